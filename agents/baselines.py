@@ -1,0 +1,109 @@
+"""The paper's baseline tensioners, batched: no tension, fixed pinch, analytic (error-opposing).
+
+A tensioner chooses a pinch point for a contour (:meth:`pinch_point`) and then, each env step, maps
+the :class:`~warpcut.task.CuttingTask` to a (B, 3) grasp move in mm (``__call__``). Moves are clipped
+by the simulator to ``max_step_mm`` per axis and ``max_displacement_mm`` in total.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from warpcut.config import SimConfig
+from warpcut.contours import Contour
+from warpcut.planning import sample_pinch_candidates
+from warpcut.task import CuttingTask
+
+AUTHORS_UNITS_PER_MM = 4.8
+"""The authors' simulator measured the 100 mm sheet in units of 1/4.8 mm."""
+
+
+@dataclass
+class NoTension:
+    """Single-arm cutting: no grasp; only the corner clips hold the sheet."""
+
+    name: str = "none"
+
+    def pinch_point(self, contour: Contour, config: SimConfig, device: str | None = None,
+                    seed: int = 0) -> np.ndarray | None:
+        return None
+
+    def __call__(self, task: CuttingTask) -> np.ndarray | None:
+        return None
+
+
+@dataclass
+class FixedTension:
+    """Pinch a disc and hold it still.
+
+    Attributes:
+        pinch: Material point (mm) to pinch; ``None``: random search over ``candidates`` feasible points
+            (plus the centroid when feasible), all simulated as one batch, keeping the best.
+        candidates: Number of random feasible points the search tries (paper: 30).
+    """
+
+    pinch: tuple[float, float] | None = None
+    candidates: int = 30
+    name: str = "fixed"
+
+    def pinch_point(self, contour: Contour, config: SimConfig, device: str | None = None,
+                    seed: int = 0) -> np.ndarray:
+        if self.pinch is not None:
+            return np.asarray(self.pinch, dtype=np.float64)
+        return search_fixed_pinch(contour, config, self.candidates, device=device, seed=seed)[0]
+
+    def __call__(self, task: CuttingTask) -> np.ndarray | None:
+        return None
+
+
+@dataclass
+class AnalyticTension:
+    """Pinch at the contour's centroid; each step move against the tracking error, the vector from the
+    scissor tip to the contour point it is about to cut (where the sheet has carried it).
+
+    Attributes:
+        gain: Grasp move (mm) per mm of tracking error, per step. The paper's gain is 0.01 per unit of
+            its simulator (4.8 units/mm, moves in mm), i.e. 0.048 mm/mm here.
+        pinch: Override the centroid (mm).
+    """
+
+    gain: float = 0.01 * AUTHORS_UNITS_PER_MM
+    pinch: tuple[float, float] | None = None
+    name: str = "analytic"
+
+    def pinch_point(self, contour: Contour, config: SimConfig, device: str | None = None,
+                    seed: int = 0) -> np.ndarray:
+        return np.asarray(self.pinch if self.pinch is not None else contour.centroid, dtype=np.float64)
+
+    def __call__(self, task: CuttingTask) -> np.ndarray:
+        error = task.target_world() - task.tip_positions()[:, :3]
+        move = -self.gain * error
+        move[:, 2] = 0.0  # the gripper moves in the x-y plane (paper A4)
+        return np.nan_to_num(move, nan=0.0)
+
+
+def search_fixed_pinch(contour: Contour, config: SimConfig, candidates: int = 30, device: str | None = None,
+                       seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Random search for the best fixed pinch point, every candidate in one simulator batch.
+
+    Returns:
+        ``(best, points, errors)``: the best point (2,), all candidates (K, 2) and their errors (K,) in
+        vertices.
+    """
+    points = sample_pinch_candidates(contour, config, candidates, np.random.default_rng(seed))
+    task = CuttingTask(config.replace(noise_std=0.0), contour, num_envs=len(points), pinch_points=points,
+                       device=device, seed=seed)
+    errors = task.run(None).error_vertices
+    return points[int(np.argmin(errors))], points, errors
+
+
+POLICIES = {"none": NoTension, "fixed": FixedTension, "analytic": AnalyticTension}
+
+
+def make_policy(name: str, pinch: tuple[float, float] | None = None):
+    """A baseline tensioner by name; ``pinch`` overrides the pinch point of fixed and analytic."""
+    if name not in POLICIES:
+        raise ValueError(f"policy: unknown {name!r}; choose from {', '.join(POLICIES)}")
+    return POLICIES[name]() if name == "none" else POLICIES[name](pinch=pinch)

@@ -1,0 +1,1 @@
+"""Gymnasium environments and the rsl-rl adapter over warpcut's batched simulator."""

@@ -1,0 +1,335 @@
+"""Tests for warpcut.contours: the built-in suite, loaders, resampling and every validation error."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+
+import numpy as np
+import pytest
+from shapely.geometry import LinearRing, LineString, Point
+
+from warpcut.contours import (
+    Contour,
+    ContourError,
+    builtin_contours,
+    builtin_names,
+    load_contour,
+    validate,
+)
+
+BUILTINS = builtin_contours()
+SQUARE = [[20.0, 20.0], [40.0, 20.0], [40.0, 40.0], [20.0, 40.0]]
+
+
+def count_x_maxima(points: np.ndarray, tolerance_mm: float = 0.5) -> int:
+    """Local maxima of x around a closed contour, ignoring wiggles smaller than ``tolerance_mm``.
+
+    Each maximum is where a scissors that can only cut toward -x must start a new segment.
+    """
+    x = points[:, 0]
+    start = int(np.argmin(x))
+    # Starting at the global minimum, the cyclic sequence opens and closes in a valley.
+    x = np.concatenate([np.roll(x, -start), x[start : start + 1]])
+    count, rising, extreme = 0, True, x[0]
+    for value in x:
+        if rising and value > extreme or not rising and value < extreme:
+            extreme = value
+        elif abs(value - extreme) > tolerance_mm:
+            count += rising
+            rising, extreme = not rising, value
+    return count
+
+
+def write(tmp_path, filename: str, text: str):
+    path = tmp_path / filename
+    path.write_text(text)
+    return path
+
+
+# ---------------------------------------------------------------------------------------------- built-ins
+
+
+def test_builtin_suite_composition():
+    names = builtin_names()
+    assert names[0] == "fls-circle"
+    assert names == list(BUILTINS)
+    assert len(names) >= 18
+    assert all(re.fullmatch(r"[a-z0-9]+(-[a-z0-9]+)*", name) for name in names)
+    closed = [c for c in BUILTINS.values() if c.closed]
+    assert len(closed) >= 11
+    assert len(BUILTINS) - len(closed) >= 7
+    assert max(count_x_maxima(c.points) for c in closed) >= 3
+
+
+@pytest.mark.parametrize("name", builtin_names())
+def test_builtin_is_valid(name):
+    contour = BUILTINS[name]
+    again = validate(contour.name, contour.closed, contour.points, contour.sheet_size)
+    np.testing.assert_array_equal(again.points, contour.points)
+    assert math.isfinite(contour.length) and contour.length > 0
+    assert math.isfinite(contour.area_mm2) and contour.area_mm2 > 0
+    steps = np.linalg.norm(np.diff(contour.points, axis=0), axis=1)
+    assert steps.max() <= 1.0
+    x, y = contour.points.T
+    if contour.closed:
+        assert LinearRing(contour.points).is_ccw
+        assert min(x.min(), y.min(), 100 - x.max(), 100 - y.max()) >= 8.0
+        region = contour.intended_region()
+        # An opening of radius 1.5 mm removes anything thinner than 3 mm.
+        opened = region.buffer(-1.5).buffer(1.5)
+        assert opened.geom_type == "Polygon"
+        assert region.area - opened.area < 0.01 * region.area
+    else:
+        for end in (contour.points[0], contour.points[-1]):
+            assert min(end[0], 100 - end[0], end[1], 100 - end[1]) == 0.0
+        assert contour.area_mm2 <= 5000.0
+
+
+def test_fls_circle():
+    circle = load_contour("fls-circle")
+    assert circle is BUILTINS["fls-circle"]
+    assert circle.closed
+    assert circle.length == pytest.approx(50 * math.pi, abs=0.05)
+    assert circle.area_mm2 == pytest.approx(25**2 * math.pi, abs=0.5)
+    np.testing.assert_allclose(circle.centroid, [50.0, 50.0], atol=1e-6)
+    np.testing.assert_allclose(np.linalg.norm(circle.points - 50.0, axis=1), 25.0, atol=1e-3)
+
+
+def test_x_maxima_counter():
+    assert count_x_maxima(BUILTINS["fls-circle"].points) == 1
+    assert count_x_maxima(BUILTINS["c-shape"].points) == 2
+    assert count_x_maxima(BUILTINS["e-shape"].points) == 3
+
+
+def test_builtins_scale_with_the_sheet():
+    wide = builtin_contours((200.0, 100.0))
+    assert wide["fls-circle"].area_mm2 == pytest.approx(2 * BUILTINS["fls-circle"].area_mm2, rel=1e-9)
+    np.testing.assert_allclose(wide["fls-circle"].centroid, [100.0, 50.0], atol=1e-6)
+    assert wide["wave-1"].points[-1].tolist() == [200.0, 45.0]
+    assert load_contour("fls-circle", (200.0, 100.0)).sheet_size == (200.0, 100.0)
+
+
+# --------------------------------------------------------------------------------------- normalisation
+
+
+def test_closed_contour_is_made_counter_clockwise_keeping_its_start():
+    clockwise = SQUARE[::-1]
+    contour = validate("square", True, clockwise)
+    assert LinearRing(contour.points).is_ccw
+    assert contour.points[0].tolist() == clockwise[0]
+    assert contour.area_mm2 == pytest.approx(400.0)
+    np.testing.assert_allclose(contour.centroid, [30.0, 30.0])
+    assert contour.length == pytest.approx(80.0)
+
+
+def test_repeated_points_are_removed():
+    contour = validate("square", True, [SQUARE[0], SQUARE[0], *SQUARE[1:], SQUARE[0]])
+    np.testing.assert_array_equal(contour.points, SQUARE)
+
+
+def test_points_are_read_only_and_the_input_untouched():
+    given = np.array(SQUARE[::-1])
+    contour = validate("square", True, given)
+    np.testing.assert_array_equal(given, SQUARE[::-1])
+    with pytest.raises(ValueError):
+        contour.points[0, 0] = 1.0
+
+
+def test_open_contour_end_near_an_edge_is_extended():
+    contour = validate("cut", False, [[3.0, 30.0], [50.0, 60.0], [97.5, 30.0]])
+    np.testing.assert_array_equal(contour.points[[0, 1, -2, -1]], [[0, 30], [3, 30], [97.5, 30], [100, 30]])
+
+
+def test_open_contour_end_too_far_from_an_edge():
+    with pytest.raises(ContourError, match=r"end \(90, 50\) is 10 mm from the nearest edge; move it"):
+        validate("cut", False, [[0.0, 30.0], [50.0, 60.0], [90.0, 50.0]])
+
+
+def test_open_contour_region_is_the_smaller_piece():
+    contour = validate("strip", False, [[30.0, 0.0], [30.0, 50.0], [30.0, 100.0]])
+    assert contour.area_mm2 == pytest.approx(3000.0)
+    np.testing.assert_allclose(contour.centroid, [15.0, 50.0])
+    assert contour.length == pytest.approx(100.0)
+
+
+# -------------------------------------------------------------------------------------------- resample
+
+
+@pytest.mark.parametrize("closed", [True, False])
+def test_resample_is_uniform_in_arc_length(closed):
+    points = [[0.0, 10.0], [40.0, 10.0], [60.0, 50.0], [100.0, 70.0]] if not closed else SQUARE
+    contour = validate("poly", closed, points)
+    samples = contour.resample(1.3)
+    line = LineString(np.vstack([contour.points, contour.points[:1]]) if closed else contour.points)
+    arc = np.array([line.project(Point(p)) for p in samples])
+    np.testing.assert_array_equal(samples[0], contour.points[0])
+    steps = np.diff(arc)
+    np.testing.assert_allclose(steps[:-1], 1.3, atol=1e-9)
+    assert 0 < steps[-1] <= 1.3 + 1e-9
+    if closed:
+        assert contour.length - arc[-1] <= 1.3
+        assert not np.allclose(samples[-1], samples[0])
+    else:
+        np.testing.assert_array_equal(samples[-1], contour.points[-1])
+
+
+def test_resample_circle_chords():
+    samples = BUILTINS["fls-circle"].resample(2.0)
+    chords = np.linalg.norm(np.diff(samples, axis=0), axis=1)
+    np.testing.assert_allclose(chords, 2.0, atol=0.01)
+
+
+def test_resample_rejects_a_bad_spacing():
+    with pytest.raises(ContourError, match="spacing_mm must be a positive number"):
+        BUILTINS["fls-circle"].resample(0.0)
+
+
+# --------------------------------------------------------------------------------------------- loaders
+
+
+def test_json_round_trip(tmp_path):
+    for name in ("kidney", "s-curve"):
+        original = BUILTINS[name]
+        path = write(tmp_path, f"{name}.json", json.dumps(original.to_json()))
+        loaded = load_contour(path)
+        assert isinstance(loaded, Contour)
+        assert (loaded.name, loaded.closed) == (original.name, original.closed)
+        np.testing.assert_array_equal(loaded.points, original.points)
+
+
+def test_json_name_defaults_to_file_stem(tmp_path):
+    path = write(tmp_path, "my-square.json", json.dumps({"closed": True, "points": SQUARE}))
+    assert load_contour(str(path)).name == "my-square"
+
+
+SVG_CLOSED = """<svg xmlns="http://www.w3.org/2000/svg" width="100mm" height="100mm" viewBox="0 0 100 100">
+  <g><path d="M 30 40 L 60 40 C 70 40 70 70 60 70 L 30 70 Z" style="fill:none"/></g>
+</svg>"""
+
+
+def test_svg_closed_with_curve(tmp_path):
+    contour = load_contour(write(tmp_path, "shape.svg", SVG_CLOSED))
+    assert contour.closed and contour.name == "shape"
+    # y is flipped: SVG y = 40 is 60 mm above the sheet's lower edge.
+    assert contour.points[0].tolist() == [30.0, 60.0]
+    np.testing.assert_allclose(contour.points.min(axis=0), [30.0, 30.0])
+    np.testing.assert_allclose(contour.points.max(axis=0), [67.5, 60.0])
+    steps = np.linalg.norm(np.diff(contour.points, axis=0), axis=1)
+    assert steps[steps < 29].max() <= 0.5  # the curve is flattened; the straight sides stay whole
+    # The 30 x 30 rectangle plus the cubic's bulge beyond x = 60: 900 * 6 * integral(t^2 (1 - t)^2) = 180.
+    assert contour.area_mm2 == pytest.approx(900.0 + 180.0, rel=1e-4)
+
+
+def test_svg_open_and_relative_commands(tmp_path):
+    contour = load_contour(write(tmp_path, "cut.svg", '<svg><path d="m 0,70 h 40 v 20 l 60,0"/></svg>'))
+    assert not contour.closed
+    np.testing.assert_array_equal(contour.points, [[0, 30], [40, 30], [40, 10], [100, 10]])
+
+
+def test_svg_viewbox_origin_and_smooth_curves(tmp_path):
+    text = '<svg viewBox="-10 20 100 100"><path d="M 10 40 Q 30 20 50 40 T 90 40 L 90 90 L 10 90 z"/></svg>'
+    contour = load_contour(write(tmp_path, "wave.svg", text))
+    np.testing.assert_allclose(contour.points.min(axis=0), [20.0, 30.0])
+    np.testing.assert_allclose(contour.points.max(axis=0), [100.0, 90.0], atol=1e-9)
+    # T reflects the previous control point, so the second bump dips below the first's baseline.
+    assert contour.points[:, 1].max() == pytest.approx(90.0)
+    assert np.sum(contour.points[:, 1] < 80.0 - 1e-9) > 0
+
+
+# ------------------------------------------------------------------------------------------- errors
+
+
+def test_fewer_than_three_distinct_points():
+    with pytest.raises(ContourError, match="fewer than 3 distinct points"):
+        validate("tiny", True, [[10.0, 10.0], [10.0, 10.0], [20.0, 20.0], [10.0, 10.0]])
+
+
+def test_nan_point():
+    with pytest.raises(ContourError, match=r"point 2 is \[nan, 30.0\], which is not finite"):
+        validate("bad", True, [[10.0, 10.0], [20.0, 10.0], [np.nan, 30.0]])
+
+
+def test_infinite_point():
+    with pytest.raises(ContourError, match=r"point 0 is \[inf, 10.0\], which is not finite"):
+        validate("bad", True, [[np.inf, 10.0], [20.0, 10.0], [20.0, 30.0]])
+
+
+def test_self_intersection_bow_tie():
+    bow_tie = [[20.0, 20.0], [40.0, 40.0], [40.0, 20.0], [20.0, 40.0]]
+    with pytest.raises(ContourError, match=r"'bow-tie': self-intersection near \(30, 30\)"):
+        validate("bow-tie", True, bow_tie)
+
+
+def test_self_intersection_open():
+    loop = [[0.0, 20.0], [60.0, 20.0], [40.0, 40.0], [40.0, 0.0]]
+    with pytest.raises(ContourError, match=r"self-intersection near \(40, 20\)"):
+        validate("loop", False, loop)
+
+
+def test_closed_contour_leaving_the_sheet():
+    with pytest.raises(ContourError, match=r"must lie inside the sheet, but it leaves it by 5 mm at point 1"):
+        validate("big", True, [[50.0, 50.0], [105.0, 50.0], [50.0, 90.0]])
+
+
+def test_open_contour_touching_an_edge_in_between():
+    with pytest.raises(ContourError, match="exactly two pieces, but it splits it into 3"):
+        validate("zigzag", False, [[0.0, 10.0], [50.0, 0.0], [100.0, 10.0]])
+
+
+def test_closed_must_be_boolean():
+    with pytest.raises(ContourError, match="'closed' must be true or false"):
+        validate("square", "yes", SQUARE)
+
+
+@pytest.mark.parametrize("points", [[[1.0, 2.0, 3.0]] * 3, [["1", "2"]] * 3, [[1.0, 2.0], [3.0]]])
+def test_points_must_be_an_n_by_2_array_of_numbers(points):
+    with pytest.raises(ContourError, match=r"points must be an \(N, 2\) array of numbers"):
+        validate("bad", True, points)
+
+
+def test_unknown_name_lists_the_built_ins():
+    with pytest.raises(ContourError, match=r"unknown contour 'xyz': not a built-in name \(known: fls-circle"):
+        load_contour("xyz")
+
+
+def test_unsupported_file_type(tmp_path):
+    with pytest.raises(ContourError, match=r"'.txt' is not a supported file type; give a built-in name"):
+        load_contour(write(tmp_path, "shape.txt", "M 0 0"))
+
+
+def test_svg_arc_is_unsupported(tmp_path):
+    path = write(tmp_path, "arc.svg", '<svg><path d="M 20 50 A 10 10 0 0 1 40 50 Z"/></svg>')
+    with pytest.raises(ContourError, match=r"SVG arcs \(A/a commands\) are unsupported; convert them"):
+        load_contour(path)
+
+
+def test_svg_with_several_subpaths(tmp_path):
+    path = write(tmp_path, "two.svg", '<svg><path d="M 20 20 h 10 v 10 z M 50 50 h 10 v 10 z"/></svg>')
+    with pytest.raises(ContourError, match="several subpaths; give one contour per file"):
+        load_contour(path)
+
+
+def test_svg_transform_is_refused(tmp_path):
+    text = '<svg><g transform="translate(5)"><path d="M 20 20 h 9 v 9 z"/></g></svg>'
+    path = write(tmp_path, "moved.svg", text)
+    with pytest.raises(ContourError, match="has a transform"):
+        load_contour(path)
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        ({"points": SQUARE}, "field 'closed' is required and must be true or false"),
+        ({"closed": "yes", "points": SQUARE}, "field 'closed' is required"),
+        ({"closed": True}, "field 'points' is required"),
+        ({"closed": True, "points": [[1, 2], [3, "4"], [5, 6]]}, "field 'points' is required"),
+        ({"name": 7, "closed": True, "points": SQUARE}, "field 'name' must be a non-empty string"),
+        ([1, 2], "expected a JSON object"),
+    ],
+)
+def test_bad_json_field(tmp_path, data, message):
+    path = write(tmp_path, "bad.json", json.dumps(data))
+    with pytest.raises(ContourError, match=message):
+        load_contour(path)

@@ -1,0 +1,138 @@
+import numpy as np
+import pytest
+
+from warpcut import ConfigError, SheetGrid, SimConfig, Simulator
+from warpcut.reference import colour_springs
+from warpcut.simulator import spring_colours
+
+
+def structural_stretch(positions: np.ndarray, grid: SheetGrid) -> np.ndarray:
+    p = positions.reshape(grid.ny, grid.nx, 3)
+    hx, hy = grid.spacing_mm
+    sx = np.linalg.norm(p[:, 1:] - p[:, :-1], axis=-1) / hx - 1
+    sy = np.linalg.norm(p[1:] - p[:-1], axis=-1) / hy - 1
+    return np.concatenate([sx.ravel(), sy.ravel()])
+
+
+@pytest.mark.parametrize("springs", [("structural",), ("structural", "shear"), ("structural", "shear", "bending")])
+def test_colours_cover_every_spring_once_and_share_no_vertex(springs):
+    grid = SheetGrid(7, 6, 60.0, 50.0)
+    config = SimConfig(resolution=(7, 6), width_mm=60.0, height_mm=50.0, springs=springs)
+    pairs = []
+    for starts, ends, _ in colour_springs(grid, config):
+        assert len(np.unique(np.concatenate([starts, ends]))) == 2 * len(starts)
+        pairs += [tuple(sorted(p)) for p in zip(starts.tolist(), ends.tolist(), strict=True)]
+    assert len(pairs) == len(set(pairs))
+    expected = 7 * 5 + 6 * 6  # structural: rows * (nx-1) + cols * (ny-1)
+    if "shear" in springs:
+        expected += 2 * 6 * 5
+    if "bending" in springs:
+        expected += 6 * 5 + 7 * 4
+    assert len(pairs) == expected
+    assert len(spring_colours(springs)) == 4 * len(springs)
+
+
+def test_default_sheet_settles_like_clipped_gauze(device):
+    sim = Simulator(SimConfig(), 1, device=device)
+    settled = sim.settled_positions()[0]
+    z = settled[:, 2].reshape(25, 25)
+    assert -25.0 < z[12, 12] < -10.0  # sag of the centre (mm), see docs/physics.md
+    assert np.allclose(settled[sim.fixture, 2], 0.0)
+    stretch = structural_stretch(settled, sim.grid)
+    assert stretch.mean() < 0.03
+    # Settled: another 100 updates move the centre by well under a millimetre.
+    sim.reset()
+    for _ in range(100):
+        sim.update()
+    assert abs(sim.positions()[0, 12 * 25 + 12, 2] - z[12, 12]) < 0.5
+
+
+def test_per_env_parameters_and_shared_settling(device):
+    config = SimConfig(gravity=[521.0, 1042.0, 521.0], resolution=11)
+    sim = Simulator(config, 3, device=device)
+    groups, env_group = sim.settle_groups()
+    assert len(groups) == 2 and env_group[0] == env_group[2] != env_group[1]
+    settled = sim.settled_positions()
+    np.testing.assert_array_equal(settled[0], settled[2])
+    assert settled[1][:, 2].min() < settled[0][:, 2].min()  # heavier sheet sags more
+
+
+def test_same_seed_is_bit_identical(device):
+    config = SimConfig(resolution=9, noise_std=0.05)
+    runs = []
+    for _ in range(2):
+        sim = Simulator(config, 2, device=device, seed=7)
+        sim.reset(np.array([[50.0, 50.0], [np.nan, np.nan]]))
+        for _ in range(5):
+            sim.move_grasp(np.array([[1.0, 0.5, 0.0], [1.0, 0.5, 0.0]]))
+            sim.update()
+        runs.append(sim.positions())
+    np.testing.assert_array_equal(runs[0], runs[1])
+    other = Simulator(config, 2, device=device, seed=8)
+    other.reset()
+    other.update()
+    assert not np.array_equal(other.positions(), runs[0])
+
+
+def test_grasp_is_clipped_per_step_and_in_total(device):
+    sim = Simulator(SimConfig(resolution=9, max_displacement_mm=3.0), 2, device=device)
+    sim.reset(np.array([[50.0, 50.0], [np.nan, np.nan]]))
+    sim.move_grasp(np.array([[5.0, -0.3, 0.0], [1.0, 1.0, 1.0]]))
+    np.testing.assert_allclose(sim.displacements(), [[1.0, -0.3, 0.0], [0.0, 0.0, 0.0]], atol=1e-6)
+    for _ in range(10):
+        sim.move_grasp(np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]))
+    assert np.linalg.norm(sim.displacements()[0]) == pytest.approx(3.0, abs=1e-5)
+    with pytest.raises(ValueError, match="action: contains NaN"):
+        sim.move_grasp(np.array([[np.nan, 0.0, 0.0], [0.0, 0.0, 0.0]]))
+
+
+def test_grasp_moves_the_pinched_disc(device):
+    sim = Simulator(SimConfig(resolution=13), 1, device=device)
+    sim.reset(np.array([[50.0, 50.0]]))
+    before = sim.positions()[0]
+    for _ in range(5):
+        sim.move_grasp(np.array([[1.0, 0.0, 0.0]]))
+        sim.update()
+    disc = sim.grid.disc_mask([50.0, 50.0], sim.config.grasp_radius)
+    np.testing.assert_allclose(sim.positions()[0][disc] - before[disc], [[5.0, 0.0, 0.0]] * disc.sum(), atol=1e-4)
+
+
+def test_cutting_removes_vertices_near_the_tip_only(device):
+    sim = Simulator(SimConfig(resolution=11, gravity=0.0), 1, device=device)
+    sim.reset()
+    sim.set_tip(np.array([[50.0, 50.0, 0.0, 1.0]]))
+    sim.update()
+    removed = ~sim.alive_mask()[0]
+    near = np.linalg.norm(sim.grid.material - [50.0, 50.0], axis=1) <= sim.config.cut_radius
+    np.testing.assert_array_equal(removed, near)
+    sim.reset()
+    sim.set_tip(np.array([[50.0, 50.0, 0.0, 0.0]]))  # travelling: no cut
+    sim.update()
+    assert sim.alive_mask().all()
+    sim.set_tip(np.array([[50.0, 50.0, 20.0, 1.0]]))  # above the height limit: no cut
+    sim.update()
+    assert sim.alive_mask().all()
+
+
+@pytest.mark.parametrize(("change", "message"), [
+    ({"resolution": 3}, "resolution: .*5 <= n <= 100"),
+    ({"damping": 1.5}, r"damping: must lie in \[0, 1\]"),
+    ({"fixture": "edges"}, "fixture: choose one of"),
+    ({"springs": ("shear",)}, "springs: choose from"),
+    ({"iterations": 0}, "iterations: must be an integer"),
+    ({"gravity": [1.0, float("nan")]}, "gravity: must be finite"),
+    ({"cut_height_mm": -1.0}, "cut_height_mm: must be a positive number"),
+])
+def test_bad_config_names_the_field(change, message):
+    with pytest.raises(ConfigError, match=message):
+        SimConfig(**change).validated()
+
+
+def test_per_env_length_mismatch_is_reported():
+    with pytest.raises(ConfigError, match="gravity: got 2 values for 3 envs"):
+        Simulator(SimConfig(gravity=[1.0, 2.0]), 3)
+
+
+def test_unknown_device_is_reported():
+    with pytest.raises(ValueError, match="device: unknown device 'tpu'"):
+        Simulator(SimConfig(resolution=5), 1, device="tpu")

@@ -1,0 +1,216 @@
+"""Simulation parameters, with the paper's defaults and units.
+
+Units are millimetres and seconds throughout. The sheet lies in the x-y plane at rest, z up, origin at
+its lower-left corner. Every *physical* parameter (``damping``, ``dt``, ``gravity``, ``elasticity``,
+``noise_std``) may be a single value shared by all envs or a sequence with one value per env: the
+simulator reads it as ``param[env % len(param)]``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+FIXTURES = ("corners", "rows")
+SPRING_FAMILIES = ("structural", "shear", "bending")
+PHYSICAL_PARAMETERS = ("damping", "dt", "gravity", "elasticity", "noise_std")
+
+Scalar = float | int
+PerEnv = Scalar | Sequence[Scalar] | np.ndarray
+
+
+class ConfigError(ValueError):
+    """A configuration value is invalid; the message names the field and how to fix it."""
+
+
+@dataclass
+class SimConfig:
+    """Everything that defines a batch of gauze sheets, the scissors and the grasp.
+
+    Defaults follow Thananjeyan et al. (ICRA 2017) where the paper gives a value; see
+    ``docs/physics.md`` for the mapping of each field to the paper's symbols (alpha, delta, tau, f(t)).
+    """
+
+    width_mm: float = 100.0
+    """Sheet size along x (mm). FLS gauze is 10 cm x 10 cm."""
+    height_mm: float = 100.0
+    """Sheet size along y (mm)."""
+    resolution: int | tuple[int, int] = 25
+    """Vertices per side, ``n`` or ``(nx, ny)``; the paper uses 25 x 25 (625 vertices). 5 to 100."""
+
+    damping: PerEnv = 0.99
+    """Verlet velocity retention per update (paper alpha = 0.99). 1 = undamped, 0 = no momentum."""
+    dt: PerEnv = 0.016
+    """Update time step (s); gravity acts as ``gravity * dt**2`` per update."""
+    gravity: PerEnv = 521.0
+    """Downward (-z) acceleration (mm/s^2): the authors' 2500 units/s^2 at 4.8 units/mm (paper f(t))."""
+    elasticity: PerEnv = 1.0
+    """Fraction of a spring's length error corrected per relaxation sweep (paper tau = 1)."""
+    noise_std: PerEnv = 0.0
+    """Std. dev. of Gaussian process noise added to every free vertex per update (mm), paper sigma."""
+
+    iterations: int = 20
+    """Gauss-Seidel relaxation sweeps per update. The paper used 5 with structural springs and rows pinned;
+    clipped corners need shear springs and ~20 sweeps to hang like gauze (docs/physics.md)."""
+    springs: tuple[str, ...] = ("structural", "shear")
+    """Spring families: ``structural`` (grid edges), ``shear`` (cell diagonals), ``bending`` (two apart)."""
+    fixture: str = "corners"
+    """How the sheet is held: ``corners`` (four clips, the FLS task) or ``rows`` (top and bottom rows)."""
+    first_order_z: bool = False
+    """Move z without momentum, as the authors' code did (their sheet never settles). ``authors`` preset."""
+
+    settle_updates: int = 200
+    """Updates under gravity, without grasp or scissors, before the cut starts (paper: 200)."""
+    updates_per_step: int = 2
+    """Simulator updates per env step (one tensioning action per step; paper: 2)."""
+    trajectory_spacing_mm: float = 1.0
+    """Distance the scissor tip advances along the trajectory per update (mm)."""
+    cut_radius_mm: float | None = None
+    """Vertices within this distance (in x-y) of the scissor tip are cut. Default: one grid spacing."""
+    cut_height_mm: float = 8.0
+    """...and within this vertical distance of the tip (mm): material far above or below is missed."""
+    grasp_radius_mm: float | None = None
+    """Vertices within this distance of the pinch point are held by the gripper. Default: 1.6 spacings."""
+    max_step_mm: float = 1.0
+    """Largest grasp move per axis per env step (mm); actions are clipped to it (paper: 1 mm)."""
+    max_displacement_mm: float = 10.0
+    """Largest distance the grasp may be moved from where it pinched (mm); the displacement is clipped."""
+
+    @property
+    def nx(self) -> int:
+        return self.resolution if isinstance(self.resolution, int) else int(self.resolution[0])
+
+    @property
+    def ny(self) -> int:
+        return self.resolution if isinstance(self.resolution, int) else int(self.resolution[1])
+
+    @property
+    def spacing_mm(self) -> tuple[float, float]:
+        """Rest distance between neighbouring vertices along x and y (mm)."""
+        return self.width_mm / (self.nx - 1), self.height_mm / (self.ny - 1)
+
+    @property
+    def cut_radius(self) -> float:
+        return self.cut_radius_mm if self.cut_radius_mm is not None else max(self.spacing_mm)
+
+    @property
+    def grasp_radius(self) -> float:
+        return self.grasp_radius_mm if self.grasp_radius_mm is not None else 1.6 * max(self.spacing_mm)
+
+    def replace(self, **changes) -> SimConfig:
+        """A copy with some fields changed (validated)."""
+        return dataclasses.replace(self, **changes).validated()
+
+    @classmethod
+    def authors(cls, **changes) -> SimConfig:
+        """The authors' released setting: rows pinned, structural springs, 5 sweeps, first-order z."""
+        base = dict(fixture="rows", springs=("structural",), iterations=5, first_order_z=True)
+        base.update(changes)
+        return cls(**base).validated()
+
+    def per_env(self, name: str, num_envs: int) -> np.ndarray:
+        """The physical parameter ``name`` as a float32 array of length 1 or ``num_envs``."""
+        values = np.atleast_1d(np.asarray(getattr(self, name), dtype=np.float64)).astype(np.float32)
+        if values.ndim != 1 or values.size not in (1, num_envs):
+            raise ConfigError(
+                f"{name}: got {values.size} values for {num_envs} envs; give one value or one per env"
+            )
+        return values
+
+    def validated(self) -> SimConfig:
+        """Check every field; raise :class:`ConfigError` naming the field and the fix."""
+        for name in ("width_mm", "height_mm"):
+            _require(getattr(self, name) > 0, name, "must be positive (mm)")
+        res = self.resolution
+        if isinstance(res, int | np.integer):
+            res = (int(res), int(res))
+        if len(res) != 2 or not all(isinstance(r, int | np.integer) and 5 <= r <= 100 for r in res):
+            raise ConfigError(f"resolution: got {self.resolution!r}; give n or (nx, ny) with 5 <= n <= 100")
+        for name in PHYSICAL_PARAMETERS:
+            values = np.atleast_1d(np.asarray(getattr(self, name), dtype=np.float64))
+            _require(values.ndim == 1 and values.size >= 1, name, "give one number or a list, one per env")
+            _require(bool(np.all(np.isfinite(values))), name, "must be finite")
+        _require(bool(np.all(np.asarray(self.damping) >= 0) and np.all(np.asarray(self.damping) <= 1)),
+                 "damping", "must lie in [0, 1] (paper: 0.99)")
+        _require(bool(np.all(np.asarray(self.dt) > 0)), "dt", "must be positive (s; paper: 0.016)")
+        _require(bool(np.all(np.asarray(self.elasticity) > 0) and np.all(np.asarray(self.elasticity) <= 1)),
+                 "elasticity", "must lie in (0, 1] (paper: 1)")
+        _require(bool(np.all(np.asarray(self.noise_std) >= 0)), "noise_std", "must be >= 0 (mm)")
+        _require(isinstance(self.iterations, int) and 1 <= self.iterations <= 200, "iterations",
+                 "must be an integer in [1, 200]")
+        unknown = [s for s in self.springs if s not in SPRING_FAMILIES]
+        _require(not unknown and "structural" in self.springs, "springs",
+                 f"choose from {SPRING_FAMILIES}, including 'structural' (got {tuple(self.springs)})")
+        _require(self.fixture in FIXTURES, "fixture", f"choose one of {FIXTURES} (got {self.fixture!r})")
+        for name in ("settle_updates", "updates_per_step"):
+            _require(isinstance(getattr(self, name), int) and getattr(self, name) >= (name != "settle_updates"),
+                     name, "must be a non-negative integer" if name == "settle_updates" else "must be >= 1")
+        for name in ("trajectory_spacing_mm", "cut_height_mm", "max_step_mm", "max_displacement_mm"):
+            value = getattr(self, name)
+            _require(isinstance(value, int | float) and math.isfinite(value) and value > 0, name,
+                     "must be a positive number (mm)")
+        for name in ("cut_radius_mm", "grasp_radius_mm"):
+            value = getattr(self, name)
+            _require(value is None or (math.isfinite(value) and value > 0), name,
+                     "must be a positive number (mm) or None for the default")
+        return self
+
+
+def _require(ok: bool, name: str, fix: str) -> None:
+    if not ok:
+        raise ConfigError(f"{name}: {fix}")
+
+
+@dataclass
+class SheetGrid:
+    """The rest (material) layout of the vertices: ``v = row * nx + col``, at ``(col * hx, row * hy)``."""
+
+    nx: int
+    ny: int
+    width_mm: float
+    height_mm: float
+    material: np.ndarray = field(init=False, repr=False)
+    """(ny * nx, 2) rest positions (mm)."""
+
+    def __post_init__(self) -> None:
+        xs = np.linspace(0.0, self.width_mm, self.nx)
+        ys = np.linspace(0.0, self.height_mm, self.ny)
+        gx, gy = np.meshgrid(xs, ys)
+        self.material = np.stack([gx.ravel(), gy.ravel()], axis=1)
+
+    @classmethod
+    def from_config(cls, config: SimConfig) -> SheetGrid:
+        return cls(config.nx, config.ny, config.width_mm, config.height_mm)
+
+    @property
+    def num_vertices(self) -> int:
+        return self.nx * self.ny
+
+    @property
+    def spacing_mm(self) -> tuple[float, float]:
+        return self.width_mm / (self.nx - 1), self.height_mm / (self.ny - 1)
+
+    @property
+    def vertex_area_mm2(self) -> float:
+        """Area each vertex stands for when regions are counted in vertices (mm^2)."""
+        hx, hy = self.spacing_mm
+        return hx * hy
+
+    def fixture_mask(self, fixture: str) -> np.ndarray:
+        """(ny * nx,) bool: vertices held by the fixture."""
+        mask = np.zeros((self.ny, self.nx), dtype=bool)
+        if fixture == "corners":
+            mask[[0, 0, -1, -1], [0, -1, 0, -1]] = True
+        elif fixture == "rows":
+            mask[[0, -1], :] = True
+        else:
+            raise ConfigError(f"fixture: choose one of {FIXTURES} (got {fixture!r})")
+        return mask.ravel()
+
+    def disc_mask(self, center_mm: np.ndarray, radius_mm: float) -> np.ndarray:
+        """(ny * nx,) bool: vertices whose rest position lies within ``radius_mm`` of ``center_mm``."""
+        return np.linalg.norm(self.material - np.asarray(center_mm, dtype=np.float64)[:2], axis=1) <= radius_mm

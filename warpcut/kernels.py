@@ -1,0 +1,187 @@
+"""Warp kernels of one simulator update: integrate, relax one spring colour, cut.
+
+All kernels live in this one module so they compile once (a cold compile costs seconds per module).
+Each kernel is launched over ``(num_envs, num_vertices)`` and starts with ``env, v = wp.tid()``; state
+is flattened env-major (``i = env * n + v``). Kernels are out-of-place (state in -> state out): the fast
+path ping-pongs two buffers, a differentiable rollout allocates fresh outputs under ``wp.Tape``.
+A physical parameter array has length 1 (shared) or num_envs and is read as ``p[env % p.shape[0]]``.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+PIN_FREE = wp.constant(0)
+PIN_FIXTURE = wp.constant(1)
+PIN_GRASP = wp.constant(2)
+
+
+@wp.kernel
+def integrate_kernel(
+    # Model:
+    n: int,
+    damping: wp.array(dtype=float),
+    dt: wp.array(dtype=float),
+    gravity: wp.array(dtype=float),
+    noise_std: wp.array(dtype=float),
+    first_order_z: int,
+    seed: int,
+    # Data in:
+    x: wp.array(dtype=wp.vec3),
+    x_prev: wp.array(dtype=wp.vec3),
+    alive: wp.array(dtype=wp.int32),
+    pin: wp.array(dtype=wp.int32),
+    anchor: wp.array(dtype=wp.vec3),
+    displacement: wp.array(dtype=wp.vec3),
+    # Data out:
+    x_out: wp.array(dtype=wp.vec3),
+):
+    """Damped Verlet: ``x + damping * (x - x_prev) + g dt^2 (+ noise)``; pinned vertices go to target."""
+    env, v = wp.tid()
+    i = env * n + v
+    p = x[i]
+    kind = pin[i]
+    if kind == PIN_FIXTURE:
+        x_out[i] = anchor[i]
+        return
+    if kind == PIN_GRASP:
+        x_out[i] = anchor[i] + displacement[env]
+        return
+    if alive[i] == 0:
+        # Removed material no longer takes part; freeze it.
+        x_out[i] = p
+        return
+    velocity = (p - x_prev[i]) * damping[env % damping.shape[0]]
+    if first_order_z != 0:
+        velocity = wp.vec3(velocity[0], velocity[1], 0.0)
+    h = dt[env % dt.shape[0]]
+    q = p + velocity - wp.vec3(0.0, 0.0, gravity[env % gravity.shape[0]] * h * h)
+    sigma = noise_std[env % noise_std.shape[0]]
+    if sigma > 0.0:
+        state = wp.rand_init(seed, i)
+        q = q + sigma * wp.vec3(wp.randn(state), wp.randn(state), wp.randn(state))
+    x_out[i] = q
+
+
+@wp.kernel
+def relax_colour_kernel(
+    # Model:
+    nx: int,
+    ny: int,
+    elasticity: wp.array(dtype=float),
+    di: int,
+    dj: int,
+    rest_length: float,
+    on_rows: int,
+    divisor: int,
+    parity: int,
+    # Data in:
+    x: wp.array(dtype=wp.vec3),
+    alive: wp.array(dtype=wp.int32),
+    pin: wp.array(dtype=wp.int32),
+    # Data out:
+    x_out: wp.array(dtype=wp.vec3),
+):
+    """Relax every spring of one colour; a colour's springs share no vertex, so each vertex has at most
+    one spring to gather from and the sweep is deterministic without atomics.
+
+    A colour holds the springs ``(row, col) -> (row + dj, col + di)`` whose start satisfies
+    ``(key // divisor) % 2 == parity`` with ``key = row if on_rows else col``.
+    """
+    env, v = wp.tid()
+    n = nx * ny
+    i = env * n + v
+    p = x[i]
+    x_out[i] = p
+    if alive[i] == 0 or pin[i] != PIN_FREE:
+        return
+    row = v // nx
+    col = v - row * nx
+    partner = -1
+    # As the start of a spring of this colour.
+    key = col
+    if on_rows != 0:
+        key = row
+    r2 = row + dj
+    c2 = col + di
+    if (key // divisor) % 2 == parity and r2 >= 0 and r2 < ny and c2 >= 0 and c2 < nx:
+        partner = r2 * nx + c2
+    # As the end of one.
+    r0 = row - dj
+    c0 = col - di
+    key0 = c0
+    if on_rows != 0:
+        key0 = r0
+    if r0 >= 0 and r0 < ny and c0 >= 0 and c0 < nx and key0 >= 0 and (key0 // divisor) % 2 == parity:
+        partner = r0 * nx + c0
+    if partner < 0:
+        return
+    j = env * n + partner
+    if alive[j] == 0:
+        return
+    d = x[j] - p
+    length = wp.length(d)
+    if length < 1.0e-9:
+        return
+    # Split the correction by inverse mass: a pinned partner does not move, so this vertex takes it all.
+    share = 0.5
+    if pin[j] != PIN_FREE:
+        share = 1.0
+    k = elasticity[env % elasticity.shape[0]]
+    x_out[i] = p + d * (k * share * (length - rest_length) / length)
+
+
+@wp.kernel
+def cut_kernel(
+    # Model:
+    n: int,
+    cut_radius: float,
+    cut_height: float,
+    # Data in:
+    x: wp.array(dtype=wp.vec3),
+    alive: wp.array(dtype=wp.int32),
+    tip: wp.array(dtype=wp.vec4),
+    # Data out:
+    alive_out: wp.array(dtype=wp.int32),
+):
+    """Remove vertices within ``cut_radius`` (in x-y) and ``cut_height`` (in z) of an active scissor tip.
+
+    ``tip[env] = (x, y, z, cutting)``; ``cutting`` is 0 while the scissors travel between segments.
+    """
+    env, v = wp.tid()
+    i = env * n + v
+    a = alive[i]
+    t = tip[env]
+    if a != 0 and t[3] > 0.5:
+        p = x[i]
+        dx = p[0] - t[0]
+        dy = p[1] - t[1]
+        if dx * dx + dy * dy <= cut_radius * cut_radius and wp.abs(p[2] - t[2]) <= cut_height:
+            a = 0
+    alive_out[i] = a
+
+
+@wp.kernel
+def move_grasp_kernel(
+    # Model:
+    max_step: float,
+    max_displacement: float,
+    # Data in:
+    displacement: wp.array(dtype=wp.vec3),
+    action: wp.array(dtype=wp.vec3),
+    # Data out:
+    displacement_out: wp.array(dtype=wp.vec3),
+):
+    """Move each grasp by its action, clipped to ``max_step`` per axis and ``max_displacement`` in norm."""
+    env = wp.tid()
+    a = action[env]
+    step = wp.vec3(
+        wp.clamp(a[0], -max_step, max_step),
+        wp.clamp(a[1], -max_step, max_step),
+        wp.clamp(a[2], -max_step, max_step),
+    )
+    u = displacement[env] + step
+    norm = wp.length(u)
+    if norm > max_displacement:
+        u = u * (max_displacement / norm)
+    displacement_out[env] = u

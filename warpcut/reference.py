@@ -1,0 +1,107 @@
+"""Plain NumPy implementation of the simulator's physics: the correctness oracle and the speed baseline.
+
+It is written independently of the Warp kernels: springs are enumerated explicitly as index pairs per
+colour (the kernels derive a vertex's partner from its grid position), and all arithmetic is float32 so
+the two agree to rounding. Process noise is not reproduced (Warp's random stream is its own); compare
+the two noise-free.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from warpcut.config import SheetGrid, SimConfig
+from warpcut.simulator import spring_colours
+
+
+def colour_springs(grid: SheetGrid, config: SimConfig) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Per colour, in sweep order: (start indices, end indices, rest length)."""
+    colours = []
+    rows, cols = np.divmod(np.arange(grid.num_vertices), grid.nx)
+    for colour in spring_colours(config.springs):
+        key = rows if colour.on_rows else cols
+        r2, c2 = rows + colour.dj, cols + colour.di
+        keep = ((key // colour.divisor) % 2 == colour.parity) & (r2 >= 0) & (r2 < grid.ny) & (c2 >= 0) & (
+            c2 < grid.nx)
+        starts = np.flatnonzero(keep)
+        ends = r2[keep] * grid.nx + c2[keep]
+        assert not np.intersect1d(starts, ends).size, "a colour's springs must not share vertices"
+        colours.append((starts, ends, colour.rest_length(grid.spacing_mm)))
+    return colours
+
+
+class ReferenceSheet:
+    """One sheet (no batch), stepped with NumPy: same update as :class:`warpcut.Simulator`.
+
+    Args:
+        config: Simulation parameters; per-env parameters must be single values.
+        positions: (N, 3) starting positions (mm), e.g. ``Simulator.settled_positions()[env]``.
+        pinch_point: Material coordinates (mm) of the pinch point, or ``None`` for no grasp.
+    """
+
+    def __init__(self, config: SimConfig, positions: np.ndarray, pinch_point: np.ndarray | None = None):
+        self.config = config.validated()
+        self.grid = SheetGrid.from_config(self.config)
+        for name in ("damping", "dt", "gravity", "elasticity"):
+            if np.size(getattr(self.config, name)) != 1:
+                raise ValueError(f"{name}: the reference simulates one sheet; give a single value")
+        self.damping = np.float32(np.ravel(self.config.damping)[0])
+        dt = np.float32(np.ravel(self.config.dt)[0])
+        self.gravity_step = np.float32(np.ravel(self.config.gravity)[0]) * dt * dt
+        self.elasticity = np.float32(np.ravel(self.config.elasticity)[0])
+        self.springs = colour_springs(self.grid, self.config)
+        self.x = np.asarray(positions, dtype=np.float32).reshape(-1, 3).copy()
+        self.x_prev = self.x.copy()
+        self.anchor = self.x.copy()
+        self.alive = np.ones(self.grid.num_vertices, dtype=bool)
+        self.fixed = self.grid.fixture_mask(self.config.fixture)
+        self.grasp = np.zeros_like(self.fixed)
+        if pinch_point is not None:
+            self.grasp = self.grid.disc_mask(pinch_point, self.config.grasp_radius) & ~self.fixed
+        self.displacement = np.zeros(3, dtype=np.float32)
+
+    def move_grasp(self, action: np.ndarray) -> None:
+        if not self.grasp.any():
+            return
+        step = np.clip(np.asarray(action, dtype=np.float32), -self.config.max_step_mm, self.config.max_step_mm)
+        u = self.displacement + step
+        norm = np.linalg.norm(u)
+        if norm > self.config.max_displacement_mm:
+            u = u * np.float32(self.config.max_displacement_mm / norm)
+        self.displacement = u.astype(np.float32)
+
+    def update(self, tip: np.ndarray | None = None) -> None:
+        """Integrate, relax, cut at ``tip = (x, y, z, cutting)`` (world mm) if given."""
+        free = self.alive & ~self.fixed & ~self.grasp
+        velocity = (self.x - self.x_prev) * self.damping
+        if self.config.first_order_z:
+            velocity[:, 2] = 0.0
+        new = self.x.copy()
+        new[free] = self.x[free] + velocity[free] - np.array([0, 0, self.gravity_step], dtype=np.float32)
+        new[self.fixed] = self.anchor[self.fixed]
+        new[self.grasp] = self.anchor[self.grasp] + self.displacement
+        self.x_prev, self.x = self.x, new
+        movable = self.alive & ~self.fixed & ~self.grasp
+        for _ in range(self.config.iterations):
+            for starts, ends, rest in self.springs:
+                self._relax(starts, ends, rest, movable)
+        if tip is not None and tip[3] > 0.5:
+            d2 = (self.x[:, 0] - tip[0]) ** 2 + (self.x[:, 1] - tip[1]) ** 2
+            hit = (d2 <= np.float32(self.config.cut_radius) ** 2) & (
+                np.abs(self.x[:, 2] - tip[2]) <= self.config.cut_height_mm)
+            self.alive &= ~hit
+
+    def _relax(self, starts: np.ndarray, ends: np.ndarray, rest: float, movable: np.ndarray) -> None:
+        live = self.alive[starts] & self.alive[ends]
+        a, b = starts[live], ends[live]
+        d = self.x[b] - self.x[a]
+        length = np.sqrt(np.sum(d * d, axis=1))
+        ok = length >= 1e-9
+        a, b, d, length = a[ok], b[ok], d[ok], length[ok]
+        ma, mb = movable[a], movable[b]
+        share_a = np.where(mb, np.float32(0.5), np.float32(1.0)) * ma
+        share_b = np.where(ma, np.float32(0.5), np.float32(1.0)) * mb
+        scale = (self.elasticity * (length - np.float32(rest)) / length)[:, None]
+        correction = d * scale
+        self.x[a] = self.x[a] + correction * share_a[:, None].astype(np.float32)
+        self.x[b] = self.x[b] - correction * share_b[:, None].astype(np.float32)

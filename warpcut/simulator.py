@@ -1,0 +1,251 @@
+"""A batch of gauze sheets stepped by Warp kernels.
+
+One :class:`Simulator` holds ``num_envs`` independent sheets of the same resolution. Each env may have
+its own physical parameters (see :class:`~warpcut.config.SimConfig`), its own grasp (pinch point) and
+its own scissor tip. One *update* is: integrate, relax every spring colour ``iterations`` times, cut.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from warpcut import kernels
+from warpcut.config import PHYSICAL_PARAMETERS, SheetGrid, SimConfig
+
+
+@dataclass(frozen=True)
+class SpringColour:
+    """Springs ``(row, col) -> (row + dj, col + di)`` whose start has ``(key // divisor) % 2 == parity``,
+    ``key`` being the row (``on_rows``) or the column. No two springs of one colour share a vertex."""
+
+    family: str
+    di: int
+    dj: int
+    on_rows: bool
+    divisor: int
+    parity: int
+
+    def rest_length(self, spacing: tuple[float, float]) -> float:
+        return math.hypot(self.di * spacing[0], self.dj * spacing[1])
+
+
+def spring_colours(springs: tuple[str, ...]) -> list[SpringColour]:
+    """The colours of the chosen spring families, in sweep order (structural, shear, bending)."""
+    directions = {
+        "structural": [(1, 0, False, 1), (0, 1, True, 1)],
+        "shear": [(1, 1, False, 1), (-1, 1, True, 1)],
+        "bending": [(2, 0, False, 2), (0, 2, True, 2)],
+    }
+    return [
+        SpringColour(family, di, dj, on_rows, divisor, parity)
+        for family in ("structural", "shear", "bending")
+        if family in springs
+        for di, dj, on_rows, divisor in directions[family]
+        for parity in (0, 1)
+    ]
+
+
+def default_device() -> str:
+    """``WARPCUT_DEVICE`` if set, else ``cuda`` when Warp sees a GPU, else ``cpu``."""
+    env = os.environ.get("WARPCUT_DEVICE")
+    if env:
+        return env
+    return "cuda" if wp.is_cuda_available() else "cpu"
+
+
+def resolve_device(device: str | None) -> str:
+    """Check a device name against what Warp sees; raise ValueError naming the fix."""
+    wp.init()
+    device = device or default_device()
+    names = [str(d) for d in wp.get_devices()]
+    if device == "cuda" and not wp.is_cuda_available():
+        raise ValueError("device: 'cuda' requested but no CUDA GPU is available; use --device cpu")
+    if device != "cuda" and device not in names:
+        raise ValueError(f"device: unknown device {device!r}; available: {', '.join(names)}")
+    return device
+
+
+class Simulator:
+    """``num_envs`` sheets on one device.
+
+    Args:
+        config: The simulation parameters (validated here).
+        num_envs: Batch size B.
+        device: ``cpu``, ``cuda`` or ``cuda:N``; default: :func:`default_device`.
+        seed: Seed of the process noise (the only randomness in the physics).
+    """
+
+    def __init__(self, config: SimConfig, num_envs: int, device: str | None = None, seed: int = 0):
+        if not isinstance(num_envs, int) or num_envs < 1:
+            raise ValueError(f"num_envs: must be a positive integer (got {num_envs!r})")
+        self.config = config.validated()
+        self.num_envs = num_envs
+        self.device = resolve_device(device)
+        self.seed = int(seed)
+        self.grid = SheetGrid.from_config(self.config)
+        self.colours = spring_colours(self.config.springs)
+        self.params = {name: self.config.per_env(name, num_envs) for name in PHYSICAL_PARAMETERS}
+        self._wp_params = {k: wp.array(v, dtype=float, device=self.device) for k, v in self.params.items()}
+        self.fixture = self.grid.fixture_mask(self.config.fixture)
+        self.update_count = 0
+        self._settled: np.ndarray | None = None
+        n = self.grid.num_vertices * num_envs
+        self._buffers = [wp.zeros(n, dtype=wp.vec3, device=self.device) for _ in range(3)]
+        self._alive = [wp.zeros(n, dtype=wp.int32, device=self.device) for _ in range(2)]
+        self.pin = wp.zeros(n, dtype=wp.int32, device=self.device)
+        self.anchor = wp.zeros(n, dtype=wp.vec3, device=self.device)
+        self.displacement = wp.zeros(num_envs, dtype=wp.vec3, device=self.device)
+        self.tip = wp.zeros(num_envs, dtype=wp.vec4, device=self.device)
+        self._action = wp.zeros(num_envs, dtype=wp.vec3, device=self.device)
+        self.grasped = np.zeros(num_envs, dtype=bool)
+        self.x, self.x_prev, self._spare = self._buffers
+        self.alive = self._alive[0]
+
+    # ------------------------------------------------------------------ settling
+    def settle_groups(self) -> tuple[np.ndarray, np.ndarray]:
+        """Envs that share physical parameters share a settled sheet.
+
+        Returns:
+            ``(group_params, env_group)``: (G, 4) parameters of each distinct sheet and (B,) group index.
+        """
+        columns = [np.broadcast_to(self.params[k], (self.num_envs,)) for k in ("damping", "dt", "gravity",
+                                                                               "elasticity")]
+        table = np.stack(columns, axis=1)
+        group_params, env_group = np.unique(table, axis=0, return_inverse=True)
+        return group_params, env_group.reshape(-1)
+
+    def settled_positions(self) -> np.ndarray:
+        """(B, N, 3) sheet positions after ``settle_updates`` under gravity, without grasp or scissors.
+
+        Each distinct parameter set is settled once, noise-free, and copied to every env that shares it.
+        """
+        if self._settled is None:
+            group_params, env_group = self.settle_groups()
+            config = self.config.replace(**{k: group_params[:, c].tolist() for c, k in
+                                            enumerate(("damping", "dt", "gravity", "elasticity"))},
+                                         noise_std=0.0)
+            sheet = Simulator(config, len(group_params), self.device)
+            sheet.reset_flat()
+            for _ in range(self.config.settle_updates):
+                sheet.update()
+            self._settled = sheet.positions()[env_group]
+        return self._settled
+
+    # ------------------------------------------------------------------ episode
+    def reset_flat(self) -> None:
+        """Put every sheet flat at rest (z = 0), uncut, held only by the fixture."""
+        rest = np.zeros((self.num_envs, self.grid.num_vertices, 3), dtype=np.float32)
+        rest[:, :, :2] = self.grid.material
+        self._load(rest, pinch_points=None)
+
+    def reset(self, pinch_points: np.ndarray | None = None) -> None:
+        """Start a cut: settled sheets, uncut; grasp the disc around each env's pinch point.
+
+        Args:
+            pinch_points: (B, 2) material coordinates (mm) of each env's pinch point; a row of NaN (or
+                ``None`` for all) means that env is not grasped.
+        """
+        self._load(self.settled_positions(), pinch_points)
+
+    def _load(self, positions: np.ndarray, pinch_points: np.ndarray | None) -> None:
+        b, n = self.num_envs, self.grid.num_vertices
+        pin = np.broadcast_to(self.fixture.astype(np.int32) * kernels.PIN_FIXTURE, (b, n)).copy()
+        self.grasped = np.zeros(b, dtype=bool)
+        if pinch_points is not None:
+            pinch_points = np.asarray(pinch_points, dtype=np.float64).reshape(-1, 2)
+            if pinch_points.shape[0] != b:
+                raise ValueError(f"pinch_points: expected shape ({b}, 2), got {pinch_points.shape}")
+            for env, point in enumerate(pinch_points):
+                if np.all(np.isfinite(point)):
+                    disc = self.grid.disc_mask(point, self.config.grasp_radius) & ~self.fixture
+                    pin[env, disc] = kernels.PIN_GRASP
+                    self.grasped[env] = bool(disc.any())
+        flat = positions.reshape(-1, 3).astype(np.float32)
+        for buffer in (self.x, self.x_prev):
+            buffer.assign(flat)
+        self.anchor.assign(flat)
+        self.pin.assign(pin.reshape(-1))
+        self.alive.fill_(1)
+        self.displacement.zero_()
+        self.tip.zero_()
+        self.update_count = 0
+
+    # ------------------------------------------------------------------ stepping
+    def move_grasp(self, action: np.ndarray) -> None:
+        """Move each env's grasp by ``action`` (B, 3) mm: clipped to ``max_step_mm`` per axis, and the
+        total displacement to ``max_displacement_mm``. Envs without a grasp ignore it."""
+        action = np.asarray(action, dtype=np.float32).reshape(self.num_envs, 3)
+        if not np.all(np.isfinite(action)):
+            raise ValueError("action: contains NaN or infinite values; give finite moves in mm")
+        self._action.assign(np.where(self.grasped[:, None], action, 0.0))
+        out = wp.empty_like(self.displacement)
+        wp.launch(kernels.move_grasp_kernel, dim=self.num_envs,
+                  inputs=[self.config.max_step_mm, self.config.max_displacement_mm, self.displacement,
+                          self._action], outputs=[out], device=self.device)
+        self.displacement = out
+
+    def set_tip(self, tip: np.ndarray) -> None:
+        """Scissor tips for the next updates: (B, 4) ``(x, y, z, cutting)`` in world mm."""
+        self.tip.assign(np.asarray(tip, dtype=np.float32).reshape(self.num_envs, 4))
+
+    def update(self, tape_mode: bool = False) -> None:
+        """One update of every env: integrate, ``iterations`` relaxation sweeps, cut at the tip.
+
+        Args:
+            tape_mode: Allocate fresh output arrays for every kernel so that the whole history stays
+                available to ``wp.Tape`` (slower, uses memory per update).
+        """
+        b, n = self.num_envs, self.grid.num_vertices
+        nx, ny = self.grid.nx, self.grid.ny
+        p = self._wp_params
+        spacing = self.grid.spacing_mm
+        out = _fresh(self.x) if tape_mode else self._spare
+        wp.launch(kernels.integrate_kernel, dim=(b, n),
+                  inputs=[n, p["damping"], p["dt"], p["gravity"], p["noise_std"], int(self.config.first_order_z),
+                          self.seed * 1_000_003 + self.update_count, self.x, self.x_prev, self.alive, self.pin,
+                          self.anchor, self.displacement],
+                  outputs=[out], device=self.device)
+        new_prev, work = self.x, out
+        spare = None if tape_mode else self.x_prev
+        for _ in range(self.config.iterations):
+            for colour in self.colours:
+                dest = _fresh(work) if tape_mode else spare
+                wp.launch(kernels.relax_colour_kernel, dim=(b, n),
+                          inputs=[nx, ny, p["elasticity"], colour.di, colour.dj, colour.rest_length(spacing),
+                                  int(colour.on_rows), colour.divisor, colour.parity, work, self.alive, self.pin],
+                          outputs=[dest], device=self.device)
+                work, spare = dest, work
+        if tape_mode:
+            alive_out = wp.empty_like(self.alive)
+        else:
+            alive_out = self._alive[1] if self.alive is self._alive[0] else self._alive[0]
+        wp.launch(kernels.cut_kernel, dim=(b, n),
+                  inputs=[n, self.config.cut_radius, self.config.cut_height_mm, work, self.alive, self.tip],
+                  outputs=[alive_out], device=self.device)
+        self.x_prev, self.x, self.alive = new_prev, work, alive_out
+        if not tape_mode:
+            self._spare = spare
+        self.update_count += 1
+
+    # ------------------------------------------------------------------ read-back
+    def positions(self) -> np.ndarray:
+        """(B, N, 3) current vertex positions (mm)."""
+        return self.x.numpy().reshape(self.num_envs, self.grid.num_vertices, 3).copy()
+
+    def alive_mask(self) -> np.ndarray:
+        """(B, N) bool: False where the scissors removed the vertex."""
+        return self.alive.numpy().reshape(self.num_envs, self.grid.num_vertices).astype(bool)
+
+    def displacements(self) -> np.ndarray:
+        """(B, 3) grasp displacement from where it pinched (mm)."""
+        return self.displacement.numpy().copy()
+
+
+def _fresh(like: wp.array) -> wp.array:
+    """A new array shaped like ``like`` that records gradients (for taped rollouts)."""
+    return wp.empty_like(like, requires_grad=True)

@@ -1,0 +1,239 @@
+"""The cutting task over a batch: settled sheets, open-loop scissor trajectories, grasps, scoring.
+
+:class:`CuttingTask` is what the Gymnasium envs, the baseline tensioners and the CLI drive. One *step*
+is one tensioning action followed by ``updates_per_step`` simulator updates, each advancing every
+scissor tip by ``trajectory_spacing_mm`` along its trajectory.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from warpcut.config import SheetGrid, SimConfig
+from warpcut.contours import Contour
+from warpcut.scoring import Score, symmetric_difference
+from warpcut.simulator import Simulator
+
+
+def material_to_world(points: np.ndarray, positions: np.ndarray, grid: SheetGrid) -> np.ndarray:
+    """World positions of material points, by bilinear interpolation over the grid cell holding each.
+
+    Args:
+        points: (M, 2) material coordinates (mm).
+        positions: (N, 3) vertex positions of one sheet (mm).
+        grid: The sheet's rest layout.
+
+    Returns:
+        (M, 3) world positions (mm).
+    """
+    hx, hy = grid.spacing_mm
+    u = np.clip(np.asarray(points, dtype=np.float64)[:, 0] / hx, 0.0, grid.nx - 1 - 1e-9)
+    v = np.clip(np.asarray(points, dtype=np.float64)[:, 1] / hy, 0.0, grid.ny - 1 - 1e-9)
+    c, r = np.floor(u).astype(int), np.floor(v).astype(int)
+    fu, fv = (u - c)[:, None], (v - r)[:, None]
+    p = np.asarray(positions, dtype=np.float64).reshape(grid.ny, grid.nx, 3)
+    return ((1 - fu) * (1 - fv) * p[r, c] + fu * (1 - fv) * p[r, c + 1]
+            + (1 - fu) * fv * p[r + 1, c] + fu * fv * p[r + 1, c + 1])
+
+
+def default_segments(contour: Contour) -> list[np.ndarray]:
+    """One segment that starts where the scissors enter (the largest x) and follows the whole contour.
+
+    Closed contours run counter-clockwise from their rightmost point back to it; open ones run from
+    their end with the larger x. :mod:`warpcut.planning` splits contours the wrist can actually cut.
+    """
+    points = np.asarray(contour.points, dtype=np.float64)
+    if contour.closed:
+        start = int(np.argmax(points[:, 0]))
+        loop = np.roll(points, -start, axis=0)
+        return [np.vstack([loop, loop[:1]])]
+    return [points if points[0, 0] >= points[-1, 0] else points[::-1].copy()]
+
+
+@dataclass
+class Trajectory:
+    """The scissor tip's path for one env, one entry per update.
+
+    Attributes:
+        tip: (T, 4) world ``(x, y, z, cutting)``; ``cutting`` is 0 while travelling between segments.
+        material: (T, 2) the material point the tip aims at (NaN while travelling).
+    """
+
+    tip: np.ndarray
+    material: np.ndarray
+
+    @classmethod
+    def from_segments(cls, segments: Sequence[np.ndarray], settled: np.ndarray, grid: SheetGrid,
+                      spacing_mm: float) -> Trajectory:
+        """Follow each segment's world position on the settled sheet (open loop), resampled to
+        ``spacing_mm`` per update along the world path, with straight non-cutting travel between them."""
+        tips, materials = [], []
+        for k, segment in enumerate(segments):
+            segment = np.asarray(segment, dtype=np.float64)
+            dense = _densify(segment, 0.25 * min(grid.spacing_mm))
+            world = material_to_world(dense, settled, grid)
+            if k > 0:
+                travel = _resample(np.stack([tips[-1][-1, :3], world[0]]), spacing_mm)[1:-1]
+                tips.append(np.column_stack([travel, np.zeros(len(travel))]))
+                materials.append(np.full((len(travel), 2), np.nan))
+            arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(world, axis=0), axis=1))])
+            s = np.append(np.arange(0.0, arc[-1], spacing_mm), arc[-1])
+            tip = np.column_stack([np.interp(s, arc, world[:, d]) for d in range(3)])
+            mat = np.column_stack([np.interp(s, arc, dense[:, d]) for d in range(2)])
+            tips.append(np.column_stack([tip, np.ones(len(tip))]))
+            materials.append(mat)
+        return cls(np.vstack(tips).astype(np.float32), np.vstack(materials))
+
+
+def _densify(polyline: np.ndarray, max_step: float) -> np.ndarray:
+    out = [polyline[:1]]
+    for a, b in zip(polyline[:-1], polyline[1:], strict=True):
+        k = max(1, math.ceil(np.linalg.norm(b - a) / max_step))
+        out.append(a + (b - a) * (np.arange(1, k + 1) / k)[:, None])
+    return np.vstack(out)
+
+
+def _resample(polyline: np.ndarray, spacing: float) -> np.ndarray:
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(polyline, axis=0), axis=1))])
+    s = np.append(np.arange(0.0, arc[-1], spacing), arc[-1])
+    return np.column_stack([np.interp(s, arc, polyline[:, d]) for d in range(polyline.shape[1])])
+
+
+class CuttingTask:
+    """B sheets being cut, each along its own contour's trajectory, each with its own grasp.
+
+    Args:
+        config: Simulation parameters.
+        contours: One contour for every env, or one per env.
+        num_envs: Batch size; default ``len(contours)`` or 1.
+        pinch_points: (B, 2) or (2,) material coordinates of the pinch point (mm); NaN rows or
+            ``None``: no grasp (the no-tension case).
+        segments: Per env, the material polylines cut in order; default :func:`default_segments`.
+        device: Warp device.
+        seed: Process-noise seed.
+    """
+
+    def __init__(self, config: SimConfig, contours: Contour | Sequence[Contour], num_envs: int | None = None,
+                 pinch_points: np.ndarray | None = None, segments: Sequence[Sequence[np.ndarray]] | None = None,
+                 device: str | None = None, seed: int = 0):
+        if isinstance(contours, Contour):
+            contours = [contours] * (num_envs or 1)
+        contours = list(contours)
+        num_envs = num_envs or len(contours)
+        if len(contours) != num_envs:
+            raise ValueError(f"contours: got {len(contours)} for {num_envs} envs; give one or one per env")
+        self.sim = Simulator(config, num_envs, device=device, seed=seed)
+        self.config, self.grid, self.num_envs = self.sim.config, self.sim.grid, num_envs
+        self.contours = contours
+        self.segments = [list(s) for s in segments] if segments is not None else [
+            default_segments(c) for c in contours]
+        if len(self.segments) != num_envs:
+            raise ValueError(f"segments: got {len(self.segments)} lists for {num_envs} envs")
+        self.pinch_points = self._pinch_array(pinch_points)
+        self.trajectories = self._build_trajectories()
+        self.horizon_updates = max(len(t.tip) for t in self.trajectories)
+        self._tips = np.zeros((num_envs, self.horizon_updates, 4), dtype=np.float32)
+        self._targets = np.full((num_envs, self.horizon_updates, 2), np.nan)
+        for env, trajectory in enumerate(self.trajectories):
+            t = len(trajectory.tip)
+            self._tips[env, :t] = trajectory.tip
+            self._tips[env, t:, :3] = trajectory.tip[-1, :3]  # parked, not cutting, once done
+            self._targets[env, :t] = trajectory.material
+        self.update_index = 0
+
+    @property
+    def num_steps(self) -> int:
+        """Env steps in an episode: enough updates for the longest trajectory."""
+        return math.ceil(self.horizon_updates / self.config.updates_per_step)
+
+    @property
+    def step_index(self) -> int:
+        return self.update_index // self.config.updates_per_step
+
+    @property
+    def done(self) -> bool:
+        return self.update_index >= self.num_steps * self.config.updates_per_step
+
+    def _pinch_array(self, pinch_points: np.ndarray | None) -> np.ndarray:
+        if pinch_points is None:
+            return np.full((self.num_envs, 2), np.nan)
+        points = np.asarray(pinch_points, dtype=np.float64)
+        if points.shape == (2,):
+            points = np.broadcast_to(points, (self.num_envs, 2)).copy()
+        if points.shape != (self.num_envs, 2):
+            raise ValueError(f"pinch_points: expected (2,) or ({self.num_envs}, 2), got {points.shape}")
+        w, h = self.config.width_mm, self.config.height_mm
+        given = np.all(np.isfinite(points), axis=1)
+        off = given & ((points[:, 0] < 0) | (points[:, 0] > w) | (points[:, 1] < 0) | (points[:, 1] > h))
+        if off.any():
+            raise ValueError(f"pinch_points: {points[off][0].tolist()} lies off the {w:g} x {h:g} mm sheet; "
+                             "give material coordinates on the sheet")
+        return points
+
+    def _build_trajectories(self) -> list[Trajectory]:
+        settled = self.sim.settled_positions()
+        _, env_group = self.sim.settle_groups()
+        # Envs sharing a settled sheet and segments share a trajectory: build each once.
+        cache: dict[tuple[int, int], Trajectory] = {}
+        trajectories = []
+        for env in range(self.num_envs):
+            segment_bytes = tuple(np.ascontiguousarray(s, dtype=np.float64).tobytes() for s in self.segments[env])
+            key = (int(env_group[env]), hash(segment_bytes))
+            if key not in cache:
+                cache[key] = Trajectory.from_segments(self.segments[env], settled[env], self.grid,
+                                                      self.config.trajectory_spacing_mm)
+            trajectories.append(cache[key])
+        return trajectories
+
+    def reset(self) -> None:
+        """Settled, uncut sheets; grasps at the pinch points; scissors at their trajectories' starts."""
+        self.sim.reset(self.pinch_points)
+        self.update_index = 0
+
+    def step(self, action: np.ndarray | None = None) -> None:
+        """Move the grasps by ``action`` (B, 3) mm (clipped), then advance the scissors one step."""
+        if self.done:
+            raise RuntimeError("step: the episode is over; call reset() first")
+        if action is not None:
+            self.sim.move_grasp(action)
+        for _ in range(self.config.updates_per_step):
+            self.sim.set_tip(self.tip_positions())
+            self.sim.update()
+            self.update_index += 1
+
+    def tip_positions(self, update_index: int | None = None) -> np.ndarray:
+        """(B, 4) scissor tips ``(x, y, z, cutting)`` for an update (default: the next one). Past the end
+        of its trajectory a tip stays parked at its last point and does not cut."""
+        u = self.update_index if update_index is None else update_index
+        tip = self._tips[:, min(u, self.horizon_updates - 1)].copy()
+        if u >= self.horizon_updates:
+            tip[:, 3] = 0.0
+        return tip
+
+    def target_world(self) -> np.ndarray:
+        """(B, 3) current world position of the material point each tip is about to cut (NaN when
+        travelling or finished): the contour as the sheet has moved it."""
+        t = min(self.update_index, self.horizon_updates - 1)
+        positions = self.sim.positions()
+        out = np.full((self.num_envs, 3), np.nan)
+        for env in range(self.num_envs):
+            target = self._targets[env, t]
+            if np.all(np.isfinite(target)) and self.update_index < self.horizon_updates:
+                out[env] = material_to_world(target[None], positions[env], self.grid)[0]
+        return out
+
+    def score(self) -> Score:
+        """Symmetric difference between each env's intended region and what its cut separated."""
+        regions = [c.intended_region() for c in self.contours]
+        return symmetric_difference(self.sim.alive_mask(), regions, self.grid)
+
+    def run(self, policy) -> Score:
+        """Reset, then step ``policy(task) -> (B, 3)`` (or ``None`` for no moves) to the end; score."""
+        self.reset()
+        while not self.done:
+            self.step(policy(self) if policy is not None else None)
+        return self.score()
