@@ -26,8 +26,9 @@ class NoTension:
 
     name: str = "none"
 
-    def pinch_point(self, contour: Contour, config: SimConfig, device: str | None = None,
-                    seed: int = 0) -> np.ndarray | None:
+    def pinch_point(
+        self, contour: Contour, config: SimConfig, device: str | None = None, seed: int = 0
+    ) -> np.ndarray | None:
         return None
 
     def __call__(self, task: CuttingTask) -> np.ndarray | None:
@@ -48,8 +49,9 @@ class FixedTension:
     candidates: int = 30
     name: str = "fixed"
 
-    def pinch_point(self, contour: Contour, config: SimConfig, device: str | None = None,
-                    seed: int = 0) -> np.ndarray:
+    def pinch_point(
+        self, contour: Contour, config: SimConfig, device: str | None = None, seed: int = 0
+    ) -> np.ndarray:
         if self.pinch is not None:
             return np.asarray(self.pinch, dtype=np.float64)
         return search_fixed_pinch(contour, config, self.candidates, device=device, seed=seed)[0]
@@ -73,8 +75,9 @@ class AnalyticTension:
     pinch: tuple[float, float] | None = None
     name: str = "analytic"
 
-    def pinch_point(self, contour: Contour, config: SimConfig, device: str | None = None,
-                    seed: int = 0) -> np.ndarray:
+    def pinch_point(
+        self, contour: Contour, config: SimConfig, device: str | None = None, seed: int = 0
+    ) -> np.ndarray:
         return np.asarray(self.pinch if self.pinch is not None else contour.centroid, dtype=np.float64)
 
     def __call__(self, task: CuttingTask) -> np.ndarray:
@@ -84,8 +87,9 @@ class AnalyticTension:
         return np.nan_to_num(move, nan=0.0)
 
 
-def search_fixed_pinch(contour: Contour, config: SimConfig, candidates: int = 30, device: str | None = None,
-                       seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def search_fixed_pinch(
+    contour: Contour, config: SimConfig, candidates: int = 30, device: str | None = None, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Random search for the best fixed pinch point, every candidate in one simulator batch.
 
     Returns:
@@ -93,8 +97,14 @@ def search_fixed_pinch(contour: Contour, config: SimConfig, candidates: int = 30
         vertices.
     """
     points = sample_pinch_candidates(contour, config, candidates, np.random.default_rng(seed))
-    task = CuttingTask(config.replace(noise_std=0.0), contour, num_envs=len(points), pinch_points=points,
-                       device=device, seed=seed)
+    task = CuttingTask(
+        config.replace(noise_std=0.0),
+        contour,
+        num_envs=len(points),
+        pinch_points=points,
+        device=device,
+        seed=seed,
+    )
     errors = task.run(None).error_vertices
     return points[int(np.argmin(errors))], points, errors
 

@@ -22,9 +22,15 @@ def ci95(values: np.ndarray) -> float:
     return float(stats.t.ppf(0.975, values.size - 1) * values.std(ddof=1) / np.sqrt(values.size))
 
 
-def compare_policies(contour: Contour, methods: Sequence[str] = ("none", "fixed", "analytic"), trials: int = 1,
-                     config: SimConfig | None = None, pinch: tuple[float, float] | None = None,
-                     device: str | None = None, seed: int = 0) -> dict:
+def compare_policies(
+    contour: Contour,
+    methods: Sequence[str] = ("none", "fixed", "analytic"),
+    trials: int = 1,
+    config: SimConfig | None = None,
+    pinch: tuple[float, float] | None = None,
+    device: str | None = None,
+    seed: int = 0,
+) -> dict:
     """Run each baseline tensioner for ``trials`` seeded trials on ``contour`` and score it.
 
     Trials differ by their process-noise stream (``config.noise_std``); without noise they coincide.
@@ -60,7 +66,8 @@ def compare_policies(contour: Contour, methods: Sequence[str] = ("none", "fixed"
         results[method] = {
             "error_vertices": float(errors[method].mean()),
             "error_mm2": float(areas[method].mean()),
-            "improvement_pct": float(improvement_pct(mean_none, errors[method].mean())) if mean_none > 0
+            "improvement_pct": float(improvement_pct(mean_none, errors[method].mean()))
+            if mean_none > 0
             else float("nan"),
             "ci95_pct": ci95(per_trial),
             "trials_error_vertices": [float(e) for e in errors[method]],

@@ -17,8 +17,10 @@ from warpcut.task import CuttingTask
 
 
 def settle_table(device: str) -> None:
-    print("| setting | springs | sweeps | centre sag (mm) | mean / max structural stretch (%) | drift over "
-          "100 more updates (mm) |")
+    print(
+        "| setting | springs | sweeps | centre sag (mm) | mean / max structural stretch (%) | drift over "
+        "100 more updates (mm) |"
+    )
     print("|---|---|---|---|---|---|")
     settings = [
         ("default (corners)", SimConfig()),
@@ -33,15 +35,21 @@ def settle_table(device: str) -> None:
         g = sim.grid
         p = settled.reshape(g.ny, g.nx, 3)
         hx, hy = g.spacing_mm
-        stretch = np.concatenate([(np.linalg.norm(p[:, 1:] - p[:, :-1], axis=-1) / hx - 1).ravel(),
-                                  (np.linalg.norm(p[1:] - p[:-1], axis=-1) / hy - 1).ravel()])
+        stretch = np.concatenate(
+            [
+                (np.linalg.norm(p[:, 1:] - p[:, :-1], axis=-1) / hx - 1).ravel(),
+                (np.linalg.norm(p[1:] - p[:-1], axis=-1) / hy - 1).ravel(),
+            ]
+        )
         centre = (g.ny // 2) * g.nx + g.nx // 2
         sim.reset()
         for _ in range(100):
             sim.update()
         drift = abs(sim.positions()[0, centre, 2] - settled[centre, 2])
-        print(f"| {label} | {'+'.join(config.springs)} | {config.iterations} | {-settled[centre, 2]:.1f} | "
-              f"{100 * stretch.mean():.1f} / {100 * stretch.max():.0f} | {drift:.2f} |")
+        print(
+            f"| {label} | {'+'.join(config.springs)} | {config.iterations} | {-settled[centre, 2]:.1f} | "
+            f"{100 * stretch.mean():.1f} / {100 * stretch.max():.0f} | {drift:.2f} |"
+        )
 
 
 def no_tension_table(device: str) -> None:
@@ -51,12 +59,20 @@ def no_tension_table(device: str) -> None:
     task = CuttingTask(SimConfig(), contours, device=device)
     score = task.run(None)
     elapsed = time.perf_counter() - start
-    print(f"\nNo-tension error, 25x25 default sheet ({len(contours)} contours in one batch, {elapsed:.1f} s):\n")
-    print("| contour | kind | length (mm) | intended area (mm^2) | error (vertices) | error (mm^2) | error / area |")
+    print(
+        f"\nNo-tension error, 25x25 default sheet ({len(contours)} contours in one batch, {elapsed:.1f} s):\n"
+    )
+    print(
+        "| contour | kind | length (mm) | intended area (mm^2) | error (vertices) | error (mm^2) "
+        "| error / area |"
+    )
     print("|---|---|---|---|---|---|---|")
     for k, c in enumerate(contours):
-        print(f"| {c.name} | {'closed' if c.closed else 'open'} | {c.length:.1f} | {c.area_mm2:.0f} | "
-              f"{score.error_vertices[k]:.0f} | {score.error_mm2[k]:.0f} | {score.error_mm2[k] / c.area_mm2:.2f} |")
+        print(
+            f"| {c.name} | {'closed' if c.closed else 'open'} | {c.length:.1f} | {c.area_mm2:.0f} | "
+            f"{score.error_vertices[k]:.0f} | {score.error_mm2[k]:.0f} | "
+            f"{score.error_mm2[k] / c.area_mm2:.2f} |"
+        )
 
 
 if __name__ == "__main__":

@@ -20,8 +20,13 @@ def mean_height_after(sim: Simulator, displacement: wp.array, updates: int, tape
     def rollout():
         for _ in range(updates):
             sim.update(tape_mode=True)
-        wp.launch(mean_height_kernel, dim=sim.x.shape[0], inputs=[sim.x, 1.0 / sim.x.shape[0]], outputs=[loss],
-                  device=sim.device)
+        wp.launch(
+            mean_height_kernel,
+            dim=sim.x.shape[0],
+            inputs=[sim.x, 1.0 / sim.x.shape[0]],
+            outputs=[loss],
+            device=sim.device,
+        )
 
     if tape is None:
         rollout()

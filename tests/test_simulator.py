@@ -14,7 +14,9 @@ def structural_stretch(positions: np.ndarray, grid: SheetGrid) -> np.ndarray:
     return np.concatenate([sx.ravel(), sy.ravel()])
 
 
-@pytest.mark.parametrize("springs", [("structural",), ("structural", "shear"), ("structural", "shear", "bending")])
+@pytest.mark.parametrize(
+    "springs", [("structural",), ("structural", "shear"), ("structural", "shear", "bending")]
+)
 def test_colours_cover_every_spring_once_and_share_no_vertex(springs):
     grid = SheetGrid(7, 6, 60.0, 50.0)
     config = SimConfig(resolution=(7, 6), width_mm=60.0, height_mm=50.0, springs=springs)
@@ -94,7 +96,9 @@ def test_grasp_moves_the_pinched_disc(device):
         sim.move_grasp(np.array([[1.0, 0.0, 0.0]]))
         sim.update()
     disc = sim.grid.disc_mask([50.0, 50.0], sim.config.grasp_radius)
-    np.testing.assert_allclose(sim.positions()[0][disc] - before[disc], [[5.0, 0.0, 0.0]] * disc.sum(), atol=1e-4)
+    np.testing.assert_allclose(
+        sim.positions()[0][disc] - before[disc], [[5.0, 0.0, 0.0]] * disc.sum(), atol=1e-4
+    )
 
 
 def test_cutting_removes_vertices_near_the_tip_only(device):
@@ -114,15 +118,18 @@ def test_cutting_removes_vertices_near_the_tip_only(device):
     assert sim.alive_mask().all()
 
 
-@pytest.mark.parametrize(("change", "message"), [
-    ({"resolution": 3}, "resolution: .*5 <= n <= 100"),
-    ({"damping": 1.5}, r"damping: must lie in \[0, 1\]"),
-    ({"fixture": "edges"}, "fixture: choose one of"),
-    ({"springs": ("shear",)}, "springs: choose from"),
-    ({"iterations": 0}, "iterations: must be an integer"),
-    ({"gravity": [1.0, float("nan")]}, "gravity: must be finite"),
-    ({"cut_height_mm": -1.0}, "cut_height_mm: must be a positive number"),
-])
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"resolution": 3}, "resolution: .*5 <= n <= 100"),
+        ({"damping": 1.5}, r"damping: must lie in \[0, 1\]"),
+        ({"fixture": "edges"}, "fixture: choose one of"),
+        ({"springs": ("shear",)}, "springs: choose from"),
+        ({"iterations": 0}, "iterations: must be an integer"),
+        ({"gravity": [1.0, float("nan")]}, "gravity: must be finite"),
+        ({"cut_height_mm": -1.0}, "cut_height_mm: must be a positive number"),
+    ],
+)
 def test_bad_config_names_the_field(change, message):
     with pytest.raises(ConfigError, match=message):
         SimConfig(**change).validated()

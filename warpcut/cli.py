@@ -28,8 +28,11 @@ class CleanErrors(click.Group):
             click.echo("interrupted", err=True)
             sys.exit(130)
         except click.ClickException as exc:
-            hint = f" (see 'warpcut {exc.ctx.command.name} --help')" if getattr(exc, "ctx", None) and \
-                exc.ctx.command is not self else ""
+            hint = (
+                f" (see 'warpcut {exc.ctx.command.name} --help')"
+                if getattr(exc, "ctx", None) and exc.ctx.command is not self
+                else ""
+            )
             click.echo(f"error: {exc.format_message()}{hint}", err=True)
             sys.exit(2)
         except (ValueError, FileNotFoundError) as exc:
@@ -52,8 +55,10 @@ def _parse_policies(value: str) -> list[str]:
     names = [v.strip() for v in value.split(",") if v.strip()]
     unknown = [n for n in names if n not in POLICY_NAMES]
     if not names or unknown:
-        raise click.BadParameter(f"unknown {', '.join(unknown) or 'empty list'}; choose from "
-                                 f"{','.join(POLICY_NAMES)}", param_hint="--policy")
+        raise click.BadParameter(
+            f"unknown {', '.join(unknown) or 'empty list'}; choose from {','.join(POLICY_NAMES)}",
+            param_hint="--policy",
+        )
     return names
 
 
@@ -64,18 +69,29 @@ def main() -> None:
 
 
 @main.command()
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the list here.")
+@click.option(
+    "--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the list here."
+)
 def contours(json_path: Path | None) -> None:
     """List the built-in contours (name, closed/open, length)."""
     from warpcut.contours import builtin_contours
 
     suite = builtin_contours()
-    rows = [{"name": c.name, "closed": c.closed, "length_mm": round(c.length, 2), "area_mm2": round(c.area_mm2, 1)}
-            for c in suite.values()]
+    rows = [
+        {
+            "name": c.name,
+            "closed": c.closed,
+            "length_mm": round(c.length, 2),
+            "area_mm2": round(c.area_mm2, 1),
+        }
+        for c in suite.values()
+    ]
     click.echo(f"{'name':<18} {'kind':<7} {'length (mm)':>11} {'area (mm^2)':>11}")
     for r in rows:
-        click.echo(f"{r['name']:<18} {'closed' if r['closed'] else 'open':<7} {r['length_mm']:>11.1f} "
-                   f"{r['area_mm2']:>11.1f}")
+        click.echo(
+            f"{r['name']:<18} {'closed' if r['closed'] else 'open':<7} {r['length_mm']:>11.1f} "
+            f"{r['area_mm2']:>11.1f}"
+        )
     if json_path:
         from warpcut.io import write_json
 
@@ -84,21 +100,49 @@ def contours(json_path: Path | None) -> None:
 
 @main.command()
 @click.option("--contour", "contour_name", required=True, help="Built-in name or a .json/.svg contour file.")
-@click.option("--policy", "policies", default="none,fixed,analytic", show_default=True,
-              help="Comma-separated tensioners to compare.")
+@click.option(
+    "--policy",
+    "policies",
+    default="none,fixed,analytic",
+    show_default=True,
+    help="Comma-separated tensioners to compare.",
+)
 @click.option("--pinch", default=None, help="Pinch point X,Y (mm, material) for fixed and analytic.")
-@click.option("--trials", default=1, show_default=True, type=click.IntRange(min=1),
-              help="Seeded trials per policy (they differ by process noise).")
-@click.option("--noise", default=0.0, show_default=True, type=click.FloatRange(min=0.0),
-              help="Process noise sigma (mm per update).")
-@click.option("--resolution", default=25, show_default=True, type=click.IntRange(5, 100),
-              help="Vertices per side.")
+@click.option(
+    "--trials",
+    default=1,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="Seeded trials per policy (they differ by process noise).",
+)
+@click.option(
+    "--noise",
+    default=0.0,
+    show_default=True,
+    type=click.FloatRange(min=0.0),
+    help="Process noise sigma (mm per update).",
+)
+@click.option(
+    "--resolution", default=25, show_default=True, type=click.IntRange(5, 100), help="Vertices per side."
+)
 @click.option("--fixture", default="corners", show_default=True, type=click.Choice(FIXTURES))
 @click.option("--device", default=None, help="Warp device: cpu or cuda (default: cuda if available).")
 @click.option("--seed", default=0, show_default=True, type=int)
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write results here.")
-def simulate(contour_name: str, policies: str, pinch: str | None, trials: int, noise: float, resolution: int,
-             fixture: str, device: str | None, seed: int, json_path: Path | None) -> None:
+@click.option(
+    "--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write results here."
+)
+def simulate(
+    contour_name: str,
+    policies: str,
+    pinch: str | None,
+    trials: int,
+    noise: float,
+    resolution: int,
+    fixture: str,
+    device: str | None,
+    seed: int,
+    json_path: Path | None,
+) -> None:
     """Cut a contour with each baseline tensioner and compare their errors."""
     from agents.evaluation import compare_policies
     from warpcut.contours import load_contour
@@ -110,17 +154,24 @@ def simulate(contour_name: str, policies: str, pinch: str | None, trials: int, n
     contour = load_contour(contour_name)
     config = SimConfig(resolution=resolution, fixture=fixture, noise_std=noise).validated()
     start = time.perf_counter()
-    report = compare_policies(contour, names, trials=trials, config=config, pinch=point, device=device,
-                              seed=seed)
+    report = compare_policies(
+        contour, names, trials=trials, config=config, pinch=point, device=device, seed=seed
+    )
     elapsed = time.perf_counter() - start
-    click.echo(f"contour {contour.name} ({'closed' if contour.closed else 'open'}, {contour.length:.1f} mm), "
-               f"{trials} trial(s), {config.nx}x{config.ny} on {device}, {elapsed:.1f} s")
-    click.echo(f"{'policy':<10} {'error (vertices)':>16} {'error (mm^2)':>13} {'improvement':>12} {'pinch (mm)':>16}")
+    click.echo(
+        f"contour {contour.name} ({'closed' if contour.closed else 'open'}, {contour.length:.1f} mm), "
+        f"{trials} trial(s), {config.nx}x{config.ny} on {device}, {elapsed:.1f} s"
+    )
+    click.echo(
+        f"{'policy':<10} {'error (vertices)':>16} {'error (mm^2)':>13} {'improvement':>12} {'pinch (mm)':>16}"
+    )
     for name, r in report["results"].items():
         ci = f" ±{r['ci95_pct']:.1f}" if trials > 1 else ""
         pinch_txt = "-" if r["pinch"] is None else f"({r['pinch'][0]:.1f}, {r['pinch'][1]:.1f})"
-        click.echo(f"{name:<10} {r['error_vertices']:>16.1f} {r['error_mm2']:>13.1f} "
-                   f"{r['improvement_pct']:>+11.1f}%{ci} {pinch_txt:>16}")
+        click.echo(
+            f"{name:<10} {r['error_vertices']:>16.1f} {r['error_mm2']:>13.1f} "
+            f"{r['improvement_pct']:>+11.1f}%{ci} {pinch_txt:>16}"
+        )
     if json_path:
         from warpcut.io import write_json
 

@@ -134,29 +134,50 @@ class SimConfig:
             values = np.atleast_1d(np.asarray(getattr(self, name), dtype=np.float64))
             _require(values.ndim == 1 and values.size >= 1, name, "give one number or a list, one per env")
             _require(bool(np.all(np.isfinite(values))), name, "must be finite")
-        _require(bool(np.all(np.asarray(self.damping) >= 0) and np.all(np.asarray(self.damping) <= 1)),
-                 "damping", "must lie in [0, 1] (paper: 0.99)")
+        _require(
+            bool(np.all(np.asarray(self.damping) >= 0) and np.all(np.asarray(self.damping) <= 1)),
+            "damping",
+            "must lie in [0, 1] (paper: 0.99)",
+        )
         _require(bool(np.all(np.asarray(self.dt) > 0)), "dt", "must be positive (s; paper: 0.016)")
-        _require(bool(np.all(np.asarray(self.elasticity) > 0) and np.all(np.asarray(self.elasticity) <= 1)),
-                 "elasticity", "must lie in (0, 1] (paper: 1)")
+        _require(
+            bool(np.all(np.asarray(self.elasticity) > 0) and np.all(np.asarray(self.elasticity) <= 1)),
+            "elasticity",
+            "must lie in (0, 1] (paper: 1)",
+        )
         _require(bool(np.all(np.asarray(self.noise_std) >= 0)), "noise_std", "must be >= 0 (mm)")
-        _require(isinstance(self.iterations, int) and 1 <= self.iterations <= 200, "iterations",
-                 "must be an integer in [1, 200]")
+        _require(
+            isinstance(self.iterations, int) and 1 <= self.iterations <= 200,
+            "iterations",
+            "must be an integer in [1, 200]",
+        )
         unknown = [s for s in self.springs if s not in SPRING_FAMILIES]
-        _require(not unknown and "structural" in self.springs, "springs",
-                 f"choose from {SPRING_FAMILIES}, including 'structural' (got {tuple(self.springs)})")
+        _require(
+            not unknown and "structural" in self.springs,
+            "springs",
+            f"choose from {SPRING_FAMILIES}, including 'structural' (got {tuple(self.springs)})",
+        )
         _require(self.fixture in FIXTURES, "fixture", f"choose one of {FIXTURES} (got {self.fixture!r})")
         for name in ("settle_updates", "updates_per_step"):
-            _require(isinstance(getattr(self, name), int) and getattr(self, name) >= (name != "settle_updates"),
-                     name, "must be a non-negative integer" if name == "settle_updates" else "must be >= 1")
+            _require(
+                isinstance(getattr(self, name), int) and getattr(self, name) >= (name != "settle_updates"),
+                name,
+                "must be a non-negative integer" if name == "settle_updates" else "must be >= 1",
+            )
         for name in ("trajectory_spacing_mm", "cut_height_mm", "max_step_mm", "max_displacement_mm"):
             value = getattr(self, name)
-            _require(isinstance(value, int | float) and math.isfinite(value) and value > 0, name,
-                     "must be a positive number (mm)")
+            _require(
+                isinstance(value, int | float) and math.isfinite(value) and value > 0,
+                name,
+                "must be a positive number (mm)",
+            )
         for name in ("cut_radius_mm", "grasp_radius_mm"):
             value = getattr(self, name)
-            _require(value is None or (math.isfinite(value) and value > 0), name,
-                     "must be a positive number (mm) or None for the default")
+            _require(
+                value is None or (math.isfinite(value) and value > 0),
+                name,
+                "must be a positive number (mm) or None for the default",
+            )
         return self
 
 
@@ -213,4 +234,6 @@ class SheetGrid:
 
     def disc_mask(self, center_mm: np.ndarray, radius_mm: float) -> np.ndarray:
         """(ny * nx,) bool: vertices whose rest position lies within ``radius_mm`` of ``center_mm``."""
-        return np.linalg.norm(self.material - np.asarray(center_mm, dtype=np.float64)[:2], axis=1) <= radius_mm
+        return (
+            np.linalg.norm(self.material - np.asarray(center_mm, dtype=np.float64)[:2], axis=1) <= radius_mm
+        )

@@ -17,25 +17,35 @@ def pinch_feasible(points: np.ndarray, contour: Contour, config: SimConfig) -> n
 
     Feasible = on the sheet at least one grasp radius from its edges, at least
     :data:`CORNER_MARGIN_MM` from the corners, not on fixture vertices, and far enough from the contour
-    that the gripped disc is never cut (grasp radius + cut radius + one spacing).
+    that the gripped disc never reaches the scissors' cut (grasp radius + cut radius).
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     w, h = config.width_mm, config.height_mm
     edge = config.grasp_radius
-    ok = (points[:, 0] >= edge) & (points[:, 0] <= w - edge) & (points[:, 1] >= edge) & (points[:, 1] <= h - edge)
+    ok = (
+        (points[:, 0] >= edge)
+        & (points[:, 0] <= w - edge)
+        & (points[:, 1] >= edge)
+        & (points[:, 1] <= h - edge)
+    )
     corners = np.array([[0.0, 0.0], [w, 0.0], [0.0, h], [w, h]])
     ok &= np.min(np.linalg.norm(points[:, None] - corners[None], axis=2), axis=1) >= CORNER_MARGIN_MM
     grid = SheetGrid.from_config(config)
     fixed = grid.material[grid.fixture_mask(config.fixture)]
     ok &= np.min(np.linalg.norm(points[:, None] - fixed[None], axis=2), axis=1) > config.grasp_radius
     line = shapely.LinearRing(contour.points) if contour.closed else shapely.LineString(contour.points)
-    clearance = config.grasp_radius + config.cut_radius + max(config.spacing_mm)
+    clearance = config.grasp_radius + config.cut_radius
     ok &= shapely.distance(shapely.points(points), line) >= clearance
     return ok
 
 
-def sample_pinch_candidates(contour: Contour, config: SimConfig, num: int = 30,
-                            rng: np.random.Generator | None = None, include_centroid: bool = True) -> np.ndarray:
+def sample_pinch_candidates(
+    contour: Contour,
+    config: SimConfig,
+    num: int = 30,
+    rng: np.random.Generator | None = None,
+    include_centroid: bool = True,
+) -> np.ndarray:
     """``num`` feasible pinch points drawn uniformly (rejection sampling), plus the contour's centroid
     first when it is feasible (the paper's candidate set). Returns (K, 2) material mm."""
     rng = rng if rng is not None else np.random.default_rng(0)
@@ -51,8 +61,10 @@ def sample_pinch_candidates(contour: Contour, config: SimConfig, num: int = 30,
         chosen.extend(good)
         need -= len(good)
     if not chosen:
-        raise ValueError(f"contour {contour.name!r}: no feasible pinch point on the sheet; the contour leaves "
-                         "no room for the gripper (give --pinch explicitly)")
+        raise ValueError(
+            f"contour {contour.name!r}: no feasible pinch point on the sheet; the contour leaves "
+            "no room for the gripper (give --pinch explicitly)"
+        )
     return np.asarray(chosen)
 
 

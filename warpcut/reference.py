@@ -21,8 +21,13 @@ def colour_springs(grid: SheetGrid, config: SimConfig) -> list[tuple[np.ndarray,
     for colour in spring_colours(config.springs):
         key = rows if colour.on_rows else cols
         r2, c2 = rows + colour.dj, cols + colour.di
-        keep = ((key // colour.divisor) % 2 == colour.parity) & (r2 >= 0) & (r2 < grid.ny) & (c2 >= 0) & (
-            c2 < grid.nx)
+        keep = (
+            ((key // colour.divisor) % 2 == colour.parity)
+            & (r2 >= 0)
+            & (r2 < grid.ny)
+            & (c2 >= 0)
+            & (c2 < grid.nx)
+        )
         starts = np.flatnonzero(keep)
         ends = r2[keep] * grid.nx + c2[keep]
         assert not np.intersect1d(starts, ends).size, "a colour's springs must not share vertices"
@@ -63,7 +68,9 @@ class ReferenceSheet:
     def move_grasp(self, action: np.ndarray) -> None:
         if not self.grasp.any():
             return
-        step = np.clip(np.asarray(action, dtype=np.float32), -self.config.max_step_mm, self.config.max_step_mm)
+        step = np.clip(
+            np.asarray(action, dtype=np.float32), -self.config.max_step_mm, self.config.max_step_mm
+        )
         u = self.displacement + step
         norm = np.linalg.norm(u)
         if norm > self.config.max_displacement_mm:
@@ -88,7 +95,8 @@ class ReferenceSheet:
         if tip is not None and tip[3] > 0.5:
             d2 = (self.x[:, 0] - tip[0]) ** 2 + (self.x[:, 1] - tip[1]) ** 2
             hit = (d2 <= np.float32(self.config.cut_radius) ** 2) & (
-                np.abs(self.x[:, 2] - tip[2]) <= self.config.cut_height_mm)
+                np.abs(self.x[:, 2] - tip[2]) <= self.config.cut_height_mm
+            )
             self.alive &= ~hit
 
     def _relax(self, starts: np.ndarray, ends: np.ndarray, rest: float, movable: np.ndarray) -> None:

@@ -109,7 +109,9 @@ def achieved_mask(alive: np.ndarray, intended: np.ndarray, grid: SheetGrid) -> n
         sheet = 1 + np.argmax(size_outside * (grid.num_vertices + 1) + size)
         separated = (env_alive & (pieces != sheet)).reshape(grid.ny, grid.nx)
         nearest_alive = ndimage.distance_transform_edt(
-            ~env_alive.reshape(grid.ny, grid.nx), sampling=(hy, hx), return_distances=False,
+            ~env_alive.reshape(grid.ny, grid.nx),
+            sampling=(hy, hx),
+            return_distances=False,
             return_indices=True,
         )
         achieved[env] = separated[nearest_alive[0], nearest_alive[1]].ravel()

@@ -113,8 +113,10 @@ class Simulator:
         Returns:
             ``(group_params, env_group)``: (G, 4) parameters of each distinct sheet and (B,) group index.
         """
-        columns = [np.broadcast_to(self.params[k], (self.num_envs,)) for k in ("damping", "dt", "gravity",
-                                                                               "elasticity")]
+        columns = [
+            np.broadcast_to(self.params[k], (self.num_envs,))
+            for k in ("damping", "dt", "gravity", "elasticity")
+        ]
         table = np.stack(columns, axis=1)
         group_params, env_group = np.unique(table, axis=0, return_inverse=True)
         return group_params, env_group.reshape(-1)
@@ -126,9 +128,13 @@ class Simulator:
         """
         if self._settled is None:
             group_params, env_group = self.settle_groups()
-            config = self.config.replace(**{k: group_params[:, c].tolist() for c, k in
-                                            enumerate(("damping", "dt", "gravity", "elasticity"))},
-                                         noise_std=0.0)
+            config = self.config.replace(
+                **{
+                    k: group_params[:, c].tolist()
+                    for c, k in enumerate(("damping", "dt", "gravity", "elasticity"))
+                },
+                noise_std=0.0,
+            )
             sheet = Simulator(config, len(group_params), self.device)
             sheet.reset_flat()
             for _ in range(self.config.settle_updates):
@@ -184,9 +190,18 @@ class Simulator:
             raise ValueError("action: contains NaN or infinite values; give finite moves in mm")
         self._action.assign(np.where(self.grasped[:, None], action, 0.0))
         out = wp.empty_like(self.displacement)
-        wp.launch(kernels.move_grasp_kernel, dim=self.num_envs,
-                  inputs=[self.config.max_step_mm, self.config.max_displacement_mm, self.displacement,
-                          self._action], outputs=[out], device=self.device)
+        wp.launch(
+            kernels.move_grasp_kernel,
+            dim=self.num_envs,
+            inputs=[
+                self.config.max_step_mm,
+                self.config.max_displacement_mm,
+                self.displacement,
+                self._action,
+            ],
+            outputs=[out],
+            device=self.device,
+        )
         self.displacement = out
 
     def set_tip(self, tip: np.ndarray) -> None:
@@ -205,28 +220,64 @@ class Simulator:
         p = self._wp_params
         spacing = self.grid.spacing_mm
         out = _fresh(self.x) if tape_mode else self._spare
-        wp.launch(kernels.integrate_kernel, dim=(b, n),
-                  inputs=[n, p["damping"], p["dt"], p["gravity"], p["noise_std"], int(self.config.first_order_z),
-                          self.seed * 1_000_003 + self.update_count, self.x, self.x_prev, self.alive, self.pin,
-                          self.anchor, self.displacement],
-                  outputs=[out], device=self.device)
+        wp.launch(
+            kernels.integrate_kernel,
+            dim=(b, n),
+            inputs=[
+                n,
+                p["damping"],
+                p["dt"],
+                p["gravity"],
+                p["noise_std"],
+                int(self.config.first_order_z),
+                self.seed * 1_000_003 + self.update_count,
+                self.x,
+                self.x_prev,
+                self.alive,
+                self.pin,
+                self.anchor,
+                self.displacement,
+            ],
+            outputs=[out],
+            device=self.device,
+        )
         new_prev, work = self.x, out
         spare = None if tape_mode else self.x_prev
         for _ in range(self.config.iterations):
             for colour in self.colours:
                 dest = _fresh(work) if tape_mode else spare
-                wp.launch(kernels.relax_colour_kernel, dim=(b, n),
-                          inputs=[nx, ny, p["elasticity"], colour.di, colour.dj, colour.rest_length(spacing),
-                                  int(colour.on_rows), colour.divisor, colour.parity, work, self.alive, self.pin],
-                          outputs=[dest], device=self.device)
+                wp.launch(
+                    kernels.relax_colour_kernel,
+                    dim=(b, n),
+                    inputs=[
+                        nx,
+                        ny,
+                        p["elasticity"],
+                        colour.di,
+                        colour.dj,
+                        colour.rest_length(spacing),
+                        int(colour.on_rows),
+                        colour.divisor,
+                        colour.parity,
+                        work,
+                        self.alive,
+                        self.pin,
+                    ],
+                    outputs=[dest],
+                    device=self.device,
+                )
                 work, spare = dest, work
         if tape_mode:
             alive_out = wp.empty_like(self.alive)
         else:
             alive_out = self._alive[1] if self.alive is self._alive[0] else self._alive[0]
-        wp.launch(kernels.cut_kernel, dim=(b, n),
-                  inputs=[n, self.config.cut_radius, self.config.cut_height_mm, work, self.alive, self.tip],
-                  outputs=[alive_out], device=self.device)
+        wp.launch(
+            kernels.cut_kernel,
+            dim=(b, n),
+            inputs=[n, self.config.cut_radius, self.config.cut_height_mm, work, self.alive, self.tip],
+            outputs=[alive_out],
+            device=self.device,
+        )
         self.x_prev, self.x, self.alive = new_prev, work, alive_out
         if not tape_mode:
             self._spare = spare

@@ -36,8 +36,12 @@ def material_to_world(points: np.ndarray, positions: np.ndarray, grid: SheetGrid
     c, r = np.floor(u).astype(int), np.floor(v).astype(int)
     fu, fv = (u - c)[:, None], (v - r)[:, None]
     p = np.asarray(positions, dtype=np.float64).reshape(grid.ny, grid.nx, 3)
-    return ((1 - fu) * (1 - fv) * p[r, c] + fu * (1 - fv) * p[r, c + 1]
-            + (1 - fu) * fv * p[r + 1, c] + fu * fv * p[r + 1, c + 1])
+    return (
+        (1 - fu) * (1 - fv) * p[r, c]
+        + fu * (1 - fv) * p[r, c + 1]
+        + (1 - fu) * fv * p[r + 1, c]
+        + fu * fv * p[r + 1, c + 1]
+    )
 
 
 def default_segments(contour: Contour) -> list[np.ndarray]:
@@ -67,8 +71,9 @@ class Trajectory:
     material: np.ndarray
 
     @classmethod
-    def from_segments(cls, segments: Sequence[np.ndarray], settled: np.ndarray, grid: SheetGrid,
-                      spacing_mm: float) -> Trajectory:
+    def from_segments(
+        cls, segments: Sequence[np.ndarray], settled: np.ndarray, grid: SheetGrid, spacing_mm: float
+    ) -> Trajectory:
         """Follow each segment's world position on the settled sheet (open loop), resampled to
         ``spacing_mm`` per update along the world path, with straight non-cutting travel between them."""
         tips, materials = [], []
@@ -117,9 +122,16 @@ class CuttingTask:
         seed: Process-noise seed.
     """
 
-    def __init__(self, config: SimConfig, contours: Contour | Sequence[Contour], num_envs: int | None = None,
-                 pinch_points: np.ndarray | None = None, segments: Sequence[Sequence[np.ndarray]] | None = None,
-                 device: str | None = None, seed: int = 0):
+    def __init__(
+        self,
+        config: SimConfig,
+        contours: Contour | Sequence[Contour],
+        num_envs: int | None = None,
+        pinch_points: np.ndarray | None = None,
+        segments: Sequence[Sequence[np.ndarray]] | None = None,
+        device: str | None = None,
+        seed: int = 0,
+    ):
         if isinstance(contours, Contour):
             contours = [contours] * (num_envs or 1)
         contours = list(contours)
@@ -129,8 +141,9 @@ class CuttingTask:
         self.sim = Simulator(config, num_envs, device=device, seed=seed)
         self.config, self.grid, self.num_envs = self.sim.config, self.sim.grid, num_envs
         self.contours = contours
-        self.segments = [list(s) for s in segments] if segments is not None else [
-            default_segments(c) for c in contours]
+        self.segments = (
+            [list(s) for s in segments] if segments is not None else [default_segments(c) for c in contours]
+        )
         if len(self.segments) != num_envs:
             raise ValueError(f"segments: got {len(self.segments)} lists for {num_envs} envs")
         self.pinch_points = self._pinch_array(pinch_points)
@@ -170,8 +183,10 @@ class CuttingTask:
         given = np.all(np.isfinite(points), axis=1)
         off = given & ((points[:, 0] < 0) | (points[:, 0] > w) | (points[:, 1] < 0) | (points[:, 1] > h))
         if off.any():
-            raise ValueError(f"pinch_points: {points[off][0].tolist()} lies off the {w:g} x {h:g} mm sheet; "
-                             "give material coordinates on the sheet")
+            raise ValueError(
+                f"pinch_points: {points[off][0].tolist()} lies off the {w:g} x {h:g} mm sheet; "
+                "give material coordinates on the sheet"
+            )
         return points
 
     def _build_trajectories(self) -> list[Trajectory]:
@@ -181,11 +196,14 @@ class CuttingTask:
         cache: dict[tuple[int, int], Trajectory] = {}
         trajectories = []
         for env in range(self.num_envs):
-            segment_bytes = tuple(np.ascontiguousarray(s, dtype=np.float64).tobytes() for s in self.segments[env])
+            segment_bytes = tuple(
+                np.ascontiguousarray(s, dtype=np.float64).tobytes() for s in self.segments[env]
+            )
             key = (int(env_group[env]), hash(segment_bytes))
             if key not in cache:
-                cache[key] = Trajectory.from_segments(self.segments[env], settled[env], self.grid,
-                                                      self.config.trajectory_spacing_mm)
+                cache[key] = Trajectory.from_segments(
+                    self.segments[env], settled[env], self.grid, self.config.trajectory_spacing_mm
+                )
             trajectories.append(cache[key])
         return trajectories
 

@@ -1,0 +1,62 @@
+"""The baseline tensioners."""
+
+import numpy as np
+import pytest
+
+from agents.baselines import AnalyticTension, FixedTension, NoTension, search_fixed_pinch
+from agents.evaluation import ci95, compare_policies
+from warpcut import SimConfig
+from warpcut.contours import load_contour
+from warpcut.planning import pinch_feasible
+from warpcut.task import CuttingTask
+
+CONFIG = SimConfig(resolution=13)
+
+
+def test_no_tension_has_no_grasp():
+    contour = load_contour("fls-circle")
+    assert NoTension().pinch_point(contour, CONFIG) is None
+
+
+def test_fixed_search_picks_the_best_feasible_candidate():
+    contour = load_contour("fls-circle")
+    best, points, errors = search_fixed_pinch(contour, CONFIG, candidates=6, seed=3)
+    assert len(points) == 7  # 6 random + the feasible centroid
+    assert np.all(pinch_feasible(points, contour, CONFIG))
+    assert errors[np.flatnonzero((points == best).all(axis=1))[0]] == errors.min()
+    assert np.array_equal(FixedTension(pinch=(30.0, 40.0)).pinch_point(contour, CONFIG), [30.0, 40.0])
+
+
+def test_feasibility_excludes_corners_contour_and_edges():
+    contour = load_contour("fls-circle")
+    points = np.array([[5.0, 5.0], [50.0, 75.0], [98.0, 50.0], [50.0, 50.0], [90.0, 90.0]])
+    assert pinch_feasible(points, contour, CONFIG).tolist() == [False, False, False, True, False]
+
+
+def test_analytic_moves_against_the_tracking_error():
+    contour = load_contour("fls-circle")
+    task = CuttingTask(CONFIG, contour, pinch_points=contour.centroid)
+    task.reset()
+    for _ in range(10):
+        task.step(None)
+    policy = AnalyticTension(gain=0.5)
+    error = task.target_world() - task.tip_positions()[:, :3]
+    move = policy(task)
+    np.testing.assert_allclose(move[:, :2], -0.5 * error[:, :2], rtol=1e-6)
+    assert move[0, 2] == 0.0
+
+
+def test_tensioning_changes_the_result():
+    report = compare_policies(
+        load_contour("fls-circle"), ("none", "fixed", "analytic"), config=CONFIG, pinch=(50.0, 42.0)
+    )
+    errors = {k: v["error_vertices"] for k, v in report["results"].items()}
+    assert errors["none"] > 0
+    assert errors["fixed"] != errors["none"] or errors["analytic"] != errors["none"]
+    assert report["results"]["none"]["improvement_pct"] == 0.0
+
+
+def test_ci95():
+    assert ci95(np.array([1.0])) == 0.0
+    # sample std of (1, 2, 3) is 1; t(0.975, 2 dof) = 4.3027
+    assert ci95(np.array([1.0, 2.0, 3.0])) == pytest.approx(4.302652729749464 / np.sqrt(3))

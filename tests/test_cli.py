@@ -1,0 +1,113 @@
+"""End-to-end tests of the ``warpcut`` command line (fast ones; one runs the installed console script)."""
+
+import json
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from warpcut.cli import main
+
+
+def invoke(args):
+    """Run the CLI in-process and return (exit code, stdout, stderr)."""
+    result = CliRunner().invoke(main, args, standalone_mode=True, catch_exceptions=False)
+    return result.exit_code, result.stdout, result.stderr
+
+
+def test_contours_lists_the_suite_and_writes_json(tmp_path):
+    out = tmp_path / "contours.json"
+    code, stdout, _ = invoke(["contours", "--json", str(out)])
+    assert code == 0
+    assert "fls-circle" in stdout and "closed" in stdout and "open" in stdout
+    rows = json.loads(out.read_text())["contours"]
+    assert len(rows) >= 18
+    circle = next(r for r in rows if r["name"] == "fls-circle")
+    assert circle["closed"] is True and circle["length_mm"] == pytest.approx(157.08, abs=0.1)
+
+
+def test_simulate_writes_results_json(tmp_path):
+    out = tmp_path / "results.json"
+    code, stdout, _ = invoke(
+        [
+            "simulate",
+            "--contour",
+            "fls-circle",
+            "--policy",
+            "none,fixed,analytic",
+            "--pinch",
+            "50,42",
+            "--resolution",
+            "13",
+            "--trials",
+            "2",
+            "--noise",
+            "0.01",
+            "--device",
+            "cpu",
+            "--json",
+            str(out),
+        ]
+    )
+    assert code == 0, stdout
+    report = json.loads(out.read_text())
+    assert report["contour"] == "fls-circle"
+    assert set(report["results"]) == {"none", "fixed", "analytic"}
+    for r in report["results"].values():
+        assert {"error_vertices", "error_mm2", "improvement_pct"} <= set(r)
+    assert report["results"]["none"]["improvement_pct"] == 0.0
+    assert report["results"]["none"]["error_vertices"] > 0
+    assert "improvement" in stdout and "analytic" in stdout
+
+
+def test_simulate_accepts_a_contour_file(tmp_path):
+    path = tmp_path / "mine.json"
+    path.write_text(
+        json.dumps({"name": "mine", "closed": True, "points": [[70, 50], [50, 70], [30, 50], [50, 30]]})
+    )
+    code, stdout, _ = invoke(["simulate", "--contour", str(path), "--policy", "none", "--resolution", "9"])
+    assert code == 0 and "contour mine" in stdout
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["simulate", "--contour", "no-such-shape"], "unknown contour 'no-such-shape'.*fls-circle"),
+        (["simulate", "--contour", "fls-circle", "--policy", "none,magic"], "--policy.*unknown magic"),
+        (["simulate", "--contour", "fls-circle", "--pinch", "50"], "--pinch.*expected X,Y"),
+        (
+            ["simulate", "--contour", "fls-circle", "--pinch", "150,40", "--policy", "fixed"],
+            "pinch_points.*off the",
+        ),
+        (["simulate", "--contour", "fls-circle", "--trials", "0"], "--trials"),
+        (["simulate", "--contour", "fls-circle", "--device", "tpu"], "device: unknown device 'tpu'"),
+        (["simulate"], "Missing option '--contour'"),
+        (["nonsense"], "No such command"),
+    ],
+)
+def test_bad_arguments_exit_2_with_one_line(args, message, capfd):
+    with pytest.raises(SystemExit) as exit_info:
+        main.main(args=args, prog_name="warpcut")
+    assert exit_info.value.code == 2
+    err = capfd.readouterr().err.strip().splitlines()
+    err = [line for line in err if not line.startswith("Warp CUDA warning")]
+    assert len(err) == 1, err
+    assert err[0].startswith("error: ")
+    assert re.search(message, err[0]), err[0]
+
+
+def test_console_script_runs():
+    script = shutil.which("warpcut", path=str(Path(sys.executable).parent)) or shutil.which("warpcut")
+    assert script, "the warpcut console script is not installed (pip install -e .)"
+    proc = subprocess.run(
+        [script, "simulate", "--contour", "circle-small", "--policy", "none", "--resolution", "9"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "circle-small" in proc.stdout and "Traceback" not in proc.stderr
