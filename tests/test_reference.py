@@ -1,6 +1,7 @@
 """Warp against the NumPy reference, through a whole cut with tensioning."""
 
 import numpy as np
+import pytest
 
 from warpcut import SimConfig
 from warpcut.contours import load_contour
@@ -12,10 +13,11 @@ POSITION_TOLERANCE_MM = 1e-2
 relaxation carries it along: the largest gap measured over this cut is ~4e-3 mm on a 100 mm sheet."""
 
 
-def test_warp_matches_numpy_reference_through_a_full_cut(device):
+@pytest.mark.parametrize("backend", ["fused", "colours"])
+def test_warp_matches_numpy_reference_through_a_full_cut(device, backend):
     config = SimConfig(resolution=17)
     contour = load_contour("fls-circle")
-    task = CuttingTask(config, contour, pinch_points=contour.centroid, device=device)
+    task = CuttingTask(config, contour, pinch_points=contour.centroid, device=device, backend=backend)
     task.reset()
     ref = ReferenceSheet(config, task.sim.settled_positions()[0], pinch_point=contour.centroid)
     worst = 0.0

@@ -2,8 +2,7 @@ import numpy as np
 import pytest
 
 from warpcut import ConfigError, SheetGrid, SimConfig, Simulator
-from warpcut.reference import colour_springs
-from warpcut.simulator import spring_colours
+from warpcut.simulator import colour_springs, spring_colours
 
 
 def structural_stretch(positions: np.ndarray, grid: SheetGrid) -> np.ndarray:
@@ -21,7 +20,7 @@ def test_colours_cover_every_spring_once_and_share_no_vertex(springs):
     grid = SheetGrid(7, 6, 60.0, 50.0)
     config = SimConfig(resolution=(7, 6), width_mm=60.0, height_mm=50.0, springs=springs)
     pairs = []
-    for starts, ends, _ in colour_springs(grid, config):
+    for starts, ends, _ in colour_springs(grid, config.springs):
         assert len(np.unique(np.concatenate([starts, ends]))) == 2 * len(starts)
         pairs += [tuple(sorted(p)) for p in zip(starts.tolist(), ends.tolist(), strict=True)]
     assert len(pairs) == len(set(pairs))
@@ -143,3 +142,27 @@ def test_per_env_length_mismatch_is_reported():
 def test_unknown_device_is_reported():
     with pytest.raises(ValueError, match="device: unknown device 'tpu'"):
         Simulator(SimConfig(resolution=5), 1, device="tpu")
+
+
+def test_fused_and_colour_backends_are_bit_identical(device):
+    config = SimConfig(resolution=13, noise_std=0.05)
+    pinches = np.array([[50.0, 50.0], [np.nan, np.nan], [30.0, 60.0]])
+    results = []
+    for backend, threads in (("fused", 1), ("fused", 2), ("colours", None)):
+        sim = Simulator(config, 3, device=device, seed=3, backend=backend, threads=threads)
+        sim.reset(pinches)
+        z = sim.settled_positions()[0, 6 * 13 + 10, 2]
+        for k in range(30):
+            sim.move_grasp(np.tile([[0.7, -0.4, 0.1]], (3, 1)))
+            sim.set_tip(np.tile([[80.0 - 1.5 * k, 50.0, z, 1.0]], (3, 1)))
+            sim.update()
+        results.append((sim.positions(), sim.alive_mask()))
+    assert (~results[0][1]).sum() > 0
+    for positions, alive in results[1:]:
+        np.testing.assert_array_equal(positions, results[0][0])
+        np.testing.assert_array_equal(alive, results[0][1])
+
+
+def test_unknown_backend_is_reported():
+    with pytest.raises(ValueError, match="backend: choose one of"):
+        Simulator(SimConfig(resolution=5), 1, backend="magic")

@@ -185,3 +185,105 @@ def move_grasp_kernel(
     if norm > max_displacement:
         u = u * (max_displacement / norm)
     displacement_out[env] = u
+
+
+@wp.kernel
+def fused_update_kernel(
+    # Model:
+    n: int,
+    env_offset: int,
+    iterations: int,
+    spring_a: wp.array(dtype=wp.int32),
+    spring_b: wp.array(dtype=wp.int32),
+    spring_rest: wp.array(dtype=float),
+    colour_start: wp.array(dtype=wp.int32),
+    damping: wp.array(dtype=float),
+    dt: wp.array(dtype=float),
+    gravity: wp.array(dtype=float),
+    noise_std: wp.array(dtype=float),
+    elasticity: wp.array(dtype=float),
+    first_order_z: int,
+    seed: int,
+    cut_radius: float,
+    cut_height: float,
+    # Data in:
+    pin: wp.array(dtype=wp.int32),
+    anchor: wp.array(dtype=wp.vec3),
+    displacement: wp.array(dtype=wp.vec3),
+    tip: wp.array(dtype=wp.vec4),
+    # Data in/out:
+    x: wp.array(dtype=wp.vec3),
+    x_prev: wp.array(dtype=wp.vec3),
+    alive: wp.array(dtype=wp.int32),
+):
+    """A whole update of one env per thread, in place: the CPU fast path.
+
+    One launch advances every env by integrate + ``iterations`` sweeps + cut, keeping the env's state
+    hot in cache, instead of one launch per stage and colour. It visits the springs colour by colour in
+    the order of :func:`relax_colour_kernel` and evaluates the same expressions, so it reproduces the
+    out-of-place kernels bit for bit (``tests/test_simulator.py``); it is not differentiable.
+    """
+    env = wp.tid() + env_offset
+    base = env * n
+    h = dt[env % dt.shape[0]]
+    fall = wp.vec3(0.0, 0.0, gravity[env % gravity.shape[0]] * h * h)
+    keep = damping[env % damping.shape[0]]
+    sigma = noise_std[env % noise_std.shape[0]]
+    k = elasticity[env % elasticity.shape[0]]
+    u = displacement[env]
+    for v in range(n):
+        i = base + v
+        p = x[i]
+        q = p
+        kind = pin[i]
+        if kind == PIN_FIXTURE:
+            q = anchor[i]
+        elif kind == PIN_GRASP:
+            q = anchor[i] + u
+        elif alive[i] != 0:
+            velocity = (p - x_prev[i]) * keep
+            if first_order_z != 0:
+                velocity = wp.vec3(velocity[0], velocity[1], 0.0)
+            q = p + velocity - fall
+            if sigma > 0.0:
+                state = wp.rand_init(seed, i)
+                q = q + sigma * wp.vec3(wp.randn(state), wp.randn(state), wp.randn(state))
+        x_prev[i] = p
+        x[i] = q
+    num_colours = colour_start.shape[0] - 1
+    for _sweep in range(iterations):
+        for c in range(num_colours):
+            for s in range(colour_start[c], colour_start[c + 1]):
+                a = base + spring_a[s]
+                b = base + spring_b[s]
+                if alive[a] == 0 or alive[b] == 0:
+                    continue
+                free_a = pin[a] == PIN_FREE
+                free_b = pin[b] == PIN_FREE
+                pa = x[a]
+                pb = x[b]
+                d = pb - pa
+                length = wp.length(d)
+                if length < 1.0e-9:
+                    continue
+                rest = spring_rest[s]
+                if free_a:
+                    share = 0.5
+                    if not free_b:
+                        share = 1.0
+                    x[a] = pa + d * (k * share * (length - rest) / length)
+                if free_b:
+                    share = 0.5
+                    if not free_a:
+                        share = 1.0
+                    x[b] = pb + (pa - pb) * (k * share * (length - rest) / length)
+    t = tip[env]
+    if t[3] > 0.5:
+        for v in range(n):
+            i = base + v
+            if alive[i] != 0:
+                p = x[i]
+                dx = p[0] - t[0]
+                dy = p[1] - t[1]
+                if dx * dx + dy * dy <= cut_radius * cut_radius and wp.abs(p[2] - t[2]) <= cut_height:
+                    alive[i] = 0

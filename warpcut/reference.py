@@ -11,28 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from warpcut.config import SheetGrid, SimConfig
-from warpcut.simulator import spring_colours
-
-
-def colour_springs(grid: SheetGrid, config: SimConfig) -> list[tuple[np.ndarray, np.ndarray, float]]:
-    """Per colour, in sweep order: (start indices, end indices, rest length)."""
-    colours = []
-    rows, cols = np.divmod(np.arange(grid.num_vertices), grid.nx)
-    for colour in spring_colours(config.springs):
-        key = rows if colour.on_rows else cols
-        r2, c2 = rows + colour.dj, cols + colour.di
-        keep = (
-            ((key // colour.divisor) % 2 == colour.parity)
-            & (r2 >= 0)
-            & (r2 < grid.ny)
-            & (c2 >= 0)
-            & (c2 < grid.nx)
-        )
-        starts = np.flatnonzero(keep)
-        ends = r2[keep] * grid.nx + c2[keep]
-        assert not np.intersect1d(starts, ends).size, "a colour's springs must not share vertices"
-        colours.append((starts, ends, colour.rest_length(grid.spacing_mm)))
-    return colours
+from warpcut.simulator import colour_springs
 
 
 class ReferenceSheet:
@@ -54,7 +33,7 @@ class ReferenceSheet:
         dt = np.float32(np.ravel(self.config.dt)[0])
         self.gravity_step = np.float32(np.ravel(self.config.gravity)[0]) * dt * dt
         self.elasticity = np.float32(np.ravel(self.config.elasticity)[0])
-        self.springs = colour_springs(self.grid, self.config)
+        self.springs = colour_springs(self.grid, self.config.springs)
         self.x = np.asarray(positions, dtype=np.float32).reshape(-1, 3).copy()
         self.x_prev = self.x.copy()
         self.anchor = self.x.copy()

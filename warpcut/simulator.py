@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,6 +51,24 @@ def spring_colours(springs: tuple[str, ...]) -> list[SpringColour]:
     ]
 
 
+def colour_springs(grid: SheetGrid, springs: tuple[str, ...]) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Per colour, in sweep order: (start vertex indices, end vertex indices, rest length in mm)."""
+    colours = []
+    rows, cols = np.divmod(np.arange(grid.num_vertices), grid.nx)
+    for colour in spring_colours(springs):
+        key = rows if colour.on_rows else cols
+        r2, c2 = rows + colour.dj, cols + colour.di
+        inside = (r2 >= 0) & (r2 < grid.ny) & (c2 >= 0) & (c2 < grid.nx)
+        keep = ((key // colour.divisor) % 2 == colour.parity) & inside
+        colours.append(
+            (np.flatnonzero(keep), r2[keep] * grid.nx + c2[keep], colour.rest_length(grid.spacing_mm))
+        )
+    return colours
+
+
+BACKENDS = ("auto", "fused", "colours")
+
+
 def default_device() -> str:
     """``WARPCUT_DEVICE`` if set, else ``cuda`` when Warp sees a GPU, else ``cpu``."""
     env = os.environ.get("WARPCUT_DEVICE")
@@ -78,9 +97,23 @@ class Simulator:
         num_envs: Batch size B.
         device: ``cpu``, ``cuda`` or ``cuda:N``; default: :func:`default_device`.
         seed: Seed of the process noise (the only randomness in the physics).
+        backend: ``fused`` (one launch per update, one thread per env, in place: the CPU fast path),
+            ``colours`` (one launch per stage and spring colour, one thread per vertex: suits GPUs and
+            is the differentiable path), or ``auto`` (fused on CPU, colours on CUDA). Both give
+            bit-identical results; ``update(tape_mode=True)`` always uses ``colours``.
+        threads: CPU threads that step disjoint halves (slices) of the batch with the fused backend;
+            default: the number of cores, at most the batch size. ``wp.launch`` releases the GIL.
     """
 
-    def __init__(self, config: SimConfig, num_envs: int, device: str | None = None, seed: int = 0):
+    def __init__(
+        self,
+        config: SimConfig,
+        num_envs: int,
+        device: str | None = None,
+        seed: int = 0,
+        backend: str = "auto",
+        threads: int | None = None,
+    ):
         if not isinstance(num_envs, int) or num_envs < 1:
             raise ValueError(f"num_envs: must be a positive integer (got {num_envs!r})")
         self.config = config.validated()
@@ -105,6 +138,28 @@ class Simulator:
         self.grasped = np.zeros(num_envs, dtype=bool)
         self.x, self.x_prev, self._spare = self._buffers
         self.alive = self._alive[0]
+        if backend not in BACKENDS:
+            raise ValueError(f"backend: choose one of {BACKENDS} (got {backend!r})")
+        is_cpu = wp.get_device(self.device).is_cpu
+        self.backend = ("fused" if is_cpu else "colours") if backend == "auto" else backend
+        springs = colour_springs(self.grid, self.config.springs)
+        counts = [len(a) for a, _, _ in springs]
+        self._spring_a = wp.array(
+            np.concatenate([a for a, _, _ in springs]).astype(np.int32), device=self.device
+        )
+        self._spring_b = wp.array(
+            np.concatenate([b for _, b, _ in springs]).astype(np.int32), device=self.device
+        )
+        self._spring_rest = wp.array(
+            np.repeat([r for _, _, r in springs], counts).astype(np.float32), dtype=float, device=self.device
+        )
+        self._colour_start = wp.array(
+            np.concatenate([[0], np.cumsum(counts)]).astype(np.int32), device=self.device
+        )
+        cores = os.cpu_count() or 1
+        self.threads = max(1, min(threads or cores, num_envs)) if is_cpu else 1
+        self._slices = [(len(c), int(c[0])) for c in np.array_split(np.arange(num_envs), self.threads)]
+        self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
 
     # ------------------------------------------------------------------ settling
     def settle_groups(self) -> tuple[np.ndarray, np.ndarray]:
@@ -215,6 +270,57 @@ class Simulator:
             tape_mode: Allocate fresh output arrays for every kernel so that the whole history stays
                 available to ``wp.Tape`` (slower, uses memory per update).
         """
+        if self.backend == "fused" and not tape_mode:
+            self._update_fused()
+        else:
+            self._update_colours(tape_mode)
+        self.update_count += 1
+
+    def _update_fused(self) -> None:
+        p = self._wp_params
+        seed = self._noise_seed()
+
+        def launch(part: tuple[int, int]) -> None:
+            count, offset = part
+            wp.launch(
+                kernels.fused_update_kernel,
+                dim=count,
+                inputs=[
+                    self.grid.num_vertices,
+                    offset,
+                    self.config.iterations,
+                    self._spring_a,
+                    self._spring_b,
+                    self._spring_rest,
+                    self._colour_start,
+                    p["damping"],
+                    p["dt"],
+                    p["gravity"],
+                    p["noise_std"],
+                    p["elasticity"],
+                    int(self.config.first_order_z),
+                    seed,
+                    self.config.cut_radius,
+                    self.config.cut_height_mm,
+                    self.pin,
+                    self.anchor,
+                    self.displacement,
+                    self.tip,
+                ],
+                outputs=[self.x, self.x_prev, self.alive],
+                device=self.device,
+            )
+
+        if self._pool is None:
+            launch(self._slices[0])
+        else:
+            list(self._pool.map(launch, self._slices))
+
+    def _noise_seed(self) -> int:
+        # A distinct stream per update; kept in int32 range for the kernel argument.
+        return (self.seed * 1_000_003 + self.update_count) % 2_147_483_647
+
+    def _update_colours(self, tape_mode: bool) -> None:
         b, n = self.num_envs, self.grid.num_vertices
         nx, ny = self.grid.nx, self.grid.ny
         p = self._wp_params
@@ -230,7 +336,7 @@ class Simulator:
                 p["gravity"],
                 p["noise_std"],
                 int(self.config.first_order_z),
-                self.seed * 1_000_003 + self.update_count,
+                self._noise_seed(),
                 self.x,
                 self.x_prev,
                 self.alive,
@@ -281,7 +387,6 @@ class Simulator:
         self.x_prev, self.x, self.alive = new_prev, work, alive_out
         if not tape_mode:
             self._spare = spare
-        self.update_count += 1
 
     # ------------------------------------------------------------------ read-back
     def positions(self) -> np.ndarray:

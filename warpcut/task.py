@@ -120,6 +120,8 @@ class CuttingTask:
         segments: Per env, the material polylines cut in order; default :func:`default_segments`.
         device: Warp device.
         seed: Process-noise seed.
+        backend: Simulator backend (``auto``, ``fused`` or ``colours``; see :class:`Simulator`).
+        threads: CPU threads stepping the batch (default: all cores).
     """
 
     def __init__(
@@ -131,6 +133,8 @@ class CuttingTask:
         segments: Sequence[Sequence[np.ndarray]] | None = None,
         device: str | None = None,
         seed: int = 0,
+        backend: str = "auto",
+        threads: int | None = None,
     ):
         if isinstance(contours, Contour):
             contours = [contours] * (num_envs or 1)
@@ -138,7 +142,7 @@ class CuttingTask:
         num_envs = num_envs or len(contours)
         if len(contours) != num_envs:
             raise ValueError(f"contours: got {len(contours)} for {num_envs} envs; give one or one per env")
-        self.sim = Simulator(config, num_envs, device=device, seed=seed)
+        self.sim = Simulator(config, num_envs, device=device, seed=seed, backend=backend, threads=threads)
         self.config, self.grid, self.num_envs = self.sim.config, self.sim.grid, num_envs
         self.contours = contours
         self.segments = (
