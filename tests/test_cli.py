@@ -111,3 +111,18 @@ def test_console_script_runs():
     )
     assert proc.returncode == 0, proc.stderr
     assert "circle-small" in proc.stdout and "Traceback" not in proc.stderr
+
+
+def test_bench_writes_the_documented_json(tmp_path):
+    out = tmp_path / "bench.json"
+    code, stdout, _ = invoke(["bench", "--device", "cpu", "--batch-sizes", "1,4", "--rollout-envs", "2",
+                              "--repeats", "1", "--json", str(out)])
+    assert code == 0, stdout
+    result = json.loads(out.read_text())
+    assert result["device"] == "cpu"
+    assert set(result["updates_per_s"]) == {"1", "4"}
+    for key in ("rollouts_per_s", "numpy_updates_per_s", "speedup_vs_numpy", "cold_start_s", "warm_start_s"):
+        assert result[key] > 0, key
+    assert "train_steps_per_s" in result
+    assert result["speedup_vs_numpy"] == pytest.approx(max(result["updates_per_s"].values())
+                                                      / result["numpy_updates_per_s"])

@@ -1,0 +1,146 @@
+"""``warpcut bench``: throughput of the simulator, measured in one run so ratios are comparable.
+
+Every figure is the median over ``repeats`` timed repetitions, after a warm-up. The machines this runs
+on are shared and noisy: compare ratios measured in one run, not absolute figures across runs.
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+
+import numpy as np
+import warp as wp
+
+from warpcut.config import SimConfig
+from warpcut.simulator import Simulator
+
+BATCH_SIZES = (1, 64, 1024, 4096)
+PAPER_SWEEPS = SimConfig(springs=("structural",), iterations=5)
+"""The issue's and the paper's unit of work: one update = integrate + 5 structural relaxation sweeps."""
+
+
+def median_time(fn: Callable[[], None], repeats: int, sync: Callable[[], None]) -> float:
+    """Median wall time (s) of ``fn`` over ``repeats`` runs, after one untimed warm-up."""
+    fn()
+    sync()
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        sync()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+def updates_per_second(
+    config: SimConfig, num_envs: int, device: str, repeats: int, min_updates: int = 1
+) -> float:
+    """Env updates per second (``num_envs`` x updates / s) with cutting active somewhere on the sheet."""
+    sim = Simulator(config, num_envs, device=device)
+    sim.reset()
+    sim.set_tip(np.tile([[50.0, 50.0, -15.0, 1.0]], (num_envs, 1)))
+    # Enough updates per timing that launch latency and timer resolution do not dominate small batches.
+    updates = max(min_updates, int(np.ceil(2048 / num_envs)))
+
+    def run() -> None:
+        for _ in range(updates):
+            sim.update()
+
+    return num_envs * updates / median_time(run, repeats, lambda: wp.synchronize_device(device))
+
+
+def rollouts_per_second(num_envs: int, device: str, repeats: int) -> float:
+    """Complete no-tension ``fls-circle`` rollouts per second; settling and trajectories are built once
+    (amortised), the timed part is reset + every step + scoring."""
+    from warpcut.contours import load_contour
+    from warpcut.task import CuttingTask
+
+    task = CuttingTask(SimConfig(), load_contour("fls-circle"), num_envs=num_envs, device=device)
+    return num_envs / median_time(lambda: task.run(None), repeats, lambda: wp.synchronize_device(device))
+
+
+def numpy_updates_per_second(repeats: int) -> float:
+    """Updates per second of the NumPy reference (one sheet, default physics)."""
+    from warpcut.reference import ReferenceSheet
+
+    config = SimConfig()
+    sim = Simulator(config, 1, device="cpu")
+    sheet = ReferenceSheet(config, sim.settled_positions()[0])
+    tip = np.array([50.0, 50.0, -15.0, 1.0], dtype=np.float32)
+    updates = 20
+
+    def run() -> None:
+        for _ in range(updates):
+            sheet.update(tip)
+
+    return updates / median_time(run, repeats, lambda: None)
+
+
+def start_times(device: str) -> dict[str, float]:
+    """Seconds to import warpcut and run one update in a fresh process: with an empty kernel cache
+    (cold: compiles the kernels) and again with the cache it filled (warm)."""
+    code = (
+        "import time; t = time.perf_counter(); import warpcut, numpy as np; "
+        f"s = warpcut.Simulator(warpcut.SimConfig(settle_updates=1), 1, device={device!r}); s.reset_flat(); "
+        "s.update(); import warp as wp; wp.synchronize(); print(time.perf_counter() - t)"
+    )
+    out = {}
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, WARP_CACHE_PATH=cache)
+        for label in ("cold_start_s", "warm_start_s"):
+            proc = subprocess.run(
+                [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+            )
+            out[label] = float(proc.stdout.strip().splitlines()[-1])
+    return out
+
+
+def train_steps_per_second(device: str) -> float | None:
+    """PPO environment steps per second during training (collection + update), if training is available."""
+    try:
+        from agents.train import benchmark_training
+    except ImportError:
+        return None
+    return benchmark_training(device=device)
+
+
+def run_bench(
+    device: str,
+    repeats: int = 3,
+    batch_sizes: tuple[int, ...] = BATCH_SIZES,
+    rollout_envs: int = 256,
+    progress: Callable[[str], None] = lambda _: None,
+) -> dict:
+    """Measure everything ``warpcut bench`` reports. Returns the JSON-ready dict."""
+    result: dict = {
+        "device": device,
+        "device_name": str(wp.get_device(device).name),
+        "resolution": 25,
+        "cpu_threads": os.cpu_count(),
+        "repeats": repeats,
+    }
+    progress("cold and warm start")
+    result.update(start_times(device))
+    ups, ups_paper = {}, {}
+    for b in batch_sizes:
+        progress(f"updates/s at B={b}")
+        ups[str(b)] = updates_per_second(SimConfig(), b, device, repeats)
+        ups_paper[str(b)] = updates_per_second(PAPER_SWEEPS, b, device, repeats)
+    result["updates_per_s"] = ups
+    result["updates_per_s_paper_sweeps"] = ups_paper
+    progress(f"fls-circle rollouts at B={rollout_envs}")
+    result["rollout_envs"] = rollout_envs
+    result["rollouts_per_s"] = rollouts_per_second(rollout_envs, device, repeats)
+    progress("NumPy reference")
+    result["numpy_updates_per_s"] = numpy_updates_per_second(repeats)
+    best = max(ups.values())
+    result["speedup_vs_numpy"] = best / result["numpy_updates_per_s"]
+    progress("PPO training")
+    result["train_steps_per_s"] = train_steps_per_second(device)
+    return result
