@@ -96,17 +96,24 @@ def search_fixed_pinch(
         ``(best, points, errors)``: the best point (2,), all candidates (K, 2) and their errors (K,) in
         vertices.
     """
-    points = sample_pinch_candidates(contour, config, candidates, np.random.default_rng(seed))
+    return search_fixed_pinches([contour], config, candidates, device, seed)[0]
+
+
+def search_fixed_pinches(
+    contours: list[Contour], config: SimConfig, candidates: int = 30, device: str | None = None, seed: int = 0
+) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """:func:`search_fixed_pinch` for several contours at once: all their candidates form one batch.
+
+    Candidates are scored noise-free, so the search is deterministic for a seed.
+    """
+    rng = np.random.default_rng(seed)
+    points = [sample_pinch_candidates(c, config, candidates, rng) for c in contours]
+    owners = [c for c, p in zip(contours, points, strict=True) for _ in range(len(p))]
     task = CuttingTask(
-        config.replace(noise_std=0.0),
-        contour,
-        num_envs=len(points),
-        pinch_points=points,
-        device=device,
-        seed=seed,
+        config.replace(noise_std=0.0), owners, pinch_points=np.vstack(points), device=device, seed=seed
     )
-    errors = task.run(None).error_vertices
-    return points[int(np.argmin(errors))], points, errors
+    errors = np.split(task.run(None).error_vertices, np.cumsum([len(p) for p in points])[:-1])
+    return [(p[int(np.argmin(e))], p, e) for p, e in zip(points, errors, strict=True)]
 
 
 POLICIES = {"none": NoTension, "fixed": FixedTension, "analytic": AnalyticTension}

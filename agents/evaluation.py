@@ -1,76 +1,200 @@
-"""Compare tensioners on a contour: every trial of a method is one env of one simulator batch."""
+"""Compare tensioners: the paper's Table I protocol, with every (contour, trial) of a method one env of
+one simulator batch."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
 
-from agents.baselines import make_policy
+from agents.baselines import AnalyticTension, FixedTension, NoTension, search_fixed_pinches
 from warpcut.config import SimConfig
 from warpcut.contours import Contour
-from warpcut.scoring import improvement_pct
 from warpcut.task import CuttingTask
+
+BASELINES = ("none", "fixed", "analytic")
 
 
 def ci95(values: np.ndarray) -> float:
     """Half-width of the 95% confidence interval of the mean (Student t); 0 for fewer than 2 values."""
     values = np.asarray(values, dtype=np.float64)
+    values = values[np.isfinite(values)]
     if values.size < 2:
         return 0.0
     return float(stats.t.ppf(0.975, values.size - 1) * values.std(ddof=1) / np.sqrt(values.size))
 
 
+def paired_improvement(e_none: np.ndarray, e_method: np.ndarray) -> np.ndarray:
+    """Per-trial ``100 * (E_none - E_method) / E_none``; NaN where no tension scored 0 (undefined)."""
+    e_none, e_method = np.asarray(e_none, dtype=np.float64), np.asarray(e_method, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(e_none > 0, 100.0 * (e_none - e_method) / e_none, np.nan)
+
+
+@dataclass
+class MethodSpec:
+    """How one method is run: a pinch point per contour (None: no grasp) and a batched policy."""
+
+    pinches: list[np.ndarray | None]
+    policy: Callable | None
+
+
+def baseline_specs(
+    contours: Sequence[Contour],
+    methods: Sequence[str],
+    config: SimConfig,
+    pinch: tuple[float, float] | None,
+    device: str | None,
+    seed: int,
+) -> dict[str, MethodSpec]:
+    """Pinch points and policies of the baseline tensioners (fixed: one batched random search)."""
+    specs: dict[str, MethodSpec] = {}
+    for method in methods:
+        if method == "none":
+            specs[method] = MethodSpec([None] * len(contours), NoTension())
+        elif method == "fixed":
+            points = (
+                [np.asarray(pinch, dtype=np.float64)] * len(contours)
+                if pinch is not None
+                else [
+                    best
+                    for best, _, _ in search_fixed_pinches(list(contours), config, device=device, seed=seed)
+                ]
+            )
+            specs[method] = MethodSpec(points, FixedTension())
+        elif method == "analytic":
+            policy = AnalyticTension(pinch=pinch)
+            specs[method] = MethodSpec([policy.pinch_point(c, config) for c in contours], policy)
+        else:
+            raise ValueError(f"methods: unknown {method!r}; baselines are {', '.join(BASELINES)}")
+    return specs
+
+
+def run_method(
+    contours: Sequence[Contour],
+    spec: MethodSpec,
+    trials: int,
+    config: SimConfig,
+    device: str | None,
+    seed: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Errors (vertices, mm^2), each (num_contours, trials), of one method; one batch for everything."""
+    envs = [(c, p) for c, p in zip(contours, spec.pinches, strict=True) for _ in range(trials)]
+    pinches = np.array([np.full(2, np.nan) if p is None else p for _, p in envs], dtype=np.float64)
+    task = CuttingTask(config, [c for c, _ in envs], pinch_points=pinches, device=device, seed=seed)
+    score = task.run(spec.policy)
+    shape = (len(contours), trials)
+    return score.error_vertices.reshape(shape), score.error_mm2.reshape(shape)
+
+
+def evaluate_suite(
+    contours: Sequence[Contour],
+    methods: Sequence[str] = BASELINES,
+    trials: int = 10,
+    config: SimConfig | None = None,
+    pinch: tuple[float, float] | None = None,
+    device: str | None = None,
+    seed: int = 0,
+    extra: dict[str, MethodSpec] | None = None,
+    progress: Callable[[str], None] = lambda _: None,
+) -> dict:
+    """The Table I protocol: per contour the no-tension error and each method's improvement over it.
+
+    Trials differ by their process-noise stream (``config.noise_std``; without noise they coincide and
+    the CI is 0). Improvements are paired per trial (same seed, same noise stream index).
+
+    Args:
+        contours: The contours to evaluate.
+        methods: Method names; baselines are built here, others must be given in ``extra``.
+        trials: Trials per contour and method.
+        config: Simulation parameters.
+        pinch: Override the pinch point of fixed and analytic for every contour.
+        device: Warp device.
+        seed: Seed of the pinch search and the process noise.
+        extra: Specs of further methods (e.g. ``rl``), by name.
+        progress: Called with a short description before each method runs.
+
+    Returns:
+        ``{"rows": [{"contour", "none_error_vertices", "none_error_mm2", "METHOD_error_vertices",
+        "METHOD_improvement_pct", "METHOD_ci95", "METHOD_pinch", ...}], "mean": {"METHOD_improvement_pct",
+        "METHOD_ci95"}, "trials": int}``. The mean row averages the per-contour improvements; its CI is
+        over contours, as in the paper's table.
+    """
+    config = (config or SimConfig()).validated()
+    if not isinstance(trials, int) or trials < 1:
+        raise ValueError(f"trials: must be a positive integer (got {trials!r})")
+    contours = list(contours)
+    if not contours:
+        raise ValueError("contours: give at least one contour")
+    extra = extra or {}
+    order = ["none"] + [m for m in methods if m != "none"]
+    specs = baseline_specs(contours, [m for m in order if m not in extra], config, pinch, device, seed)
+    specs.update(extra)
+    errors, areas = {}, {}
+    for method in order:
+        progress(f"{method}: {len(contours)} contour(s) x {trials} trial(s)")
+        errors[method], areas[method] = run_method(contours, specs[method], trials, config, device, seed)
+    rows = []
+    for k, contour in enumerate(contours):
+        row = {
+            "contour": contour.name,
+            "none_error_vertices": float(errors["none"][k].mean()),
+            "none_error_mm2": float(areas["none"][k].mean()),
+        }
+        for method in order:
+            if method == "none" and "none" not in methods:
+                continue
+            pinch_k = specs[method].pinches[k]
+            improvement = paired_improvement(errors["none"][k], errors[method][k])
+            row[f"{method}_error_vertices"] = float(errors[method][k].mean())
+            row[f"{method}_error_mm2"] = float(areas[method][k].mean())
+            row[f"{method}_improvement_pct"] = (
+                float(np.nanmean(improvement)) if np.isfinite(improvement).any() else float("nan")
+            )
+            row[f"{method}_ci95"] = ci95(improvement)
+            row[f"{method}_pinch"] = None if pinch_k is None else [float(v) for v in pinch_k]
+            row[f"{method}_trials_error_vertices"] = [float(e) for e in errors[method][k]]
+        rows.append(row)
+    mean = {}
+    for method in order:
+        if method == "none" and "none" not in methods:
+            continue
+        values = np.array([r[f"{method}_improvement_pct"] for r in rows])
+        mean[f"{method}_improvement_pct"] = (
+            float(np.nanmean(values)) if np.isfinite(values).any() else float("nan")
+        )
+        mean[f"{method}_ci95"] = ci95(values)
+    return {"rows": rows, "mean": mean, "trials": trials}
+
+
 def compare_policies(
     contour: Contour,
-    methods: Sequence[str] = ("none", "fixed", "analytic"),
+    methods: Sequence[str] = BASELINES,
     trials: int = 1,
     config: SimConfig | None = None,
     pinch: tuple[float, float] | None = None,
     device: str | None = None,
     seed: int = 0,
 ) -> dict:
-    """Run each baseline tensioner for ``trials`` seeded trials on ``contour`` and score it.
-
-    Trials differ by their process-noise stream (``config.noise_std``); without noise they coincide.
-    The no-tension baseline always runs: improvements are relative to it.
+    """One contour, the baseline tensioners: the ``warpcut simulate`` report.
 
     Returns:
         ``{"contour": name, "results": {method: {"error_vertices", "error_mm2", "improvement_pct",
-        "ci95_pct", "trials_error_vertices", "pinch"}}}``; per-method figures are means over trials,
-        ``improvement_pct`` is ``100 * (E_none - E_method) / E_none`` of the means, ``ci95_pct`` the
-        95% CI half-width of the per-trial improvements.
+        "ci95_pct", "trials_error_vertices", "pinch"}}}``: means over trials; ``improvement_pct`` is the
+        mean paired improvement over no tension (0 for ``none`` itself).
     """
-    config = (config or SimConfig()).validated()
-    if not isinstance(trials, int) or trials < 1:
-        raise ValueError(f"trials: must be a positive integer (got {trials!r})")
-    order = ["none"] + [m for m in methods if m != "none"]
-    errors: dict[str, np.ndarray] = {}
-    areas: dict[str, np.ndarray] = {}
-    pinches: dict[str, list[float] | None] = {}
-    for method in order:
-        policy = make_policy(method, pinch)
-        point = policy.pinch_point(contour, config, device=device, seed=seed)
-        task = CuttingTask(config, contour, num_envs=trials, pinch_points=point, device=device, seed=seed)
-        score = task.run(policy)
-        errors[method], areas[method] = score.error_vertices, score.error_mm2
-        pinches[method] = None if point is None else [float(v) for v in point]
-    none = errors["none"]
+    report = evaluate_suite([contour], methods, trials, config, pinch, device, seed)
+    row = report["rows"][0]
     results = {}
-    for method in order:
-        if method not in methods:
-            continue
-        per_trial = improvement_pct(none, errors[method]) if np.all(none > 0) else np.full(trials, np.nan)
-        mean_none = none.mean()
+    for method in methods:
         results[method] = {
-            "error_vertices": float(errors[method].mean()),
-            "error_mm2": float(areas[method].mean()),
-            "improvement_pct": float(improvement_pct(mean_none, errors[method].mean()))
-            if mean_none > 0
-            else float("nan"),
-            "ci95_pct": ci95(per_trial),
-            "trials_error_vertices": [float(e) for e in errors[method]],
-            "pinch": pinches[method],
+            "error_vertices": row[f"{method}_error_vertices"],
+            "error_mm2": row[f"{method}_error_mm2"],
+            "improvement_pct": row[f"{method}_improvement_pct"],
+            "ci95_pct": row[f"{method}_ci95"],
+            "trials_error_vertices": row[f"{method}_trials_error_vertices"],
+            "pinch": row[f"{method}_pinch"],
         }
     return {"contour": contour.name, "results": results}

@@ -60,3 +60,21 @@ def test_ci95():
     assert ci95(np.array([1.0])) == 0.0
     # sample std of (1, 2, 3) is 1; t(0.975, 2 dof) = 4.3027
     assert ci95(np.array([1.0, 2.0, 3.0])) == pytest.approx(4.302652729749464 / np.sqrt(3))
+
+
+def test_table_one_protocol_rows_and_mean():
+    from agents.evaluation import evaluate_suite
+
+    contours = [load_contour("fls-circle"), load_contour("s-curve")]
+    config = SimConfig(resolution=13, noise_std=0.02)
+    report = evaluate_suite(contours, ("none", "fixed", "analytic"), trials=2, config=config, seed=1)
+    assert [r["contour"] for r in report["rows"]] == ["fls-circle", "s-curve"]
+    for row in report["rows"]:
+        assert row["none_error_vertices"] > 0
+        for method in ("fixed", "analytic"):
+            assert np.isfinite(row[f"{method}_improvement_pct"]) and row[f"{method}_ci95"] >= 0
+            assert len(row[f"{method}_trials_error_vertices"]) == 2
+    for method in ("none", "fixed", "analytic"):
+        values = [r[f"{method}_improvement_pct"] for r in report["rows"]]
+        assert report["mean"][f"{method}_improvement_pct"] == pytest.approx(np.mean(values))
+    assert report["mean"]["none_improvement_pct"] == 0.0

@@ -1,0 +1,115 @@
+"""Action distributions that rsl-rl lacks, pluggable through a model's ``distribution_cfg``.
+
+rsl-rl 5.5.1 builds an actor's output distribution from ``{"class_name": ..., **kwargs}`` as
+``cls(output_dim, **kwargs)``, where ``output_dim`` is the env's ``num_actions``. Select the one here with::
+
+    "distribution_cfg": {"class_name": "agents.distributions:Categorical", "num_choices": K}
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn as nn
+from rsl_rl.modules.distribution import Distribution
+from torch.distributions import Categorical as TorchCategorical
+from torch.distributions import kl_divergence
+
+
+class Categorical(Distribution):
+    """Independent categorical distributions over ``num_choices`` options for each of ``output_dim`` actions.
+
+    The actor's MLP outputs logits of shape ``(..., output_dim, num_choices)``. Sampled and deterministic
+    actions are choice indices stored as floats, shape ``(..., output_dim)``, because rsl-rl's rollout storage
+    and PPO keep actions in a float tensor of shape ``(num_envs, num_actions)``; the env casts them back with
+    ``actions.long()``. One discrete action per env is ``output_dim == num_actions == 1``.
+    """
+
+    def __init__(self, output_dim: int, num_choices: int, init_logit_scale: float = 0.01) -> None:
+        """Initialize the categorical distribution module.
+
+        Args:
+            output_dim: Number of independent discrete actions (the env's ``num_actions``).
+            num_choices: Number of options per action.
+            init_logit_scale: Scale of the logit layer's initial weights; small values start the policy near
+                uniform, i.e. at maximum entropy.
+        """
+        super().__init__(output_dim)
+        if num_choices < 2:
+            raise ValueError(f"A categorical action needs at least 2 choices, got {num_choices}.")
+        self.num_choices = num_choices
+        self.init_logit_scale = init_logit_scale
+        self._distribution: TorchCategorical | None = None
+        TorchCategorical.set_default_validate_args(False)
+
+    def update(self, mlp_output: torch.Tensor) -> None:
+        """Update the distribution from logits of shape ``(..., output_dim, num_choices)``."""
+        self._distribution = TorchCategorical(logits=mlp_output)
+
+    def sample(self) -> torch.Tensor:
+        """Sample choice indices, as floats of shape ``(..., output_dim)``."""
+        return self._distribution.sample().float()  # type: ignore
+
+    def deterministic_output(self, mlp_output: torch.Tensor) -> torch.Tensor:
+        """Return the most likely choice indices, as floats of shape ``(..., output_dim)``."""
+        return mlp_output.argmax(dim=-1).float()
+
+    def as_deterministic_output_module(self) -> nn.Module:
+        """Return an export-friendly module that takes the argmax of the logits."""
+        return _ArgmaxDeterministicOutput()
+
+    @property
+    def input_dim(self) -> list[int]:
+        """Return the MLP output shape ``[output_dim, num_choices]`` (one row of logits per action)."""
+        return [self.output_dim, self.num_choices]
+
+    @property
+    def mean(self) -> torch.Tensor:
+        """Return the expected choice index."""
+        return (self._distribution.probs * self._choice_indices()).sum(dim=-1)  # type: ignore
+
+    @property
+    def std(self) -> torch.Tensor:
+        """Return the standard deviation of the choice index (rsl-rl logs it as ``Policy/mean_std``)."""
+        deviation = self._choice_indices() - self.mean.unsqueeze(-1)
+        return (self._distribution.probs * deviation.square()).sum(dim=-1).sqrt()  # type: ignore
+
+    @property
+    def entropy(self) -> torch.Tensor:
+        """Return the entropy, summed over the actions."""
+        return self._distribution.entropy().sum(dim=-1)  # type: ignore
+
+    @property
+    def params(self) -> tuple[torch.Tensor, ...]:
+        """Return ``(logits,)``, normalized so that they are log-probabilities."""
+        return (self._distribution.logits,)  # type: ignore
+
+    def log_prob(self, outputs: torch.Tensor) -> torch.Tensor:
+        """Compute the log probability of choice indices (floats), summed over the actions."""
+        return self._distribution.log_prob(outputs.long()).sum(dim=-1)  # type: ignore
+
+    def kl_divergence(
+        self, old_params: tuple[torch.Tensor, ...], new_params: tuple[torch.Tensor, ...]
+    ) -> torch.Tensor:
+        """Compute KL(old || new), summed over the actions."""
+        return kl_divergence(
+            TorchCategorical(logits=old_params[0]), TorchCategorical(logits=new_params[0])
+        ).sum(dim=-1)
+
+    def init_mlp_weights(self, mlp: nn.Module) -> None:
+        """Shrink the logit layer so that the initial policy is close to uniform."""
+        # rsl-rl's MLP ends with Linear then Unflatten when the output has a shape, as here.
+        logit_layer = mlp[-2]  # type: ignore
+        with torch.no_grad():
+            logit_layer.weight.mul_(self.init_logit_scale)
+            logit_layer.bias.zero_()
+
+    def _choice_indices(self) -> torch.Tensor:
+        probs = self._distribution.probs  # type: ignore
+        return torch.arange(self.num_choices, device=probs.device, dtype=probs.dtype)
+
+
+class _ArgmaxDeterministicOutput(nn.Module):
+    """Exportable module that returns the most likely choice index of each action, as a float."""
+
+    def forward(self, mlp_output: torch.Tensor) -> torch.Tensor:
+        return mlp_output.argmax(dim=-1).float()

@@ -1,0 +1,98 @@
+"""Trained policies as deployable files: TorchScript (``policy.pt``) and ONNX (``policy.onnx``).
+
+Both map a batch of observations ``(batch, obs_dim)``, the actor's observation groups concatenated in
+``config.json``'s ``obs_groups["actor"]`` order, to deterministic actions ``(batch, num_actions)``: the most
+likely choice index (as a float, exactly what the env's ``step()`` receives in training) for discrete
+policies, the Gaussian mean for continuous ones. Observation normalization is part of both. They are built
+from rsl-rl's own export wrappers (``MLPModel.as_jit`` and ``as_onnx``), which its runner uses too; the
+runner's export methods need a live env, these need only the run directory.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import warnings
+from pathlib import Path
+
+import torch
+from rsl_rl.models import MLPModel
+from rsl_rl.utils import resolve_class
+from tensordict import TensorDict
+
+from agents.train import latest_checkpoint
+from warpcut.io import write_atomic
+
+ONNX_OPSET = 18
+"""ONNX opset of ``policy.onnx`` (rsl-rl's choice)."""
+
+
+def load_policy(source: str | Path) -> MLPModel:
+    """Rebuild a trained actor on the CPU, in eval mode, from a run directory or checkpoint.
+
+    Args:
+        source: Run directory (its ``latest.pt``) or a checkpoint file; ``config.json`` is read from the
+            checkpoint's directory.
+
+    Returns:
+        The actor; ``actor(obs_tensordict)`` returns deterministic actions.
+    """
+    checkpoint = latest_checkpoint(source)
+    config = json.loads((checkpoint.parent / "config.json").read_text())
+    env, rsl_cfg = config["env"], config["rsl_rl"]
+    obs = TensorDict(
+        {group: torch.zeros(1, *shape) for group, shape in env["obs_shapes"].items()}, batch_size=[1]
+    )
+    actor_class, actor_cfg = resolve_class(rsl_cfg["actor"])
+    actor = actor_class(obs, rsl_cfg["obs_groups"], "actor", env["num_actions"], **actor_cfg)
+    state = torch.load(checkpoint, map_location="cpu", weights_only=True)
+    actor.load_state_dict(state["actor_state_dict"])
+    return actor.eval()
+
+
+def export_policy(source: str | Path, out_dir: str | Path | None = None) -> dict[str, Path]:
+    """Write ``policy.pt`` (TorchScript) and ``policy.onnx`` for the actor of a run or checkpoint.
+
+    Args:
+        source: Run directory (its ``latest.pt``) or a checkpoint file.
+        out_dir: Where to write; defaults to ``exported/`` beside the checkpoint.
+
+    Returns:
+        Paths of the files, under the keys "torchscript" and "onnx".
+    """
+    actor = load_policy(source)
+    out_dir = Path(out_dir) if out_dir is not None else latest_checkpoint(source).parent / "exported"
+    out_dir.mkdir(parents=True, exist_ok=True)
+
+    with warnings.catch_warnings():
+        # TorchScript is deprecated in favour of torch.export, but it is what C++ deployments load.
+        warnings.filterwarnings(
+            "ignore", message=".*torch.jit.script.*deprecated", category=DeprecationWarning
+        )
+        scripted = torch.jit.script(actor.as_jit())
+    buffer = io.BytesIO()
+    torch.jit.save(scripted, buffer)
+    torchscript_path = write_atomic(out_dir / "policy.pt", buffer.getvalue())
+
+    onnx_model = actor.as_onnx(verbose=False).eval()
+    # A batch of 2: torch.export would specialize a batch of 1 to a constant.
+    example = torch.zeros(2, onnx_model.input_size)
+    onnx_path = out_dir / "policy.onnx"
+    tmp_path = out_dir / f".{onnx_path.name}.tmp"
+    try:
+        torch.onnx.export(
+            onnx_model,
+            (example,),
+            tmp_path,
+            opset_version=ONNX_OPSET,
+            input_names=onnx_model.input_names,
+            output_names=onnx_model.output_names,
+            dynamic_shapes=({0: torch.export.Dim("batch")},),
+            external_data=False,
+            verbose=False,
+        )
+        os.replace(tmp_path, onnx_path)
+    finally:
+        tmp_path.unlink(missing_ok=True)
+    return {"torchscript": torchscript_path, "onnx": onnx_path}

@@ -1,0 +1,404 @@
+"""PPO training on rsl-rl's ``OnPolicyRunner``, with a run directory that survives Ctrl-C.
+
+A run directory holds::
+
+    config.json        TrainConfig, the rsl-rl config built from it, and the env's shapes (for export)
+    model_K.pt         checkpoint after learning iteration K (0-based, rsl-rl's naming), every save_interval
+    latest.pt          copy of the newest checkpoint; ``resume`` reads it
+    events.out.tfevents.*   TensorBoard scalars written by rsl-rl's logger
+    summary.json       status ("completed" or "interrupted"), iterations, env steps, speed, last metrics
+
+The env is any :class:`rsl_rl.env.VecEnv` (``envs.rsl`` for warpcut). Beyond that contract, train() relies on:
+
+- ``get_observations()`` / ``step()`` return a TensorDict with the group ``"policy"`` (actor and critic input;
+  change ``TrainConfig.obs_groups`` to give the critic another group).
+- Discrete control: ``num_actions`` actions per env (1 for one choice per step), each an index into
+  ``num_action_choices`` options. ``step()`` receives the indices as a float tensor of shape
+  ``(num_envs, num_actions)`` and casts them with ``.long()``. Continuous control: unbounded Gaussian
+  samples; the env clips them.
+- ``step()`` resets finished envs itself; ``dones`` (num_envs,) is 1 where an episode ended.
+  ``extras["time_outs"]`` (num_envs,) bool is True only where an episode was cut short by a limit the
+  observation does not show (PPO then bootstraps the value); a finished cut is a termination, not a time-out.
+- ``extras["log"]`` maps names to a scalar or a 1D tensor; rsl-rl logs the mean over the iteration under the
+  name (names with a "/" as is, others as ``Episode/<name>``). Put each finished episode's final error in
+  ``extras["log"][FINAL_ERROR_KEY]`` as a tensor holding one value per env that finished on this step, and
+  leave the key out on steps where none finished. The progress display shows its iteration mean. Do not set
+  ``extras["episode"]``: rsl-rl 5.5.1 then ignores ``extras["log"]``.
+- Optional ``seed(seed)``: reseed the env's randomness and reset every env; train() calls it first.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import random
+import statistics
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+from rsl_rl.env import VecEnv
+from rsl_rl.runners import OnPolicyRunner
+from rsl_rl.utils.logger import Logger
+
+from warpcut.io import write_atomic, write_json
+
+FINAL_ERROR_KEY = "Episode/final_error"
+"""``extras["log"]`` key of the finished episodes' final error; also its TensorBoard tag."""
+
+LATEST_CHECKPOINT = "latest.pt"
+"""File name of the copy of the newest checkpoint in a run directory."""
+
+
+@dataclass
+class TrainConfig:
+    """PPO training settings; :meth:`to_rsl_rl` turns them into rsl-rl's nested config dict."""
+
+    num_envs: int = 64
+    """Parallel envs; must equal the env's ``num_envs`` (the caller builds the env with it)."""
+    iterations: int = 300
+    """Total learning iterations of the run, counting those done before a resume."""
+    seed: int = 0
+    """Seed of Python, NumPy, torch and the env (``env.seed``)."""
+    device: str = "cpu"
+    """Torch device of the policy and PPO update."""
+    discrete: bool = True
+    """Categorical actions (the paper's 1 mm moves) if True, else a Gaussian over continuous actions."""
+    actor_hidden_dims: list[int] = field(default_factory=lambda: [32, 32])
+    """Hidden layer widths of the policy MLP (paper: 2 x 32)."""
+    critic_hidden_dims: list[int] = field(default_factory=lambda: [64, 64])
+    """Hidden layer widths of the value MLP."""
+    activation: str = "tanh"
+    """Hidden activation of both MLPs (an rsl-rl name: elu, relu, tanh, ...)."""
+    obs_normalization: bool = True
+    """Normalize observations by running mean and std (part of the exported policy)."""
+    obs_groups: dict[str, list[str]] = field(
+        default_factory=lambda: {"actor": ["policy"], "critic": ["policy"]}
+    )
+    """Observation groups of the env that feed the actor and the critic."""
+    init_noise_std: float = 1.0
+    """Initial action standard deviation (continuous only), in the env's action units."""
+    num_steps_per_env: int = 32
+    """Env steps per env per iteration; an iteration collects ``num_envs * num_steps_per_env`` steps."""
+    num_learning_epochs: int = 5
+    """Passes over each rollout."""
+    num_mini_batches: int = 4
+    """Mini-batches per pass."""
+    learning_rate: float = 1e-3
+    """Adam step size (initial value when ``schedule`` is "adaptive")."""
+    schedule: str = "adaptive"
+    """"adaptive": scale the learning rate to keep the KL per update near ``desired_kl``; "fixed": don't."""
+    desired_kl: float = 0.01
+    """Target KL divergence between successive policies for the adaptive schedule."""
+    entropy_coef: float = 0.01
+    """Entropy bonus weight; keeps exploring while the sparse final reward is rarely informative."""
+    gamma: float = 0.99
+    """Discount per env step."""
+    lam: float = 0.95
+    """GAE lambda."""
+    clip_param: float = 0.2
+    """PPO ratio clip (also the value clip)."""
+    value_loss_coef: float = 1.0
+    """Value loss weight."""
+    max_grad_norm: float = 1.0
+    """Gradient norm clip."""
+    save_interval: int = 50
+    """Save a checkpoint every this many iterations (and at the end, and on Ctrl-C)."""
+
+    def to_rsl_rl(self, num_action_choices: int | None = None) -> dict:
+        """Return rsl-rl 5.5.1's ``OnPolicyRunner`` config.
+
+        Args:
+            num_action_choices: Options per discrete action (the env's ``num_action_choices``); required
+                when ``discrete``.
+        """
+        if self.discrete:
+            if num_action_choices is None:
+                raise ValueError("discrete training needs the env's num_action_choices")
+            distribution = {
+                "class_name": "agents.distributions:Categorical",
+                "num_choices": num_action_choices,
+            }
+        else:
+            distribution = {
+                "class_name": "rsl_rl.modules:GaussianDistribution",
+                "init_std": self.init_noise_std,
+            }
+        model = {"class_name": "rsl_rl.models:MLPModel", "activation": self.activation}
+        return {
+            "num_steps_per_env": self.num_steps_per_env,
+            "save_interval": self.save_interval,
+            "obs_groups": {name: list(groups) for name, groups in self.obs_groups.items()},
+            "logger": "tensorboard",
+            "actor": {
+                **model,
+                "hidden_dims": list(self.actor_hidden_dims),
+                "obs_normalization": self.obs_normalization,
+                "distribution_cfg": distribution,
+            },
+            "critic": {
+                **model,
+                "hidden_dims": list(self.critic_hidden_dims),
+                "obs_normalization": self.obs_normalization,
+            },
+            "algorithm": {
+                "class_name": "rsl_rl.algorithms:PPO",
+                "num_learning_epochs": self.num_learning_epochs,
+                "num_mini_batches": self.num_mini_batches,
+                "learning_rate": self.learning_rate,
+                "schedule": self.schedule,
+                "desired_kl": self.desired_kl,
+                "entropy_coef": self.entropy_coef,
+                "gamma": self.gamma,
+                "lam": self.lam,
+                "clip_param": self.clip_param,
+                "value_loss_coef": self.value_loss_coef,
+                "max_grad_norm": self.max_grad_norm,
+            },
+        }
+
+
+def train(
+    env: VecEnv,
+    cfg: TrainConfig | dict,
+    out_dir: str | Path,
+    resume: str | Path | None = None,
+    progress: bool = True,
+) -> dict:
+    """Train a PPO policy on ``env`` and write the run directory ``out_dir``.
+
+    Ctrl-C saves a checkpoint and an "interrupted" summary, then re-raises the ``KeyboardInterrupt``.
+
+    Args:
+        env: The vectorized env, seeded and reset by this function (see the module docstring's contract).
+        cfg: Settings, or a dict of :class:`TrainConfig` fields.
+        out_dir: Run directory; created if needed.
+        resume: Run directory or checkpoint to continue from: loads the model, optimizer and iteration count
+            and trains until ``cfg.iterations`` in total.
+        progress: Show a progress bar (on stderr). rsl-rl's per-iteration console report is never printed;
+            its scalars go to TensorBoard.
+
+    Returns:
+        The summary also written to ``out_dir/summary.json``.
+    """
+    cfg = cfg if isinstance(cfg, TrainConfig) else TrainConfig(**cfg)
+    if env.num_envs != cfg.num_envs:
+        raise ValueError(f"env has {env.num_envs} envs but the config asks for {cfg.num_envs}")
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+
+    seed_everything(cfg.seed)
+    if hasattr(env, "seed"):
+        env.seed(cfg.seed)
+    num_action_choices = getattr(env, "num_action_choices", None) if cfg.discrete else None
+    runner = Runner(env, cfg.to_rsl_rl(num_action_choices), out_dir, cfg.device)
+    if resume is not None:
+        runner.load_checkpoint(latest_checkpoint(resume))
+    obs = env.get_observations()
+    write_json(
+        out_dir / "config.json",
+        {
+            "train": asdict(cfg),
+            "rsl_rl": runner.cfg,
+            "env": {
+                "num_envs": env.num_envs,
+                "num_actions": env.num_actions,
+                "num_action_choices": num_action_choices,
+                "obs_shapes": {group: list(obs[group].shape[1:]) for group in obs.keys()},
+            },
+            "resumed_from": None if resume is None else str(resume),
+        },
+    )
+
+    start_iterations, start_time, status = runner.iterations_done, time.monotonic(), "failed"
+    try:
+        with _progress_display(progress, cfg.iterations, start_iterations) as report:
+            runner.on_iteration = report
+            if cfg.iterations > start_iterations:
+                runner.learn(cfg.iterations - start_iterations)
+        status = "completed"
+    except KeyboardInterrupt:
+        status = "interrupted"
+        runner.save_interrupted()
+        raise
+    finally:
+        if runner.logger.writer is not None:
+            runner.logger.writer.close()
+        wall_time = time.monotonic() - start_time
+        steps_per_iteration = cfg.num_steps_per_env * cfg.num_envs
+        summary = {
+            "status": status,
+            "iterations": runner.iterations_done,
+            "env_steps": runner.iterations_done * steps_per_iteration,
+            "wall_time_s": wall_time,
+            "steps_per_s": (runner.iterations_done - start_iterations)
+            * steps_per_iteration
+            / max(wall_time, 1e-9),
+            **runner.metrics,
+            "checkpoint": runner.checkpoint_path,
+        }
+        write_json(out_dir / "summary.json", summary)
+    return summary
+
+
+class Runner(OnPolicyRunner):
+    """rsl-rl's on-policy runner with atomic checkpoints, a ``latest.pt`` copy and a per-iteration callback.
+
+    Attributes:
+        iterations_done: Learning iterations completed, including those before a resume.
+        metrics: Last iteration's ``final_error``, ``mean_return``, ``mean_episode_length`` (None until an
+            episode ends) and ``iteration_steps_per_s``.
+        checkpoint_path: Newest checkpoint written, or None.
+        on_iteration: Called with ``(iterations_done, metrics)`` after each iteration.
+    """
+
+    def __init__(self, env: VecEnv, train_cfg: dict, log_dir: str | Path, device: str = "cpu") -> None:
+        # rsl-rl prints the models and observation sets; config.json records them instead.
+        with contextlib.redirect_stdout(io.StringIO()):
+            super().__init__(env, train_cfg, str(log_dir), device)
+        self.logger = _QuietLogger(
+            self._end_iteration,
+            log_dir=str(log_dir),
+            cfg=self.cfg,
+            env_cfg=self.env.cfg,
+            num_envs=self.env.num_envs,
+            is_distributed=self.is_distributed,
+            gpu_world_size=self.gpu_world_size,
+            gpu_global_rank=self.gpu_global_rank,
+            device=self.device,
+        )
+        self.iterations_done = 0
+        self.metrics: dict[str, float | None] = {}
+        self.checkpoint_path: str | None = None
+        self.on_iteration: Callable[[int, dict], None] = lambda iterations_done, metrics: None
+
+    def save(self, path: str, infos: dict | None = None) -> None:
+        """Save models, optimizer and iteration count to ``path`` and to ``latest.pt``, each atomically."""
+        state = self.alg.save()
+        state["iter"] = self.current_learning_iteration
+        state["infos"] = {"iterations_done": self.iterations_done, **(infos or {})}
+        buffer = io.BytesIO()
+        torch.save(state, buffer)
+        write_atomic(path, buffer.getvalue())
+        write_atomic(Path(path).with_name(LATEST_CHECKPOINT), buffer.getvalue())
+        self.checkpoint_path = str(path)
+        self.logger.save_model(path, self.current_learning_iteration)
+
+    def save_interrupted(self) -> None:
+        """Save the current state after a Ctrl-C, as the checkpoint of the last completed iteration."""
+        self.current_learning_iteration = self.iterations_done - 1
+        name = f"model_{self.iterations_done - 1}.pt" if self.iterations_done else LATEST_CHECKPOINT
+        self.save(str(Path(self.logger.log_dir) / name))  # type: ignore[arg-type]
+
+    def load_checkpoint(self, path: str | Path) -> None:
+        """Load models, optimizer and learning rate; continue the iteration count after the checkpoint's."""
+        infos = self.load(str(path), map_location=self.device) or {}
+        # rsl-rl would repeat the checkpoint's iteration; continue after it instead.
+        self.iterations_done = infos.get("iterations_done", self.current_learning_iteration + 1)
+        self.current_learning_iteration = self.iterations_done
+
+    def _end_iteration(self, it: int, metrics: dict) -> None:
+        self.iterations_done = it + 1
+        self.metrics = metrics
+        self.on_iteration(self.iterations_done, metrics)
+
+
+class _QuietLogger(Logger):
+    """rsl-rl's logger that hands each iteration's metrics to a callback instead of printing a report.
+
+    It also skips rsl-rl's code-state snapshot, which runs ``git status`` on the repository around rsl-rl.
+    """
+
+    def __init__(self, on_iteration: Callable[[int, dict], None], **kwargs) -> None:
+        super().__init__(**kwargs)
+        self.on_iteration = on_iteration
+
+    def log(
+        self, it: int, start_it: int, total_it: int, collect_time: float, learn_time: float, **kwargs
+    ) -> None:
+        final_error = _mean_log_value(self.ep_extras, FINAL_ERROR_KEY)
+        with contextlib.redirect_stdout(io.StringIO()):
+            super().log(it, start_it, total_it, collect_time, learn_time, **kwargs)
+        steps = self.cfg["num_steps_per_env"] * self.num_envs * self.gpu_world_size
+        self.on_iteration(
+            it,
+            {
+                "final_error": final_error,
+                "mean_return": statistics.mean(self.rewbuffer) if self.rewbuffer else None,
+                "mean_episode_length": statistics.mean(self.lenbuffer) if self.lenbuffer else None,
+                "iteration_steps_per_s": steps / (collect_time + learn_time),
+            },
+        )
+
+    def _store_code_state(self) -> list[str]:
+        return []
+
+
+def latest_checkpoint(path: str | Path) -> Path:
+    """Return ``path`` if it is a checkpoint file, else the run directory's ``latest.pt``."""
+    path = Path(path)
+    checkpoint = path / LATEST_CHECKPOINT if path.is_dir() else path
+    if not checkpoint.is_file():
+        raise FileNotFoundError(f"no checkpoint at {checkpoint}")
+    return checkpoint
+
+
+def seed_everything(seed: int) -> None:
+    """Seed Python's, NumPy's and torch's global generators."""
+    random.seed(seed)
+    np.random.seed(seed)  # noqa: NPY002 -- for any third-party code drawing from the global generator
+    torch.manual_seed(seed)
+
+
+def _mean_log_value(ep_extras: list[dict], key: str) -> float | None:
+    """Mean of every value logged under ``key`` this iteration (scalars and tensors alike), or None."""
+    values = [
+        torch.as_tensor(extras[key], dtype=torch.float).reshape(-1).cpu()
+        for extras in ep_extras
+        if key in extras
+    ]
+    values = torch.cat(values) if values else torch.empty(0)
+    return float(values.mean()) if values.numel() else None
+
+
+@contextlib.contextmanager
+def _progress_display(enabled: bool, total: int, completed: int) -> Iterator[Callable[[int, dict], None]]:
+    """Yield a callback ``(iterations_done, metrics)`` that advances a progress bar, or does nothing."""
+    if not enabled:
+        yield lambda iterations_done, metrics: None
+        return
+    columns = (
+        TextColumn("PPO"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[steps_per_s]} steps/s"),
+        TextColumn("final error {task.fields[final_error]}"),
+        TextColumn("return {task.fields[mean_return]}"),
+        TimeRemainingColumn(),
+    )
+    # stderr: rsl-rl's report is swallowed by redirecting stdout, which must not catch the bar's redraws.
+    with Progress(*columns, console=Console(stderr=True)) as bar:
+        task = bar.add_task(
+            "train", total=total, completed=completed, steps_per_s="-", final_error="-", mean_return="-"
+        )
+
+        def report(iterations_done: int, metrics: dict) -> None:
+            # Keep the last known episode metrics through iterations in which no episode ended.
+            known = {
+                key: f"{metrics[key]:.3f}"
+                for key in ("final_error", "mean_return")
+                if metrics[key] is not None
+            }
+            bar.update(
+                task,
+                completed=iterations_done,
+                steps_per_s=f"{metrics['iteration_steps_per_s']:.0f}",
+                **known,
+            )
+
+        yield report
