@@ -19,8 +19,38 @@ from warpcut.scoring import Score, symmetric_difference
 from warpcut.simulator import Simulator
 
 
+def material_cells(points: np.ndarray, grid: SheetGrid) -> tuple[np.ndarray, np.ndarray]:
+    """The grid cell holding each material point, for bilinear interpolation.
+
+    Args:
+        points: (..., 2) material coordinates (mm); clipped onto the sheet.
+        grid: The sheet's rest layout.
+
+    Returns:
+        ``(vertices, weights)``: (..., 4) indices of the cell's corner vertices and their (..., 4)
+        bilinear weights.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    hx, hy = grid.spacing_mm
+    u = np.clip(points[..., 0] / hx, 0.0, grid.nx - 1 - 1e-9)
+    v = np.clip(points[..., 1] / hy, 0.0, grid.ny - 1 - 1e-9)
+    col, row = np.floor(u).astype(np.int64), np.floor(v).astype(np.int64)
+    fu, fv = u - col, v - row
+    corner = row * grid.nx + col
+    vertices = np.stack([corner, corner + 1, corner + grid.nx, corner + grid.nx + 1], axis=-1)
+    weights = np.stack([(1 - fu) * (1 - fv), fu * (1 - fv), (1 - fu) * fv, fu * fv], axis=-1)
+    return vertices, weights
+
+
+def interpolate(positions: np.ndarray, vertices: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """World positions (B, K, 3) of material points whose cells are ``vertices``/``weights`` (B, K, 4)
+    on sheets at ``positions`` (B, N, 3)."""
+    corners = np.take_along_axis(positions[:, None], vertices[..., None], axis=2)  # (B, K, 4, 3)
+    return np.einsum("bkc,bkcd->bkd", weights, corners)
+
+
 def material_to_world(points: np.ndarray, positions: np.ndarray, grid: SheetGrid) -> np.ndarray:
-    """World positions of material points, by bilinear interpolation over the grid cell holding each.
+    """World positions of material points on one sheet, by bilinear interpolation over their cells.
 
     Args:
         points: (M, 2) material coordinates (mm).
@@ -30,18 +60,8 @@ def material_to_world(points: np.ndarray, positions: np.ndarray, grid: SheetGrid
     Returns:
         (M, 3) world positions (mm).
     """
-    hx, hy = grid.spacing_mm
-    u = np.clip(np.asarray(points, dtype=np.float64)[:, 0] / hx, 0.0, grid.nx - 1 - 1e-9)
-    v = np.clip(np.asarray(points, dtype=np.float64)[:, 1] / hy, 0.0, grid.ny - 1 - 1e-9)
-    c, r = np.floor(u).astype(int), np.floor(v).astype(int)
-    fu, fv = (u - c)[:, None], (v - r)[:, None]
-    p = np.asarray(positions, dtype=np.float64).reshape(grid.ny, grid.nx, 3)
-    return (
-        (1 - fu) * (1 - fv) * p[r, c]
-        + fu * (1 - fv) * p[r, c + 1]
-        + (1 - fu) * fv * p[r + 1, c]
-        + fu * fv * p[r + 1, c + 1]
-    )
+    vertices, weights = material_cells(points, grid)
+    return interpolate(np.asarray(positions, dtype=np.float64)[None], vertices[None], weights[None])[0]
 
 
 def default_segments(contour: Contour) -> list[np.ndarray]:
@@ -211,8 +231,14 @@ class CuttingTask:
             trajectories.append(cache[key])
         return trajectories
 
-    def reset(self) -> None:
-        """Settled, uncut sheets; grasps at the pinch points; scissors at their trajectories' starts."""
+    def reset(self, seed: int | None = None) -> None:
+        """Settled, uncut sheets; grasps at the pinch points; scissors at their trajectories' starts.
+
+        Args:
+            seed: New process-noise seed (default: keep the current one).
+        """
+        if seed is not None:
+            self.sim.seed = int(seed)
         self.sim.reset(self.pinch_points)
         self.update_index = 0
 
@@ -240,13 +266,11 @@ class CuttingTask:
         """(B, 3) current world position of the material point each tip is about to cut (NaN when
         travelling or finished): the contour as the sheet has moved it."""
         t = min(self.update_index, self.horizon_updates - 1)
-        positions = self.sim.positions()
-        out = np.full((self.num_envs, 3), np.nan)
-        for env in range(self.num_envs):
-            target = self._targets[env, t]
-            if np.all(np.isfinite(target)) and self.update_index < self.horizon_updates:
-                out[env] = material_to_world(target[None], positions[env], self.grid)[0]
-        return out
+        targets = self._targets[:, t]
+        active = np.all(np.isfinite(targets), axis=1) & (self.update_index < self.horizon_updates)
+        vertices, weights = material_cells(np.nan_to_num(targets)[:, None], self.grid)
+        world = interpolate(self.sim.positions(), vertices, weights)[:, 0]
+        return np.where(active[:, None], world, np.nan)
 
     def score(self) -> Score:
         """Symmetric difference between each env's intended region and what its cut separated."""

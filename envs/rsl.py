@@ -1,0 +1,112 @@
+"""rsl-rl (5.5.1) view of :class:`~envs.vector.PatternCutVecEnv`: torch tensors, resets inside ``step``.
+
+Observations are a ``TensorDict`` with one group, ``"policy"`` (B, D) float32; configure the runner with
+``obs_groups={"actor": ["policy"], "critic": ["policy"]}``.
+
+Actions, a tensor on any device:
+    * discrete: choice indices, shape (B,) or (B, 1), of any dtype holding integers in
+      ``[0, num_choices)`` -- what ``agents.distributions.Categorical`` samples (floats of shape
+      ``(B, num_actions)`` with ``num_actions == 1``). Set its ``num_choices`` to :attr:`num_action_choices`.
+    * continuous: (B, num_actions) moves in units of ``max_step_mm``, clipped to [-1, 1].
+
+``step`` returns ``dones`` (B,) long, 1 where an episode ended (all envs together: they share one clock)
+and the env has already reset. ``extras["time_outs"]`` (B,) bool is True only where the episode was cut
+short by ``max_episode_steps``: a completed cut is a true terminal state (its reward is final), so PPO must
+not bootstrap past it. On the step where cuts complete, ``extras["log"]`` holds one value per env of
+``Episode/final_error`` (:data:`FINAL_ERROR_KEY`: ``error_mm2 / area_mm2``, minus the final reward),
+``Cut/error_mm2`` and ``Cut/error_vertices``; rsl-rl's logger records their means under those names. The
+key is absent on other steps (and after truncated episodes, which have no score).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from rsl_rl.env import VecEnv
+from tensordict import TensorDict
+
+from envs.pattern_cut import PatternCutOptions
+from envs.vector import PatternCutVecEnv
+
+FINAL_ERROR_KEY = "Episode/final_error"
+"""``extras["log"]`` key of each completed cut's relative error (the name ``agents.train`` reads)."""
+
+
+class PatternCutRslEnv(VecEnv):
+    """Adapter from a :class:`~envs.vector.PatternCutVecEnv` to ``rsl_rl.env.VecEnv``.
+
+    Args:
+        env: The batched env (any action type); it is reset here.
+        device: Torch device of the returned tensors (the simulator's Warp device is ``env.options.device``).
+        seed: Seed of the first reset.
+
+    Attributes:
+        num_envs: Batch size B.
+        num_actions: 1 for discrete actions (one index per env), else the action dimension.
+        num_action_choices: Number of discrete actions (5, or 7 with ``allow_z``); ``None`` for continuous.
+        max_episode_length: Steps per episode (the same for every env).
+        device: Torch device of observations, rewards, dones and extras.
+        cfg: The env's :class:`~envs.pattern_cut.PatternCutOptions` (``to_dict()`` for loggers).
+    """
+
+    def __init__(self, env: PatternCutVecEnv, device: str | torch.device = "cpu", seed: int | None = 0):
+        self.env = env
+        self.device = torch.device(device)
+        self.cfg: PatternCutOptions = env.options
+        self.num_envs = env.num_envs
+        space = env.single_action_space
+        discrete = env.options.action_type == "discrete"
+        self.num_action_choices: int | None = int(space.n) if discrete else None
+        self.num_actions = 1 if discrete else int(space.shape[0])
+        self.max_episode_length = env.scene.episode_steps
+        self.seed(seed)
+
+    def seed(self, seed: int | None) -> None:
+        """Reseed the env's randomness (noise, fiducials) and reset every env."""
+        obs, _ = self.env.reset(seed=seed)
+        self._obs = self._tensordict(obs)
+
+    @property
+    def episode_length_buf(self) -> torch.Tensor:
+        """(B,) long: steps taken in the current episode, the same for every env."""
+        return torch.full((self.num_envs,), self.env.scene.step_index, dtype=torch.long, device=self.device)
+
+    @episode_length_buf.setter
+    def episode_length_buf(self, value: torch.Tensor) -> None:
+        raise ValueError(
+            "episode_length_buf: the pattern-cutting envs share one episode clock and cannot start at random "
+            "episode lengths; train with init_at_random_ep_len=False"
+        )
+
+    def get_observations(self) -> TensorDict:
+        """The current observations, ``{"policy": (B, D) float32}``."""
+        return self._obs
+
+    def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
+        """Apply ``actions`` (module docstring); reset every env in the same call when the episode ends.
+
+        Returns:
+            ``(observations, rewards (B,) float32, dones (B,) long, extras)``.
+        """
+        actions = actions.detach().cpu().numpy()
+        if self.num_action_choices is not None and actions.ndim == 2 and actions.shape[1] == 1:
+            actions = actions[:, 0]
+        obs, rewards, terminated, truncated, info = self.env.step(actions)
+        self._obs = self._tensordict(obs)
+        extras: dict = {"time_outs": torch.as_tensor(truncated, device=self.device)}
+        score = info.get("final_info", {})
+        if "relative_error" in score:
+            extras["log"] = {
+                FINAL_ERROR_KEY: self._tensor(score["relative_error"]),
+                "Cut/error_mm2": self._tensor(score["error_mm2"]),
+                "Cut/error_vertices": self._tensor(score["error_vertices"]),
+            }
+        dones = torch.as_tensor(terminated | truncated, device=self.device).long()
+        return self._obs, self._tensor(rewards), dones, extras
+
+    def _tensor(self, values: np.ndarray) -> torch.Tensor:
+        return torch.as_tensor(values, dtype=torch.float32, device=self.device)
+
+    def _tensordict(self, obs: np.ndarray) -> TensorDict:
+        policy = torch.as_tensor(obs, device=self.device)
+        return TensorDict({"policy": policy}, batch_size=[self.num_envs], device=self.device)

@@ -1,0 +1,87 @@
+"""The pattern-cutting env natively batched: one :class:`~warpcut.task.CuttingTask` of B sheets.
+
+Autoreset is ``AutoresetMode.SAME_STEP``. All B envs share one episode clock, so every episode ends on
+the same step; the env then resets all of them at once inside that ``step`` and returns the new
+episodes' first observations. Following the Gymnasium spec for same-step autoreset
+(https://farama.org/Vector-Autoreset-Mode), the ending step's observations and score are in
+``info["final_obs"]`` (an object array of B observations) and ``info["final_info"]`` (a dict of (B,)
+arrays), each with its ``"_final_obs"`` / ``"_final_info"`` mask (all True). Same-step rather than
+next-step because a next-step reset would spend a whole ``step`` call of B envs ignoring their actions
+after every episode, and because rsl-rl (:mod:`envs.rsl`) expects resets inside ``step``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from envs.pattern_cut import PatternCut, PatternCutOptions, reject_reset_options
+from warpcut.task import CuttingTask
+
+
+class PatternCutVecEnv(VectorEnv):
+    """B sheets cut at once (see :mod:`envs.pattern_cut` for observations, actions and rewards).
+
+    Args:
+        num_envs: Batch size B.
+        options: The scenario; keyword arguments (any :class:`~envs.pattern_cut.PatternCutOptions` field)
+            replace its fields. Per-env lists (contours, physical parameters, pinch points) have length B.
+
+    ``reset(seed=...)`` takes one int (not a list): it seeds the process noise and the fiducials of all
+    envs, which differ from env to env. Actions are (B,) indices (discrete) or (B, A) moves (continuous).
+    """
+
+    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
+
+    def __init__(self, num_envs: int = 1, options: PatternCutOptions | None = None, **kwargs: Any):
+        self.options = PatternCutOptions.build(options, **kwargs)
+        self.num_envs = num_envs
+        self.scene = PatternCut(self.options, num_envs)
+        self.single_observation_space = self.scene.observation_space
+        self.single_action_space = self.scene.action_space
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        self._started = False
+
+    @property
+    def task(self) -> CuttingTask:
+        """The underlying :class:`~warpcut.task.CuttingTask` of B envs."""
+        return self.scene.task
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset every env; a ``seed`` also redraws the fiducials. There are no reset ``options``."""
+        if seed is not None and not isinstance(seed, int | np.integer):
+            raise TypeError(f"reset: seed must be one int for the whole batch (got {type(seed).__name__})")
+        super().reset(seed=None if seed is None else int(seed))
+        reject_reset_options(options)
+        self._started = True
+        return self.scene.reset(self.np_random, seed is not None or self.options.resample_fiducials), {}
+
+    def step(
+        self, actions: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """Step every env; at the episode's end, reset them all in the same call (module docstring)."""
+        if not self._started:
+            raise RuntimeError("step: call reset() first")
+        obs, rewards, terminated, truncated, info = self.scene.step(actions)
+        b = self.num_envs
+        infos: dict[str, Any] = {}
+        if terminated or truncated:
+            final_obs = np.empty(b, dtype=object)
+            for env in range(b):
+                final_obs[env] = obs[env]
+            everyone = np.ones(b, dtype=bool)
+            final_info = {**info, **{f"_{k}": everyone.copy() for k in info}}
+            infos = {
+                "final_obs": final_obs,
+                "_final_obs": everyone,
+                "final_info": final_info,
+                "_final_info": everyone.copy(),
+            }
+            obs = self.scene.reset(self.np_random, self.options.resample_fiducials)
+        return obs, rewards, np.full(b, terminated), np.full(b, truncated), infos

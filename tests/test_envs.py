@@ -1,0 +1,243 @@
+"""Gymnasium envs, the natively batched vector env and the rsl-rl adapter (small sheets, short cuts)."""
+
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from gymnasium.utils.env_checker import check_env
+from gymnasium.vector import AutoresetMode
+from rsl_rl.runners import OnPolicyRunner
+
+import envs
+from envs import ENV_ID, PatternCutEnv, PatternCutVecEnv
+from envs.observations import Fiducials
+from envs.rsl import FINAL_ERROR_KEY, PatternCutRslEnv
+from warpcut.config import SheetGrid
+from warpcut.contours import load_contour
+
+SMALL = {"contour": "circle-small", "resolution": 9}
+"""A 9 x 9 sheet and a 94 mm contour: 48 steps per episode."""
+OBS_DIM = 4 + 3 * 12
+
+
+@pytest.mark.parametrize(
+    "options",
+    [
+        {"action_type": "discrete"},
+        {"action_type": "continuous", "allow_z": True, "contour_features": True, "dense_reward": True},
+    ],
+)
+def test_check_env_passes_without_warnings(options):
+    env = gym.make(ENV_ID, device="cpu", noise_std=0.05, **SMALL, **options)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_env(env.unwrapped, skip_render_check=True)
+
+
+def test_make_and_make_vec_build_the_registered_envs():
+    env = gym.make(ENV_ID, device="cpu", **SMALL)
+    assert isinstance(env.unwrapped, PatternCutEnv) and env.spec.id == ENV_ID
+    assert env.observation_space.shape == (OBS_DIM,) and env.action_space == gym.spaces.Discrete(5)
+    vec = gym.make_vec(ENV_ID, num_envs=3, vectorization_mode="vector_entry_point", device="cpu", **SMALL)
+    assert isinstance(vec, PatternCutVecEnv) and vec.num_envs == 3 and vec.task.num_envs == 3
+    assert vec.metadata["autoreset_mode"] is AutoresetMode.SAME_STEP
+    assert vec.action_space == gym.spaces.MultiDiscrete([5, 5, 5])
+    assert isinstance(envs.make(num_envs=2, device="cpu", **SMALL), PatternCutVecEnv)
+    with pytest.raises(TypeError, match="unknown option"):
+        gym.make(ENV_ID, contuor="fls-circle")
+
+
+def test_vector_env_shapes_dtypes_and_discrete_moves(device):
+    vec = PatternCutVecEnv(4, device=device, contour_features=True, allow_z=True, **SMALL)
+    obs, info = vec.reset(seed=0)
+    assert obs.shape == (4, OBS_DIM + 7) and obs.dtype == np.float32 and obs in vec.observation_space
+    assert info == {} and vec.single_action_space == gym.spaces.Discrete(7)
+    obs, rewards, terminated, truncated, info = vec.step(np.array([1, 2, 3, 6]))
+    assert obs.shape == (4, OBS_DIM + 7) and obs.dtype == np.float32 and obs in vec.observation_space
+    assert rewards.shape == (4,) and rewards.dtype == np.float64 and np.all(rewards == 0.0)
+    assert terminated.dtype == bool and truncated.dtype == bool and not (terminated.any() or truncated.any())
+    assert info == {}
+    moves = [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, 0, -1]]
+    np.testing.assert_allclose(vec.task.sim.displacements(), moves, atol=1e-6)
+    np.testing.assert_allclose(obs[:, 0], 1 / vec.task.num_steps)
+    np.testing.assert_allclose(obs[:, 1:4], np.array(moves) / 10.0, atol=1e-6)
+
+
+def test_seeded_resets_repeat_and_fiducials_differ_between_envs():
+    vec = PatternCutVecEnv(2, device="cpu", **SMALL)
+    first, _ = vec.reset(seed=1)
+    again, _ = vec.reset(seed=1)
+    other, _ = vec.reset(seed=2)
+    np.testing.assert_array_equal(first, again)
+    assert not np.array_equal(first[:, 4:], other[:, 4:])
+    assert not np.array_equal(first[0, 4:], first[1, 4:])
+    with pytest.raises(TypeError, match="one int"):
+        vec.reset(seed=[1, 2])
+
+
+def test_vector_autoreset_is_same_step_with_final_obs_and_score():
+    vec = PatternCutVecEnv(
+        2, device="cpu", contour=["circle-small", "edge-bite"], resolution=9, damping=[0.99, 0.98]
+    )
+    start, _ = vec.reset(seed=3)
+    num_steps = vec.task.num_steps
+    for _ in range(num_steps - 1):
+        obs, rewards, terminated, truncated, info = vec.step(np.array([1, 3]))
+        assert not terminated.any() and not truncated.any() and np.all(rewards == 0.0) and info == {}
+    obs, rewards, terminated, truncated, info = vec.step(np.array([1, 3]))
+    assert terminated.all() and not truncated.any()
+    assert info["_final_obs"].all() and info["_final_info"].all() and info["final_obs"].dtype == object
+    final = np.stack(info["final_obs"])
+    assert final.shape == (2, OBS_DIM) and np.all(final[:, 0] == 1.0)
+    score = info["final_info"]
+    assert score["_error_mm2"].all()
+    areas = [load_contour(name).area_mm2 for name in ("circle-small", "edge-bite")]
+    np.testing.assert_allclose(rewards, -score["error_mm2"] / areas)
+    np.testing.assert_allclose(score["relative_error"], -rewards)
+    # The returned observation already starts the next episode: same fiducials, settled sheet, no grasp move.
+    np.testing.assert_array_equal(obs, start)
+    assert vec.scene.step_index == 0
+    obs, rewards, terminated, *_ = vec.step(np.array([2, 0]))
+    assert obs[0, 0] == np.float32(1 / num_steps) and not terminated.any()
+    np.testing.assert_allclose(vec.task.sim.displacements()[0], [-1, 0, 0], atol=1e-6)
+
+
+def test_truncated_episodes_have_no_score_and_reset_in_the_same_step():
+    vec = PatternCutVecEnv(2, device="cpu", max_episode_steps=3, resample_fiducials=True, **SMALL)
+    start, _ = vec.reset(seed=0)
+    for _ in range(3):
+        obs, rewards, terminated, truncated, info = vec.step(np.array([0, 0]))
+    assert truncated.all() and not terminated.any() and np.all(rewards == 0.0)
+    assert info["final_info"] == {} and info["_final_info"].all()
+    assert obs[0, 0] == 0.0 and not np.array_equal(obs[:, 4:], start[:, 4:])  # resampled fiducials
+
+
+def test_fiducials_hidden_under_the_shaft_or_cut_away_keep_their_last_visible_position():
+    grid = SheetGrid(11, 11, 100.0, 100.0)
+    flat = np.column_stack([grid.material, np.zeros(grid.num_vertices)])[None]
+    fiducials = Fiducials(grid, shaft_radius_mm=5.0)
+    # 0: right of the tip, 2 mm off the shaft's axis; 1: left of the tip; 2: away from both.
+    fiducials.material = np.array([[[70.0, 52.0], [30.0, 52.0], [55.0, 25.0]]])
+    fiducials.reset(flat)
+    alive = np.ones((1, grid.num_vertices), dtype=bool)
+    tip = np.array([[50.0, 50.0, 0.0, 1.0]])
+    seen = fiducials.track(flat + [0.0, 0.0, -3.0], alive, tip)
+    assert fiducials.visible.tolist() == [[False, True, True]]
+    np.testing.assert_allclose(seen[0], [[70.0, 52.0, 0.0], [30.0, 52.0, -3.0], [55.0, 25.0, -3.0]])
+    alive[0, 2 * 11 + 5] = False  # the vertex at (50, 20), a corner of fiducial 2's cell
+    tip_far = np.array([[0.0, 0.0, 50.0, 1.0]])
+    seen = fiducials.track(flat + [0.0, 0.0, -6.0], alive, tip_far)
+    assert fiducials.visible.tolist() == [[True, True, False]]
+    np.testing.assert_allclose(seen[0], [[70.0, 52.0, -6.0], [30.0, 52.0, -6.0], [55.0, 25.0, -3.0]])
+
+
+def test_a_fiducial_on_the_contour_is_cut_away_and_stays_put():
+    vec = PatternCutVecEnv(1, device="cpu", num_fiducials=2, **SMALL)
+    vec.reset(seed=0)
+    contour = vec.task.contours[0]
+    start = contour.points[np.argmax(contour.points[:, 0])]  # where the scissors enter
+    fiducials = vec.scene.fiducials
+    fiducials.material = np.array([[start, [85.0, 15.0]]])
+    fiducials.reset(vec.task.sim.positions())
+    first = vec.scene.observe()[0, 4:10]
+    for _ in range(20):
+        obs, *_ = vec.step(np.array([1]))  # pull +x: the whole sheet moves
+        assert not fiducials.visible[0, 0] and fiducials.visible[0, 1]
+        np.testing.assert_array_equal(obs[0, 4:7], first[:3])
+    assert not np.allclose(obs[0, 7:10], first[3:])
+
+
+def test_invalid_actions_raise_and_continuous_actions_are_clipped():
+    env = PatternCutEnv(device="cpu", **SMALL)
+    env.reset(seed=0)
+    for bad in (np.nan, 5, 1.5, -1):
+        with pytest.raises(ValueError, match="action"):
+            env.step(bad)
+    vec = PatternCutVecEnv(2, device="cpu", action_type="continuous", allow_z=True, **SMALL)
+    vec.reset(seed=0)
+    with pytest.raises(ValueError, match=r"action: .*not finite \(env 1\)"):
+        vec.step(np.array([[0.0, 0.0, 0.0], [0.0, np.nan, 0.0]]))
+    obs, *_ = vec.step(np.array([[5.0, -0.5, 0.0], [-3.0, 0.0, 2.0]]))
+    np.testing.assert_allclose(vec.task.sim.displacements(), [[1.0, -0.5, 0.0], [-1.0, 0.0, 1.0]], atol=1e-6)
+    np.testing.assert_allclose(obs[:, 1:4], [[0.1, -0.05, 0.0], [-0.1, 0.0, 0.1]], atol=1e-6)
+
+
+def test_sparse_reward_is_zero_until_the_last_step_then_minus_the_relative_error():
+    env = gym.make(ENV_ID, device="cpu", **SMALL)
+    env.reset(seed=0)
+    rewards, terminated, info = [], False, {}
+    while not terminated:
+        _, reward, terminated, truncated, info = env.step(0)
+        rewards.append(reward)
+        assert not truncated
+    task = env.unwrapped.task
+    assert len(rewards) == task.num_steps and all(r == 0.0 for r in rewards[:-1])
+    assert info["error_mm2"] == task.score().error_mm2[0] > 0
+    assert rewards[-1] == pytest.approx(-info["error_mm2"] / task.contours[0].area_mm2)
+    assert set(info) == {
+        "error_vertices",
+        "error_mm2",
+        "missed_vertices",
+        "excess_vertices",
+        "relative_error",
+    }
+
+
+def test_dense_reward_penalises_tracking_error_every_step():
+    env = PatternCutEnv(device="cpu", dense_reward=True, **SMALL)
+    env.reset(seed=0)
+    rewards = [env.step(1)[1] for _ in range(20)]  # pulling +x drags the contour off the scissors' path
+    assert all(r <= 0.0 for r in rewards) and min(rewards) < 0.0
+
+
+def test_rsl_adapter_steps_logs_and_resets_itself():
+    env = PatternCutRslEnv(PatternCutVecEnv(3, device="cpu", **SMALL), seed=0)
+    obs = env.get_observations()
+    assert list(obs.keys()) == ["policy"] and obs["policy"].shape == (3, OBS_DIM)
+    assert obs["policy"].dtype == torch.float32 and obs.batch_size == torch.Size([3])
+    assert env.num_actions == 1 and env.num_action_choices == 5
+    assert env.max_episode_length == env.env.task.num_steps
+    for k in range(env.max_episode_length):
+        actions = torch.randint(0, 5, (3, 1)).float() if k % 2 else torch.randint(0, 5, (3,))
+        obs, rewards, dones, extras = env.step(actions)
+        assert obs["policy"].shape == (3, OBS_DIM) and rewards.shape == (3,) and dones.shape == (3,)
+        assert rewards.dtype == torch.float32 and dones.dtype == torch.long
+        assert extras["time_outs"].dtype == torch.bool and extras["time_outs"].shape == (3,)
+        if k < env.max_episode_length - 1:
+            assert not dones.any() and "log" not in extras and env.episode_length_buf.tolist() == [k + 1] * 3
+    assert dones.all() and not extras["time_outs"].any()  # a completed cut is terminal, not a time-out
+    torch.testing.assert_close(rewards, -extras["log"][FINAL_ERROR_KEY])
+    assert extras["log"]["Cut/error_mm2"].shape == (3,)
+    assert env.episode_length_buf.tolist() == [0, 0, 0] and torch.all(obs["policy"][:, 0] == 0.0)
+    with pytest.raises(ValueError, match="action"):
+        env.step(torch.full((3, 1), 0.5))
+
+
+def test_rsl_adapter_reports_time_outs_for_truncated_episodes():
+    vec = PatternCutVecEnv(2, device="cpu", action_type="continuous", max_episode_steps=2, **SMALL)
+    env = PatternCutRslEnv(vec)
+    assert env.num_actions == 2 and env.num_action_choices is None and env.max_episode_length == 2
+    for _ in range(2):
+        _, _, dones, extras = env.step(torch.randn(2, 2))
+    assert dones.tolist() == [1, 1] and extras["time_outs"].all() and "log" not in extras
+    assert env.episode_length_buf.tolist() == [0, 0]
+    with pytest.raises(ValueError, match="init_at_random_ep_len"):
+        env.episode_length_buf = torch.zeros(2, dtype=torch.long)
+
+
+def test_rsl_rl_ppo_runs_on_the_adapter():
+    env = PatternCutRslEnv(PatternCutVecEnv(2, device="cpu", action_type="continuous", **SMALL))
+    model = {"class_name": "rsl_rl.models:MLPModel", "hidden_dims": [8]}
+    cfg = {
+        "num_steps_per_env": 8,
+        "save_interval": 100,
+        "obs_groups": {"actor": ["policy"], "critic": ["policy"]},
+        "actor": {**model, "distribution_cfg": {"class_name": "rsl_rl.modules:GaussianDistribution"}},
+        "critic": model,
+        "algorithm": {"class_name": "rsl_rl.algorithms:PPO", "num_learning_epochs": 1, "num_mini_batches": 1},
+    }
+    runner = OnPolicyRunner(env, cfg, log_dir=None, device="cpu")
+    runner.learn(num_learning_iterations=7)  # 56 steps: across the end of a 48-step episode
+    assert env.episode_length_buf.tolist() == [8, 8]
