@@ -41,6 +41,16 @@ class MethodSpec:
     policy: Callable | None
 
 
+@dataclass
+class MethodResult:
+    """A method's outcome on a suite: errors (num_contours, trials) in vertices and mm^2, and the pinch
+    point used per contour (None: no grasp)."""
+
+    errors: np.ndarray
+    areas: np.ndarray
+    pinches: list[np.ndarray | None]
+
+
 def baseline_specs(
     contours: Sequence[Contour],
     methods: Sequence[str],
@@ -86,7 +96,9 @@ def run_method(
     task = CuttingTask(config, [c for c, _ in envs], pinch_points=pinches, device=device, seed=seed)
     score = task.run(spec.policy)
     shape = (len(contours), trials)
-    return score.error_vertices.reshape(shape), score.error_mm2.reshape(shape)
+    return MethodResult(
+        score.error_vertices.reshape(shape), score.error_mm2.reshape(shape), list(spec.pinches)
+    )
 
 
 def evaluate_suite(
@@ -113,7 +125,7 @@ def evaluate_suite(
         pinch: Override the pinch point of fixed and analytic for every contour.
         device: Warp device.
         seed: Seed of the pinch search and the process noise.
-        extra: Specs of further methods (e.g. ``rl``), by name.
+        extra: Results of further methods run elsewhere (e.g. ``rl`` through its env), by name.
         progress: Called with a short description before each method runs.
 
     Returns:
@@ -131,11 +143,13 @@ def evaluate_suite(
     extra = extra or {}
     order = ["none"] + [m for m in methods if m != "none"]
     specs = baseline_specs(contours, [m for m in order if m not in extra], config, pinch, device, seed)
-    specs.update(extra)
-    errors, areas = {}, {}
+    results = dict(extra)
     for method in order:
-        progress(f"{method}: {len(contours)} contour(s) x {trials} trial(s)")
-        errors[method], areas[method] = run_method(contours, specs[method], trials, config, device, seed)
+        if method not in results:
+            progress(f"{method}: {len(contours)} contour(s) x {trials} trial(s)")
+            results[method] = run_method(contours, specs[method], trials, config, device, seed)
+    errors = {m: r.errors for m, r in results.items()}
+    areas = {m: r.areas for m, r in results.items()}
     rows = []
     for k, contour in enumerate(contours):
         row = {
@@ -146,7 +160,7 @@ def evaluate_suite(
         for method in order:
             if method == "none" and "none" not in methods:
                 continue
-            pinch_k = specs[method].pinches[k]
+            pinch_k = results[method].pinches[k]
             improvement = paired_improvement(errors["none"][k], errors[method][k])
             row[f"{method}_error_vertices"] = float(errors[method][k].mean())
             row[f"{method}_error_mm2"] = float(areas[method][k].mean())

@@ -65,14 +65,11 @@ def export_policy(source: str | Path, out_dir: str | Path | None = None) -> dict
     out_dir = Path(out_dir) if out_dir is not None else latest_checkpoint(source).parent / "exported"
     out_dir.mkdir(parents=True, exist_ok=True)
 
+    buffer = io.BytesIO()
     with warnings.catch_warnings():
         # TorchScript is deprecated in favour of torch.export, but it is what C++ deployments load.
-        warnings.filterwarnings(
-            "ignore", message=".*torch.jit.script.*deprecated", category=DeprecationWarning
-        )
-        scripted = torch.jit.script(actor.as_jit())
-    buffer = io.BytesIO()
-    torch.jit.save(scripted, buffer)
+        warnings.filterwarnings("ignore", message=".*torch.jit.* is deprecated", category=DeprecationWarning)
+        torch.jit.save(torch.jit.script(actor.as_jit()), buffer)
     torchscript_path = write_atomic(out_dir / "policy.pt", buffer.getvalue())
 
     onnx_model = actor.as_onnx(verbose=False).eval()

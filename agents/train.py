@@ -6,7 +6,7 @@ A run directory holds::
     model_K.pt         checkpoint after learning iteration K (0-based, rsl-rl's naming), every save_interval
     latest.pt          copy of the newest checkpoint; ``resume`` reads it
     events.out.tfevents.*   TensorBoard scalars written by rsl-rl's logger
-    summary.json       status ("completed" or "interrupted"), iterations, env steps, speed, last metrics
+    summary.json       status (completed, interrupted, failed), iterations, env steps, speed, last metrics
 
 The env is any :class:`rsl_rl.env.VecEnv` (``envs.rsl`` for warpcut). Beyond that contract, train() relies on:
 
@@ -46,9 +46,9 @@ from rsl_rl.env import VecEnv
 from rsl_rl.runners import OnPolicyRunner
 from rsl_rl.utils.logger import Logger
 
+from envs.rsl import FINAL_ERROR_KEY
 from warpcut.io import write_atomic, write_json
 
-FINAL_ERROR_KEY = "Episode/final_error"
 """``extras["log"]`` key of the finished episodes' final error; also its TensorBoard tag."""
 
 LATEST_CHECKPOINT = "latest.pt"
@@ -231,16 +231,15 @@ def train(
             runner.logger.writer.close()
         wall_time = time.monotonic() - start_time
         steps_per_iteration = cfg.num_steps_per_env * cfg.num_envs
+        new_steps = (runner.iterations_done - start_iterations) * steps_per_iteration
         summary = {
             "status": status,
             "iterations": runner.iterations_done,
             "env_steps": runner.iterations_done * steps_per_iteration,
             "wall_time_s": wall_time,
-            "steps_per_s": (runner.iterations_done - start_iterations)
-            * steps_per_iteration
-            / max(wall_time, 1e-9),
+            "steps_per_s": new_steps / max(wall_time, 1e-9),
             **runner.metrics,
-            "checkpoint": runner.checkpoint_path,
+            "checkpoint": None if runner.checkpoint is None else runner.checkpoint.name,
         }
         write_json(out_dir / "summary.json", summary)
     return summary
@@ -253,17 +252,18 @@ class Runner(OnPolicyRunner):
         iterations_done: Learning iterations completed, including those before a resume.
         metrics: Last iteration's ``final_error``, ``mean_return``, ``mean_episode_length`` (None until an
             episode ends) and ``iteration_steps_per_s``.
-        checkpoint_path: Newest checkpoint written, or None.
+        checkpoint: Newest checkpoint written, or None.
         on_iteration: Called with ``(iterations_done, metrics)`` after each iteration.
     """
 
-    def __init__(self, env: VecEnv, train_cfg: dict, log_dir: str | Path, device: str = "cpu") -> None:
+    def __init__(self, env: VecEnv, train_cfg: dict, log_dir: str | Path | None, device: str = "cpu") -> None:
+        log_dir = None if log_dir is None else str(log_dir)
         # rsl-rl prints the models and observation sets; config.json records them instead.
         with contextlib.redirect_stdout(io.StringIO()):
-            super().__init__(env, train_cfg, str(log_dir), device)
+            super().__init__(env, train_cfg, log_dir, device)
         self.logger = _QuietLogger(
             self._end_iteration,
-            log_dir=str(log_dir),
+            log_dir=log_dir,
             cfg=self.cfg,
             env_cfg=self.env.cfg,
             num_envs=self.env.num_envs,
@@ -273,8 +273,10 @@ class Runner(OnPolicyRunner):
             device=self.device,
         )
         self.iterations_done = 0
-        self.metrics: dict[str, float | None] = {}
-        self.checkpoint_path: str | None = None
+        self.metrics: dict[str, float | None] = dict.fromkeys(
+            ("final_error", "mean_return", "mean_episode_length", "iteration_steps_per_s")
+        )
+        self.checkpoint: Path | None = None
         self.on_iteration: Callable[[int, dict], None] = lambda iterations_done, metrics: None
 
     def save(self, path: str, infos: dict | None = None) -> None:
@@ -286,7 +288,7 @@ class Runner(OnPolicyRunner):
         torch.save(state, buffer)
         write_atomic(path, buffer.getvalue())
         write_atomic(Path(path).with_name(LATEST_CHECKPOINT), buffer.getvalue())
-        self.checkpoint_path = str(path)
+        self.checkpoint = Path(path)
         self.logger.save_model(path, self.current_learning_iteration)
 
     def save_interrupted(self) -> None:

@@ -1,0 +1,168 @@
+"""Learned tensioners: train a PPO policy for one contour, and run a trained one in evaluations.
+
+A run directory (``warpcut train``) holds rsl-rl's ``config.json``, checkpoints and TensorBoard events
+(:func:`agents.train.train`), plus ``scenario.json`` (the env options the policy was trained on, so it
+can be rebuilt without guessing) and ``evaluation.json`` (the trained policy against no tension).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from agents.export import load_policy
+from agents.train import TrainConfig, train
+from envs.pattern_cut import PatternCutOptions
+from envs.rsl import PatternCutRslEnv
+from envs.vector import PatternCutVecEnv
+from warpcut.config import SimConfig
+from warpcut.contours import Contour, load_contour
+from warpcut.io import write_json
+from warpcut.planning import nearest_feasible
+
+
+@dataclass
+class Scenario:
+    """What a policy is trained and evaluated on (everything but the batch size and seed).
+
+    Attributes:
+        contour: Built-in name or path of the contour file.
+        pinch: Pinch point (mm, material); default: the centroid or the feasible point nearest to it.
+        sim: SimConfig fields that differ from the defaults (e.g. ``{"noise_std": 0.05}``).
+        num_fiducials: Fiducial points observed (paper: 12).
+        contour_features: Add the tip and the tracking error to the observation.
+    """
+
+    contour: str
+    pinch: list[float] | None = None
+    sim: dict = field(default_factory=dict)
+    num_fiducials: int = 12
+    contour_features: bool = False
+
+    def load_contour(self) -> Contour:
+        return load_contour(self.contour)
+
+    def sim_config(self) -> SimConfig:
+        return SimConfig(**self.sim).validated()
+
+    def pinch_point(self) -> np.ndarray:
+        if self.pinch is not None:
+            return np.asarray(self.pinch, dtype=np.float64)
+        contour = self.load_contour()
+        return nearest_feasible(contour.centroid, contour, self.sim_config())
+
+    def vec_env(self, num_envs: int, device: str | None = None) -> PatternCutVecEnv:
+        options = PatternCutOptions(
+            contour=self.load_contour(),
+            pinch_point=self.pinch_point(),
+            sim_config=self.sim_config(),
+            device=device,
+            num_fiducials=self.num_fiducials,
+            contour_features=self.contour_features,
+            action_type="discrete",
+        )
+        return PatternCutVecEnv(num_envs, options)
+
+
+def train_contour(
+    scenario: Scenario,
+    out_dir: str | Path,
+    cfg: TrainConfig,
+    resume: str | Path | None = None,
+    eval_trials: int = 10,
+    progress: bool = True,
+) -> dict:
+    """Train a discrete PPO tensioner for ``scenario`` into ``out_dir``, then evaluate it.
+
+    Returns:
+        ``{"summary": training summary, "evaluation": evaluation of the final policy}``.
+    """
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    scenario = Scenario(**{**asdict(scenario), "pinch": [float(v) for v in scenario.pinch_point()]})
+    write_json(out_dir / "scenario.json", asdict(scenario))
+    env = PatternCutRslEnv(
+        scenario.vec_env(cfg.num_envs, device=cfg.device if cfg.device != "cpu" else "cpu"),
+        device="cpu",
+        seed=cfg.seed,
+    )
+    summary = train(env, cfg, out_dir, resume=resume, progress=progress)
+    evaluation = evaluate_run(out_dir, trials=eval_trials, seed=cfg.seed + 1)
+    write_json(out_dir / "evaluation.json", evaluation)
+    return {"summary": summary, "evaluation": evaluation}
+
+
+def load_scenario(run_dir: str | Path) -> Scenario:
+    path = Path(run_dir) / "scenario.json"
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"{run_dir}: no scenario.json; give a run directory written by 'warpcut train'"
+        )
+    return Scenario(**json.loads(path.read_text()))
+
+
+def rollout_errors(
+    run_dir: str | Path,
+    trials: int,
+    seed: int = 0,
+    device: str | None = None,
+    scenario: Scenario | None = None,
+) -> dict:
+    """Run the trained policy (deterministic: argmax action) for ``trials`` seeded episodes at once.
+
+    Trials differ by their fiducials and process-noise streams. Returns per-trial errors (vertices,
+    mm^2) and the pinch point used.
+    """
+    scenario = scenario or load_scenario(run_dir)
+    actor = load_policy(run_dir)
+    env = scenario.vec_env(trials, device=device)
+    obs, _ = env.reset(seed=seed)
+    errors = errors_mm2 = None
+    with torch.inference_mode():
+        for _ in range(env.task.num_steps):
+            obs_td = {"policy": torch.as_tensor(obs)}
+            action = actor(_tensordict(obs_td, trials)).cpu().numpy().reshape(trials, -1)[:, 0]
+            obs, _, terminated, truncated, info = env.step(action.astype(np.int64))
+            if np.any(terminated | truncated):
+                final = info["final_info"]
+                errors, errors_mm2 = np.asarray(final["error_vertices"]), np.asarray(final["error_mm2"])
+                break
+    if errors is None:
+        raise RuntimeError(f"{run_dir}: the episode did not end within {env.task.num_steps} steps")
+    return {"error_vertices": errors, "error_mm2": errors_mm2, "pinch": scenario.pinch_point()}
+
+
+def _tensordict(groups: dict[str, torch.Tensor], batch: int):
+    from tensordict import TensorDict
+
+    return TensorDict(groups, batch_size=[batch])
+
+
+def evaluate_run(run_dir: str | Path, trials: int = 10, seed: int = 1, device: str | None = None) -> dict:
+    """The trained policy against no tension on its own scenario (paired by trial)."""
+    from agents.evaluation import MethodSpec, ci95, paired_improvement, run_method
+
+    scenario = load_scenario(run_dir)
+    contour = scenario.load_contour()
+    start = time.perf_counter()
+    rl = rollout_errors(run_dir, trials, seed=seed, device=device, scenario=scenario)
+    none = run_method([contour], MethodSpec([None], None), trials, scenario.sim_config(), device, seed).errors
+    improvement = paired_improvement(none[0], rl["error_vertices"])
+    return {
+        "contour": contour.name,
+        "trials": trials,
+        "none_error_vertices": float(none[0].mean()),
+        "rl_error_vertices": float(rl["error_vertices"].mean()),
+        "rl_error_mm2": float(rl["error_mm2"].mean()),
+        "rl_improvement_pct": float(np.nanmean(improvement))
+        if np.isfinite(improvement).any()
+        else float("nan"),
+        "rl_ci95": ci95(improvement),
+        "pinch": [float(v) for v in rl["pinch"]],
+        "seconds": time.perf_counter() - start,
+    }

@@ -1,0 +1,185 @@
+"""PPO training on rsl-rl: the categorical distribution, run directories, learning, resume, Ctrl-C, export."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+from dummy_env import FINAL_ERROR_KEY, ReachEnv
+from onnx.reference import ReferenceEvaluator
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+from tensordict import TensorDict
+
+from agents.distributions import Categorical
+from agents.export import export_policy, load_policy
+from agents.train import FINAL_ERROR_KEY as TRAIN_FINAL_ERROR_KEY
+from agents.train import Runner, TrainConfig, train
+
+NUM_ENVS = 32
+
+
+def tiny_config(**overrides) -> TrainConfig:
+    return TrainConfig(**{"num_envs": NUM_ENVS, "iterations": 3, "num_steps_per_env": 24, **overrides})
+
+
+def mean_final_error(env: ReachEnv, policy, episodes: int = 4) -> float:
+    """Mean final error of ``policy(obs) -> actions`` over ``episodes`` episodes of every env."""
+    errors = []
+    obs = env.get_observations()
+    with torch.inference_mode():
+        while len(errors) < episodes:
+            obs, _, _, extras = env.step(policy(obs))
+            if FINAL_ERROR_KEY in extras["log"]:
+                errors.append(extras["log"][FINAL_ERROR_KEY].mean().item())
+    return float(np.mean(errors))
+
+
+@pytest.fixture(scope="module", autouse=True)
+def one_torch_thread():
+    """Tiny MLPs gain nothing from threads, and threads slow to a crawl on a busy 2-core machine."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+@pytest.fixture(scope="module")
+def trained_run(tmp_path_factory) -> str:
+    """A discrete policy trained until it reaches the target (about 2 s)."""
+    run_dir = tmp_path_factory.mktemp("trained")
+    train(ReachEnv(NUM_ENVS), tiny_config(iterations=20), run_dir, progress=False)
+    return str(run_dir)
+
+
+def test_categorical_matches_torch_and_starts_uniform():
+    dist = Categorical(output_dim=2, num_choices=3)
+    logits = torch.randn(5, 2, 3)
+    dist.update(logits)
+    actions = dist.sample()
+    reference = torch.distributions.Categorical(logits=logits)
+    assert actions.shape == (5, 2) and actions.dtype == torch.float32
+    assert torch.allclose(dist.log_prob(actions), reference.log_prob(actions.long()).sum(-1))
+    assert torch.allclose(dist.entropy, reference.entropy().sum(-1))
+    assert torch.equal(dist.deterministic_output(logits), logits.argmax(-1).float())
+    assert torch.allclose(dist.kl_divergence(dist.params, dist.params), torch.zeros(5), atol=1e-6)
+    probs = reference.probs
+    assert torch.allclose(dist.mean, (probs * torch.arange(3.0)).sum(-1))
+
+    env = ReachEnv(num_envs=4)
+    cfg = tiny_config(num_envs=4).to_rsl_rl(env.num_action_choices)
+    actor = Runner(env, cfg, log_dir=None).alg.get_policy()
+    actor(env.get_observations(), stochastic_output=True)
+    assert torch.allclose(actor.output_entropy, torch.full((4,), float(np.log(3))), atol=1e-3)
+
+
+@pytest.mark.parametrize("discrete", [True, False], ids=["discrete", "continuous"])
+def test_smoke_run_writes_run_directory(tmp_path, discrete):
+    summary = train(
+        ReachEnv(NUM_ENVS, discrete=discrete), tiny_config(discrete=discrete), tmp_path, progress=True
+    )
+
+    assert summary == json.loads((tmp_path / "summary.json").read_text())
+    assert summary["status"] == "completed" and summary["iterations"] == 3
+    assert summary["env_steps"] == 3 * 24 * NUM_ENVS
+    assert summary["checkpoint"] == "model_2.pt" and summary["final_error"] is not None
+    config = json.loads((tmp_path / "config.json").read_text())
+    assert TrainConfig(**config["train"]) == tiny_config(discrete=discrete)
+    assert config["env"] == {
+        "num_envs": NUM_ENVS,
+        "num_actions": 1,
+        "num_action_choices": 3 if discrete else None,
+        "obs_shapes": {"policy": [2]},
+    }
+    checkpoint = torch.load(tmp_path / "latest.pt", weights_only=True)
+    assert checkpoint["iter"] == 2 and checkpoint["infos"]["iterations_done"] == 3
+    assert {"model_0.pt", "model_2.pt"} <= {p.name for p in tmp_path.glob("model_*.pt")}
+
+    assert TRAIN_FINAL_ERROR_KEY == FINAL_ERROR_KEY
+    for tag in (FINAL_ERROR_KEY, "Train/mean_reward", "Perf/total_fps", "Loss/surrogate"):
+        assert [event.step for event in _scalars(tmp_path, tag)] == [0, 1, 2]
+
+
+def test_same_seed_same_weights(tmp_path):
+    for run in ("a", "b"):
+        train(ReachEnv(NUM_ENVS), tiny_config(iterations=2), tmp_path / run, progress=False)
+    a, b = (torch.load(tmp_path / run / "latest.pt", weights_only=True) for run in ("a", "b"))
+    for key, value in a["actor_state_dict"].items():
+        assert torch.equal(value, b["actor_state_dict"][key]), key
+
+
+def test_trained_policy_beats_random(trained_run):
+    env = ReachEnv(NUM_ENVS, seed=123)
+    random_error = mean_final_error(env, lambda obs: torch.randint(0, 3, (NUM_ENVS, 1)).float())
+    actor = load_policy(trained_run)
+    trained_error = mean_final_error(ReachEnv(NUM_ENVS, seed=123), actor)
+    assert random_error > 1.5
+    assert trained_error < 0.25 * random_error
+
+
+def test_resume_continues_from_checkpoint(tmp_path):
+    train(ReachEnv(NUM_ENVS), tiny_config(), tmp_path, progress=False)
+    saved = torch.load(tmp_path / "latest.pt", weights_only=True)
+
+    # Ctrl-C on the first step of the resumed run saves the state it started from.
+    env = ReachEnv(NUM_ENVS)
+    env.interrupt_after = 1
+    with pytest.raises(KeyboardInterrupt):
+        train(env, tiny_config(iterations=5), tmp_path / "resumed", resume=tmp_path, progress=False)
+    restored = torch.load(tmp_path / "resumed" / "latest.pt", weights_only=True)
+    assert restored["infos"]["iterations_done"] == 3
+    for key in ("actor_state_dict", "critic_state_dict"):
+        for name, value in saved[key].items():
+            assert torch.equal(value, restored[key][name]), name
+    assert (
+        restored["optimizer_state_dict"]["state"][0]["step"]
+        == saved["optimizer_state_dict"]["state"][0]["step"]
+    )
+
+    summary = train(ReachEnv(NUM_ENVS), tiny_config(iterations=5), tmp_path, resume=tmp_path, progress=False)
+    assert summary["iterations"] == 5 and summary["env_steps"] == 5 * 24 * NUM_ENVS
+    assert summary["checkpoint"] == "model_4.pt"
+    assert torch.load(tmp_path / "model_4.pt", weights_only=True)["infos"]["iterations_done"] == 5
+    steps = [event.step for event in _scalars(tmp_path, "Loss/surrogate")]
+    assert sorted(steps) == [0, 1, 2, 3, 4]
+
+
+def test_ctrl_c_leaves_a_checkpoint(tmp_path):
+    env = ReachEnv(NUM_ENVS)
+    env.interrupt_after = 2 * 24 + 10  # in the third iteration's rollout
+    with pytest.raises(KeyboardInterrupt):
+        train(env, tiny_config(iterations=10), tmp_path, progress=False)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["status"] == "interrupted" and summary["iterations"] == 2
+    assert summary["checkpoint"] == "model_1.pt"
+    checkpoint = torch.load(tmp_path / "latest.pt", weights_only=True)
+    assert checkpoint["iter"] == 1 and checkpoint["infos"]["iterations_done"] == 2
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
+@pytest.mark.filterwarnings("ignore:.*torch.jit.load.* is deprecated:DeprecationWarning")
+@pytest.mark.parametrize("discrete", [True, False], ids=["discrete", "continuous"])
+def test_exported_policies_match_live_policy(tmp_path, trained_run, discrete):
+    run_dir = trained_run
+    if not discrete:
+        run_dir = tmp_path / "run"
+        train(ReachEnv(NUM_ENVS, discrete=False), tiny_config(discrete=False), run_dir, progress=False)
+    paths = export_policy(run_dir, tmp_path / "exported")
+    obs = torch.randn(64, 2) * 2.0
+
+    live = load_policy(run_dir)(TensorDict({"policy": obs}, batch_size=[64]))
+    torchscript = torch.jit.load(paths["torchscript"])(obs)
+    onnx = torch.from_numpy(ReferenceEvaluator(str(paths["onnx"])).run(None, {"obs": obs.numpy()})[0])
+    assert live.shape == torchscript.shape == onnx.shape == (64, 1)
+    if discrete:
+        assert torch.equal(torchscript, live) and torch.equal(onnx, live)
+        assert set(live.unique().tolist()) <= {0.0, 1.0, 2.0}
+    else:
+        assert torch.allclose(torchscript, live, atol=1e-6) and torch.allclose(onnx, live, atol=1e-5)
+
+
+def _scalars(log_dir, tag: str) -> list:
+    events = EventAccumulator(str(log_dir))
+    events.Reload()
+    return events.Scalars(tag)
