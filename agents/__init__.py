@@ -3,4 +3,11 @@
 from agents.baselines import AnalyticTension, FixedTension, NoTension, make_policy
 from agents.evaluation import compare_policies, evaluate_suite
 
-__all__ = ["AnalyticTension", "FixedTension", "NoTension", "compare_policies", "evaluate_suite", "make_policy"]
+__all__ = [
+    "AnalyticTension",
+    "FixedTension",
+    "NoTension",
+    "compare_policies",
+    "evaluate_suite",
+    "make_policy",
+]

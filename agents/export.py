@@ -10,10 +10,13 @@ runner's export methods need a live env, these need only the run directory.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
+import logging
 import os
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
 
 import torch
@@ -78,18 +81,33 @@ def export_policy(source: str | Path, out_dir: str | Path | None = None) -> dict
     onnx_path = out_dir / "policy.onnx"
     tmp_path = out_dir / f".{onnx_path.name}.tmp"
     try:
-        torch.onnx.export(
-            onnx_model,
-            (example,),
-            tmp_path,
-            opset_version=ONNX_OPSET,
-            input_names=onnx_model.input_names,
-            output_names=onnx_model.output_names,
-            dynamic_shapes=({0: torch.export.Dim("batch")},),
-            external_data=False,
-            verbose=False,
-        )
+        with _quiet_onnx_exporter():
+            torch.onnx.export(
+                onnx_model,
+                (example,),
+                tmp_path,
+                opset_version=ONNX_OPSET,
+                input_names=onnx_model.input_names,
+                output_names=onnx_model.output_names,
+                dynamic_shapes=({0: torch.export.Dim("batch")},),
+                external_data=False,
+                verbose=False,
+            )
         os.replace(tmp_path, onnx_path)
     finally:
         tmp_path.unlink(missing_ok=True)
     return {"torchscript": torchscript_path, "onnx": onnx_path}
+
+
+@contextlib.contextmanager
+def _quiet_onnx_exporter() -> Iterator[None]:
+    """Silence the exporter's notes about optional torchvision ops and a torch-internal deprecation."""
+    exporter_log = logging.getLogger("torch.onnx")
+    level = exporter_log.level
+    exporter_log.setLevel(logging.ERROR)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FutureWarning)
+            yield
+    finally:
+        exporter_log.setLevel(level)

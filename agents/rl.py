@@ -76,8 +76,18 @@ def train_contour(
     resume: str | Path | None = None,
     eval_trials: int = 10,
     progress: bool = True,
+    device: str | None = None,
 ) -> dict:
     """Train a discrete PPO tensioner for ``scenario`` into ``out_dir``, then evaluate it.
+
+    Args:
+        scenario: Contour, pinch point and simulation settings.
+        out_dir: Run directory.
+        cfg: PPO settings (``cfg.device`` is torch's device).
+        resume: Run directory or checkpoint to continue from.
+        eval_trials: Trials of the final evaluation against no tension.
+        progress: Show the progress bar.
+        device: Warp device of the simulator.
 
     Returns:
         ``{"summary": training summary, "evaluation": evaluation of the final policy}``.
@@ -86,13 +96,9 @@ def train_contour(
     out_dir.mkdir(parents=True, exist_ok=True)
     scenario = Scenario(**{**asdict(scenario), "pinch": [float(v) for v in scenario.pinch_point()]})
     write_json(out_dir / "scenario.json", asdict(scenario))
-    env = PatternCutRslEnv(
-        scenario.vec_env(cfg.num_envs, device=cfg.device if cfg.device != "cpu" else "cpu"),
-        device="cpu",
-        seed=cfg.seed,
-    )
+    env = PatternCutRslEnv(scenario.vec_env(cfg.num_envs, device=device), device=cfg.device, seed=cfg.seed)
     summary = train(env, cfg, out_dir, resume=resume, progress=progress)
-    evaluation = evaluate_run(out_dir, trials=eval_trials, seed=cfg.seed + 1)
+    evaluation = evaluate_run(out_dir, trials=eval_trials, seed=cfg.seed + 1, device=device)
     write_json(out_dir / "evaluation.json", evaluation)
     return {"summary": summary, "evaluation": evaluation}
 
@@ -166,3 +172,14 @@ def evaluate_run(run_dir: str | Path, trials: int = 10, seed: int = 1, device: s
         "pinch": [float(v) for v in rl["pinch"]],
         "seconds": time.perf_counter() - start,
     }
+
+
+def benchmark_training(device: str | None = None, num_envs: int = 64, iterations: int = 4) -> float:
+    """PPO env steps per second (collection + updates) training ``fls-circle`` on ``num_envs`` envs."""
+    import tempfile
+
+    cfg = TrainConfig(num_envs=num_envs, iterations=iterations, num_steps_per_env=32, save_interval=10**6)
+    scenario = Scenario(contour="fls-circle")
+    with tempfile.TemporaryDirectory() as out:
+        env = PatternCutRslEnv(scenario.vec_env(num_envs, device=device), device=cfg.device, seed=cfg.seed)
+        return float(train(env, cfg, out, progress=False)["steps_per_s"])

@@ -115,14 +115,149 @@ def test_console_script_runs():
 
 def test_bench_writes_the_documented_json(tmp_path):
     out = tmp_path / "bench.json"
-    code, stdout, _ = invoke(["bench", "--device", "cpu", "--batch-sizes", "1,4", "--rollout-envs", "2",
-                              "--repeats", "1", "--json", str(out)])
+    code, stdout, _ = invoke(
+        [
+            "bench",
+            "--device",
+            "cpu",
+            "--batch-sizes",
+            "1,4",
+            "--rollout-envs",
+            "2",
+            "--repeats",
+            "1",
+            "--json",
+            str(out),
+        ]
+    )
     assert code == 0, stdout
     result = json.loads(out.read_text())
     assert result["device"] == "cpu"
     assert set(result["updates_per_s"]) == {"1", "4"}
-    for key in ("rollouts_per_s", "numpy_updates_per_s", "speedup_vs_numpy", "cold_start_s", "warm_start_s"):
+    for key in (
+        "rollouts_per_s",
+        "numpy_updates_per_s",
+        "speedup_vs_numpy",
+        "cold_start_s",
+        "warm_start_s",
+        "train_steps_per_s",
+    ):
         assert result[key] > 0, key
-    assert "train_steps_per_s" in result
-    assert result["speedup_vs_numpy"] == pytest.approx(max(result["updates_per_s"].values())
-                                                      / result["numpy_updates_per_s"])
+    assert result["speedup_vs_numpy"] == pytest.approx(
+        max(result["updates_per_s"].values()) / result["numpy_updates_per_s"]
+    )
+
+
+def test_train_resume_export_and_evaluate_with_checkpoints(tmp_path):
+    run = tmp_path / "runs" / "circle-small"
+    common = ["--num-envs", "4", "--steps-per-env", "4", "--eval-trials", "2", "--no-progress"]
+    code, stdout, _ = invoke(
+        ["train", "--contour", "circle-small", "--iterations", "2", "--out", str(run), *common]
+    )
+    assert code == 0, stdout
+    for name in (
+        "config.json",
+        "scenario.json",
+        "summary.json",
+        "evaluation.json",
+        "latest.pt",
+        "model_1.pt",
+    ):
+        assert (run / name).is_file(), name
+    assert any(p.name.startswith("events.out.tfevents") for p in run.iterdir())
+    assert json.loads((run / "summary.json").read_text())["iterations"] == 2
+
+    code, stdout, _ = invoke(
+        ["train", "--contour", "circle-small", "--iterations", "3", "--resume", str(run), *common]
+    )
+    assert code == 0, stdout
+    assert json.loads((run / "summary.json").read_text())["iterations"] == 3
+    assert (run / "model_2.pt").is_file()
+
+    code, stdout, _ = invoke(["export", str(run)])
+    assert (
+        code == 0
+        and (run / "exported" / "policy.pt").is_file()
+        and (run / "exported" / "policy.onnx").is_file()
+    )
+
+    out = tmp_path / "table.json"
+    code, stdout, _ = invoke(
+        [
+            "evaluate",
+            "--contours",
+            "circle-small",
+            "--methods",
+            "none,analytic,rl",
+            "--trials",
+            "2",
+            "--checkpoints",
+            str(tmp_path / "runs"),
+            "--out",
+            str(tmp_path / "eval"),
+            "--json",
+            str(out),
+            "--markdown",
+            str(tmp_path / "t.md"),
+        ]
+    )
+    assert code == 0, stdout
+    report = json.loads(out.read_text())
+    assert report["rows"][0]["contour"] == "circle-small"
+    assert {"rl_improvement_pct", "rl_ci95", "analytic_improvement_pct", "none_error_vertices"} <= set(
+        report["rows"][0]
+    )
+    assert "rl_improvement_pct" in report["mean"]
+    assert "| **mean** |" in (tmp_path / "t.md").read_text()
+
+
+def test_evaluate_two_contours_two_trials_writes_table_json(tmp_path):
+    out = tmp_path / "results.json"
+    code, stdout, _ = invoke(
+        [
+            "evaluate",
+            "--contours",
+            "fls-circle",
+            "--contours",
+            "s-curve",
+            "--methods",
+            "none,fixed,analytic",
+            "--trials",
+            "2",
+            "--noise",
+            "0.02",
+            "--out",
+            str(tmp_path / "run"),
+            "--json",
+            str(out),
+        ]
+    )
+    assert code == 0, stdout
+    report = json.loads(out.read_text())
+    assert [r["contour"] for r in report["rows"]] == ["fls-circle", "s-curve"]
+    for row in report["rows"]:
+        assert row["none_error_vertices"] > 0
+        for m in ("fixed", "analytic"):
+            assert isinstance(row[f"{m}_improvement_pct"], float) and row[f"{m}_ci95"] >= 0
+    assert set(report["mean"]) >= {"fixed_improvement_pct", "analytic_improvement_pct"}
+    assert (tmp_path / "run" / "results.json").is_file()
+
+
+def test_evaluate_reports_missing_checkpoints(tmp_path, capfd):
+    with pytest.raises(SystemExit) as exit_info:
+        main.main(
+            args=[
+                "evaluate",
+                "--contours",
+                "fls-circle",
+                "--methods",
+                "none,rl",
+                "--checkpoints",
+                str(tmp_path),
+                "--out",
+                str(tmp_path / "o"),
+            ],
+            prog_name="warpcut",
+        )
+    assert exit_info.value.code == 2
+    assert "no trained run for 'fls-circle'" in capfd.readouterr().err

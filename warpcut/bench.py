@@ -101,12 +101,10 @@ def start_times(device: str) -> dict[str, float]:
     return out
 
 
-def train_steps_per_second(device: str) -> float | None:
-    """PPO environment steps per second during training (collection + update), if training is available."""
-    try:
-        from agents.train import benchmark_training
-    except ImportError:
-        return None
+def train_steps_per_second(device: str) -> float:
+    """PPO environment steps per second during training (collection + update), 64 envs."""
+    from agents.rl import benchmark_training
+
     return benchmark_training(device=device)
 
 

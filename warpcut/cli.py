@@ -238,10 +238,329 @@ def bench(
         f"NumPy reference updates/s: {result['numpy_updates_per_s']:,.1f}  "
         f"(Warp best / NumPy = {result['speedup_vs_numpy']:,.0f}x)"
     )
-    if result["train_steps_per_s"] is not None:
-        click.echo(f"PPO training env steps/s: {result['train_steps_per_s']:,.0f}")
+    click.echo(f"PPO training env steps/s (64 envs): {result['train_steps_per_s']:,.0f}")
     if json_path:
         from warpcut.io import write_json
 
         write_json(json_path, result)
         click.echo(f"wrote {json_path}")
+
+
+def _run_dir(out: Path | None, prefix: str) -> Path:
+    """``out`` or a fresh ``logs/PREFIX-YYYYmmdd-HHMMSS`` directory."""
+    if out is not None:
+        return out
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    path = Path("logs") / f"{prefix}-{stamp}"
+    suffix = 1
+    while path.exists():
+        path = Path("logs") / f"{prefix}-{stamp}-{suffix}"
+        suffix += 1
+    return path
+
+
+@main.command()
+@click.option("--contour", "contour_name", required=True, help="Built-in name or a .json/.svg contour file.")
+@click.option(
+    "--pinch", default=None, help="Pinch point X,Y (mm); default: centroid or nearest feasible point."
+)
+@click.option("--num-envs", default=64, show_default=True, type=click.IntRange(min=1), help="Parallel envs.")
+@click.option(
+    "--iterations",
+    default=100,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="PPO iterations in total (a resumed run continues up to this count).",
+)
+@click.option(
+    "--steps-per-env",
+    default=32,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="Env steps per env per PPO iteration.",
+)
+@click.option(
+    "--noise",
+    default=0.0,
+    show_default=True,
+    type=click.FloatRange(min=0.0),
+    help="Process noise sigma (mm per update) during training and evaluation.",
+)
+@click.option(
+    "--eval-trials",
+    default=10,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="Trials of the final evaluation against no tension.",
+)
+@click.option("--device", default=None, help="Warp device for the simulator (cpu or cuda).")
+@click.option("--seed", default=0, show_default=True, type=int)
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Run directory (default: logs/train-CONTOUR-TIMESTAMP).",
+)
+@click.option(
+    "--resume",
+    type=click.Path(exists=True, path_type=Path),
+    default=None,
+    help="Run directory or checkpoint to continue from (writes into it unless --out is given).",
+)
+@click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
+def train(
+    contour_name: str,
+    pinch: str | None,
+    num_envs: int,
+    iterations: int,
+    steps_per_env: int,
+    noise: float,
+    eval_trials: int,
+    device: str | None,
+    seed: int,
+    out: Path | None,
+    resume: Path | None,
+    no_progress: bool,
+) -> None:
+    """Train a PPO tensioning policy (rsl-rl, 2x32 MLP, discrete 1 mm moves) for one contour."""
+    from agents.rl import Scenario, load_scenario, train_contour
+    from agents.train import TrainConfig
+    from warpcut.contours import load_contour
+    from warpcut.simulator import resolve_device
+
+    device = resolve_device(device)
+    point = _parse_point(pinch, "--pinch")
+    if resume is not None:
+        scenario = load_scenario(resume if resume.is_dir() else resume.parent)
+        out = out or (resume if resume.is_dir() else resume.parent)
+    else:
+        contour = load_contour(contour_name)
+        scenario = Scenario(
+            contour=contour_name,
+            pinch=None if point is None else list(point),
+            sim={"noise_std": noise} if noise else {},
+        )
+        scenario.pinch_point()  # fail early on an infeasible default pinch
+        out = _run_dir(out, f"train-{contour.name}")
+    cfg = TrainConfig(
+        num_envs=num_envs, iterations=iterations, num_steps_per_env=steps_per_env, seed=seed, device="cpu"
+    )
+    click.echo(f"training {scenario.contour} into {out} ({num_envs} envs, {iterations} iterations, {device})")
+    try:
+        result = train_contour(
+            scenario,
+            out,
+            cfg,
+            resume=resume,
+            eval_trials=eval_trials,
+            progress=not no_progress,
+            device=device,
+        )
+    except KeyboardInterrupt:
+        click.echo(f"interrupted: checkpoint saved in {out}; continue with --resume {out}", err=True)
+        sys.exit(130)
+    s, e = result["summary"], result["evaluation"]
+    click.echo(
+        f"done: {s['iterations']} iterations, {s['env_steps']:,} env steps in {s['wall_time_s']:.0f} s "
+        f"({s['steps_per_s']:,.0f} steps/s)"
+    )
+    click.echo(
+        f"evaluation ({e['trials']} trials): no tension {e['none_error_vertices']:.1f} vertices, "
+        f"rl {e['rl_error_vertices']:.1f} vertices, improvement {e['rl_improvement_pct']:+.1f}% "
+        f"± {e['rl_ci95']:.1f}"
+    )
+    click.echo(f"wrote {out}")
+
+
+@main.command()
+@click.argument("run_dir", type=click.Path(exists=True, path_type=Path))
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Where to write policy.pt and policy.onnx (default: RUN_DIR/exported).",
+)
+def export(run_dir: Path, out: Path | None) -> None:
+    """Export a trained policy as TorchScript and ONNX (observation -> action index)."""
+    from agents.export import export_policy
+
+    paths = export_policy(run_dir, out)
+    for kind, path in paths.items():
+        click.echo(f"{kind}: {path}")
+
+
+EVALUATE_METHODS = ("none", "fixed", "analytic", "rl")
+
+
+@main.command()
+@click.option(
+    "--contours",
+    "contour_args",
+    multiple=True,
+    default=("all",),
+    show_default=True,
+    help="'all' (the built-in suite), names or contour files; repeat or comma-separate.",
+)
+@click.option(
+    "--methods", default="none,fixed,analytic,rl", show_default=True, help="Comma-separated methods."
+)
+@click.option(
+    "--trials", default=10, show_default=True, type=click.IntRange(min=1), help="Trials per contour."
+)
+@click.option(
+    "--noise",
+    default=0.0,
+    show_default=True,
+    type=click.FloatRange(min=0.0),
+    help="Process noise sigma (mm per update); trials differ by their noise stream and fiducials.",
+)
+@click.option(
+    "--checkpoints",
+    type=click.Path(exists=True, file_okay=False, path_type=Path),
+    default=None,
+    help="Directory of trained runs, one per contour (CHECKPOINTS/NAME, as 'warpcut train' writes); "
+    "without it the rl column trains a policy per contour.",
+)
+@click.option(
+    "--iterations",
+    default=100,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="PPO iterations per contour when training.",
+)
+@click.option(
+    "--num-envs", default=64, show_default=True, type=click.IntRange(min=1), help="Envs when training."
+)
+@click.option("--device", default=None, help="Warp device (cpu or cuda).")
+@click.option("--seed", default=0, show_default=True, type=int)
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Run directory (default: logs/evaluate-TIMESTAMP): results and trained policies.",
+)
+@click.option(
+    "--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write results here."
+)
+@click.option(
+    "--markdown",
+    "markdown_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Write the table as Markdown here.",
+)
+def evaluate(
+    contour_args: tuple[str, ...],
+    methods: str,
+    trials: int,
+    noise: float,
+    checkpoints: Path | None,
+    iterations: int,
+    num_envs: int,
+    device: str | None,
+    seed: int,
+    out: Path | None,
+    json_path: Path | None,
+    markdown_path: Path | None,
+) -> None:
+    """The paper's Table I: per contour the no-tension error and each method's improvement (95% CI)."""
+    from agents.evaluation import MethodResult, evaluate_suite
+    from warpcut.contours import builtin_names, load_contour
+    from warpcut.io import write_atomic, write_json
+    from warpcut.simulator import resolve_device
+
+    names = [m.strip() for m in methods.split(",") if m.strip()]
+    unknown = [m for m in names if m not in EVALUATE_METHODS]
+    if not names or unknown:
+        raise click.BadParameter(
+            f"unknown {', '.join(unknown) or 'empty list'}; choose from {','.join(EVALUATE_METHODS)}",
+            param_hint="--methods",
+        )
+    specs = [s.strip() for arg in contour_args for s in arg.split(",") if s.strip()]
+    if "all" in specs:
+        specs = [s for s in specs if s != "all"] + [n for n in builtin_names() if n not in specs]
+    contours = [load_contour(s) for s in specs]
+    by_name = dict(zip([c.name for c in contours], specs, strict=True))
+    device = resolve_device(device)
+    config = SimConfig(noise_std=noise).validated()
+    out = _run_dir(out, "evaluate")
+    start = time.perf_counter()
+    extra = {}
+    if "rl" in names:
+        extra["rl"] = _rl_results(
+            contours,
+            by_name,
+            checkpoints,
+            out,
+            trials,
+            noise,
+            iterations,
+            num_envs,
+            device,
+            seed,
+            MethodResult,
+        )
+    report = evaluate_suite(
+        contours,
+        names,
+        trials=trials,
+        config=config,
+        device=device,
+        seed=seed,
+        extra=extra,
+        progress=lambda what: click.echo(f"  running {what}", err=True),
+    )
+    report["seconds"] = time.perf_counter() - start
+    table = _markdown_table(report, names)
+    click.echo(table)
+    click.echo(f"({len(contours)} contours x {trials} trials in {report['seconds']:.0f} s)")
+    write_json(out / "results.json", report)
+    if json_path:
+        write_json(json_path, report)
+    if markdown_path:
+        write_atomic(markdown_path, table + "\n")
+    click.echo(f"wrote {out}")
+
+
+def _rl_results(
+    contours, by_name, checkpoints, out, trials, noise, iterations, num_envs, device, seed, result_type
+):
+    """Per contour, a trained run (from ``checkpoints`` or trained now) rolled out for ``trials``."""
+    import numpy as np
+
+    from agents.rl import Scenario, rollout_errors, train_contour
+    from agents.train import TrainConfig
+
+    errors, areas, pinches = [], [], []
+    for contour in contours:
+        if checkpoints is not None:
+            run = checkpoints / contour.name
+            if not (run / "scenario.json").is_file():
+                raise click.BadParameter(
+                    f"no trained run for {contour.name!r} at {run} (expected "
+                    "CHECKPOINTS/NAME/scenario.json from 'warpcut train --out')",
+                    param_hint="--checkpoints",
+                )
+        else:
+            run = out / "policies" / contour.name
+            click.echo(f"  training rl for {contour.name} ({iterations} iterations)", err=True)
+            scenario = Scenario(contour=by_name[contour.name], sim={"noise_std": noise} if noise else {})
+            cfg = TrainConfig(num_envs=num_envs, iterations=iterations, seed=seed, device="cpu")
+            train_contour(scenario, run, cfg, eval_trials=trials, progress=False, device=device)
+        result = rollout_errors(run, trials, seed=seed + 1, device=device)
+        errors.append(result["error_vertices"])
+        areas.append(result["error_mm2"])
+        pinches.append(result["pinch"])
+    return result_type(np.array(errors), np.array(areas), pinches)
+
+
+def _markdown_table(report: dict, methods: list[str]) -> str:
+    shown = [m for m in methods if m != "none"]
+    head = "| contour | no tension (vertices) | " + " | ".join(f"{m} (%)" for m in shown) + " |"
+    lines = [head, "|---|---|" + "---|" * len(shown)]
+    for row in report["rows"]:
+        cells = [f"{row[f'{m}_improvement_pct']:+.1f} ± {row[f'{m}_ci95']:.1f}" for m in shown]
+        lines.append(f"| {row['contour']} | {row['none_error_vertices']:.1f} | " + " | ".join(cells) + " |")
+    mean = report["mean"]
+    cells = [f"{mean[f'{m}_improvement_pct']:+.1f} ± {mean[f'{m}_ci95']:.1f}" for m in shown]
+    lines.append("| **mean** | | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
