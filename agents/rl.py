@@ -36,6 +36,8 @@ class Scenario:
         sim: SimConfig fields that differ from the defaults (e.g. ``{"noise_std": 0.05}``).
         num_fiducials: Fiducial points observed (paper: 12).
         contour_features: Add the tip and the tracking error to the observation.
+        action_type: ``discrete`` (paper: stay, +-x, +-y at 1 mm) or ``continuous`` (x-y moves up to
+            1 mm per axis; a policy that outputs zero holds the grasp still, like fixed tensioning).
     """
 
     contour: str
@@ -43,6 +45,7 @@ class Scenario:
     sim: dict = field(default_factory=dict)
     num_fiducials: int = 12
     contour_features: bool = False
+    action_type: str = "discrete"
 
     def load_contour(self) -> Contour:
         return load_contour(self.contour)
@@ -64,7 +67,7 @@ class Scenario:
             device=device,
             num_fiducials=self.num_fiducials,
             contour_features=self.contour_features,
-            action_type="discrete",
+            action_type=self.action_type,
         )
         return PatternCutVecEnv(num_envs, options)
 
@@ -78,7 +81,7 @@ def train_contour(
     progress: bool = True,
     device: str | None = None,
 ) -> dict:
-    """Train a discrete PPO tensioner for ``scenario`` into ``out_dir``, then evaluate it.
+    """Train a PPO tensioner for ``scenario`` into ``out_dir``, then evaluate it.
 
     Args:
         scenario: Contour, pinch point and simulation settings.
@@ -92,6 +95,10 @@ def train_contour(
     Returns:
         ``{"summary": training summary, "evaluation": evaluation of the final policy}``.
     """
+    if cfg.discrete != (scenario.action_type == "discrete"):
+        raise ValueError(
+            f"cfg.discrete={cfg.discrete} does not match the scenario's {scenario.action_type} actions"
+        )
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     scenario = Scenario(**{**asdict(scenario), "pinch": [float(v) for v in scenario.pinch_point()]})
@@ -132,8 +139,10 @@ def rollout_errors(
     with torch.inference_mode():
         for _ in range(env.task.num_steps):
             obs_td = {"policy": torch.as_tensor(obs)}
-            action = actor(_tensordict(obs_td, trials)).cpu().numpy().reshape(trials, -1)[:, 0]
-            obs, _, terminated, truncated, info = env.step(action.astype(np.int64))
+            action = actor(_tensordict(obs_td, trials)).cpu().numpy().reshape(trials, -1)
+            if scenario.action_type == "discrete":
+                action = action[:, 0].astype(np.int64)
+            obs, _, terminated, truncated, info = env.step(action)
             if np.any(terminated | truncated):
                 final = info["final_info"]
                 errors, errors_mm2 = np.asarray(final["error_vertices"]), np.asarray(final["error_mm2"])

@@ -261,3 +261,31 @@ def test_evaluate_reports_missing_checkpoints(tmp_path, capfd):
         )
     assert exit_info.value.code == 2
     assert "no trained run for 'fls-circle'" in capfd.readouterr().err
+
+
+def test_train_continuous_actions(tmp_path):
+    run = tmp_path / "cont"
+    code, stdout, _ = invoke(
+        [
+            "train",
+            "--contour",
+            "circle-small",
+            "--actions",
+            "continuous",
+            "--iterations",
+            "1",
+            "--num-envs",
+            "4",
+            "--steps-per-env",
+            "4",
+            "--eval-trials",
+            "2",
+            "--no-progress",
+            "--out",
+            str(run),
+        ]
+    )
+    assert code == 0, stdout
+    assert json.loads((run / "scenario.json").read_text())["action_type"] == "continuous"
+    assert json.loads((run / "config.json").read_text())["train"]["discrete"] is False
+    assert "rl_error_vertices" in json.loads((run / "evaluation.json").read_text())

@@ -287,6 +287,14 @@ def _run_dir(out: Path | None, prefix: str) -> Path:
     help="Process noise sigma (mm per update) during training and evaluation.",
 )
 @click.option(
+    "--actions",
+    "action_type",
+    default="discrete",
+    show_default=True,
+    type=click.Choice(["discrete", "continuous"]),
+    help="discrete: stay, +-x, +-y at 1 mm (paper); continuous: x-y moves up to 1 mm per axis.",
+)
+@click.option(
     "--eval-trials",
     default=10,
     show_default=True,
@@ -315,6 +323,7 @@ def train(
     iterations: int,
     steps_per_env: int,
     noise: float,
+    action_type: str,
     eval_trials: int,
     device: str | None,
     seed: int,
@@ -322,7 +331,7 @@ def train(
     resume: Path | None,
     no_progress: bool,
 ) -> None:
-    """Train a PPO tensioning policy (rsl-rl, 2x32 MLP, discrete 1 mm moves) for one contour."""
+    """Train a PPO tensioning policy (rsl-rl, 2x32 MLP, 1 mm moves) for one contour."""
     from agents.rl import Scenario, load_scenario, train_contour
     from agents.train import TrainConfig
     from warpcut.contours import load_contour
@@ -339,11 +348,17 @@ def train(
             contour=contour_name,
             pinch=None if point is None else list(point),
             sim={"noise_std": noise} if noise else {},
+            action_type=action_type,
         )
         scenario.pinch_point()  # fail early on an infeasible default pinch
         out = _run_dir(out, f"train-{contour.name}")
     cfg = TrainConfig(
-        num_envs=num_envs, iterations=iterations, num_steps_per_env=steps_per_env, seed=seed, device="cpu"
+        num_envs=num_envs,
+        iterations=iterations,
+        num_steps_per_env=steps_per_env,
+        seed=seed,
+        device="cpu",
+        discrete=scenario.action_type == "discrete",
     )
     click.echo(f"training {scenario.contour} into {out} ({num_envs} envs, {iterations} iterations, {device})")
     try:

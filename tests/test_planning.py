@@ -1,0 +1,144 @@
+"""Cut planning: arm footprint, pinch feasibility and candidates, the order search, the plan's JSON."""
+
+import json
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from warpcut import SimConfig
+from warpcut.contours import load_contour
+from warpcut.planning import (
+    Plan,
+    pinch_candidates,
+    pinch_feasible,
+    pinch_rules,
+    plan_cut,
+    search_orders,
+    under_arm,
+)
+from warpcut.segmentation import segment_contour
+from warpcut.task import CuttingTask
+
+GEOMETRY = SimConfig()  # feasibility only: no simulation, so the paper's 25 x 25 sheet costs nothing
+SIM = SimConfig(resolution=13)
+
+
+@pytest.fixture(scope="module")
+def small_plan() -> Plan:
+    """circle-offset: 2 segments, 2 random candidates (its centroid lies under the arm)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # K = 2: every order, no heuristic warning
+        return plan_cut(load_contour("circle-offset"), SIM, num_candidates=2, seed=1, device="cpu")
+
+
+def test_under_arm_is_the_swept_ray_toward_plus_x():
+    path = np.array([[60.0, 50.0], [40.0, 50.0]])  # cut toward -x
+    points = np.array([[90.0, 50.0], [70.0, 53.9], [70.0, 54.1], [37.0, 50.0], [35.0, 50.0], [50.0, 20.0]])
+    assert under_arm(points, path, radius_mm=4.0).tolist() == [True, True, False, True, False, False]
+    short = under_arm(np.array([[90.0, 50.0], [44.0, 50.0]]), path, radius_mm=4.0, length_mm=5.0)
+    assert short.tolist() == [False, True]
+    with pytest.raises(ValueError, match="radius_mm"):
+        under_arm(points, path, radius_mm=-1.0)
+
+
+def test_infeasible_points_are_never_candidates():
+    contour = load_contour("fls-circle")  # centre (50, 50), radius 25
+    segments = segment_contour(contour)
+    corners = [[3.0, 3.0], [97.0, 97.0]]
+    on_contour = [[25.5, 50.0]]  # just right of the leftmost point: on the cut, under the arm
+    under = [[50.0, 50.0], [90.0, 50.0]]  # the centroid; right of the circle, clear of everything but the arm
+    clear = [[10.0, 50.0], [50.0, 90.0]]  # left of the circle; above the swept band
+    points = np.array(corners + on_contour + under + clear)
+    with_arm = pinch_feasible(points, contour, GEOMETRY, segments)
+    assert with_arm.tolist() == [False] * 5 + [True] * 2
+    assert pinch_feasible(points, contour, GEOMETRY).tolist() == [False] * 3 + [True] * 4
+    rules = pinch_rules(points, contour, GEOMETRY, segments)
+    assert not rules["arm"][2:5].any() and rules["arm"][5:].all()
+    assert rules["contour"][3:].all()  # the under-arm points fail only because of the arm
+
+    candidates = pinch_candidates(contour, GEOMETRY, segments, num=40, rng=np.random.default_rng(0))
+    assert len(candidates) == 40  # the centroid is infeasible, so not added
+    assert pinch_feasible(candidates, contour, GEOMETRY, segments).all()
+    assert not under_arm(candidates, segments).any()
+
+
+def test_empty_feasible_region_names_the_contour():
+    contour = load_contour("circle-large")
+    with pytest.raises(ValueError, match="circle-large.*arm_radius_mm"):
+        pinch_candidates(contour, GEOMETRY, segment_contour(contour), arm_radius_mm=60.0)
+
+
+def test_plan_cut_rejects_bad_arguments():
+    contour = load_contour("circle-offset")
+    for kwargs, name in (
+        ({"num_candidates": 0}, "num_candidates"),
+        ({"arm_radius_mm": -1.0}, "arm_radius_mm"),
+        ({"arm_length_mm": float("nan")}, "arm_length_mm"),
+        ({"tolerance_mm": 0.0}, "tolerance_mm"),
+    ):
+        with pytest.raises(ValueError, match=name):
+            plan_cut(contour, SIM, **kwargs)
+
+
+def test_order_search_picks_the_brute_force_best(small_plan):
+    contour = small_plan.contour
+    points = np.array([c["point"] for c in small_plan.candidates])
+    assert len(small_plan.segments) == 2 and len(small_plan.orders) == 2 and len(points) == 2
+    brute = np.zeros((len(points), len(small_plan.orders)))
+    for c, point in enumerate(points):
+        for o, order in enumerate(small_plan.orders):
+            task = CuttingTask(
+                SIM.replace(noise_std=0.0),
+                contour,
+                pinch_points=point,
+                segments=[small_plan.ordered_segments(order)],
+                device="cpu",
+            )
+            brute[c, o] = task.run(None).error_vertices[0]
+    np.testing.assert_array_equal(small_plan.errors, brute)  # the batch simulates each pair faithfully
+    chosen = small_plan.chosen
+    c = int(np.flatnonzero((points == chosen["pinch"]).all(axis=1))[0])
+    o = small_plan.orders.index(tuple(chosen["order"]))
+    assert brute[c, o] == brute.min() == chosen["error_vertices"]
+    assert tuple(small_plan.order) == tuple(chosen["order"])
+    for c, candidate in enumerate(small_plan.candidates):
+        assert candidate["error_vertices"] == brute[c].min()
+        assert brute[c, small_plan.orders.index(tuple(candidate["best_order"]))] == brute[c].min()
+
+
+def test_plan_json_shape(small_plan):
+    data = json.loads(json.dumps(small_plan.to_json()))
+    assert {"segments", "order", "pinch_candidates", "chosen"} <= data.keys()
+    assert len(data["segments"]) == len(small_plan.segments)
+    for segment in data["segments"]:
+        assert {"points", "notch", "termination"} <= segment.keys()
+        assert segment["notch"] == segment["points"][0]
+        assert segment["termination"] == segment["points"][-1]
+        assert all(len(p) == 2 for p in segment["points"])
+    assert sorted(data["order"]) == list(range(len(data["segments"])))
+    feasible = [c for c in data["pinch_candidates"] if c["feasible"]]
+    assert len(feasible) == 2
+    for candidate in data["pinch_candidates"]:
+        assert {"point", "feasible", "error_vertices"} <= candidate.keys() and len(candidate["point"]) == 2
+        assert isinstance(candidate["error_vertices"], float) == candidate["feasible"]
+    infeasible = [c for c in data["pinch_candidates"] if not c["feasible"]]
+    assert len(infeasible) == 1 and "arm" in infeasible[0]["violates"]  # the centroid, under the arm
+    chosen = data["chosen"]
+    assert {"pinch", "order", "error_vertices"} <= chosen.keys()
+    assert chosen["order"] == data["order"]
+    assert chosen["error_vertices"] == min(c["error_vertices"] for c in feasible)
+    assert chosen["pinch"] in [c["point"] for c in feasible]
+    polylines = small_plan.ordered_segments()
+    assert [p.tolist() for p in polylines] == [data["segments"][k]["points"] for k in data["order"]]
+
+
+def test_many_segments_use_the_heuristic_orders_with_a_warning():
+    contour = load_contour("flower-5")
+    segments = segment_contour(contour)
+    assert len(segments) > 6
+    with pytest.warns(UserWarning, match="heuristic"):
+        orders, errors = search_orders(contour, SIM, segments, np.array([[50.0, 50.0]]), device="cpu")
+    assert 1 < len(orders) < math.factorial(len(segments))
+    assert errors.shape == (1, len(orders)) and np.isfinite(errors).all()
