@@ -289,3 +289,30 @@ def test_train_continuous_actions(tmp_path):
     assert json.loads((run / "scenario.json").read_text())["action_type"] == "continuous"
     assert json.loads((run / "config.json").read_text())["train"]["discrete"] is False
     assert "rl_error_vertices" in json.loads((run / "evaluation.json").read_text())
+
+
+def test_plan_prints_and_writes_the_plan_json(tmp_path):
+    out = tmp_path / "plan.json"
+    code, stdout, _ = invoke(
+        [
+            "plan",
+            "--contour",
+            "fls-circle",
+            "--candidates",
+            "4",
+            "--arm-length",
+            "15",
+            "--resolution",
+            "17",
+            "--json",
+            str(out),
+        ]
+    )
+    assert code == 0, stdout
+    assert "segment 0: notch (75.0, 50.0)" in stdout and "chosen: pinch" in stdout
+    plan = json.loads(out.read_text())
+    assert len(plan["segments"]) == 2 and sorted(plan["order"]) == [0, 1]
+    assert {"points", "notch", "termination"} <= set(plan["segments"][0])
+    assert all({"point", "feasible", "error_vertices"} <= set(c) for c in plan["pinch_candidates"])
+    feasible = [c for c in plan["pinch_candidates"] if c["feasible"]]
+    assert plan["chosen"]["error_vertices"] == min(c["error_vertices"] for c in feasible)
