@@ -8,7 +8,7 @@ scissor tip by ``trajectory_spacing_mm`` along its trajectory.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -277,9 +277,20 @@ class CuttingTask:
         regions = [c.intended_region() for c in self.contours]
         return symmetric_difference(self.sim.alive_mask(), regions, self.grid)
 
-    def run(self, policy) -> Score:
-        """Reset, then step ``policy(task) -> (B, 3)`` (or ``None`` for no moves) to the end; score."""
+    def run(self, policy, on_step: Callable[[CuttingTask, np.ndarray | None], None] | None = None) -> Score:
+        """Reset, then step ``policy(task) -> (B, 3)`` (or ``None`` for no moves) to the end; score.
+
+        Args:
+            policy: Maps the task to (B, 3) grasp moves in mm, or returns ``None``; ``None``: no moves.
+            on_step: Called as ``on_step(task, action)`` after the reset (action ``None``) and after every
+                step, e.g. to record the episode; costs nothing when ``None``.
+        """
         self.reset()
+        if on_step is not None:
+            on_step(self, None)
         while not self.done:
-            self.step(policy(self) if policy is not None else None)
+            action = policy(self) if policy is not None else None
+            self.step(action)
+            if on_step is not None:
+                on_step(self, action)
         return self.score()
