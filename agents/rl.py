@@ -36,6 +36,7 @@ class Scenario:
         sim: SimConfig fields that differ from the defaults (e.g. ``{"noise_std": 0.05}``).
         num_fiducials: Fiducial points observed (paper: 12).
         contour_features: Add the tip and the tracking error to the observation.
+        dense_reward: Add the per-step tracking-error shaping of the env to the sparse final reward.
         action_type: ``discrete`` (paper: stay, +-x, +-y at 1 mm) or ``continuous`` (x-y moves up to
             1 mm per axis; a policy that outputs zero holds the grasp still, like fixed tensioning).
     """
@@ -46,6 +47,7 @@ class Scenario:
     num_fiducials: int = 12
     contour_features: bool = False
     action_type: str = "discrete"
+    dense_reward: bool = False
 
     def load_contour(self) -> Contour:
         return load_contour(self.contour)
@@ -68,6 +70,7 @@ class Scenario:
             num_fiducials=self.num_fiducials,
             contour_features=self.contour_features,
             action_type=self.action_type,
+            dense_reward=self.dense_reward,
         )
         return PatternCutVecEnv(num_envs, options)
 
