@@ -1,0 +1,52 @@
+"""Learned tensioners on the real pattern-cutting env: run directories and their evaluation."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from agents.rl import Scenario, evaluate_run, load_scenario, rollout_errors, train_contour
+from agents.train import TrainConfig
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    torch.set_num_threads(1)
+    run = tmp_path_factory.mktemp("rl") / "fls-circle"
+    scenario = Scenario(
+        contour="fls-circle", sim={"resolution": 13}, dense_reward=True, contour_features=True
+    )
+    train_contour(
+        scenario,
+        run,
+        TrainConfig(num_envs=8, iterations=2, num_steps_per_env=8),
+        eval_trials=3,
+        progress=False,
+    )
+    return run
+
+
+def test_run_directory_records_the_scenario(run_dir):
+    scenario = load_scenario(run_dir)
+    assert scenario.contour == "fls-circle" and scenario.dense_reward and scenario.contour_features
+    assert scenario.pinch == pytest.approx([50.0, 50.0], abs=1e-3)  # the centroid is feasible
+    evaluation = json.loads((run_dir / "evaluation.json").read_text())
+    assert evaluation["trials"] == 3 and evaluation["none_error_vertices"] > 0
+
+
+def test_evaluation_is_reproducible_from_the_run_directory(run_dir):
+    first = json.loads((run_dir / "evaluation.json").read_text())
+    again = evaluate_run(run_dir, trials=3, seed=1)
+    assert again["rl_error_vertices"] == first["rl_error_vertices"]
+    errors = rollout_errors(run_dir, trials=2, seed=5)
+    assert errors["error_vertices"].shape == (2,) and np.all(np.isfinite(errors["error_mm2"]))
+
+
+def test_mismatched_action_type_is_reported(tmp_path):
+    with pytest.raises(ValueError, match="does not match the scenario's continuous actions"):
+        train_contour(
+            Scenario(contour="fls-circle", action_type="continuous"), tmp_path, TrainConfig(num_envs=2)
+        )
+    with pytest.raises(FileNotFoundError, match="no scenario.json"):
+        load_scenario(tmp_path / "nothing")
