@@ -89,12 +89,16 @@ def run_method(
     config: SimConfig,
     device: str | None,
     seed: int,
+    on_step: Callable[[CuttingTask, np.ndarray | None], None] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Errors (vertices, mm^2), each (num_contours, trials), of one method; one batch for everything."""
+    """Errors (vertices, mm^2), each (num_contours, trials), of one method; one batch for everything.
+
+    ``on_step`` is passed to :meth:`CuttingTask.run`; envs are ordered contour by contour, trials within.
+    """
     envs = [(c, p) for c, p in zip(contours, spec.pinches, strict=True) for _ in range(trials)]
     pinches = np.array([np.full(2, np.nan) if p is None else p for _, p in envs], dtype=np.float64)
     task = CuttingTask(config, [c for c, _ in envs], pinch_points=pinches, device=device, seed=seed)
-    score = task.run(spec.policy)
+    score = task.run(spec.policy, on_step=on_step)
     shape = (len(contours), trials)
     return MethodResult(
         score.error_vertices.reshape(shape), score.error_mm2.reshape(shape), list(spec.pinches)
@@ -111,6 +115,7 @@ def evaluate_suite(
     seed: int = 0,
     extra: dict[str, MethodSpec] | None = None,
     progress: Callable[[str], None] = lambda _: None,
+    on_step: Callable[[str], Callable[[CuttingTask, np.ndarray | None], None] | None] | None = None,
 ) -> dict:
     """The Table I protocol: per contour the no-tension error and each method's improvement over it.
 
@@ -127,6 +132,8 @@ def evaluate_suite(
         seed: Seed of the pinch search and the process noise.
         extra: Results of further methods run elsewhere (e.g. ``rl`` through its env), by name.
         progress: Called with a short description before each method runs.
+        on_step: Maps a method's name to the step callback of its batch (e.g. ``recorder.on_step``), for
+            the methods run here (not those in ``extra``).
 
     Returns:
         ``{"rows": [{"contour", "none_error_vertices", "none_error_mm2", "METHOD_error_vertices",
@@ -147,7 +154,8 @@ def evaluate_suite(
     for method in order:
         if method not in results:
             progress(f"{method}: {len(contours)} contour(s) x {trials} trial(s)")
-            results[method] = run_method(contours, specs[method], trials, config, device, seed)
+            callback = on_step(method) if on_step is not None else None
+            results[method] = run_method(contours, specs[method], trials, config, device, seed, callback)
     errors = {m: r.errors for m, r in results.items()}
     areas = {m: r.areas for m, r in results.items()}
     rows = []
@@ -191,15 +199,18 @@ def compare_policies(
     pinch: tuple[float, float] | None = None,
     device: str | None = None,
     seed: int = 0,
+    on_step: Callable[[str], Callable[[CuttingTask, np.ndarray | None], None] | None] | None = None,
 ) -> dict:
     """One contour, the baseline tensioners: the ``warpcut simulate`` report.
+
+    ``on_step`` maps a method's name to the step callback of its batch, as in :func:`evaluate_suite`.
 
     Returns:
         ``{"contour": name, "results": {method: {"error_vertices", "error_mm2", "improvement_pct",
         "ci95_pct", "trials_error_vertices", "pinch"}}}``: means over trials; ``improvement_pct`` is the
         mean paired improvement over no tension (0 for ``none`` itself).
     """
-    report = evaluate_suite([contour], methods, trials, config, pinch, device, seed)
+    report = evaluate_suite([contour], methods, trials, config, pinch, device, seed, on_step=on_step)
     row = report["rows"][0]
     results = {}
     for method in methods:

@@ -69,7 +69,9 @@ def test_simulate_accepts_a_contour_file(tmp_path):
     path.write_text(
         json.dumps({"name": "mine", "closed": True, "points": [[70, 50], [50, 70], [30, 50], [50, 30]]})
     )
-    code, stdout, _ = invoke(["simulate", "--contour", str(path), "--policy", "none", "--resolution", "9"])
+    code, stdout, _ = invoke(
+        ["simulate", "--contour", str(path), "--policy", "none", "--resolution", "9", "--no-plots"]
+    )
     assert code == 0 and "contour mine" in stdout
 
 
@@ -104,7 +106,17 @@ def test_console_script_runs():
     script = shutil.which("warpcut", path=str(Path(sys.executable).parent)) or shutil.which("warpcut")
     assert script, "the warpcut console script is not installed (pip install -e .)"
     proc = subprocess.run(
-        [script, "simulate", "--contour", "circle-small", "--policy", "none", "--resolution", "9"],
+        [
+            script,
+            "simulate",
+            "--contour",
+            "circle-small",
+            "--policy",
+            "none",
+            "--resolution",
+            "9",
+            "--no-plots",
+        ],
         capture_output=True,
         text=True,
         timeout=300,

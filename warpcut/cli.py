@@ -6,6 +6,8 @@ to fix, never a traceback.
 
 from __future__ import annotations
 
+import os
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -39,6 +41,24 @@ class CleanErrors(click.Group):
             click.echo(f"error: {exc}", err=True)
             sys.exit(2)
         sys.exit(result if isinstance(result, int) else 0)
+
+
+def _record_option(what: str):
+    return click.option(
+        "--record",
+        "record_envs",
+        type=click.IntRange(min=1),
+        is_flag=False,
+        flag_value=1,
+        default=None,
+        metavar="[N]",
+        help=f"Write recording.rrd ({what}) of the first N envs (default 1) of each method; "
+        "view it with 'warpcut replay'.",
+    )
+
+
+def _plots_option(what: str):
+    return click.option("--no-plots", is_flag=True, help=f"Do not write the plots ({what}).")
 
 
 def _parse_point(value: str | None, name: str) -> tuple[float, float] | None:
@@ -131,6 +151,8 @@ def contours(json_path: Path | None) -> None:
 @click.option(
     "--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write results here."
 )
+@_record_option("next to --json, or in logs/simulate-TIMESTAMP")
+@_plots_option("regions.png/svg next to --json, or in logs/simulate-TIMESTAMP")
 def simulate(
     contour_name: str,
     policies: str,
@@ -142,6 +164,8 @@ def simulate(
     device: str | None,
     seed: int,
     json_path: Path | None,
+    record_envs: int | None,
+    no_plots: bool,
 ) -> None:
     """Cut a contour with each baseline tensioner and compare their errors."""
     from agents.evaluation import compare_policies
@@ -153,10 +177,24 @@ def simulate(
     device = resolve_device(device)
     contour = load_contour(contour_name)
     config = SimConfig(resolution=resolution, fixture=fixture, noise_std=noise).validated()
+    out = json_path.parent if json_path else _run_dir(None, "simulate")
+    cuts = None
+    if not no_plots:
+        from warpcut.plots import FinalCuts
+
+        cuts = FinalCuts()
     start = time.perf_counter()
-    report = compare_policies(
-        contour, names, trials=trials, config=config, pinch=point, device=device, seed=seed
-    )
+    with _recorder(out, record_envs) as recorder:
+        report = compare_policies(
+            contour,
+            names,
+            trials=trials,
+            config=config,
+            pinch=point,
+            device=device,
+            seed=seed,
+            on_step=_step_hooks(recorder, cuts),
+        )
     elapsed = time.perf_counter() - start
     click.echo(
         f"contour {contour.name} ({'closed' if contour.closed else 'open'}, {contour.length:.1f} mm), "
@@ -177,6 +215,48 @@ def simulate(
 
         write_json(json_path, report)
         click.echo(f"wrote {json_path}")
+    if cuts is not None:
+        from warpcut.plots import plot_regions
+
+        _echo_written(plot_regions(cuts.cuts, out))
+    if recorder is not None:
+        _echo_written([recorder.path])
+
+
+def _recorder(out: Path, record_envs: int | None):
+    """A :class:`Recorder` of ``out/recording.rrd``, or a null context when not recording."""
+    import contextlib
+
+    if record_envs is None:
+        return contextlib.nullcontext()
+    from warpcut.recording import Recorder
+
+    return Recorder(out / "recording.rrd", envs=record_envs)
+
+
+def _step_hooks(*hooks):
+    """One ``on_step(method)`` factory calling every hook's (objects with ``on_step(method)``; None: off)."""
+    hooks = [h for h in hooks if h is not None]
+    if not hooks:
+        return None
+    if len(hooks) == 1:
+        return hooks[0].on_step
+
+    def for_method(method: str):
+        callbacks = [h.on_step(method) for h in hooks]
+
+        def on_step(task, action) -> None:
+            for callback in callbacks:
+                callback(task, action)
+
+        return on_step
+
+    return for_method
+
+
+def _echo_written(paths: list[Path]) -> None:
+    for path in paths:
+        click.echo(f"wrote {path}")
 
 
 @main.command()
@@ -463,6 +543,8 @@ EVALUATE_METHODS = ("none", "fixed", "analytic", "rl")
     type=click.Path(dir_okay=False, path_type=Path),
     help="Write the table as Markdown here.",
 )
+@_record_option("in the run directory; the rl column is not recorded")
+@_plots_option("improvement.png/svg in the run directory")
 def evaluate(
     contour_args: tuple[str, ...],
     methods: str,
@@ -476,6 +558,8 @@ def evaluate(
     out: Path | None,
     json_path: Path | None,
     markdown_path: Path | None,
+    record_envs: int | None,
+    no_plots: bool,
 ) -> None:
     """The paper's Table I: per contour the no-tension error and each method's improvement (95% CI)."""
     from agents.evaluation import MethodResult, evaluate_suite
@@ -514,16 +598,18 @@ def evaluate(
             seed,
             MethodResult,
         )
-    report = evaluate_suite(
-        contours,
-        names,
-        trials=trials,
-        config=config,
-        device=device,
-        seed=seed,
-        extra=extra,
-        progress=lambda what: click.echo(f"  running {what}", err=True),
-    )
+    with _recorder(out, record_envs) as recorder:
+        report = evaluate_suite(
+            contours,
+            names,
+            trials=trials,
+            config=config,
+            device=device,
+            seed=seed,
+            extra=extra,
+            progress=lambda what: click.echo(f"  running {what}", err=True),
+            on_step=_step_hooks(recorder),
+        )
     report["seconds"] = time.perf_counter() - start
     table = _markdown_table(report, names)
     click.echo(table)
@@ -533,7 +619,62 @@ def evaluate(
         write_json(json_path, report)
     if markdown_path:
         write_atomic(markdown_path, table + "\n")
+    if not no_plots:
+        from warpcut.plots import plot_improvements
+
+        _echo_written(plot_improvements(report, names, out))
+    if recorder is not None:
+        _echo_written([recorder.path])
     click.echo(f"wrote {out}")
+
+
+@main.command()
+@click.argument("path", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "--web", is_flag=True, help="Serve the web viewer on http://127.0.0.1:9090 instead (Ctrl-C stops it)."
+)
+def replay(path: Path, web: bool) -> None:
+    """Open a recording (.rrd from --record) in the rerun viewer.
+
+    Without a display (no DISPLAY or WAYLAND_DISPLAY) it prints how to view the file and what it holds.
+    """
+    from warpcut.recording import read_summary
+
+    summary = read_summary(path)
+    viewer = [sys.executable, "-m", "rerun_cli"]
+    if web:
+        click.echo(f"serving {path} at http://127.0.0.1:9090 (gRPC on port 9876); Ctrl-C stops it")
+        sys.exit(subprocess.run([*viewer, "--web-viewer", "--bind", "127.0.0.1", str(path)]).returncode)
+    has_display = sys.platform in ("darwin", "win32") or any(
+        os.environ.get(v) for v in ("DISPLAY", "WAYLAND_DISPLAY")
+    )
+    if has_display:
+        subprocess.Popen(
+            [*viewer, str(path)],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,
+        )
+        click.echo(f"opened {path} in the rerun viewer")
+        return
+    size_mb = path.stat().st_size / 1e6
+    click.echo(f"recording {path} ({size_mb:.1f} MB, application {summary.application_id})")
+    click.echo(
+        f"  {summary.frames} frames (steps {summary.first_step} to {summary.last_step}), "
+        f"{summary.duration_s:.2f} s simulated"
+    )
+    shown = 40
+    click.echo(f"  {len(summary.entity_paths)} entities:")
+    for entity in summary.entity_paths[:shown]:
+        click.echo(f"    {entity}")
+    if len(summary.entity_paths) > shown:
+        click.echo(f"    ... and {len(summary.entity_paths) - shown} more")
+    click.echo("no display here (DISPLAY and WAYLAND_DISPLAY are unset); to view it, either")
+    click.echo(f"  run 'rerun {path}' (pip install rerun-sdk) on a machine with a display, or")
+    click.echo(
+        f"  run 'warpcut replay {path} --web' and open http://localhost:9090 "
+        "(over ssh, forward ports 9090 and 9876: ssh -L 9090:localhost:9090 -L 9876:localhost:9876 HOST)"
+    )
 
 
 def _rl_results(
