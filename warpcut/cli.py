@@ -367,6 +367,22 @@ def _run_dir(out: Path | None, prefix: str) -> Path:
     help="Process noise sigma (mm per update) during training and evaluation.",
 )
 @click.option(
+    "--reward",
+    default="dense",
+    show_default=True,
+    type=click.Choice(["sparse", "dense"]),
+    help="sparse: -(final error / area) at the last step only (paper); dense: plus per-step tracking-error "
+    "shaping (learns in short runs, docs/learning.md).",
+)
+@click.option(
+    "--observe",
+    default="contour",
+    show_default=True,
+    type=click.Choice(["fiducials", "contour"]),
+    help="fiducials: time, grasp displacement, 12 fiducials (paper); contour: plus the scissor tip and the "
+    "vector to the contour point it is about to cut.",
+)
+@click.option(
     "--actions",
     "action_type",
     default="discrete",
@@ -403,6 +419,8 @@ def train(
     iterations: int,
     steps_per_env: int,
     noise: float,
+    reward: str,
+    observe: str,
     action_type: str,
     eval_trials: int,
     device: str | None,
@@ -429,6 +447,8 @@ def train(
             pinch=None if point is None else list(point),
             sim={"noise_std": noise} if noise else {},
             action_type=action_type,
+            dense_reward=reward == "dense",
+            contour_features=observe == "contour",
         )
         scenario.pinch_point()  # fail early on an infeasible default pinch
         out = _run_dir(out, f"train-{contour.name}")
@@ -699,7 +719,13 @@ def _rl_results(
         else:
             run = out / "policies" / contour.name
             click.echo(f"  training rl for {contour.name} ({iterations} iterations)", err=True)
-            scenario = Scenario(contour=by_name[contour.name], sim={"noise_std": noise} if noise else {})
+            # The same recipe as 'warpcut train' by default: dense shaping, contour-aware observations.
+            scenario = Scenario(
+                contour=by_name[contour.name],
+                sim={"noise_std": noise} if noise else {},
+                dense_reward=True,
+                contour_features=True,
+            )
             cfg = TrainConfig(num_envs=num_envs, iterations=iterations, seed=seed, device="cpu")
             train_contour(scenario, run, cfg, eval_trials=trials, progress=False, device=device)
         result = rollout_errors(run, trials, seed=seed + 1, device=device)
