@@ -12,7 +12,7 @@ from scipy import stats
 from agents.baselines import AnalyticTension, FixedTension, NoTension, search_fixed_pinches
 from warpcut.config import SimConfig
 from warpcut.contours import Contour
-from warpcut.task import CuttingTask
+from warpcut.task import CuttingTask, default_segments
 
 BASELINES = ("none", "fixed", "analytic")
 
@@ -58,11 +58,20 @@ def baseline_specs(
     pinch: tuple[float, float] | None,
     device: str | None,
     seed: int,
+    pinches: dict[str, list[np.ndarray]] | None = None,
 ) -> dict[str, MethodSpec]:
-    """Pinch points and policies of the baseline tensioners (fixed: one batched random search)."""
+    """Pinch points and policies of the baseline tensioners (fixed: one batched random search, unless
+    ``pinches`` gives a method's pinch point per contour, e.g. from a cut plan)."""
     specs: dict[str, MethodSpec] = {}
+    pinches = pinches or {}
     for method in methods:
-        if method == "none":
+        if method in pinches and method != "none":
+            points = [np.asarray(p, dtype=np.float64) for p in pinches[method]]
+            if len(points) != len(contours):
+                raise ValueError(f"pinches[{method!r}]: give one point per contour ({len(contours)})")
+            policy = AnalyticTension() if method == "analytic" else FixedTension()
+            specs[method] = MethodSpec(points, policy)
+        elif method == "none":
             specs[method] = MethodSpec([None] * len(contours), NoTension())
         elif method == "fixed":
             points = (
@@ -90,14 +99,30 @@ def run_method(
     device: str | None,
     seed: int,
     on_step: Callable[[CuttingTask, np.ndarray | None], None] | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Errors (vertices, mm^2), each (num_contours, trials), of one method; one batch for everything.
+    segments: Sequence[list[np.ndarray] | None] | None = None,
+) -> MethodResult:
+    """One method on every (contour, trial): one simulator batch for everything.
 
     ``on_step`` is passed to :meth:`CuttingTask.run`; envs are ordered contour by contour, trials within.
+    ``segments`` gives, per contour, the polylines cut in order (None: the default single segment).
     """
     envs = [(c, p) for c, p in zip(contours, spec.pinches, strict=True) for _ in range(trials)]
     pinches = np.array([np.full(2, np.nan) if p is None else p for _, p in envs], dtype=np.float64)
-    task = CuttingTask(config, [c for c, _ in envs], pinch_points=pinches, device=device, seed=seed)
+    per_env_segments = None
+    if segments is not None:
+        per_env_segments = [
+            s if s is not None else default_segments(c)
+            for c, s in zip(contours, segments, strict=True)
+            for _ in range(trials)
+        ]
+    task = CuttingTask(
+        config,
+        [c for c, _ in envs],
+        pinch_points=pinches,
+        segments=per_env_segments,
+        device=device,
+        seed=seed,
+    )
     score = task.run(spec.policy, on_step=on_step)
     shape = (len(contours), trials)
     return MethodResult(
@@ -113,9 +138,11 @@ def evaluate_suite(
     pinch: tuple[float, float] | None = None,
     device: str | None = None,
     seed: int = 0,
-    extra: dict[str, MethodSpec] | None = None,
+    extra: dict[str, MethodResult] | None = None,
     progress: Callable[[str], None] = lambda _: None,
     on_step: Callable[[str], Callable[[CuttingTask, np.ndarray | None], None] | None] | None = None,
+    segments: Sequence[list[np.ndarray] | None] | None = None,
+    pinches: dict[str, list[np.ndarray]] | None = None,
 ) -> dict:
     """The Table I protocol: per contour the no-tension error and each method's improvement over it.
 
@@ -134,6 +161,10 @@ def evaluate_suite(
         progress: Called with a short description before each method runs.
         on_step: Maps a method's name to the step callback of its batch (e.g. ``recorder.on_step``), for
             the methods run here (not those in ``extra``).
+        segments: Per contour, the polylines the scissors cut in order (a cut plan), for every method;
+            None (or a None entry): the whole contour as one segment.
+        pinches: Per method, a pinch point per contour that replaces the method's own choice (e.g. the
+            planned pinch for ``fixed``).
 
     Returns:
         ``{"rows": [{"contour", "none_error_vertices", "none_error_mm2", "METHOD_error_vertices",
@@ -149,13 +180,19 @@ def evaluate_suite(
         raise ValueError("contours: give at least one contour")
     extra = extra or {}
     order = ["none"] + [m for m in methods if m != "none"]
-    specs = baseline_specs(contours, [m for m in order if m not in extra], config, pinch, device, seed)
+    if segments is not None and len(segments) != len(contours):
+        raise ValueError(f"segments: give one list of polylines (or None) per contour ({len(contours)})")
+    specs = baseline_specs(
+        contours, [m for m in order if m not in extra], config, pinch, device, seed, pinches
+    )
     results = dict(extra)
     for method in order:
         if method not in results:
             progress(f"{method}: {len(contours)} contour(s) x {trials} trial(s)")
             callback = on_step(method) if on_step is not None else None
-            results[method] = run_method(contours, specs[method], trials, config, device, seed, callback)
+            results[method] = run_method(
+                contours, specs[method], trials, config, device, seed, callback, segments=segments
+            )
     errors = {m: r.errors for m, r in results.items()}
     areas = {m: r.areas for m, r in results.items()}
     rows = []

@@ -36,6 +36,8 @@ class Scenario:
         sim: SimConfig fields that differ from the defaults (e.g. ``{"noise_std": 0.05}``).
         num_fiducials: Fiducial points observed (paper: 12).
         contour_features: Add the tip and the tracking error to the observation.
+        segments: Material polylines cut in this order (a plan's ``ordered_segments()``); default: the
+            whole contour as one segment.
         dense_reward: Add the per-step tracking-error shaping of the env to the sparse final reward.
         action_type: ``discrete`` (paper: stay, +-x, +-y at 1 mm) or ``continuous`` (x-y moves up to
             1 mm per axis; a policy that outputs zero holds the grasp still, like fixed tensioning).
@@ -48,6 +50,7 @@ class Scenario:
     contour_features: bool = False
     action_type: str = "discrete"
     dense_reward: bool = False
+    segments: list[list[list[float]]] | None = None
 
     def load_contour(self) -> Contour:
         return load_contour(self.contour)
@@ -71,6 +74,7 @@ class Scenario:
             contour_features=self.contour_features,
             action_type=self.action_type,
             dense_reward=self.dense_reward,
+            segments=self.segments,
         )
         return PatternCutVecEnv(num_envs, options)
 
@@ -169,7 +173,10 @@ def evaluate_run(run_dir: str | Path, trials: int = 10, seed: int = 1, device: s
     contour = scenario.load_contour()
     start = time.perf_counter()
     rl = rollout_errors(run_dir, trials, seed=seed, device=device, scenario=scenario)
-    none = run_method([contour], MethodSpec([None], None), trials, scenario.sim_config(), device, seed).errors
+    segments = None if scenario.segments is None else [[np.asarray(p) for p in scenario.segments]]
+    none = run_method(
+        [contour], MethodSpec([None], None), trials, scenario.sim_config(), device, seed, segments=segments
+    ).errors
     improvement = paired_improvement(none[0], rl["error_vertices"])
     return {
         "contour": contour.name,

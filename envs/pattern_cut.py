@@ -65,6 +65,9 @@ class PatternCutOptions:
     pinch_point: Sequence[float] | np.ndarray | None = None
     """Material point (mm) the tensioning arm pinches, ``(2,)`` or ``(B, 2)``. Default: each contour's
     centroid, or the feasible point nearest to it (:func:`warpcut.planning.nearest_feasible`)."""
+    segments: Sequence[Sequence[Sequence[float]]] | None = None
+    """Material polylines (mm) the scissors cut, in order, the same for every env (e.g. a plan's
+    ``ordered_segments()``); default: the whole contour as one segment (``warpcut.task.default_segments``)."""
     sim_config: SimConfig = field(default_factory=SimConfig)
     """Base simulation parameters; the fields below override it when given."""
     fixture: str | None = None
@@ -137,6 +140,8 @@ class PatternCutOptions:
                 value = [c.name if isinstance(c, Contour) else os.fspath(c) for c in specs]
             elif f.name == "sim_config":
                 value = dataclasses.asdict(value)
+            elif f.name == "segments" and value is not None:
+                value = [np.asarray(p).tolist() for p in value]
             out[f.name] = np.asarray(value).tolist() if isinstance(value, np.ndarray) else value
         return out
 
@@ -174,7 +179,17 @@ class PatternCut:
             pinch_points = np.array([nearest_feasible(c.centroid, c, config) for c in contours])
         else:
             pinch_points = options.pinch_point
-        self.task = CuttingTask(config, contours, num_envs, pinch_points=pinch_points, device=options.device)
+        segments = None
+        if options.segments is not None:
+            polylines = [np.asarray(p, dtype=np.float64) for p in options.segments]
+            if not polylines or any(p.ndim != 2 or p.shape[1] != 2 or len(p) < 2 for p in polylines):
+                raise ValueError(
+                    "segments: give a list of polylines, each at least 2 points [[x_mm, y_mm], ...]"
+                )
+            segments = [polylines] * num_envs
+        self.task = CuttingTask(
+            config, contours, num_envs, pinch_points=pinch_points, segments=segments, device=options.device
+        )
         self.config = self.task.config
         self.area_mm2 = np.array([c.area_mm2 for c in contours])
         self.episode_steps = min(self.task.num_steps, options.max_episode_steps or self.task.num_steps)

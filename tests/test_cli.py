@@ -328,3 +328,46 @@ def test_plan_prints_and_writes_the_plan_json(tmp_path):
     assert all({"point", "feasible", "error_vertices"} <= set(c) for c in plan["pinch_candidates"])
     feasible = [c for c in plan["pinch_candidates"] if c["feasible"]]
     assert plan["chosen"]["error_vertices"] == min(c["error_vertices"] for c in feasible)
+
+
+def test_run_end_to_end_on_a_tiny_budget(tmp_path):
+    out = tmp_path / "run"
+    code, stdout, _ = invoke(
+        [
+            "run",
+            "--contour",
+            "fls-circle",
+            "--resolution",
+            "17",
+            "--candidates",
+            "2",
+            "--iterations",
+            "1",
+            "--trials",
+            "2",
+            "--num-envs",
+            "4",
+            "--out",
+            str(out),
+            "--json",
+            str(tmp_path / "r.json"),
+        ]
+    )
+    assert code == 0, stdout
+    for name in (
+        "plan.json",
+        "results.json",
+        "regions.png",
+        "improvement.png",
+        "rl/latest.pt",
+        "rl/scenario.json",
+    ):
+        assert (out / name).is_file(), name
+    report = json.loads((tmp_path / "r.json").read_text())
+    row = report["rows"][0]
+    plan = json.loads((out / "plan.json").read_text())
+    assert row["fixed_pinch"] == pytest.approx(plan["chosen"]["pinch"])  # fixed and rl use the planned pinch
+    assert row["rl_pinch"] == pytest.approx(plan["chosen"]["pinch"])
+    scenario = json.loads((out / "rl" / "scenario.json").read_text())
+    assert len(scenario["segments"]) == len(plan["segments"])
+    assert {"none", "fixed", "analytic", "rl"} <= {line.split()[0] for line in stdout.splitlines() if line}

@@ -859,3 +859,179 @@ def plan(
 
         write_json(json_path, data)
         click.echo(f"wrote {json_path}")
+
+
+BUDGETS = {
+    # candidates for the pinch search, PPO iterations, evaluation trials
+    "fast": {"candidates": 8, "iterations": 60, "trials": 10},
+    "paper": {"candidates": 30, "iterations": 200, "trials": 10},
+}
+
+
+@main.command()
+@click.option(
+    "--contour",
+    "contour_name",
+    default="fls-circle",
+    show_default=True,
+    help="Built-in name or a .json/.svg contour file.",
+)
+@click.option(
+    "--budget",
+    default="fast",
+    show_default=True,
+    type=click.Choice(list(BUDGETS)),
+    help="fast: 8 pinch candidates, 60 PPO iterations (a few minutes on 2 CPU cores); "
+    "paper: 30 candidates, 200 iterations.",
+)
+@click.option(
+    "--candidates", type=click.IntRange(min=1), default=None, help="Override the budget's pinch candidates."
+)
+@click.option(
+    "--iterations", type=click.IntRange(min=1), default=None, help="Override the budget's PPO iterations."
+)
+@click.option(
+    "--trials", type=click.IntRange(min=1), default=None, help="Override the budget's evaluation trials."
+)
+@click.option("--num-envs", default=64, show_default=True, type=click.IntRange(min=1), help="PPO envs.")
+@click.option(
+    "--resolution", default=25, show_default=True, type=click.IntRange(5, 100), help="Vertices per side."
+)
+@click.option(
+    "--arm-length",
+    default=15.0,
+    show_default=True,
+    type=click.FloatRange(min=0.0),
+    help="Reach of the cutting arm's footprint from the tip toward +x (mm), for pinch feasibility.",
+)
+@click.option("--device", default=None, help="Warp device: cpu or cuda (default: cuda if available).")
+@click.option("--seed", default=0, show_default=True, type=int)
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Run directory (default: logs/run-CONTOUR-TIMESTAMP).",
+)
+@click.option(
+    "--json",
+    "json_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Also write the results here.",
+)
+@_record_option("in the run directory")
+@_plots_option("in the run directory")
+def run(
+    contour_name: str,
+    budget: str,
+    candidates: int | None,
+    iterations: int | None,
+    trials: int | None,
+    num_envs: int,
+    resolution: int,
+    arm_length: float,
+    device: str | None,
+    seed: int,
+    out: Path | None,
+    json_path: Path | None,
+    record_envs: int | None,
+    no_plots: bool,
+) -> None:
+    """The whole pipeline: plan the cut, train RL at the planned pinch, compare none/fixed/analytic/RL."""
+    import numpy as np
+
+    from agents.evaluation import MethodResult, evaluate_suite
+    from agents.rl import Scenario, rollout_errors, train_contour
+    from agents.train import TrainConfig
+    from warpcut.contours import load_contour
+    from warpcut.io import write_json
+    from warpcut.planning import plan_cut
+    from warpcut.simulator import resolve_device
+
+    settings = dict(BUDGETS[budget])
+    overrides = {"candidates": candidates, "iterations": iterations, "trials": trials}
+    settings.update({k: v for k, v in overrides.items() if v is not None})
+    device = resolve_device(device)
+    contour = load_contour(contour_name)
+    config = SimConfig(resolution=resolution).validated()
+    out = _run_dir(out, f"run-{contour.name}")
+    start = time.perf_counter()
+
+    click.echo(f"[1/3] planning {contour.name}: {settings['candidates']} pinch candidates", err=True)
+    plan = plan_cut(
+        contour,
+        config,
+        num_candidates=settings["candidates"],
+        seed=seed,
+        device=device,
+        arm_length_mm=arm_length,
+    )
+    write_json(out / "plan.json", plan.to_json())
+    pinch, segments = plan.chosen["pinch"], plan.ordered_segments()
+    click.echo(
+        f"      {len(plan.segments)} segment(s), order {list(plan.order)}, pinch "
+        f"({pinch[0]:.1f}, {pinch[1]:.1f}) with fixed tension: {plan.chosen['error_vertices']:.1f} vertices",
+        err=True,
+    )
+
+    click.echo(f"[2/3] training RL at the planned pinch ({settings['iterations']} PPO iterations)", err=True)
+    scenario = Scenario(
+        contour=contour_name,
+        pinch=[float(v) for v in pinch],
+        sim={"resolution": resolution} if resolution != 25 else {},
+        segments=[s.tolist() for s in segments],
+        dense_reward=True,
+        contour_features=True,
+    )
+    cfg = TrainConfig(num_envs=num_envs, iterations=settings["iterations"], seed=seed, device="cpu")
+    try:
+        train_contour(scenario, out / "rl", cfg, eval_trials=settings["trials"], progress=True, device=device)
+    except KeyboardInterrupt:
+        click.echo(f"interrupted: checkpoint saved in {out / 'rl'}", err=True)
+        sys.exit(130)
+    rl = rollout_errors(out / "rl", settings["trials"], seed=seed + 1, device=device)
+
+    click.echo(f"[3/3] evaluating none, fixed, analytic, rl: {settings['trials']} trials each", err=True)
+    cuts = None
+    if not no_plots:
+        from warpcut.plots import FinalCuts
+
+        cuts = FinalCuts()
+    with _recorder(out, record_envs) as recorder:
+        report = evaluate_suite(
+            [contour],
+            ["none", "fixed", "analytic", "rl"],
+            trials=settings["trials"],
+            config=config,
+            device=device,
+            seed=seed,
+            segments=[segments],
+            pinches={"fixed": [pinch]},
+            extra={"rl": MethodResult(rl["error_vertices"][None], rl["error_mm2"][None], [rl["pinch"]])},
+            on_step=_step_hooks(recorder, cuts),
+        )
+    report["plan"] = plan.to_json()["chosen"]
+    report["budget"] = budget
+    report["seconds"] = time.perf_counter() - start
+    row = report["rows"][0]
+    click.echo(
+        f"{contour.name}: planned order {list(plan.order)}, pinch ({pinch[0]:.1f}, {pinch[1]:.1f}); "
+        f"{settings['trials']} trials, {report['seconds']:.0f} s"
+    )
+    click.echo(f"{'method':<10} {'error (vertices)':>16} {'improvement':>14} {'pinch (mm)':>16}")
+    for m in ("none", "fixed", "analytic", "rl"):
+        p = row[f"{m}_pinch"]
+        p_txt = "-" if p is None else f"({p[0]:.1f}, {p[1]:.1f})"
+        imp = row[f"{m}_improvement_pct"]
+        imp_txt = f"{imp:+.1f}% ±{row[f'{m}_ci95']:.1f}" if np.isfinite(imp) else "n/a"
+        click.echo(f"{m:<10} {row[f'{m}_error_vertices']:>16.1f} {imp_txt:>14} {p_txt:>16}")
+    write_json(out / "results.json", report)
+    if json_path:
+        write_json(json_path, report)
+    if cuts is not None:
+        from warpcut.plots import plot_improvements, plot_regions
+
+        _echo_written(plot_regions(cuts.cuts, out))
+        _echo_written(plot_improvements(report, ["fixed", "analytic", "rl"], out))
+    if recorder is not None:
+        _echo_written([recorder.path])
+    click.echo(f"wrote {out}")
