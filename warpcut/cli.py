@@ -766,9 +766,11 @@ def _markdown_table(report: dict, methods: list[str]) -> str:
 )
 @click.option(
     "--arm-length",
-    default=None,
+    default=15.0,
+    show_default=True,
     type=click.FloatRange(min=0.0),
-    help="Reach of the arm's footprint from the tip toward +x (mm); default: the whole way.",
+    help="Reach of the arm's footprint from the tip toward +x (mm); 'inf' for the whole way. The shaft "
+    "rises from the tip at an angle, so only its first centimetres are near the sheet.",
 )
 @click.option(
     "--tolerance",
@@ -789,7 +791,7 @@ def plan(
     contour_name: str,
     candidates: int,
     arm_radius: float,
-    arm_length: float | None,
+    arm_length: float,
     tolerance: float,
     resolution: int,
     device: str | None,
@@ -797,7 +799,6 @@ def plan(
     json_path: Path | None,
 ) -> None:
     """Plan a cut: segments, orderings and pinch candidates, scored with fixed tension."""
-    import math
     import warnings
 
     from warpcut.contours import load_contour
@@ -818,7 +819,7 @@ def plan(
             device=device,
             tolerance_mm=tolerance,
             arm_radius_mm=arm_radius,
-            arm_length_mm=math.inf if arm_length is None else arm_length,
+            arm_length_mm=arm_length,
         )
     for warning in caught:
         click.echo(f"warning: {warning.message}", err=True)
