@@ -13,7 +13,7 @@ POSITION_TOLERANCE_MM = 1e-2
 relaxation carries it along: the largest gap measured over this cut is ~4e-3 mm on a 100 mm sheet."""
 
 
-@pytest.mark.parametrize("backend", ["fused", "colours"])
+@pytest.mark.parametrize("backend", ["simd", "fused", "colours"])
 def test_warp_matches_numpy_reference_through_a_full_cut(device, backend):
     config = SimConfig(resolution=17)
     contour = load_contour("fls-circle")

@@ -1,5 +1,6 @@
 import numpy as np
 import pytest
+import warp as wp
 
 from warpcut import ConfigError, SheetGrid, SimConfig, Simulator
 from warpcut.simulator import colour_springs, spring_colours
@@ -144,18 +145,23 @@ def test_unknown_device_is_reported():
         Simulator(SimConfig(resolution=5), 1, device="tpu")
 
 
-def test_fused_and_colour_backends_are_bit_identical(device):
+def test_backends_are_bit_identical(device):
+    """simd (several blocks of 8 envs, over threads), fused and colours: the same bits, noise included."""
     config = SimConfig(resolution=13, noise_std=0.05)
-    pinches = np.array([[50.0, 50.0], [np.nan, np.nan], [30.0, 60.0]])
+    pinches = np.tile([[50.0, 50.0], [np.nan, np.nan], [30.0, 60.0]], (4, 1))[:11]
+    cpu = wp.get_device(device).is_cpu
+    variants = [("simd", 1), ("simd", 2), ("fused", 1), ("fused", 2)] if cpu else []
     results = []
-    for backend, threads in (("fused", 1), ("fused", 2), ("colours", None)):
-        sim = Simulator(config, 3, device=device, seed=3, backend=backend, threads=threads)
+    for backend, threads in [*variants, ("colours", None)]:
+        sim = Simulator(config, 11, device=device, seed=3, backend=backend, threads=threads)
         sim.reset(pinches)
         z = sim.settled_positions()[0, 6 * 13 + 10, 2]
         for k in range(30):
-            sim.move_grasp(np.tile([[0.7, -0.4, 0.1]], (3, 1)))
-            sim.set_tip(np.tile([[80.0 - 1.5 * k, 50.0, z, 1.0]], (3, 1)))
+            sim.move_grasp(np.tile([[0.7, -0.4, 0.1]], (11, 1)))
+            sim.set_tip(np.tile([[80.0 - 1.5 * k, 50.0, z, 1.0]], (11, 1)))
             sim.update()
+            if k == 10:
+                sim.positions()  # a read-back in the middle must not disturb the packed state
         results.append((sim.positions(), sim.alive_mask()))
     assert (~results[0][1]).sum() > 0
     for positions, alive in results[1:]:
@@ -166,3 +172,16 @@ def test_fused_and_colour_backends_are_bit_identical(device):
 def test_unknown_backend_is_reported():
     with pytest.raises(ValueError, match="backend: choose one of"):
         Simulator(SimConfig(resolution=5), 1, backend="magic")
+
+
+def test_simd_state_survives_a_switch_to_the_taped_path():
+    config = SimConfig(resolution=9)
+    runs = []
+    for backend in ("simd", "colours"):
+        sim = Simulator(config, 3, backend=backend)
+        sim.reset(np.array([[50.0, 50.0]] * 3))
+        for k in range(6):
+            sim.move_grasp(np.tile([[1.0, 0.0, 0.0]], (3, 1)))
+            sim.update(tape_mode=k == 3)  # one update on the differentiable path in the middle
+        runs.append(sim.positions())
+    np.testing.assert_array_equal(runs[0], runs[1])

@@ -17,6 +17,7 @@ import warp as wp
 
 from warpcut import kernels
 from warpcut.config import PHYSICAL_PARAMETERS, SheetGrid, SimConfig
+from warpcut.kernels_simd import SimdModel, SimdState
 
 
 @dataclass(frozen=True)
@@ -66,7 +67,7 @@ def colour_springs(grid: SheetGrid, springs: tuple[str, ...]) -> list[tuple[np.n
     return colours
 
 
-BACKENDS = ("auto", "fused", "colours")
+BACKENDS = ("auto", "simd", "fused", "colours")
 
 
 def default_device() -> str:
@@ -97,12 +98,13 @@ class Simulator:
         num_envs: Batch size B.
         device: ``cpu``, ``cuda`` or ``cuda:N``; default: :func:`default_device`.
         seed: Seed of the process noise (the only randomness in the physics).
-        backend: ``fused`` (one launch per update, one thread per env, in place: the CPU fast path),
-            ``colours`` (one launch per stage and spring colour, one thread per vertex: suits GPUs and
-            is the differentiable path), or ``auto`` (fused on CPU, colours on CUDA). Both give
+        backend: ``simd`` (the CPU fast path: one launch per update, one thread per block of 8 envs
+            stepped in lockstep in SIMD lanes, :mod:`warpcut.kernels_simd`), ``fused`` (one thread per
+            env, scalar), ``colours`` (one launch per stage and spring colour, one thread per vertex: suits
+            GPUs and is the differentiable path), or ``auto`` (simd on CPU, colours on CUDA). All give
             bit-identical results; ``update(tape_mode=True)`` always uses ``colours``.
-        threads: CPU threads that step disjoint halves (slices) of the batch with the fused backend;
-            default: the number of cores, at most the batch size. ``wp.launch`` releases the GIL.
+        threads: CPU threads that step disjoint slices of the batch (simd: of its blocks); default: the
+            number of cores, at most the number of slices. ``wp.launch`` releases the GIL.
     """
 
     def __init__(
@@ -141,7 +143,11 @@ class Simulator:
         if backend not in BACKENDS:
             raise ValueError(f"backend: choose one of {BACKENDS} (got {backend!r})")
         is_cpu = wp.get_device(self.device).is_cpu
-        self.backend = ("fused" if is_cpu else "colours") if backend == "auto" else backend
+        self.backend = ("simd" if is_cpu else "colours") if backend == "auto" else backend
+        if self.backend in ("simd", "fused") and not is_cpu:
+            raise ValueError(
+                f"backend: {self.backend!r} runs on the CPU only; use 'colours' on {self.device}"
+            )
         springs = colour_springs(self.grid, self.config.springs)
         counts = [len(a) for a, _, _ in springs]
         self._spring_a = wp.array(
@@ -156,9 +162,27 @@ class Simulator:
         self._colour_start = wp.array(
             np.concatenate([[0], np.cumsum(counts)]).astype(np.int32), device=self.device
         )
+        self._simd: SimdState | None = None
+        # Which copy of the state is current: the env-major arrays (``x``...) and/or the SIMD blocks.
+        self._flat_current, self._packed_current = True, False
+        units = num_envs
+        if self.backend == "simd":
+            self._simd = SimdState(num_envs, self.grid.num_vertices, device=self.device)
+            self._simd_model = SimdModel.from_arrays(
+                self.grid.num_vertices,
+                self.config.iterations,
+                self._spring_a,
+                self._spring_b,
+                self._spring_rest,
+                self._colour_start,
+                int(self.config.first_order_z),
+                self.config.cut_radius,
+                self.config.cut_height_mm,
+            )
+            units = self._simd.blocks
         cores = os.cpu_count() or 1
-        self.threads = max(1, min(threads or cores, num_envs)) if is_cpu else 1
-        self._slices = [(len(c), int(c[0])) for c in np.array_split(np.arange(num_envs), self.threads)]
+        self.threads = max(1, min(threads or cores, units)) if is_cpu else 1
+        self._slices = [(len(c), int(c[0])) for c in np.array_split(np.arange(units), self.threads)]
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
 
     # ------------------------------------------------------------------ settling
@@ -235,6 +259,7 @@ class Simulator:
         self.displacement.zero_()
         self.tip.zero_()
         self.update_count = 0
+        self._flat_current, self._packed_current = True, False
 
     # ------------------------------------------------------------------ stepping
     def move_grasp(self, action: np.ndarray) -> None:
@@ -270,11 +295,42 @@ class Simulator:
             tape_mode: Allocate fresh output arrays for every kernel so that the whole history stays
                 available to ``wp.Tape`` (slower, uses memory per update).
         """
-        if self.backend == "fused" and not tape_mode:
-            self._update_fused()
+        if self.backend == "simd" and not tape_mode:
+            self._update_simd()
         else:
-            self._update_colours(tape_mode)
+            self._sync_flat()
+            if self.backend == "fused" and not tape_mode:
+                self._update_fused()
+            else:
+                self._update_colours(tape_mode)
+            self._packed_current = False
         self.update_count += 1
+
+    def _update_simd(self) -> None:
+        state = self._simd
+        if not self._packed_current:
+            state.load(self.x, self.x_prev, self.alive, self.pin, self.anchor)
+            p = self._wp_params
+            state.load_params(p["damping"], p["dt"], p["gravity"], p["noise_std"], p["elasticity"])
+            self._packed_current = True
+        state.load_controls(self.displacement, self.tip)
+        seed = self._noise_seed()
+
+        def launch(part: tuple[int, int]) -> None:
+            count, offset = part
+            state.step(self._simd_model, seed, block_offset=offset, block_count=count)
+
+        if self._pool is None:
+            launch(self._slices[0])
+        else:
+            list(self._pool.map(launch, self._slices))
+        self._flat_current = False
+
+    def _sync_flat(self) -> None:
+        """Unpack the SIMD blocks into the env-major arrays if they are behind."""
+        if not self._flat_current:
+            self._simd.store(self.x, self.x_prev, self.alive)
+            self._flat_current = True
 
     def _update_fused(self) -> None:
         p = self._wp_params
@@ -391,10 +447,12 @@ class Simulator:
     # ------------------------------------------------------------------ read-back
     def positions(self) -> np.ndarray:
         """(B, N, 3) current vertex positions (mm)."""
+        self._sync_flat()
         return self.x.numpy().reshape(self.num_envs, self.grid.num_vertices, 3).copy()
 
     def alive_mask(self) -> np.ndarray:
         """(B, N) bool: False where the scissors removed the vertex."""
+        self._sync_flat()
         return self.alive.numpy().reshape(self.num_envs, self.grid.num_vertices).astype(bool)
 
     def displacements(self) -> np.ndarray:
