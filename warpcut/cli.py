@@ -57,6 +57,14 @@ def _record_option(what: str):
     )
 
 
+_device_option = click.option(
+    "--device", default=None, help="Warp device: cpu or cuda (default: cuda if available, else cpu)."
+)
+_seed_option = click.option(
+    "--seed", default=0, show_default=True, type=int, help="Seed of everything random (noise, sampling, PPO)."
+)
+
+
 def _plots_option(what: str):
     return click.option("--no-plots", is_flag=True, help=f"Do not write the plots ({what}).")
 
@@ -146,8 +154,8 @@ def contours(json_path: Path | None) -> None:
     "--resolution", default=25, show_default=True, type=click.IntRange(5, 100), help="Vertices per side."
 )
 @click.option("--fixture", default="corners", show_default=True, type=click.Choice(FIXTURES))
-@click.option("--device", default=None, help="Warp device: cpu or cuda (default: cuda if available).")
-@click.option("--seed", default=0, show_default=True, type=int)
+@_device_option
+@_seed_option
 @click.option(
     "--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write results here."
 )
@@ -260,7 +268,7 @@ def _echo_written(paths: list[Path]) -> None:
 
 
 @main.command()
-@click.option("--device", default=None, help="Warp device: cpu or cuda (default: cuda if available).")
+@_device_option
 @click.option(
     "--repeats", default=3, show_default=True, type=click.IntRange(min=1), help="Timed repeats (median)."
 )
@@ -397,8 +405,8 @@ def _run_dir(out: Path | None, prefix: str) -> Path:
     type=click.IntRange(min=1),
     help="Trials of the final evaluation against no tension.",
 )
-@click.option("--device", default=None, help="Warp device for the simulator (cpu or cuda).")
-@click.option("--seed", default=0, show_default=True, type=int)
+@_device_option
+@_seed_option
 @click.option(
     "--out",
     type=click.Path(file_okay=False, path_type=Path),
@@ -546,8 +554,8 @@ EVALUATE_METHODS = ("none", "fixed", "analytic", "rl")
 @click.option(
     "--num-envs", default=64, show_default=True, type=click.IntRange(min=1), help="Envs when training."
 )
-@click.option("--device", default=None, help="Warp device (cpu or cuda).")
-@click.option("--seed", default=0, show_default=True, type=int)
+@_device_option
+@_seed_option
 @click.option(
     "--out",
     type=click.Path(file_okay=False, path_type=Path),
@@ -782,8 +790,8 @@ def _markdown_table(report: dict, methods: list[str]) -> str:
 @click.option(
     "--resolution", default=25, show_default=True, type=click.IntRange(5, 100), help="Vertices per side."
 )
-@click.option("--device", default=None, help="Warp device: cpu or cuda (default: cuda if available).")
-@click.option("--seed", default=0, show_default=True, type=int)
+@_device_option
+@_seed_option
 @click.option(
     "--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the plan here."
 )
@@ -905,8 +913,8 @@ BUDGETS = {
     type=click.FloatRange(min=0.0),
     help="Reach of the cutting arm's footprint from the tip toward +x (mm), for pinch feasibility.",
 )
-@click.option("--device", default=None, help="Warp device: cpu or cuda (default: cuda if available).")
-@click.option("--seed", default=0, show_default=True, type=int)
+@_device_option
+@_seed_option
 @click.option(
     "--out",
     type=click.Path(file_okay=False, path_type=Path),
