@@ -205,6 +205,7 @@ def test_train_resume_export_and_evaluate_with_checkpoints(tmp_path):
             "2",
             "--checkpoints",
             str(tmp_path / "runs"),
+            "--no-plan",
             "--out",
             str(tmp_path / "eval"),
             "--json",
@@ -238,6 +239,8 @@ def test_evaluate_two_contours_two_trials_writes_table_json(tmp_path):
             "2",
             "--noise",
             "0.02",
+            "--candidates",
+            "3",
             "--out",
             str(tmp_path / "run"),
             "--json",
@@ -246,6 +249,10 @@ def test_evaluate_two_contours_two_trials_writes_table_json(tmp_path):
     )
     assert code == 0, stdout
     report = json.loads(out.read_text())
+    assert report["planned"] is True
+    plans = json.loads((tmp_path / "run" / "plans.json").read_text())
+    for row in report["rows"]:  # fixed pinches where planned; analytic keeps the centroid
+        assert row["fixed_pinch"] == pytest.approx(plans[row["contour"]]["chosen"]["pinch"])
     assert [r["contour"] for r in report["rows"]] == ["fls-circle", "s-curve"]
     for row in report["rows"]:
         assert row["none_error_vertices"] > 0

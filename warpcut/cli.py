@@ -571,6 +571,28 @@ EVALUATE_METHODS = ("none", "fixed", "analytic", "rl")
     type=click.Path(dir_okay=False, path_type=Path),
     help="Write the table as Markdown here.",
 )
+@click.option(
+    "--plan/--no-plan",
+    default=True,
+    show_default=True,
+    help="Cut every contour as planned (segments, order) and pinch fixed and rl at the planned point "
+    "(analytic keeps the centroid, as in the paper); --no-plan: one loop per contour, fixed by random "
+    "search, rl at the centroid.",
+)
+@click.option(
+    "--candidates",
+    default=30,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="Pinch candidates per plan.",
+)
+@click.option(
+    "--arm-length",
+    default=15.0,
+    show_default=True,
+    type=click.FloatRange(min=0.0),
+    help="Reach of the cutting arm's footprint from the tip toward +x (mm), for pinch feasibility.",
+)
 @_record_option("in the run directory; the rl column is not recorded")
 @_plots_option("improvement.png/svg in the run directory")
 def evaluate(
@@ -581,6 +603,9 @@ def evaluate(
     checkpoints: Path | None,
     iterations: int,
     num_envs: int,
+    plan: bool,
+    candidates: int,
+    arm_length: float,
     device: str | None,
     seed: int,
     out: Path | None,
@@ -611,6 +636,24 @@ def evaluate(
     config = SimConfig(noise_std=noise).validated()
     out = _run_dir(out, "evaluate")
     start = time.perf_counter()
+    plans = None
+    if plan:
+        from warpcut.planning import plan_cut
+
+        plans = []
+        for contour in contours:
+            click.echo(f"  planning {contour.name} ({candidates} candidates)", err=True)
+            plans.append(
+                plan_cut(
+                    contour,
+                    config.replace(noise_std=0.0),
+                    num_candidates=candidates,
+                    seed=seed,
+                    device=device,
+                    arm_length_mm=arm_length,
+                )
+            )
+        write_json(out / "plans.json", {p.contour.name: p.to_json() for p in plans})
     extra = {}
     if "rl" in names:
         extra["rl"] = _rl_results(
@@ -625,6 +668,7 @@ def evaluate(
             device,
             seed,
             MethodResult,
+            plans,
         )
     with _recorder(out, record_envs) as recorder:
         report = evaluate_suite(
@@ -637,7 +681,10 @@ def evaluate(
             extra=extra,
             progress=lambda what: click.echo(f"  running {what}", err=True),
             on_step=_step_hooks(recorder),
+            segments=None if plans is None else [p.ordered_segments() for p in plans],
+            pinches=None if plans is None else {"fixed": [p.chosen["pinch"] for p in plans]},
         )
+    report["planned"] = plans is not None
     report["seconds"] = time.perf_counter() - start
     table = _markdown_table(report, names)
     click.echo(table)
@@ -706,16 +753,17 @@ def replay(path: Path, web: bool) -> None:
 
 
 def _rl_results(
-    contours, by_name, checkpoints, out, trials, noise, iterations, num_envs, device, seed, result_type
+    contours, by_name, checkpoints, out, trials, noise, iterations, num_envs, device, seed, result_type, plans
 ):
-    """Per contour, a trained run (from ``checkpoints`` or trained now) rolled out for ``trials``."""
+    """Per contour, a trained run (from ``checkpoints`` or trained now, at the planned pinch and
+    segments when ``plans`` are given) rolled out for ``trials``."""
     import numpy as np
 
     from agents.rl import Scenario, rollout_errors, train_contour
     from agents.train import TrainConfig
 
     errors, areas, pinches = [], [], []
-    for contour in contours:
+    for k, contour in enumerate(contours):
         if checkpoints is not None:
             run = checkpoints / contour.name
             if not (run / "scenario.json").is_file():
@@ -728,11 +776,18 @@ def _rl_results(
             run = out / "policies" / contour.name
             click.echo(f"  training rl for {contour.name} ({iterations} iterations)", err=True)
             # The same recipe as 'warpcut train' by default: dense shaping, contour-aware observations.
+            planned = {}
+            if plans is not None:
+                planned = {
+                    "pinch": [float(v) for v in plans[k].chosen["pinch"]],
+                    "segments": [s.tolist() for s in plans[k].ordered_segments()],
+                }
             scenario = Scenario(
                 contour=by_name[contour.name],
                 sim={"noise_std": noise} if noise else {},
                 dense_reward=True,
                 contour_features=True,
+                **planned,
             )
             cfg = TrainConfig(num_envs=num_envs, iterations=iterations, seed=seed, device="cpu")
             train_contour(scenario, run, cfg, eval_trials=trials, progress=False, device=device)
