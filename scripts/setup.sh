@@ -23,10 +23,14 @@ elif [ -n "${TORCH_SPEC:-}" ]; then
 elif command -v nvidia-smi >/dev/null 2>&1 && nvidia-smi -L >/dev/null 2>&1; then
   python -m pip install -q "torch>=2.4"
 else
-  # A CPU wheel that pip's configured find-links already holds installs offline; otherwise fetch the
-  # CPU build from PyTorch's CPU index (PyPI's default Linux build bundles CUDA: several GB).
-  python -m pip install -q --no-index "torch==${TORCH_CPU_VERSION}" 2>/dev/null ||
+  # If pip's configured find-links already hold the CPU wheel, the plain pin takes it (its local
+  # version 2.13.0+cpu sorts above PyPI's 2.13.0); otherwise add PyTorch's CPU index, since PyPI's
+  # default Linux build bundles CUDA (several GB).
+  if python -m pip download -q --no-deps --no-index -d "$(mktemp -d)" "torch==${TORCH_CPU_VERSION}" 2>/dev/null; then
+    python -m pip install -q "torch==${TORCH_CPU_VERSION}"
+  else
     python -m pip install -q "torch==${TORCH_CPU_VERSION}" --extra-index-url https://download.pytorch.org/whl/cpu
+  fi
 fi
 python -m pip install -q -e ".[test]"
 echo "setup: ready ($(python -c 'import torch, warp; print("torch", torch.__version__, "/ warp", warp.__version__)'))"

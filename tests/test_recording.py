@@ -103,7 +103,17 @@ def test_no_plots_writes_none(tmp_path):
 
 
 def test_evaluate_writes_the_comparison_plot_and_recording(tmp_path):
-    args = ["evaluate", "--contours", "circle-small", "--methods", "none,analytic", "--trials", "1"]
+    args = [
+        "evaluate",
+        "--contours",
+        "circle-small",
+        "--methods",
+        "none,analytic",
+        "--trials",
+        "1",
+        "--candidates",
+        "3",
+    ]
     code, stdout = invoke([*args, "--out", str(tmp_path / "run"), "--record"])
     assert code == 0, stdout
     for name in ("improvement.png", "improvement.svg", "recording.rrd", "results.json"):
@@ -113,7 +123,7 @@ def test_evaluate_writes_the_comparison_plot_and_recording(tmp_path):
 
     code, stdout = invoke([*args, "--out", str(tmp_path / "bare"), "--no-plots"])
     assert code == 0, stdout
-    assert sorted(p.name for p in (tmp_path / "bare").iterdir()) == ["results.json"]
+    assert sorted(p.name for p in (tmp_path / "bare").iterdir()) == ["plans.json", "results.json"]
 
 
 def test_recording_does_not_change_the_results(tmp_path):
