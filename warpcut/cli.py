@@ -65,6 +65,16 @@ _seed_option = click.option(
 )
 
 
+_arm_length_option = click.option(
+    "--arm-length",
+    default=15.0,
+    show_default=True,
+    type=click.FloatRange(min=0.0),
+    help="Reach of the cutting arm's footprint from the scissor tip toward +x (mm), for pinch feasibility; "
+    "'inf' for the whole way. The shaft rises away from the sheet: only its first centimetres are near it.",
+)
+
+
 def _plots_option(what: str):
     return click.option("--no-plots", is_flag=True, help=f"Do not write the plots ({what}).")
 
@@ -586,13 +596,7 @@ EVALUATE_METHODS = ("none", "fixed", "analytic", "rl")
     type=click.IntRange(min=1),
     help="Pinch candidates per plan.",
 )
-@click.option(
-    "--arm-length",
-    default=15.0,
-    show_default=True,
-    type=click.FloatRange(min=0.0),
-    help="Reach of the cutting arm's footprint from the tip toward +x (mm), for pinch feasibility.",
-)
+@_arm_length_option
 @_record_option("in the run directory; the rl column is not recorded")
 @_plots_option("improvement.png/svg in the run directory")
 def evaluate(
@@ -827,14 +831,7 @@ def _markdown_table(report: dict, methods: list[str]) -> str:
     type=click.FloatRange(min=0.0),
     help="Radius of the cutting arm (mm) whose sweep pinch points must avoid.",
 )
-@click.option(
-    "--arm-length",
-    default=15.0,
-    show_default=True,
-    type=click.FloatRange(min=0.0),
-    help="Reach of the arm's footprint from the tip toward +x (mm); 'inf' for the whole way. The shaft "
-    "rises from the tip at an angle, so only its first centimetres are near the sheet.",
-)
+@_arm_length_option
 @click.option(
     "--tolerance",
     default=1.0,
@@ -961,13 +958,7 @@ BUDGETS = {
 @click.option(
     "--resolution", default=25, show_default=True, type=click.IntRange(5, 100), help="Vertices per side."
 )
-@click.option(
-    "--arm-length",
-    default=15.0,
-    show_default=True,
-    type=click.FloatRange(min=0.0),
-    help="Reach of the cutting arm's footprint from the tip toward +x (mm), for pinch feasibility.",
-)
+@_arm_length_option
 @_device_option
 @_seed_option
 @click.option(
