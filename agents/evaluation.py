@@ -12,6 +12,7 @@ from scipy import stats
 from agents.baselines import AnalyticTension, FixedTension, NoTension, search_fixed_pinches
 from warpcut.config import SimConfig
 from warpcut.contours import Contour
+from warpcut.scoring import improvement_pct
 from warpcut.task import CuttingTask, default_segments
 
 BASELINES = ("none", "fixed", "analytic")
@@ -27,10 +28,14 @@ def ci95(values: np.ndarray) -> float:
 
 
 def paired_improvement(e_none: np.ndarray, e_method: np.ndarray) -> np.ndarray:
-    """Per-trial ``100 * (E_none - E_method) / E_none``; NaN where no tension scored 0 (undefined)."""
-    e_none, e_method = np.asarray(e_none, dtype=np.float64), np.asarray(e_method, dtype=np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(e_none > 0, 100.0 * (e_none - e_method) / e_none, np.nan)
+    """Per-trial :func:`~warpcut.scoring.improvement_pct`; NaN where no tension scored 0 (undefined)."""
+    e_none, e_method = np.broadcast_arrays(
+        np.asarray(e_none, dtype=np.float64), np.asarray(e_method, np.float64)
+    )
+    out = np.full(e_none.shape, np.nan)
+    defined = e_none > 0
+    out[defined] = improvement_pct(e_none[defined], e_method[defined])
+    return out
 
 
 @dataclass
