@@ -148,6 +148,7 @@ def test_bench_writes_the_documented_json(tmp_path):
     assert set(result["updates_per_s"]) == {"1", "4"}
     for key in (
         "rollouts_per_s",
+        "rollouts_per_s_paper_sweeps",
         "numpy_updates_per_s",
         "speedup_vs_numpy",
         "cold_start_s",

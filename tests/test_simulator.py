@@ -123,6 +123,7 @@ def test_cutting_removes_vertices_near_the_tip_only(device):
     [
         ({"resolution": 3}, "resolution: .*5 <= n <= 100"),
         ({"damping": 1.5}, r"damping: must lie in \[0, 1\]"),
+        ({"elasticity": 2.0}, r"elasticity: must lie in \(0, 2\)"),
         ({"fixture": "edges"}, "fixture: choose one of"),
         ({"springs": ("shear",)}, "springs: choose from"),
         ({"iterations": 0}, "iterations: must be an integer"),

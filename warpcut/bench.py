@@ -55,13 +55,13 @@ def updates_per_second(
     return num_envs * updates / median_time(run, repeats, lambda: wp.synchronize_device(device))
 
 
-def rollouts_per_second(num_envs: int, device: str, repeats: int) -> float:
+def rollouts_per_second(num_envs: int, device: str, repeats: int, config: SimConfig | None = None) -> float:
     """Complete no-tension ``fls-circle`` rollouts per second; settling and trajectories are built once
-    (amortised), the timed part is reset + every step + scoring."""
+    (amortised), the timed part is reset + every step + scoring. ``config``: default physics if None."""
     from warpcut.contours import load_contour
     from warpcut.task import CuttingTask
 
-    task = CuttingTask(SimConfig(), load_contour("fls-circle"), num_envs=num_envs, device=device)
+    task = CuttingTask(config or SimConfig(), load_contour("fls-circle"), num_envs=num_envs, device=device)
     return num_envs / median_time(lambda: task.run(None), repeats, lambda: wp.synchronize_device(device))
 
 
@@ -135,6 +135,7 @@ def run_bench(
     progress(f"fls-circle rollouts at B={rollout_envs}")
     result["rollout_envs"] = rollout_envs
     result["rollouts_per_s"] = rollouts_per_second(rollout_envs, device, repeats)
+    result["rollouts_per_s_paper_sweeps"] = rollouts_per_second(rollout_envs, device, repeats, PAPER_SWEEPS)
     progress("NumPy reference")
     result["numpy_updates_per_s"] = numpy_updates_per_second(repeats)
     best = max(ups.values())

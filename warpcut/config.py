@@ -141,9 +141,9 @@ class SimConfig:
         )
         _require(bool(np.all(np.asarray(self.dt) > 0)), "dt", "must be positive (s; paper: 0.016)")
         _require(
-            bool(np.all(np.asarray(self.elasticity) > 0) and np.all(np.asarray(self.elasticity) <= 1)),
+            bool(np.all(np.asarray(self.elasticity) > 0) and np.all(np.asarray(self.elasticity) < 2)),
             "elasticity",
-            "must lie in (0, 1] (paper: 1)",
+            "must lie in (0, 2): 1 is plain Gauss-Seidel (paper), above 1 over-relaxes",
         )
         _require(bool(np.all(np.asarray(self.noise_std) >= 0)), "noise_std", "must be >= 0 (mm)")
         _require(
