@@ -24,7 +24,14 @@ class Categorical(Distribution):
     ``actions.long()``. One discrete action per env is ``output_dim == num_actions == 1``.
     """
 
-    def __init__(self, output_dim: int, num_choices: int, init_logit_scale: float = 0.01) -> None:
+    def __init__(
+        self,
+        output_dim: int,
+        num_choices: int,
+        init_logit_scale: float = 0.01,
+        init_choice: int | None = None,
+        init_choice_prob: float = 0.0,
+    ) -> None:
         """Initialize the categorical distribution module.
 
         Args:
@@ -32,12 +39,24 @@ class Categorical(Distribution):
             num_choices: Number of options per action.
             init_logit_scale: Scale of the logit layer's initial weights; small values start the policy near
                 uniform, i.e. at maximum entropy.
+            init_choice: Option the initial policy prefers (for warpcut: 0, "stay"), or None for none.
+            init_choice_prob: Initial probability of ``init_choice``, in [1 / num_choices, 1); the others
+                share the rest evenly. The initial deterministic (argmax) policy is ``init_choice``.
         """
         super().__init__(output_dim)
         if num_choices < 2:
             raise ValueError(f"A categorical action needs at least 2 choices, got {num_choices}.")
+        if init_choice is not None:
+            if not 0 <= init_choice < num_choices:
+                raise ValueError(f"init_choice: must index one of {num_choices} choices, got {init_choice}.")
+            if not 1.0 / num_choices <= init_choice_prob < 1.0:
+                raise ValueError(
+                    f"init_choice_prob: must lie in [1/{num_choices}, 1), got {init_choice_prob}."
+                )
         self.num_choices = num_choices
         self.init_logit_scale = init_logit_scale
+        self.init_choice = init_choice
+        self.init_choice_prob = init_choice_prob
         self._distribution: TorchCategorical | None = None
         TorchCategorical.set_default_validate_args(False)
 
@@ -96,12 +115,18 @@ class Categorical(Distribution):
         ).sum(dim=-1)
 
     def init_mlp_weights(self, mlp: nn.Module) -> None:
-        """Shrink the logit layer so that the initial policy is close to uniform."""
+        """Shrink the logit layer so that the initial policy is close to uniform, or, with ``init_choice``,
+        close to ``init_choice_prob`` on that option and uniform over the others."""
         # rsl-rl's MLP ends with Linear then Unflatten when the output has a shape, as here.
         logit_layer = mlp[-2]  # type: ignore
         with torch.no_grad():
             logit_layer.weight.mul_(self.init_logit_scale)
             logit_layer.bias.zero_()
+            if self.init_choice is not None:
+                # p / ((1 - p) / (K - 1)) = exp(bias): the odds of init_choice against each other option.
+                odds = self.init_choice_prob * (self.num_choices - 1) / (1.0 - self.init_choice_prob)
+                bias = logit_layer.bias.view(self.output_dim, self.num_choices)
+                bias[:, self.init_choice] = float(torch.log(torch.tensor(odds)))
 
     def _choice_indices(self) -> torch.Tensor:
         probs = self._distribution.probs  # type: ignore

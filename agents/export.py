@@ -24,7 +24,7 @@ from rsl_rl.models import MLPModel
 from rsl_rl.utils import resolve_class
 from tensordict import TensorDict
 
-from agents.train import latest_checkpoint
+from agents.train import policy_checkpoint
 from warpcut.io import write_atomic
 
 ONNX_OPSET = 18
@@ -35,13 +35,14 @@ def load_policy(source: str | Path) -> MLPModel:
     """Rebuild a trained actor on the CPU, in eval mode, from a run directory or checkpoint.
 
     Args:
-        source: Run directory (its ``latest.pt``) or a checkpoint file; ``config.json`` is read from the
+        source: Run directory (its ``best.pt`` if training validated, else ``latest.pt``) or a checkpoint
+            file; ``config.json`` is read from the
             checkpoint's directory.
 
     Returns:
         The actor; ``actor(obs_tensordict)`` returns deterministic actions.
     """
-    checkpoint = latest_checkpoint(source)
+    checkpoint = policy_checkpoint(source)
     config = json.loads((checkpoint.parent / "config.json").read_text())
     env, rsl_cfg = config["env"], config["rsl_rl"]
     obs = TensorDict(
@@ -58,14 +59,14 @@ def export_policy(source: str | Path, out_dir: str | Path | None = None) -> dict
     """Write ``policy.pt`` (TorchScript) and ``policy.onnx`` for the actor of a run or checkpoint.
 
     Args:
-        source: Run directory (its ``latest.pt``) or a checkpoint file.
+        source: Run directory (``best.pt`` if training validated, else ``latest.pt``) or a checkpoint.
         out_dir: Where to write; defaults to ``exported/`` beside the checkpoint.
 
     Returns:
         Paths of the files, under the keys "torchscript" and "onnx".
     """
     actor = load_policy(source)
-    out_dir = Path(out_dir) if out_dir is not None else latest_checkpoint(source).parent / "exported"
+    out_dir = Path(out_dir) if out_dir is not None else policy_checkpoint(source).parent / "exported"
     out_dir.mkdir(parents=True, exist_ok=True)
 
     buffer = io.BytesIO()

@@ -41,6 +41,7 @@ class Scenario:
         dense_reward: Add the per-step tracking-error shaping of the env to the sparse final reward.
         action_type: ``discrete`` (paper: stay, +-x, +-y at 1 mm) or ``continuous`` (x-y moves up to
             1 mm per axis; a policy that outputs zero holds the grasp still, like fixed tensioning).
+        allow_z: Let the grasp move along z too (``+-z``; lifting the sheet into the scissors' reach).
     """
 
     contour: str
@@ -51,6 +52,7 @@ class Scenario:
     action_type: str = "discrete"
     dense_reward: bool = False
     segments: list[list[list[float]]] | None = None
+    allow_z: bool = False
 
     def load_contour(self) -> Contour:
         return load_contour(self.contour)
@@ -73,10 +75,26 @@ class Scenario:
             num_fiducials=self.num_fiducials,
             contour_features=self.contour_features,
             action_type=self.action_type,
+            allow_z=self.allow_z,
             dense_reward=self.dense_reward,
             segments=self.segments,
         )
         return PatternCutVecEnv(num_envs, options)
+
+
+RECIPE = {"dense_reward": True, "contour_features": True, "allow_z": True}
+"""warpcut's default learning recipe (Scenario fields; ``warpcut train``, ``evaluate`` and ``run`` use it):
+dense tracking-error shaping, contour-aware observations and x-y-z moves. Together with
+``TrainConfig.stay_prior`` (start at "hold still") and validation-based model selection; see
+docs/learning.md for the measurements behind each choice. The paper's setting is sparse reward,
+fiducials only, x-y moves and a uniform initial policy."""
+
+STAY_PRIOR = 0.9
+"""``TrainConfig.stay_prior`` of the recipe: the initial policy holds still with probability 0.9."""
+
+VALIDATION_SEED_OFFSET = 7919
+"""Validation episodes use seed ``cfg.seed + VALIDATION_SEED_OFFSET``: neither training's ``cfg.seed`` nor the
+evaluations' small seeds, so model selection never sees an evaluation episode."""
 
 
 def train_contour(
@@ -87,8 +105,13 @@ def train_contour(
     eval_trials: int = 10,
     progress: bool = True,
     device: str | None = None,
+    validation_trials: int = 8,
 ) -> dict:
     """Train a PPO tensioner for ``scenario`` into ``out_dir``, then evaluate it.
+
+    With ``validation_trials > 0`` the deterministic policy is scored on that many held-out episodes
+    (seed ``cfg.seed + VALIDATION_SEED_OFFSET``) before training and every ``cfg.validation_interval``
+    iterations, and the best one is the run's policy (``best.pt``; see :func:`agents.train.train`).
 
     Args:
         scenario: Contour, pinch point and simulation settings.
@@ -98,9 +121,11 @@ def train_contour(
         eval_trials: Trials of the final evaluation against no tension.
         progress: Show the progress bar.
         device: Warp device of the simulator.
+        validation_trials: Held-out episodes per validation; 0 disables validation (the run's policy is
+            then the last one).
 
     Returns:
-        ``{"summary": training summary, "evaluation": evaluation of the final policy}``.
+        ``{"summary": training summary, "evaluation": evaluation of the run's policy}``.
     """
     if cfg.discrete != (scenario.action_type == "discrete"):
         raise ValueError(
@@ -111,7 +136,15 @@ def train_contour(
     scenario = Scenario(**{**asdict(scenario), "pinch": [float(v) for v in scenario.pinch_point()]})
     write_json(out_dir / "scenario.json", asdict(scenario))
     env = PatternCutRslEnv(scenario.vec_env(cfg.num_envs, device=device), device=cfg.device, seed=cfg.seed)
-    summary = train(env, cfg, out_dir, resume=resume, progress=progress)
+    validate = None
+    if validation_trials > 0:
+        validation_env = scenario.vec_env(validation_trials, device=device)
+
+        def validate(actor: torch.nn.Module) -> float:
+            seed = cfg.seed + VALIDATION_SEED_OFFSET
+            return float(np.mean(policy_errors(actor, validation_env, scenario, seed)["error_vertices"]))
+
+    summary = train(env, cfg, out_dir, resume=resume, progress=progress, validate=validate)
     evaluation = evaluate_run(out_dir, trials=eval_trials, seed=cfg.seed + 1, device=device)
     write_json(out_dir / "evaluation.json", evaluation)
     return {"summary": summary, "evaluation": evaluation}
@@ -141,6 +174,12 @@ def rollout_errors(
     scenario = scenario or load_scenario(run_dir)
     actor = load_policy(run_dir)
     env = scenario.vec_env(trials, device=device)
+    return policy_errors(actor, env, scenario, seed=seed)
+
+
+def policy_errors(actor: torch.nn.Module, env: PatternCutVecEnv, scenario: Scenario, seed: int) -> dict:
+    """One deterministic episode of ``actor`` in every env of ``env`` (reset with ``seed``)."""
+    trials = env.num_envs
     obs, _ = env.reset(seed=seed)
     errors = errors_mm2 = None
     with torch.inference_mode():
@@ -155,7 +194,7 @@ def rollout_errors(
                 errors, errors_mm2 = np.asarray(final["error_vertices"]), np.asarray(final["error_mm2"])
                 break
     if errors is None:
-        raise RuntimeError(f"{run_dir}: the episode did not end within {env.task.num_steps} steps")
+        raise RuntimeError(f"{scenario.contour}: the episode did not end within {env.task.num_steps} steps")
     return {"error_vertices": errors, "error_mm2": errors_mm2, "pinch": scenario.pinch_point()}
 
 

@@ -5,6 +5,9 @@ A run directory holds::
     config.json        TrainConfig, the rsl-rl config built from it, and the env's shapes (for export)
     model_K.pt         checkpoint after learning iteration K (0-based, rsl-rl's naming), every save_interval
     latest.pt          copy of the newest checkpoint; ``resume`` reads it
+    best.pt            with a ``validate`` callback: the checkpoint whose deterministic policy scored the
+                       lowest validation error so far (iteration 0, the initial policy, included);
+                       ``policy_checkpoint`` (evaluation, export) prefers it
     events.out.tfevents.*   TensorBoard scalars written by rsl-rl's logger
     summary.json       status (completed, interrupted, failed), iterations, env steps, speed, last metrics
 
@@ -53,6 +56,8 @@ from warpcut.io import write_atomic, write_json
 
 LATEST_CHECKPOINT = "latest.pt"
 """File name of the copy of the newest checkpoint in a run directory."""
+BEST_CHECKPOINT = "best.pt"
+"""File name of the checkpoint with the lowest validation error in a run directory."""
 
 
 @dataclass
@@ -109,6 +114,14 @@ class TrainConfig:
     """Gradient norm clip."""
     save_interval: int = 50
     """Save a checkpoint every this many iterations (and at the end, and on Ctrl-C)."""
+    stay_prior: float = 0.0
+    """Discrete only: initial probability of action 0, the others sharing the rest; the initial
+    deterministic policy then takes action 0. For warpcut's env action 0 is "stay" (hold the grasp still,
+    what fixed tensioning does), so PPO learns moves on top of holding still (``agents.rl.STAY_PRIOR``).
+    0: start uniform over the actions (the paper's setting)."""
+    validation_interval: int = 10
+    """With a ``validate`` callback (see :func:`train`): score the deterministic policy every this many
+    iterations and keep the best in ``best.pt``."""
 
     def to_rsl_rl(self, num_action_choices: int | None = None) -> dict:
         """Return rsl-rl 5.5.1's ``OnPolicyRunner`` config.
@@ -124,6 +137,8 @@ class TrainConfig:
                 "class_name": "agents.distributions:Categorical",
                 "num_choices": num_action_choices,
             }
+            if self.stay_prior > 0:
+                distribution.update(init_choice=0, init_choice_prob=self.stay_prior)
         else:
             distribution = {
                 "class_name": "rsl_rl.modules:GaussianDistribution",
@@ -169,6 +184,7 @@ def train(
     out_dir: str | Path,
     resume: str | Path | None = None,
     progress: bool = True,
+    validate: Callable[[torch.nn.Module], float] | None = None,
 ) -> dict:
     """Train a PPO policy on ``env`` and write the run directory ``out_dir``.
 
@@ -182,6 +198,11 @@ def train(
             and trains until ``cfg.iterations`` in total.
         progress: Show a progress bar (on stderr). rsl-rl's per-iteration console report is never printed;
             its scalars go to TensorBoard.
+        validate: Scores an actor (called with the live actor; use its deterministic output) by an error
+            to minimise, on episodes that are not the evaluation's. Called before training and every
+            ``cfg.validation_interval`` iterations; the best-scoring policy is saved as ``best.pt``, which
+            evaluation and export then use (model selection on held-out episodes). The scores are in the
+            summary's ``validation`` list and in TensorBoard (``Validation/error``).
 
     Returns:
         The summary also written to ``out_dir/summary.json``.
@@ -218,7 +239,18 @@ def train(
     start_iterations, start_time, status = runner.iterations_done, time.monotonic(), "failed"
     try:
         with _progress_display(progress, cfg.iterations, start_iterations) as report:
-            runner.on_iteration = report
+            if validate is None:
+                runner.on_iteration = report
+            else:
+                if resume is None or runner.best_error is None:
+                    runner.validate(validate)
+
+                def on_iteration(iterations_done: int, metrics: dict) -> None:
+                    if iterations_done % cfg.validation_interval == 0 or iterations_done == cfg.iterations:
+                        runner.validate(validate)
+                    report(iterations_done, metrics)
+
+                runner.on_iteration = on_iteration
             if cfg.iterations > start_iterations:
                 runner.learn(cfg.iterations - start_iterations)
         status = "completed"
@@ -240,6 +272,10 @@ def train(
             "steps_per_s": new_steps / max(wall_time, 1e-9),
             **runner.metrics,
             "checkpoint": None if runner.checkpoint is None else runner.checkpoint.name,
+            "validation": runner.validation,
+            "best": None
+            if runner.best_error is None
+            else {"iterations": runner.best_iterations, "validation_error": runner.best_error},
         }
         write_json(out_dir / "summary.json", summary)
     return summary
@@ -278,18 +314,49 @@ class Runner(OnPolicyRunner):
         )
         self.checkpoint: Path | None = None
         self.on_iteration: Callable[[int, dict], None] = lambda iterations_done, metrics: None
+        self.validation: list[dict] = []
+        self.best_error: float | None = None
+        self.best_iterations: int | None = None
+
+    def _state_bytes(self, infos: dict | None = None) -> bytes:
+        state = self.alg.save()
+        state["iter"] = self.current_learning_iteration
+        state["infos"] = {
+            "iterations_done": self.iterations_done,
+            "validation": self.validation,
+            "best_error": self.best_error,
+            "best_iterations": self.best_iterations,
+            **(infos or {}),
+        }
+        buffer = io.BytesIO()
+        torch.save(state, buffer)
+        return buffer.getvalue()
 
     def save(self, path: str, infos: dict | None = None) -> None:
         """Save models, optimizer and iteration count to ``path`` and to ``latest.pt``, each atomically."""
-        state = self.alg.save()
-        state["iter"] = self.current_learning_iteration
-        state["infos"] = {"iterations_done": self.iterations_done, **(infos or {})}
-        buffer = io.BytesIO()
-        torch.save(state, buffer)
-        write_atomic(path, buffer.getvalue())
-        write_atomic(Path(path).with_name(LATEST_CHECKPOINT), buffer.getvalue())
+        data = self._state_bytes(infos)
+        write_atomic(path, data)
+        write_atomic(Path(path).with_name(LATEST_CHECKPOINT), data)
         self.checkpoint = Path(path)
         self.logger.save_model(path, self.current_learning_iteration)
+
+    def validate(self, validate: Callable[[torch.nn.Module], float]) -> float:
+        """Score the deterministic policy with ``validate``; save ``best.pt`` if it is the best yet."""
+        was_training = self.alg.actor.training
+        self.alg.actor.eval()
+        try:
+            with torch.inference_mode():
+                error = float(validate(self.alg.actor))
+        finally:
+            self.alg.actor.train(was_training)
+        self.validation.append({"iterations": self.iterations_done, "error": error})
+        if self.logger.writer is not None:
+            self.logger.writer.add_scalar("Validation/error", error, self.iterations_done)
+        if self.best_error is None or error < self.best_error:
+            self.best_error, self.best_iterations = error, self.iterations_done
+            if self.logger.log_dir is not None:
+                write_atomic(Path(self.logger.log_dir) / BEST_CHECKPOINT, self._state_bytes())
+        return error
 
     def save_interrupted(self) -> None:
         """Save the current state after a Ctrl-C, as the checkpoint of the last completed iteration."""
@@ -303,6 +370,9 @@ class Runner(OnPolicyRunner):
         # rsl-rl would repeat the checkpoint's iteration; continue after it instead.
         self.iterations_done = infos.get("iterations_done", self.current_learning_iteration + 1)
         self.current_learning_iteration = self.iterations_done
+        self.validation = list(infos.get("validation") or [])
+        self.best_error = infos.get("best_error")
+        self.best_iterations = infos.get("best_iterations")
 
     def _end_iteration(self, it: int, metrics: dict) -> None:
         self.iterations_done = it + 1
@@ -348,6 +418,15 @@ def latest_checkpoint(path: str | Path) -> Path:
     if not checkpoint.is_file():
         raise FileNotFoundError(f"no checkpoint at {checkpoint}")
     return checkpoint
+
+
+def policy_checkpoint(path: str | Path) -> Path:
+    """The checkpoint whose policy a run stands for: ``path`` if it is a file, else the run directory's
+    ``best.pt`` (the validated best, when training validated) or its ``latest.pt``."""
+    path = Path(path)
+    if path.is_dir() and (path / BEST_CHECKPOINT).is_file():
+        return path / BEST_CHECKPOINT
+    return latest_checkpoint(path)
 
 
 def seed_everything(seed: int) -> None:

@@ -15,7 +15,7 @@ from tensordict import TensorDict
 from agents.distributions import Categorical
 from agents.export import export_policy, load_policy
 from agents.train import FINAL_ERROR_KEY as TRAIN_FINAL_ERROR_KEY
-from agents.train import Runner, TrainConfig, train
+from agents.train import BEST_CHECKPOINT, Runner, TrainConfig, policy_checkpoint, train
 
 NUM_ENVS = 32
 
@@ -72,6 +72,75 @@ def test_categorical_matches_torch_and_starts_uniform():
     actor = Runner(env, cfg, log_dir=None).alg.get_policy()
     actor(env.get_observations(), stochastic_output=True)
     assert torch.allclose(actor.output_entropy, torch.full((4,), float(np.log(3))), atol=1e-3)
+
+
+def test_stay_prior_starts_at_choice_zero():
+    env = ReachEnv(num_envs=4)
+    cfg = tiny_config(num_envs=4, stay_prior=0.8).to_rsl_rl(env.num_action_choices)
+    actor = Runner(env, cfg, log_dir=None).alg.get_policy()
+    obs = env.get_observations()
+    actor(obs, stochastic_output=True)
+    probs = actor.distribution._distribution.probs
+    assert torch.allclose(probs, torch.tensor([0.8, 0.1, 0.1]).expand_as(probs), atol=1e-2)
+    assert torch.equal(actor(obs), torch.zeros(4, 1))
+    for kwargs, match in (
+        ({"init_choice": 3, "init_choice_prob": 0.8}, "init_choice"),
+        ({"init_choice": 0, "init_choice_prob": 1.0}, "init_choice_prob"),
+        ({"init_choice": 0, "init_choice_prob": 0.2}, "init_choice_prob"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            Categorical(output_dim=1, num_choices=3, **kwargs)
+
+
+class ScriptedValidation:
+    """Returns the scripted errors in turn and remembers the actor's weights at each call."""
+
+    def __init__(self, errors: list[float]) -> None:
+        self.errors, self.calls, self.weights = list(errors), 0, []
+
+    def __call__(self, actor) -> float:
+        assert not actor.training
+        self.weights.append({k: v.clone() for k, v in actor.state_dict().items()})
+        self.calls += 1
+        return self.errors[self.calls - 1]
+
+
+def test_validation_keeps_the_best_policy(tmp_path):
+    validate = ScriptedValidation([5.0, 3.0, 4.0, 9.0])
+    summary = train(
+        ReachEnv(NUM_ENVS),
+        tiny_config(iterations=6, validation_interval=2),
+        tmp_path,
+        progress=False,
+        validate=validate,
+    )
+    assert [v["iterations"] for v in summary["validation"]] == [0, 2, 4, 6]
+    assert [v["error"] for v in summary["validation"]] == [5.0, 3.0, 4.0, 9.0]
+    assert summary["best"] == {"iterations": 2, "validation_error": 3.0}
+    best = torch.load(tmp_path / BEST_CHECKPOINT, weights_only=True)
+    assert best["infos"]["iterations_done"] == 2
+    assert policy_checkpoint(tmp_path) == tmp_path / BEST_CHECKPOINT
+    policy = load_policy(tmp_path).state_dict()
+    for name, value in validate.weights[1].items():
+        assert torch.equal(policy[name], value), name
+    assert [event.step for event in _scalars(tmp_path, "Validation/error")] == [2, 4, 6]
+
+    # Resuming keeps the best so far: a later, worse policy does not replace it.
+    summary = train(
+        ReachEnv(NUM_ENVS),
+        tiny_config(iterations=8, validation_interval=2),
+        tmp_path,
+        resume=tmp_path,
+        progress=False,
+        validate=ScriptedValidation([3.5]),
+    )
+    assert [v["iterations"] for v in summary["validation"]] == [0, 2, 4, 6, 8]
+    assert summary["best"] == {"iterations": 2, "validation_error": 3.0}
+    assert torch.load(tmp_path / BEST_CHECKPOINT, weights_only=True)["infos"]["iterations_done"] == 2
+
+
+def test_without_validation_the_latest_checkpoint_is_the_policy(trained_run):
+    assert policy_checkpoint(trained_run).name == "latest.pt"
 
 
 @pytest.mark.parametrize("discrete", [True, False], ids=["discrete", "continuous"])

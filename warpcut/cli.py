@@ -330,7 +330,8 @@ def bench(
             f"{b:>6} {result['updates_per_s'][b]:>38,.0f} {result['updates_per_s_paper_sweeps'][b]:>28,.0f}"
         )
     click.echo(
-        f"fls-circle no-tension rollouts/s (B={result['rollout_envs']}): {result['rollouts_per_s']:,.1f}"
+        f"fls-circle no-tension rollouts/s (B={result['rollout_envs']}): {result['rollouts_per_s']:,.1f} "
+        f"default physics, {result['rollouts_per_s_paper_sweeps']:,.1f} paper sweeps"
     )
     click.echo(
         f"NumPy reference updates/s: {result['numpy_updates_per_s']:,.1f}  "
@@ -406,7 +407,30 @@ def _run_dir(out: Path | None, prefix: str) -> Path:
     default="discrete",
     show_default=True,
     type=click.Choice(["discrete", "continuous"]),
-    help="discrete: stay, +-x, +-y at 1 mm (paper); continuous: x-y moves up to 1 mm per axis.",
+    help="discrete: stay, +-x, +-y (and +-z) at 1 mm (paper: x-y); continuous: moves up to 1 mm per axis.",
+)
+@click.option(
+    "--z/--no-z",
+    "allow_z",
+    default=True,
+    show_default=True,
+    help="Let the grasp also move along z (lift or lower the sheet); --no-z: x-y only (paper).",
+)
+@click.option(
+    "--stay-prior",
+    default=0.9,
+    show_default=True,
+    type=click.FloatRange(0.0, 1.0, max_open=True),
+    help="Discrete: initial probability of 'stay', so training starts from holding still (fixed "
+    "tensioning); 0: a uniform start (paper).",
+)
+@click.option(
+    "--validation-trials",
+    default=8,
+    show_default=True,
+    type=click.IntRange(min=0),
+    help="Held-out episodes scoring the policy every 10 iterations; the best is kept (best.pt). 0: off, "
+    "the last policy is the run's.",
 )
 @click.option(
     "--eval-trials",
@@ -440,6 +464,9 @@ def train(
     reward: str,
     observe: str,
     action_type: str,
+    allow_z: bool,
+    stay_prior: float,
+    validation_trials: int,
     eval_trials: int,
     device: str | None,
     seed: int,
@@ -467,6 +494,7 @@ def train(
             action_type=action_type,
             dense_reward=reward == "dense",
             contour_features=observe == "contour",
+            allow_z=allow_z,
         )
         scenario.pinch_point()  # fail early on an infeasible default pinch
         out = _run_dir(out, f"train-{contour.name}")
@@ -477,6 +505,7 @@ def train(
         seed=seed,
         device="cpu",
         discrete=scenario.action_type == "discrete",
+        stay_prior=stay_prior if scenario.action_type == "discrete" else 0.0,
     )
     click.echo(f"training {scenario.contour} into {out} ({num_envs} envs, {iterations} iterations, {device})")
     try:
@@ -488,6 +517,7 @@ def train(
             eval_trials=eval_trials,
             progress=not no_progress,
             device=device,
+            validation_trials=validation_trials,
         )
     except KeyboardInterrupt:
         click.echo(f"interrupted: checkpoint saved in {out}; continue with --resume {out}", err=True)
@@ -763,7 +793,7 @@ def _rl_results(
     segments when ``plans`` are given) rolled out for ``trials``."""
     import numpy as np
 
-    from agents.rl import Scenario, rollout_errors, train_contour
+    from agents.rl import RECIPE, STAY_PRIOR, Scenario, rollout_errors, train_contour
     from agents.train import TrainConfig
 
     errors, areas, pinches = [], [], []
@@ -779,7 +809,7 @@ def _rl_results(
         else:
             run = out / "policies" / contour.name
             click.echo(f"  training rl for {contour.name} ({iterations} iterations)", err=True)
-            # The same recipe as 'warpcut train' by default: dense shaping, contour-aware observations.
+            # The same recipe as 'warpcut train' by default (agents.rl.RECIPE).
             planned = {}
             if plans is not None:
                 planned = {
@@ -789,11 +819,12 @@ def _rl_results(
             scenario = Scenario(
                 contour=by_name[contour.name],
                 sim={"noise_std": noise} if noise else {},
-                dense_reward=True,
-                contour_features=True,
+                **RECIPE,
                 **planned,
             )
-            cfg = TrainConfig(num_envs=num_envs, iterations=iterations, seed=seed, device="cpu")
+            cfg = TrainConfig(
+                num_envs=num_envs, iterations=iterations, seed=seed, device="cpu", stay_prior=STAY_PRIOR
+            )
             train_contour(scenario, run, cfg, eval_trials=trials, progress=False, device=device)
         result = rollout_errors(run, trials, seed=seed + 1, device=device)
         errors.append(result["error_vertices"])
@@ -995,7 +1026,7 @@ def run(
     import numpy as np
 
     from agents.evaluation import MethodResult, evaluate_suite
-    from agents.rl import Scenario, rollout_errors, train_contour
+    from agents.rl import RECIPE, STAY_PRIOR, Scenario, rollout_errors, train_contour
     from agents.train import TrainConfig
     from warpcut.contours import load_contour
     from warpcut.io import write_json
@@ -1034,10 +1065,11 @@ def run(
         pinch=[float(v) for v in pinch],
         sim={"resolution": resolution} if resolution != 25 else {},
         segments=[s.tolist() for s in segments],
-        dense_reward=True,
-        contour_features=True,
+        **RECIPE,
     )
-    cfg = TrainConfig(num_envs=num_envs, iterations=settings["iterations"], seed=seed, device="cpu")
+    cfg = TrainConfig(
+        num_envs=num_envs, iterations=settings["iterations"], seed=seed, device="cpu", stay_prior=STAY_PRIOR
+    )
     try:
         train_contour(scenario, out / "rl", cfg, eval_trials=settings["trials"], progress=True, device=device)
     except KeyboardInterrupt:
