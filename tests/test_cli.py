@@ -349,6 +349,8 @@ def test_run_end_to_end_on_a_tiny_budget(tmp_path):
             "17",
             "--candidates",
             "2",
+            "--rl-candidates",
+            "2",
             "--iterations",
             "1",
             "--trials",
@@ -367,15 +369,24 @@ def test_run_end_to_end_on_a_tiny_budget(tmp_path):
         "results.json",
         "regions.png",
         "improvement.png",
-        "rl/latest.pt",
-        "rl/scenario.json",
+        "rl/candidate-0/best.pt",
+        "rl/candidate-0/scenario.json",
+        "rl/candidate-1/best.pt",
     ):
         assert (out / name).is_file(), name
     report = json.loads((tmp_path / "r.json").read_text())
     row = report["rows"][0]
     plan = json.loads((out / "plan.json").read_text())
-    assert row["fixed_pinch"] == pytest.approx(plan["chosen"]["pinch"])  # fixed and rl use the planned pinch
-    assert row["rl_pinch"] == pytest.approx(plan["chosen"]["pinch"])
-    scenario = json.loads((out / "rl" / "scenario.json").read_text())
+    assert row["fixed_pinch"] == pytest.approx(plan["chosen"]["pinch"])  # fixed at the planned pinch
+    # One policy per candidate, the best two by fixed tension; rl uses the one that validated best.
+    feasible = sorted(
+        (c for c in plan["pinch_candidates"] if c["feasible"]), key=lambda c: c["error_vertices"]
+    )
+    runs = report["rl_candidates"]
+    assert [r["pinch"] for r in runs] == [pytest.approx(c["point"]) for c in feasible[:2]]
+    chosen = runs[report["rl_chosen"]]
+    assert chosen["validation_error_vertices"] == min(r["validation_error_vertices"] for r in runs)
+    assert row["rl_pinch"] == pytest.approx(chosen["pinch"])
+    scenario = json.loads((out / chosen["run"] / "scenario.json").read_text())
     assert len(scenario["segments"]) == len(plan["segments"])
     assert {"none", "fixed", "analytic", "rl"} <= {line.split()[0] for line in stdout.splitlines() if line}

@@ -954,9 +954,10 @@ def plan(
 
 
 BUDGETS = {
-    # candidates for the pinch search, PPO iterations, evaluation trials
-    "fast": {"candidates": 8, "iterations": 60, "trials": 10},
-    "paper": {"candidates": 30, "iterations": 200, "trials": 10},
+    # candidates for the pinch search, of which the best rl_candidates (by fixed tension) get a PPO policy
+    # each; PPO iterations per policy; evaluation trials
+    "fast": {"candidates": 8, "rl_candidates": 2, "iterations": 60, "trials": 10},
+    "paper": {"candidates": 30, "rl_candidates": 5, "iterations": 200, "trials": 10},
 }
 
 
@@ -973,11 +974,17 @@ BUDGETS = {
     default="fast",
     show_default=True,
     type=click.Choice(list(BUDGETS)),
-    help="fast: 8 pinch candidates, 60 PPO iterations (a few minutes on 2 CPU cores); "
-    "paper: 30 candidates, 200 iterations.",
+    help="fast: 8 pinch candidates, a PPO policy for each of the best 2, 60 PPO iterations each (a few "
+    "minutes on 2 CPU cores); paper: 30 candidates, policies for the best 5, 200 iterations.",
 )
 @click.option(
     "--candidates", type=click.IntRange(min=1), default=None, help="Override the budget's pinch candidates."
+)
+@click.option(
+    "--rl-candidates",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Override how many of the best candidates (ranked by fixed tension) get their own PPO policy.",
 )
 @click.option(
     "--iterations", type=click.IntRange(min=1), default=None, help="Override the budget's PPO iterations."
@@ -1010,6 +1017,7 @@ def run(
     contour_name: str,
     budget: str,
     candidates: int | None,
+    rl_candidates: int | None,
     iterations: int | None,
     trials: int | None,
     num_envs: int,
@@ -1022,7 +1030,8 @@ def run(
     record_envs: int | None,
     no_plots: bool,
 ) -> None:
-    """The whole pipeline: plan the cut, train RL at the planned pinch, compare none/fixed/analytic/RL."""
+    """The whole pipeline: plan the cut, train RL at the best pinch candidates, compare
+    none/fixed/analytic/RL."""
     import numpy as np
 
     from agents.evaluation import MethodResult, evaluate_suite
@@ -1034,7 +1043,12 @@ def run(
     from warpcut.simulator import resolve_device
 
     settings = dict(BUDGETS[budget])
-    overrides = {"candidates": candidates, "iterations": iterations, "trials": trials}
+    overrides = {
+        "candidates": candidates,
+        "rl_candidates": rl_candidates,
+        "iterations": iterations,
+        "trials": trials,
+    }
     settings.update({k: v for k, v in overrides.items() if v is not None})
     device = resolve_device(device)
     contour = load_contour(contour_name)
@@ -1059,23 +1073,54 @@ def run(
         err=True,
     )
 
-    click.echo(f"[2/3] training RL at the planned pinch ({settings['iterations']} PPO iterations)", err=True)
-    scenario = Scenario(
-        contour=contour_name,
-        pinch=[float(v) for v in pinch],
-        sim={"resolution": resolution} if resolution != 25 else {},
-        segments=[s.tolist() for s in segments],
-        **RECIPE,
+    ranked = sorted(range(len(plan.candidates)), key=lambda c: plan.candidates[c]["error_vertices"])
+    ranked = ranked[: settings["rl_candidates"]]
+    click.echo(
+        f"[2/3] training RL at the best {len(ranked)} pinch candidate(s) "
+        f"({settings['iterations']} PPO iterations each)",
+        err=True,
     )
     cfg = TrainConfig(
         num_envs=num_envs, iterations=settings["iterations"], seed=seed, device="cpu", stay_prior=STAY_PRIOR
     )
-    try:
-        train_contour(scenario, out / "rl", cfg, eval_trials=settings["trials"], progress=True, device=device)
-    except KeyboardInterrupt:
-        click.echo(f"interrupted: checkpoint saved in {out / 'rl'}", err=True)
-        sys.exit(130)
-    rl = rollout_errors(out / "rl", settings["trials"], seed=seed + 1, device=device)
+    rl_runs = []
+    for rank, c in enumerate(ranked):
+        candidate = plan.candidates[c]
+        point = [float(v) for v in candidate["point"]]
+        scenario = Scenario(
+            contour=contour_name,
+            pinch=point,
+            sim={"resolution": resolution} if resolution != 25 else {},
+            segments=[seg.tolist() for seg in plan.ordered_segments(candidate["best_order"])],
+            **RECIPE,
+        )
+        run_dir = out / "rl" / f"candidate-{rank}"
+        try:
+            result = train_contour(
+                scenario, run_dir, cfg, eval_trials=settings["trials"], progress=True, device=device
+            )
+        except KeyboardInterrupt:
+            click.echo(f"interrupted: checkpoint saved in {run_dir}", err=True)
+            sys.exit(130)
+        best = result["summary"]["best"]
+        rl_runs.append(
+            {
+                "run": str(run_dir.relative_to(out)),
+                "pinch": point,
+                "order": [int(k) for k in candidate["best_order"]],
+                "fixed_error_vertices": float(candidate["error_vertices"]),
+                "validation_error_vertices": best["validation_error"],
+                "best_iteration": best["iterations"],
+            }
+        )
+        click.echo(
+            f"      candidate ({point[0]:.1f}, {point[1]:.1f}): fixed {candidate['error_vertices']:.1f}, "
+            f"rl {best['validation_error']:.1f} vertices (validation)",
+            err=True,
+        )
+    # The candidate whose policy validated best wins (the better fixed rank on ties).
+    chosen_rl = min(range(len(rl_runs)), key=lambda k: (rl_runs[k]["validation_error_vertices"], k))
+    rl = rollout_errors(out / rl_runs[chosen_rl]["run"], settings["trials"], seed=seed + 1, device=device)
 
     click.echo(f"[3/3] evaluating none, fixed, analytic, rl: {settings['trials']} trials each", err=True)
     cuts = None
@@ -1097,6 +1142,8 @@ def run(
             on_step=_step_hooks(recorder, cuts),
         )
     report["plan"] = plan.to_json()["chosen"]
+    report["rl_candidates"] = rl_runs
+    report["rl_chosen"] = chosen_rl
     report["budget"] = budget
     report["seconds"] = time.perf_counter() - start
     row = report["rows"][0]
