@@ -1,4 +1,5 @@
-"""Figures of a run, as PNG and SVG written atomically: the Table I comparison and the cut regions.
+"""Figures of a run, as PNG and SVG written atomically: the Table I comparison, the cut regions, a
+training run's learning curve and a cut plan's pinch candidates.
 
 Figures are drawn on ``matplotlib.figure.Figure`` objects (Agg), never through pyplot, so plotting needs
 no display and leaves matplotlib's global state alone.
@@ -7,6 +8,7 @@ no display and leaves matplotlib's global state alone.
 from __future__ import annotations
 
 import io
+import math
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -15,11 +17,13 @@ from pathlib import Path
 import numpy as np
 from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
-from matplotlib.patches import Patch
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch, Rectangle
 
-from warpcut.config import SheetGrid
+from warpcut.config import SheetGrid, SimConfig
 from warpcut.contours import Contour
 from warpcut.io import write_atomic
+from warpcut.planning import Plan, pinch_feasible
 from warpcut.scoring import Score, symmetric_difference
 from warpcut.task import CuttingTask
 
@@ -163,4 +167,211 @@ def plot_regions(cuts: dict[str, FinalCut], out_dir: str | os.PathLike, name: st
     fig.suptitle(
         f"{next(iter(cuts.values())).contour.name}: intended contour (line) over the separated region"
     )
+    return save_figure(fig, out_dir, name)
+
+
+def plot_learning_curve(
+    metrics: Sequence[dict],
+    validation: Sequence[dict],
+    out_dir: str | os.PathLike,
+    name: str = "learning_curve",
+    title: str | None = None,
+) -> list[Path]:
+    """A training run over its learning iterations: errors above, throughput below.
+
+    Top: the mean final error of the training episodes that ended in each iteration (``final_error``,
+    error mm² / intended area; iterations where none ended are skipped) and, on its own y axis on the
+    right, the deterministic policy's validation error in vertices, with its minimum marked (the
+    policy kept as ``best.pt``). Bottom: env steps per second of each iteration.
+
+    Args:
+        metrics: One dict per iteration: ``iteration`` (iterations done, from 1), ``final_error`` (float
+            or None), ``mean_return`` (float or None, not drawn) and ``iteration_steps_per_s``.
+        validation: ``{"iterations": int, "error": float}`` per validation (0 = the initial policy);
+            may be empty.
+        out_dir: Where ``NAME.png`` and ``NAME.svg`` go.
+        name: File name stem.
+        title: Figure title; default "Learning curve".
+
+    Returns:
+        The paths written.
+    """
+    fig = Figure(figsize=(7.5, 6.0), layout="constrained")
+    top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=[2, 1])
+    ended = [(m["iteration"], m["final_error"]) for m in metrics if m.get("final_error") is not None]
+    handles = []
+    if ended:
+        x, y = zip(*ended, strict=True)
+        handles += top.plot(x, y, color="C0", linewidth=1.2, label="final error, training episodes")
+    else:
+        top.text(0.5, 0.5, "no training episode has ended", transform=top.transAxes, ha="center", color="C0")
+    top.set_ylabel("final error (error mm² / intended area)", color="C0")
+    top.tick_params(axis="y", colors="C0")
+    right = top.twinx()
+    if validation:
+        x = [v["iterations"] for v in validation]
+        y = [v["error"] for v in validation]
+        handles += right.plot(x, y, "o-", color="C1", markersize=4, label="validation error (vertices)")
+        best = int(np.argmin(y))
+        handles.append(
+            right.scatter(
+                x[best],
+                y[best],
+                marker="*",
+                s=220,
+                color="C3",
+                zorder=5,
+                label=f"best validation: {y[best]:.1f} vertices at iteration {x[best]}",
+            )
+        )
+    else:
+        right.text(0.5, 0.4, "no validation yet", transform=top.transAxes, ha="center", color="C1")
+    right.set_ylabel("validation error (vertices)", color="C1")
+    right.tick_params(axis="y", colors="C1")
+    if handles:
+        top.legend(handles=handles, loc="upper right", fontsize="small")
+    rates = [(m["iteration"], m["iteration_steps_per_s"]) for m in metrics if m.get("iteration_steps_per_s")]
+    if rates:
+        x, y = zip(*rates, strict=True)
+        bottom.plot(x, y, color="C2", linewidth=1.2)
+        bottom.set_ylim(bottom=0.0)
+    bottom.set_ylabel("env steps/s")
+    bottom.set_xlabel("learning iteration")
+    top.grid(alpha=0.3)
+    bottom.grid(alpha=0.3)
+    fig.suptitle(title or "Learning curve")
+    return save_figure(fig, out_dir, name)
+
+
+def feasible_grid(
+    plan: Plan, config: SimConfig, step_mm: float = 1.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pinch feasibility sampled on a grid over the sheet, as :func:`~warpcut.planning.plan_cut` judged
+    it: :func:`~warpcut.planning.pinch_feasible` with the plan's contour, segments and arm.
+
+    Args:
+        plan: The plan (its contour, segments, ``arm_radius_mm`` and ``arm_length_mm``).
+        config: The simulation parameters the plan was made with (sheet size, grasp radius, fixture).
+        step_mm: Grid spacing (mm), > 0.
+
+    Returns:
+        ``(xs, ys, feasible)``: (NX,) and (NY,) sample coordinates (mm), and (NY, NX) bool, ``feasible[j, i]``
+        for the point ``(xs[i], ys[j])``.
+    """
+    if not step_mm > 0:
+        raise ValueError(f"step_mm: must be > 0 (got {step_mm!r})")
+    xs = np.arange(0.0, config.width_mm + 1e-9, step_mm)
+    ys = np.arange(0.0, config.height_mm + 1e-9, step_mm)
+    points = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    feasible = pinch_feasible(
+        points, plan.contour, config, plan.segments, plan.arm_radius_mm, plan.arm_length_mm
+    )
+    return xs, ys, feasible.reshape(len(ys), len(xs))
+
+
+def plot_pinch_candidates(
+    plan: Plan, config: SimConfig, out_dir: str | os.PathLike, name: str = "pinch_candidates"
+) -> list[Path]:
+    """The plan on the rest sheet: where a pinch is feasible, the contour and its segments, every
+    candidate coloured by its error with fixed tension, the rejected points and the chosen pinch.
+
+    The feasible region is :func:`feasible_grid` at 1 mm (shaded green); segments are drawn in cutting
+    order with their notch (circle, where the scissors enter) and termination (square); candidates are
+    coloured by ``error_vertices`` (their best order's, colour bar); rejected points (``plan.rejected``,
+    e.g. the centroid when infeasible) are crosses labelled with the rules they break; the chosen pinch
+    is ringed.
+
+    Args:
+        plan: From :func:`~warpcut.planning.plan_cut`.
+        config: The simulation parameters the plan was made with.
+        out_dir: Where ``NAME.png`` and ``NAME.svg`` go.
+        name: File name stem.
+
+    Returns:
+        The paths written.
+    """
+    fig = Figure(figsize=(7.2, 6.2), layout="constrained")
+    ax = fig.add_subplot()
+    xs, ys, feasible = feasible_grid(plan, config)
+    step = xs[1] - xs[0] if len(xs) > 1 else 1.0
+    ax.imshow(
+        feasible,
+        origin="lower",
+        extent=(xs[0] - step / 2, xs[-1] + step / 2, ys[0] - step / 2, ys[-1] + step / 2),
+        cmap=ListedColormap(["#eeeeee", "#cdeccd"]),
+        vmin=0,
+        vmax=1,
+        interpolation="nearest",
+    )
+    ax.add_patch(Rectangle((0.0, 0.0), config.width_mm, config.height_mm, fill=False, color="black"))
+    handles = [
+        Patch(color="#cdeccd", label="feasible pinch region"),
+        Patch(color="#eeeeee", label="infeasible"),
+    ]
+    points = plan.contour.points
+    if plan.contour.closed:
+        points = np.vstack([points, points[:1]])
+    handles += ax.plot(
+        points[:, 0], points[:, 1], color="black", linewidth=0.8, linestyle="--", label="contour"
+    )
+    for rank, k in enumerate(plan.order):
+        segment = plan.segments[k]
+        colour = f"C{rank % 10}"
+        handles += ax.plot(
+            segment.points[:, 0],
+            segment.points[:, 1],
+            color=colour,
+            linewidth=2.0,
+            label=f"segment {k}, cut {rank + 1}.",
+        )
+        ax.plot(*segment.notch, marker="o", color=colour, markersize=7, markeredgecolor="black")
+        ax.plot(*segment.termination, marker="s", color=colour, markersize=6, markeredgecolor="black")
+    handles.append(
+        Line2D([], [], marker="o", color="grey", markeredgecolor="black", linestyle="", label="notch")
+    )
+    handles.append(
+        Line2D([], [], marker="s", color="grey", markeredgecolor="black", linestyle="", label="termination")
+    )
+    if plan.candidates:
+        candidates = np.array([c["point"] for c in plan.candidates], dtype=np.float64)
+        errors = np.array([c["error_vertices"] for c in plan.candidates], dtype=np.float64)
+        dots = ax.scatter(
+            candidates[:, 0], candidates[:, 1], c=errors, cmap="viridis_r", s=40, edgecolors="black", zorder=4
+        )
+        fig.colorbar(dots, ax=ax, label="error with fixed tension (vertices)", shrink=0.8)
+    for rejected in plan.rejected:
+        violates = ", ".join(rejected.get("violates", [])) or "infeasible"
+        handles += ax.plot(
+            *rejected["point"],
+            marker="x",
+            color="red",
+            markersize=10,
+            markeredgewidth=2,
+            linestyle="",
+            label=f"rejected ({violates})",
+            zorder=5,
+        )
+    pinch = np.asarray(plan.chosen["pinch"], dtype=np.float64)
+    handles += ax.plot(
+        *pinch,
+        marker="o",
+        markersize=16,
+        markerfacecolor="none",
+        markeredgecolor="red",
+        markeredgewidth=2.5,
+        linestyle="",
+        label=f"chosen ({pinch[0]:.1f}, {pinch[1]:.1f}): {plan.chosen['error_vertices']:.1f} vertices",
+        zorder=6,
+    )
+    ax.set_xlim(-2.0, config.width_mm + 2.0)
+    ax.set_ylim(-2.0, config.height_mm + 2.0)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (mm)")
+    length = "inf" if math.isinf(plan.arm_length_mm) else f"{plan.arm_length_mm:g} mm"
+    ax.set_title(
+        f"{plan.contour.name}: {len(plan.candidates)} pinch candidate(s), "
+        f"arm radius {plan.arm_radius_mm:g} mm, length {length}"
+    )
+    fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize="small", frameon=False)
     return save_figure(fig, out_dir, name)
