@@ -142,7 +142,7 @@ class Simulator:
         self.alive = self._alive[0]
         if backend not in BACKENDS:
             raise ValueError(f"backend: choose one of {BACKENDS} (got {backend!r})")
-        is_cpu = wp.get_device(self.device).is_cpu
+        is_cpu = self._is_cpu = wp.get_device(self.device).is_cpu
         self.backend = ("simd" if is_cpu else "colours") if backend == "auto" else backend
         if self.backend in ("simd", "fused") and not is_cpu:
             raise ValueError(
@@ -454,6 +454,29 @@ class Simulator:
         """(B, N) bool: False where the scissors removed the vertex."""
         self._sync_flat()
         return self.alive.numpy().reshape(self.num_envs, self.grid.num_vertices).astype(bool)
+
+    def read_envs(self, envs: np.ndarray | list[int]) -> tuple[np.ndarray, np.ndarray]:
+        """Positions (k, N, 3) float32 (mm) and alive masks (k, N) bool of the envs ``envs`` (k,) only.
+
+        The same values as ``positions()[envs]`` and ``alive_mask()[envs]``, but only those envs are read:
+        the ``simd`` backend reads their lanes from the packed blocks instead of unpacking the whole batch,
+        and on a GPU only their slices are copied. For recorders that watch a few envs of a big batch.
+        """
+        envs = np.asarray(envs, dtype=np.intp).reshape(-1).tolist()
+        if any(not 0 <= env < self.num_envs for env in envs):
+            raise ValueError(f"envs: indices must lie in [0, {self.num_envs}) (got {envs})")
+        if not self._flat_current:
+            return self._simd.read_envs(envs)
+        n = self.grid.num_vertices
+        if self._is_cpu:
+            x = self.x.numpy().reshape(self.num_envs, n, 3)[envs]
+            return x, self.alive.numpy().reshape(self.num_envs, n)[envs].astype(bool)
+        positions = np.empty((len(envs), n, 3), dtype=np.float32)
+        alive = np.empty((len(envs), n), dtype=bool)
+        for k, env in enumerate(envs):
+            positions[k] = self.x[env * n : (env + 1) * n].numpy()
+            alive[k] = self.alive[env * n : (env + 1) * n].numpy() != 0
+        return positions, alive
 
     def displacements(self) -> np.ndarray:
         """(B, 3) grasp displacement from where it pinched (mm)."""
