@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -24,6 +25,7 @@ from warpcut.config import SimConfig
 from warpcut.contours import Contour, load_contour
 from warpcut.io import write_json
 from warpcut.planning import nearest_feasible
+from warpcut.task import CuttingTask
 
 
 @dataclass
@@ -105,7 +107,8 @@ def train_contour(
     eval_trials: int = 10,
     progress: bool = True,
     device: str | None = None,
-    validation_trials: int = 8,
+    validation_trials: int = 16,
+    on_step: Callable[[str], Callable[[CuttingTask, np.ndarray | None], None] | None] | None = None,
 ) -> dict:
     """Train a PPO tensioner for ``scenario`` into ``out_dir``, then evaluate it.
 
@@ -123,6 +126,8 @@ def train_contour(
         device: Warp device of the simulator.
         validation_trials: Held-out episodes per validation; 0 disables validation (the run's policy is
             then the last one).
+        on_step: Step-callback factory for the final evaluation (see :func:`evaluate_run`), e.g. a
+            recorder's ``on_step``.
 
     Returns:
         ``{"summary": training summary, "evaluation": evaluation of the run's policy}``.
@@ -145,7 +150,7 @@ def train_contour(
             return float(np.mean(policy_errors(actor, validation_env, scenario, seed)["error_vertices"]))
 
     summary = train(env, cfg, out_dir, resume=resume, progress=progress, validate=validate)
-    evaluation = evaluate_run(out_dir, trials=eval_trials, seed=cfg.seed + 1, device=device)
+    evaluation = evaluate_run(out_dir, trials=eval_trials, seed=cfg.seed + 1, device=device, on_step=on_step)
     write_json(out_dir / "evaluation.json", evaluation)
     return {"summary": summary, "evaluation": evaluation}
 
@@ -165,22 +170,34 @@ def rollout_errors(
     seed: int = 0,
     device: str | None = None,
     scenario: Scenario | None = None,
+    on_step: Callable[[CuttingTask, np.ndarray | None], None] | None = None,
 ) -> dict:
     """Run the trained policy (deterministic: argmax action) for ``trials`` seeded episodes at once.
 
     Trials differ by their fiducials and process-noise streams. Returns per-trial errors (vertices,
-    mm^2) and the pinch point used.
+    mm^2) and the pinch point used. ``on_step(task, moves)`` is called after the reset (moves ``None``)
+    and after every step, as in :meth:`warpcut.task.CuttingTask.run` (e.g. a recorder's callback).
     """
     scenario = scenario or load_scenario(run_dir)
     actor = load_policy(run_dir)
     env = scenario.vec_env(trials, device=device)
-    return policy_errors(actor, env, scenario, seed=seed)
+    return policy_errors(actor, env, scenario, seed=seed, on_step=on_step)
 
 
-def policy_errors(actor: torch.nn.Module, env: PatternCutVecEnv, scenario: Scenario, seed: int) -> dict:
-    """One deterministic episode of ``actor`` in every env of ``env`` (reset with ``seed``)."""
+def policy_errors(
+    actor: torch.nn.Module,
+    env: PatternCutVecEnv,
+    scenario: Scenario,
+    seed: int,
+    on_step: Callable[[CuttingTask, np.ndarray | None], None] | None = None,
+) -> dict:
+    """One deterministic episode of ``actor`` in every env of ``env`` (reset with ``seed``); see
+    :func:`rollout_errors`. Steps the env's scene directly, so the sheet is not reset after the last step
+    (the vector env would reset it in the same call) and ``on_step`` sees the finished cut."""
     trials = env.num_envs
     obs, _ = env.reset(seed=seed)
+    if on_step is not None:
+        on_step(env.task, None)
     errors = errors_mm2 = None
     with torch.inference_mode():
         for _ in range(env.task.num_steps):
@@ -188,10 +205,11 @@ def policy_errors(actor: torch.nn.Module, env: PatternCutVecEnv, scenario: Scena
             action = actor(_tensordict(obs_td, trials)).cpu().numpy().reshape(trials, -1)
             if scenario.action_type == "discrete":
                 action = action[:, 0].astype(np.int64)
-            obs, _, terminated, truncated, info = env.step(action)
-            if np.any(terminated | truncated):
-                final = info["final_info"]
-                errors, errors_mm2 = np.asarray(final["error_vertices"]), np.asarray(final["error_mm2"])
+            obs, _, terminated, truncated, info = env.scene.step(action)
+            if on_step is not None:
+                on_step(env.task, env.scene.moves(action))
+            if terminated or truncated:
+                errors, errors_mm2 = np.asarray(info["error_vertices"]), np.asarray(info["error_mm2"])
                 break
     if errors is None:
         raise RuntimeError(f"{scenario.contour}: the episode did not end within {env.task.num_steps} steps")
@@ -204,17 +222,35 @@ def _tensordict(groups: dict[str, torch.Tensor], batch: int):
     return TensorDict(groups, batch_size=[batch])
 
 
-def evaluate_run(run_dir: str | Path, trials: int = 10, seed: int = 1, device: str | None = None) -> dict:
-    """The trained policy against no tension on its own scenario (paired by trial)."""
+def evaluate_run(
+    run_dir: str | Path,
+    trials: int = 10,
+    seed: int = 1,
+    device: str | None = None,
+    on_step: Callable[[str], Callable[[CuttingTask, np.ndarray | None], None] | None] | None = None,
+) -> dict:
+    """The trained policy against no tension on its own scenario (paired by trial).
+
+    ``on_step`` maps a method's name (``"rl"``, ``"none"``) to the step callback of its batch, as in
+    :func:`agents.evaluation.evaluate_suite` (e.g. ``recorder.on_step``).
+    """
     from agents.evaluation import MethodSpec, ci95, paired_improvement, run_method
 
     scenario = load_scenario(run_dir)
     contour = scenario.load_contour()
     start = time.perf_counter()
-    rl = rollout_errors(run_dir, trials, seed=seed, device=device, scenario=scenario)
+    hook = on_step or (lambda method: None)
+    rl = rollout_errors(run_dir, trials, seed=seed, device=device, scenario=scenario, on_step=hook("rl"))
     segments = None if scenario.segments is None else [[np.asarray(p) for p in scenario.segments]]
     none = run_method(
-        [contour], MethodSpec([None], None), trials, scenario.sim_config(), device, seed, segments=segments
+        [contour],
+        MethodSpec([None], None),
+        trials,
+        scenario.sim_config(),
+        device,
+        seed,
+        on_step=hook("none"),
+        segments=segments,
     ).errors
     improvement = paired_improvement(none[0], rl["error_vertices"])
     return {

@@ -11,6 +11,7 @@ import pytest
 from click.testing import CliRunner
 
 from warpcut.cli import main
+from warpcut.recording import read_summary
 
 
 def invoke(args):
@@ -165,7 +166,7 @@ def test_train_resume_export_and_evaluate_with_checkpoints(tmp_path):
     run = tmp_path / "runs" / "circle-small"
     common = ["--num-envs", "4", "--steps-per-env", "4", "--eval-trials", "2", "--no-progress"]
     code, stdout, _ = invoke(
-        ["train", "--contour", "circle-small", "--iterations", "2", "--out", str(run), *common]
+        ["train", "--contour", "circle-small", "--iterations", "2", "--out", str(run), "--record", *common]
     )
     assert code == 0, stdout
     for name in (
@@ -174,9 +175,15 @@ def test_train_resume_export_and_evaluate_with_checkpoints(tmp_path):
         "summary.json",
         "evaluation.json",
         "latest.pt",
+        "best.pt",
         "model_1.pt",
+        "recording.rrd",
     ):
         assert (run / name).is_file(), name
+    # The final evaluation is recorded: the trained policy and no tension, each in its own tree.
+    entities = read_summary(run / "recording.rrd").entity_paths
+    assert "/rl/env_0/sheet" in entities and "/none/env_0/sheet" in entities
+    assert "/rl/env_1/sheet" not in entities
     assert any(p.name.startswith("events.out.tfevents") for p in run.iterdir())
     assert json.loads((run / "summary.json").read_text())["iterations"] == 2
 
@@ -361,9 +368,12 @@ def test_run_end_to_end_on_a_tiny_budget(tmp_path):
             str(out),
             "--json",
             str(tmp_path / "r.json"),
+            "--record",
         ]
     )
     assert code == 0, stdout
+    entities = read_summary(out / "recording.rrd").entity_paths
+    assert {f"/{m}/env_0/sheet" for m in ("none", "fixed", "analytic", "rl")} <= set(entities)
     for name in (
         "plan.json",
         "results.json",

@@ -426,7 +426,7 @@ def _run_dir(out: Path | None, prefix: str) -> Path:
 )
 @click.option(
     "--validation-trials",
-    default=8,
+    default=16,
     show_default=True,
     type=click.IntRange(min=0),
     help="Held-out episodes scoring the policy every 10 iterations; the best is kept (best.pt). 0: off, "
@@ -453,6 +453,7 @@ def _run_dir(out: Path | None, prefix: str) -> Path:
     default=None,
     help="Run directory or checkpoint to continue from (writes into it unless --out is given).",
 )
+@_record_option("of the final evaluation, in the run directory")
 @click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
 def train(
     contour_name: str,
@@ -472,6 +473,7 @@ def train(
     seed: int,
     out: Path | None,
     resume: Path | None,
+    record_envs: int | None,
     no_progress: bool,
 ) -> None:
     """Train a PPO tensioning policy (rsl-rl, 2x32 MLP, 1 mm moves) for one contour."""
@@ -509,16 +511,18 @@ def train(
     )
     click.echo(f"training {scenario.contour} into {out} ({num_envs} envs, {iterations} iterations, {device})")
     try:
-        result = train_contour(
-            scenario,
-            out,
-            cfg,
-            resume=resume,
-            eval_trials=eval_trials,
-            progress=not no_progress,
-            device=device,
-            validation_trials=validation_trials,
-        )
+        with _recorder(out, record_envs) as recorder:
+            result = train_contour(
+                scenario,
+                out,
+                cfg,
+                resume=resume,
+                eval_trials=eval_trials,
+                progress=not no_progress,
+                device=device,
+                validation_trials=validation_trials,
+                on_step=None if recorder is None else recorder.on_step,
+            )
     except KeyboardInterrupt:
         click.echo(f"interrupted: checkpoint saved in {out}; continue with --resume {out}", err=True)
         sys.exit(130)
@@ -532,6 +536,8 @@ def train(
         f"rl {e['rl_error_vertices']:.1f} vertices, improvement {e['rl_improvement_pct']:+.1f}% "
         f"± {e['rl_ci95']:.1f}"
     )
+    if recorder is not None:
+        _echo_written([recorder.path])
     click.echo(f"wrote {out}")
 
 
@@ -627,7 +633,7 @@ EVALUATE_METHODS = ("none", "fixed", "analytic", "rl")
     help="Pinch candidates per plan.",
 )
 @_arm_length_option
-@_record_option("in the run directory; the rl column is not recorded")
+@_record_option("in the run directory; of the first contour")
 @_plots_option("improvement.png/svg in the run directory")
 def evaluate(
     contour_args: tuple[str, ...],
@@ -689,22 +695,23 @@ def evaluate(
             )
         write_json(out / "plans.json", {p.contour.name: p.to_json() for p in plans})
     extra = {}
-    if "rl" in names:
-        extra["rl"] = _rl_results(
-            contours,
-            by_name,
-            checkpoints,
-            out,
-            trials,
-            noise,
-            iterations,
-            num_envs,
-            device,
-            seed,
-            MethodResult,
-            plans,
-        )
     with _recorder(out, record_envs) as recorder:
+        if "rl" in names:
+            extra["rl"] = _rl_results(
+                contours,
+                by_name,
+                checkpoints,
+                out,
+                trials,
+                noise,
+                iterations,
+                num_envs,
+                device,
+                seed,
+                MethodResult,
+                plans,
+                None if recorder is None else recorder.on_step("rl"),
+            )
         report = evaluate_suite(
             contours,
             names,
@@ -787,10 +794,22 @@ def replay(path: Path, web: bool) -> None:
 
 
 def _rl_results(
-    contours, by_name, checkpoints, out, trials, noise, iterations, num_envs, device, seed, result_type, plans
+    contours,
+    by_name,
+    checkpoints,
+    out,
+    trials,
+    noise,
+    iterations,
+    num_envs,
+    device,
+    seed,
+    result_type,
+    plans,
+    on_step=None,
 ):
     """Per contour, a trained run (from ``checkpoints`` or trained now, at the planned pinch and
-    segments when ``plans`` are given) rolled out for ``trials``."""
+    segments when ``plans`` are given) rolled out for ``trials``; ``on_step`` sees the first contour's."""
     import numpy as np
 
     from agents.rl import RECIPE, STAY_PRIOR, Scenario, rollout_errors, train_contour
@@ -826,7 +845,8 @@ def _rl_results(
                 num_envs=num_envs, iterations=iterations, seed=seed, device="cpu", stay_prior=STAY_PRIOR
             )
             train_contour(scenario, run, cfg, eval_trials=trials, progress=False, device=device)
-        result = rollout_errors(run, trials, seed=seed + 1, device=device)
+        hook = on_step if k == 0 else None
+        result = rollout_errors(run, trials, seed=seed + 1, device=device, on_step=hook)
         errors.append(result["error_vertices"])
         areas.append(result["error_mm2"])
         pinches.append(result["pinch"])
@@ -1120,7 +1140,6 @@ def run(
         )
     # The candidate whose policy validated best wins (the better fixed rank on ties).
     chosen_rl = min(range(len(rl_runs)), key=lambda k: (rl_runs[k]["validation_error_vertices"], k))
-    rl = rollout_errors(out / rl_runs[chosen_rl]["run"], settings["trials"], seed=seed + 1, device=device)
 
     click.echo(f"[3/3] evaluating none, fixed, analytic, rl: {settings['trials']} trials each", err=True)
     cuts = None
@@ -1129,6 +1148,14 @@ def run(
 
         cuts = FinalCuts()
     with _recorder(out, record_envs) as recorder:
+        hooks = _step_hooks(recorder, cuts)
+        rl = rollout_errors(
+            out / rl_runs[chosen_rl]["run"],
+            settings["trials"],
+            seed=seed + 1,
+            device=device,
+            on_step=None if hooks is None else hooks("rl"),
+        )
         report = evaluate_suite(
             [contour],
             ["none", "fixed", "analytic", "rl"],
@@ -1139,7 +1166,7 @@ def run(
             segments=[segments],
             pinches={"fixed": [pinch]},
             extra={"rl": MethodResult(rl["error_vertices"][None], rl["error_mm2"][None], [rl["pinch"]])},
-            on_step=_step_hooks(recorder, cuts),
+            on_step=hooks,
         )
     report["plan"] = plan.to_json()["chosen"]
     report["rl_candidates"] = rl_runs
