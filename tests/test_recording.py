@@ -3,14 +3,17 @@
 import json
 import sys
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
 from agents.evaluation import compare_policies
+from warpcut import recording
 from warpcut.cli import main
-from warpcut.config import SimConfig
+from warpcut.config import SheetGrid, SimConfig
 from warpcut.contours import load_contour
-from warpcut.recording import Recorder, read_summary
+from warpcut.recording import STRAIN_FULL_SCALE, Recorder, _ramp, read_summary, vertex_strain
+from warpcut.simulator import Simulator, colour_springs
 from warpcut.task import CuttingTask
 
 RESOLUTION = 9
@@ -187,3 +190,159 @@ def test_replay_of_a_missing_or_bad_file_exits_2_with_one_line(tmp_path, capfd, 
     assert exit_info.value.code == 2
     err = [line for line in capfd.readouterr().err.strip().splitlines() if "Warp CUDA warning" not in line]
     assert len(err) == 1 and err[0].startswith("error: ") and message in err[0], err
+
+
+def read_columns(path) -> dict[tuple[str, str], list]:
+    """Every (entity, component) of a recording as its (step, value) pairs sorted by step; static data
+    under step None."""
+    from rerun.chunk import RrdReader
+
+    reader = RrdReader(path)
+    columns: dict[tuple[str, str], list] = {}
+    for chunk in reader.stream(store=reader.recordings()[0]):
+        if chunk.entity_path.startswith("/__"):
+            continue
+        batch = chunk.to_record_batch()
+        steps = batch.column("step").to_pylist() if "step" in batch.schema.names else [None] * batch.num_rows
+        for name in batch.schema.names:
+            if name in ("rerun.controls.RowId", "step", "sim_time"):
+                continue
+            columns.setdefault((chunk.entity_path, name), []).extend(
+                zip(steps, batch.column(name).to_pylist(), strict=True)
+            )
+    return {
+        key: sorted(values, key=lambda sv: -1 if sv[0] is None else sv[0]) for key, values in columns.items()
+    }
+
+
+@pytest.mark.parametrize("backend", ["simd", "fused", "colours"])
+def test_read_envs_reads_only_the_asked_envs_and_the_same_values(backend):
+    sim = Simulator(SimConfig(resolution=RESOLUTION, noise_std=0.05), 11, device="cpu", backend=backend)
+    sim.reset(np.full((11, 2), 50.0))
+    envs = [10, 0, 8]
+    for _ in range(3):
+        positions, alive = sim.read_envs(envs)  # before any update and between updates
+        assert positions.dtype == np.float32 and alive.dtype == bool
+        assert np.array_equal(positions, sim.positions()[envs])
+        assert np.array_equal(alive, sim.alive_mask()[envs])
+        sim.set_tip(np.tile([50.0, 50.0, 0.0, 1.0], (11, 1)))
+        sim.update()
+    with pytest.raises(ValueError, match="envs"):
+        sim.read_envs([11])
+
+
+def test_read_envs_leaves_the_simulation_bit_identical():
+    def run(read: bool) -> np.ndarray:
+        sim = Simulator(SimConfig(resolution=RESOLUTION, noise_std=0.05), 9, device="cpu", seed=2)
+        sim.reset(np.full((9, 2), 40.0))
+        for _ in range(4):
+            sim.update()
+            if read:
+                sim.read_envs([0, 8])
+        return sim.positions()
+
+    assert np.array_equal(run(True), run(False))
+
+
+def test_colour_by_is_validated(tmp_path):
+    with pytest.raises(ValueError, match="colour_by"):
+        Recorder(tmp_path / "r.rrd", colour_by="stress")
+    with pytest.raises(ValueError, match="every"):
+        Recorder(tmp_path / "r.rrd", every=0)
+    assert not list(tmp_path.iterdir())
+
+
+def test_vertex_strain_is_the_mean_over_live_springs():
+    for config in (
+        SimConfig(resolution=RESOLUTION),
+        SimConfig(resolution=7, springs=("structural", "bending")),
+    ):
+        grid = SheetGrid.from_config(config)
+        rng = np.random.default_rng(0)
+        rest = np.column_stack([grid.material, np.zeros(grid.num_vertices)])
+        positions = rest[None] + rng.normal(0.0, 0.3, (3, grid.num_vertices, 3))
+        alive = rng.random((3, grid.num_vertices)) > 0.2
+        expected = np.zeros((3, grid.num_vertices))
+        count = np.zeros((3, grid.num_vertices))
+        for a, b, length in colour_springs(grid, config.springs):
+            for f in range(3):
+                live = alive[f, a] & alive[f, b]
+                strain = np.abs(np.linalg.norm(positions[f, a] - positions[f, b], axis=1) / length - 1) * live
+                for ends in (a, b):
+                    np.add.at(expected[f], ends, strain)
+                    np.add.at(count[f], ends, live)
+        expected /= np.maximum(count, 1)
+        got = vertex_strain(positions, alive, grid, config.springs)
+        assert got.shape == expected.shape and np.allclose(got, expected, atol=1e-5)
+        assert np.all(got[count == 0] == 0.0)
+    # A sheet at rest is unstrained.
+    assert np.all(
+        vertex_strain(rest[None], np.ones((1, grid.num_vertices), bool), grid, config.springs) < 1e-6
+    )
+
+
+@pytest.mark.parametrize("colour_by", ["strain", "height"])
+def test_vertex_colours_follow_the_chosen_field(tmp_path, colour_by):
+    config = SimConfig(resolution=RESOLUTION)
+    task = CuttingTask(
+        config, load_contour("circle-small"), device="cpu", pinch_points=np.array([50.0, 50.0])
+    )
+    with Recorder(tmp_path / "r.rrd", colour_by=colour_by) as recorder:
+        task.run(lambda t: np.array([[0.5, 0.0, 0.0]]), on_step=recorder.on_step("fixed"))
+    columns = read_columns(tmp_path / "r.rrd")
+    colours = columns[("/fixed/env_0/sheet", "Mesh3D:vertex_colors")]
+    positions = columns[("/fixed/env_0/sheet", "Mesh3D:vertex_positions")]
+    assert [s for s, _ in colours] == list(range(task.num_steps + 1))
+    last = np.array(positions[-1][1], dtype=np.float32)[None]
+    alive = task.sim.alive_mask()
+    if colour_by == "strain":
+        expected = _ramp(vertex_strain(last, alive, task.grid, config.springs), 0.0, STRAIN_FULL_SCALE)
+    else:
+        first = np.array(positions[0][1])[:, 2]
+        expected = _ramp(last[..., 2], first.min(), max(first.max(), first.min() + 1.0))
+    assert np.array_equal(np.array(colours[-1][1], dtype=np.uint32), expected[0])
+    (info,) = columns[("/fixed/env_0/info", "TextDocument:text")][0][1]
+    assert f"vertex colours: {colour_by}" in info
+
+
+def test_the_recorded_error_is_the_score(tmp_path):
+    task = CuttingTask(
+        SimConfig(resolution=RESOLUTION),
+        load_contour("fls-circle"),
+        device="cpu",
+        pinch_points=np.array([50.0, 50.0]),
+    )
+    with Recorder(tmp_path / "r.rrd") as recorder:
+        score = task.run(lambda t: np.array([[0.3, 0.2, 0.0]]), on_step=recorder.on_step("fixed"))
+    errors = read_columns(tmp_path / "r.rrd")[("/fixed/env_0/error_vertices", "Scalars:scalars")]
+    assert [s for s, _ in errors] == list(range(task.num_steps + 1))
+    assert errors[-1][1] == [score.error_vertices[0]]
+    assert errors[0][1] == [float(score.intended.sum())]  # uncut: nothing separated yet
+
+
+def test_background_and_inline_recordings_hold_the_same(tmp_path):
+    task = CuttingTask(
+        SimConfig(resolution=RESOLUTION, noise_std=0.02),
+        load_contour("fls-circle"),
+        num_envs=3,
+        pinch_points=np.array([50.0, 45.0]),
+        device="cpu",
+    )
+    for background in (True, False):
+        with Recorder(tmp_path / f"{background}.rrd", envs=2, background=background) as recorder:
+            task.run(lambda t: np.full((3, 3), 0.2), on_step=recorder.on_step("fixed"))
+            task.run(None, on_step=recorder.on_step("none"))
+    assert read_columns(tmp_path / "True.rrd") == read_columns(tmp_path / "False.rrd")
+
+
+def test_a_failure_on_the_worker_surfaces_and_the_file_remains(tmp_path, monkeypatch):
+    def fail(*args, **kwargs):
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr(recording._Episode, "_send_env", fail)
+    task = CuttingTask(SimConfig(resolution=RESOLUTION), load_contour("circle-small"), device="cpu")
+    path = tmp_path / "r.rrd"
+    with pytest.raises(RuntimeError, match="boom"), Recorder(path) as recorder:
+        task.run(None, on_step=recorder.on_step("none"))
+    assert read_summary(path).frames == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.rrd"]
