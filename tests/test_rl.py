@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from agents.rl import RECIPE, STAY_PRIOR, Scenario, evaluate_run, load_scenario, rollout_errors, train_contour
+from agents.rl import RECIPE, Scenario, evaluate_run, load_scenario, rollout_errors, train_contour
 from agents.train import TrainConfig
 
 
@@ -55,14 +55,16 @@ def test_mismatched_action_type_is_reported(tmp_path):
 @pytest.mark.slow
 def test_ppo_learns_to_lift_the_parabola(tmp_path):
     """A seeded learning test on the real env (~30 s): on ``parabola`` with the grasp at the centroid, the
-    open-loop scissors pass over a sheet that sags out of their reach, so holding still (the initial policy,
-    ``stay_prior``) cuts as badly as no tension; lifting the sheet (+z) is what helps. PPO must find it."""
+    open-loop scissors pass over a sheet that sags out of their reach, so no tension and holding still both
+    leave ~250 vertices of error; lifting the sheet (+z) is what helps (``scripts/constant_moves.py``).
+    From a uniform start (its argmax policy cuts as badly as no tension), PPO must find it. Measured with
+    seeds 0, 1, 2: 16, 17 and 84 vertices after 30 iterations, against 252 with no tension."""
     torch.set_num_threads(1)
     scenario = Scenario(contour="parabola", **RECIPE)
     result = train_contour(
         scenario,
         tmp_path,
-        TrainConfig(num_envs=64, iterations=30, stay_prior=STAY_PRIOR, save_interval=10**6),
+        TrainConfig(num_envs=64, iterations=30, stay_prior=0.0, save_interval=10**6),
         eval_trials=4,
         progress=False,
     )
@@ -70,6 +72,6 @@ def test_ppo_learns_to_lift_the_parabola(tmp_path):
     assert initial["iterations"] == 0
     evaluation = result["evaluation"]
     assert evaluation["none_error_vertices"] > 200
-    assert initial["error"] > 0.9 * evaluation["none_error_vertices"]  # holding still does not help
-    assert evaluation["rl_error_vertices"] < 0.3 * evaluation["none_error_vertices"]
+    assert initial["error"] > 0.8 * evaluation["none_error_vertices"]  # the untrained policy does not help
+    assert evaluation["rl_error_vertices"] < 0.5 * evaluation["none_error_vertices"]
     assert result["summary"]["best"]["iterations"] > 0
