@@ -11,7 +11,9 @@ Times, interleaved in one process so that machine load hits all variants alike, 
   the simulator's stepping threads),
 
 on (a) one 25 x 25 ``fls-circle`` sheet without tension, and (b) a batch of 64 such sheets with env 0
-recorded (N = 1), and prints each recording's overhead over ``plain`` in %.
+recorded (N = 1), and prints each recording's overhead over ``plain`` in %: of the median wall times, the
+median of the overheads of neighbouring runs (paired, less sensitive to load that comes and goes), and of
+the process CPU time (all threads: what recording costs where no core is free).
 
     python scripts/recording_overhead.py [--repeats 15] [--json PATH]
 """
@@ -34,27 +36,30 @@ from warpcut.task import CuttingTask
 VARIANTS = ("plain", "worker thread", "no thread")
 
 
-def time_case(num_envs: int, repeats: int, out_dir: Path, device: str) -> dict[str, list[float]]:
-    """Wall times (s) of every variant on a batch of ``num_envs`` fls-circle sheets, interleaved."""
+def time_case(
+    num_envs: int, repeats: int, out_dir: Path, device: str
+) -> dict[str, list[tuple[float, float]]]:
+    """(wall, process CPU) times (s) of every variant on a batch of ``num_envs`` fls-circle sheets,
+    interleaved."""
     task = CuttingTask(SimConfig(), load_contour("fls-circle"), num_envs=num_envs, device=device)
     counter = iter(range(10**9))
 
-    def run(variant: str) -> float:
-        start = time.perf_counter()
+    def run(variant: str) -> tuple[float, float]:
+        start, cpu = time.perf_counter(), time.process_time()
         if variant == "plain":
             task.run(None)
         else:
             path = out_dir / f"r{next(counter)}.rrd"
             with Recorder(path, envs=1, background=variant == "worker thread") as recorder:
                 task.run(None, on_step=recorder.on_step("none"))
-        elapsed = time.perf_counter() - start
+        elapsed = time.perf_counter() - start, time.process_time() - cpu
         if variant != "plain":
             path.unlink()
         return elapsed
 
     for variant in VARIANTS:  # warm-up: kernels, rerun's and the blueprint's first use
         run(variant)
-    times: dict[str, list[float]] = {v: [] for v in VARIANTS}
+    times: dict[str, list[tuple[float, float]]] = {v: [] for v in VARIANTS}
     for _ in range(repeats):
         for variant in VARIANTS:
             times[variant].append(run(variant))
@@ -71,27 +76,48 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="warpcut-rec-") as tmp:
         for label, num_envs in (("B = 1", 1), ("B = 64, env 0 recorded", 64)):
             times = time_case(num_envs, args.repeats, Path(tmp), args.device)
-            medians = {v: statistics.median(t) for v, t in times.items()}
+            wall = {v: [w for w, _ in t] for v, t in times.items()}
+            cpu = {v: [c for _, c in t] for v, t in times.items()}
+            medians = {v: statistics.median(t) for v, t in wall.items()}
             task = CuttingTask(SimConfig(), load_contour("fls-circle"), num_envs=num_envs, device=args.device)
             steps, threads = task.num_steps, task.sim.threads
+            recorded = [v for v in VARIANTS if v != "plain"]
             report[label] = {
                 "num_envs": num_envs,
                 "steps": steps,
                 "stepping_threads": threads,
                 "cores": os.cpu_count(),
                 "default": "worker thread" if (os.cpu_count() or 1) > threads else "no thread",
-                "median_s": medians,
-                "overhead_pct": {
-                    v: 100.0 * (medians[v] / medians["plain"] - 1.0) for v in VARIANTS if v != "plain"
+                "median_wall_s": medians,
+                "median_cpu_s": {v: statistics.median(t) for v, t in cpu.items()},
+                "overhead_pct": {v: 100.0 * (medians[v] / medians["plain"] - 1.0) for v in recorded},
+                "paired_overhead_pct": {
+                    v: 100.0
+                    * statistics.median(r / p - 1.0 for r, p in zip(wall[v], wall["plain"], strict=True))
+                    for v in recorded
+                },
+                "cpu_overhead_pct": {
+                    v: 100.0 * (statistics.median(cpu[v]) / statistics.median(cpu["plain"]) - 1.0)
+                    for v in recorded
                 },
             }
             print(
                 f"fls-circle 25 x 25, no tension, {label} ({steps} steps + reset; medians of {args.repeats}; "
                 f"{threads} stepping thread(s) on {os.cpu_count()} cores: default {report[label]['default']})"
             )
+            print(f"  {'':<14} {'wall':>9} {'overhead':>9} {'paired':>8} {'CPU':>9} {'overhead':>9}")
             for variant in VARIANTS:
-                extra = "" if variant == "plain" else f"  {report[label]['overhead_pct'][variant]:+6.1f}%"
-                print(f"  {variant:<22} {1e3 * medians[variant]:8.1f} ms{extra}")
+                line = f"  {variant:<14} {1e3 * medians[variant]:6.1f} ms"
+                cpu_ms = 1e3 * report[label]["median_cpu_s"][variant]
+                if variant == "plain":
+                    line += f" {'':>9} {'':>8} {cpu_ms:6.1f} ms"
+                else:
+                    r = report[label]
+                    line += (
+                        f" {r['overhead_pct'][variant]:+8.1f}% {r['paired_overhead_pct'][variant]:+7.1f}%"
+                        f" {cpu_ms:6.1f} ms {r['cpu_overhead_pct'][variant]:+8.1f}%"
+                    )
+                print(line)
     if args.json:
         args.json.write_text(json.dumps(report, indent=2) + "\n")
 

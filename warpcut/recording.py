@@ -5,7 +5,8 @@ A :class:`Recorder` writes one ``.rrd`` file. Every method recorded into it gets
 can be compared side by side in one viewer (the recording carries a blueprint that lays them out so):
 
 * ``sheet``: the sheet as a triangle mesh (two triangles per grid cell, faces touching a cut vertex
-  dropped), vertex colours by height;
+  dropped), vertex colours by strain (default: the mean relative stretch of each vertex's live springs,
+  which shows where the grasp and the clips pull) or by height (``colour_by``);
 * ``contour``: the intended contour carried along with the material (bilinear lookup on the sheet);
 * ``tip`` and ``cut_path``: the scissor tip (red while cutting) and the path it has cut so far;
 * ``grasp/disc`` and ``grasp/displacement``: the grasped vertices and the grasp's displacement;
@@ -14,9 +15,14 @@ can be compared side by side in one viewer (the recording carries a blueprint th
 
 Frames are on the ``step`` timeline (0 after the reset, then one per env step) and on ``sim_time``
 (simulated seconds). Recording must not slow the stepping loop down, so the step callback only copies
-the recorded envs' state; the frames are turned into rerun columns (``send_columns``) and scored in
-batches, every 64 frames and when the recorder closes. ``every=k`` keeps only every k-th step (plus the
-first and the last) for long runs or big sheets.
+the recorded envs' state, and only theirs (:meth:`~warpcut.simulator.Simulator.read_envs`, a few
+microseconds); the frames are scored and turned into rerun columns (``send_columns``) in batches, all
+frames of a batch at once (one labelling for the errors, shifted grid slices for the strain, one sparse
+product for the contour): on a worker thread where a core is free, every :data:`WORKER_BATCH_FRAMES`
+frames, else in the step callback every :data:`FLUSH_FRAMES` frames (``background``). Without a step
+callback (``on_step=None``) :meth:`CuttingTask.run` does none of this. ``every=k`` keeps only every k-th
+step (plus the first and the last) for long runs or big sheets. ``docs/performance.md`` has the measured
+overhead (``scripts/recording_overhead.py``).
 
 The file is written beside its target under a temporary name and renamed when the recorder closes,
 also when an exception or Ctrl-C ends the run early, so a readable recording of what happened so far
@@ -53,8 +59,14 @@ from warpcut.task import CuttingTask, material_cells
 StepCallback = Callable[[CuttingTask, "np.ndarray | None"], None]
 """``on_step(task, action)`` as :meth:`CuttingTask.run` calls it."""
 
-FLUSH_FRAMES = 64
-"""Most frames buffered per method before they are handed on to be sent to the file."""
+FLUSH_FRAMES = 128
+"""Frames buffered per method before they are scored and sent to the file in the step callback (without
+a worker thread). Each batch costs ~3 ms on top of ~0.1 ms per frame (25 x 25 sheet), so few large
+batches are cheapest; 128 frames of a 25 x 25 sheet hold ~1 MB per recorded env."""
+
+WORKER_BATCH_FRAMES = 32
+"""Frames handed to the worker thread at a time (and the rest when the episode ends): smaller batches
+than :data:`FLUSH_FRAMES`, so that little work is left for :meth:`Recorder.close` to wait for."""
 
 COLOUR_FIELDS = ("strain", "height")
 """What the sheet's vertex colours can show (``Recorder(colour_by=...)``)."""
@@ -293,8 +305,9 @@ class _TaskSetup:
 
 class _Episode:
     """The step callback of one method. In the stepping loop it only copies the recorded envs' state
-    (only theirs: :meth:`~warpcut.simulator.Simulator.read_envs`); every :data:`FLUSH_FRAMES` frames
-    it hands the batch to the recorder's worker, which scores it and sends it as rerun columns."""
+    (only theirs: :meth:`~warpcut.simulator.Simulator.read_envs`); every :data:`WORKER_BATCH_FRAMES`
+    frames it hands the batch to the recorder's worker, which scores it and sends it as rerun columns
+    (or, without a worker, does that itself every :data:`FLUSH_FRAMES` frames)."""
 
     def __init__(self, recorder: Recorder, method: str):
         self.recorder = recorder
@@ -323,7 +336,10 @@ class _Episode:
                 None if action is None else np.asarray(action, dtype=np.float64).reshape(-1, 3)[envs],
             )
         )
-        if len(self.frames) >= FLUSH_FRAMES or (task.done and self.threaded):
+        if self.threaded:
+            if len(self.frames) >= WORKER_BATCH_FRAMES or task.done:
+                self.flush()
+        elif len(self.frames) >= FLUSH_FRAMES:
             self.flush()
 
     def _start(self, task: CuttingTask) -> None:
