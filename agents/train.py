@@ -9,7 +9,8 @@ A run directory holds::
                        lowest validation error so far (iteration 0, the initial policy, included);
                        ``policy_checkpoint`` (evaluation, export) prefers it
     events.out.tfevents.*   TensorBoard scalars written by rsl-rl's logger
-    summary.json       status (completed, interrupted, failed), iterations, env steps, speed, last metrics
+    summary.json       status (completed, interrupted, failed), iterations, env steps, speed, last metrics,
+                       ``history`` (every iteration's metrics) and ``validation`` (the validation scores)
 
 The env is any :class:`rsl_rl.env.VecEnv` (``envs.rsl`` for warpcut). Beyond that contract, train() relies on:
 
@@ -273,6 +274,7 @@ def train(
             **runner.metrics,
             "checkpoint": None if runner.checkpoint is None else runner.checkpoint.name,
             "validation": runner.validation,
+            "history": runner.history,
             "best": None
             if runner.best_error is None
             else {"iterations": runner.best_iterations, "validation_error": runner.best_error},
@@ -315,6 +317,7 @@ class Runner(OnPolicyRunner):
         self.checkpoint: Path | None = None
         self.on_iteration: Callable[[int, dict], None] = lambda iterations_done, metrics: None
         self.validation: list[dict] = []
+        self.history: list[dict] = []
         self.best_error: float | None = None
         self.best_iterations: int | None = None
 
@@ -324,6 +327,7 @@ class Runner(OnPolicyRunner):
         state["infos"] = {
             "iterations_done": self.iterations_done,
             "validation": self.validation,
+            "history": self.history,
             "best_error": self.best_error,
             "best_iterations": self.best_iterations,
             **(infos or {}),
@@ -371,12 +375,14 @@ class Runner(OnPolicyRunner):
         self.iterations_done = infos.get("iterations_done", self.current_learning_iteration + 1)
         self.current_learning_iteration = self.iterations_done
         self.validation = list(infos.get("validation") or [])
+        self.history = list(infos.get("history") or [])
         self.best_error = infos.get("best_error")
         self.best_iterations = infos.get("best_iterations")
 
     def _end_iteration(self, it: int, metrics: dict) -> None:
         self.iterations_done = it + 1
         self.metrics = metrics
+        self.history.append({"iteration": self.iterations_done, **metrics})
         self.on_iteration(self.iterations_done, metrics)
 
 

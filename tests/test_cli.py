@@ -178,6 +178,7 @@ def test_train_resume_export_and_evaluate_with_checkpoints(tmp_path):
         "best.pt",
         "model_1.pt",
         "recording.rrd",
+        "learning_curve.png",
     ):
         assert (run / name).is_file(), name
     # The final evaluation is recorded: the trained policy and no tension, each in its own tree.
@@ -268,6 +269,8 @@ def test_evaluate_two_contours_two_trials_writes_table_json(tmp_path):
             assert isinstance(row[f"{m}_improvement_pct"], float) and row[f"{m}_ci95"] >= 0
     assert set(report["mean"]) >= {"fixed_improvement_pct", "analytic_improvement_pct"}
     assert (tmp_path / "run" / "results.json").is_file()
+    for name in ("improvement.png", "plans/fls-circle.png", "plans/s-curve.svg"):
+        assert (tmp_path / "run" / name).stat().st_size > 0, name
 
 
 def test_evaluate_reports_missing_checkpoints(tmp_path, capfd):
@@ -381,7 +384,9 @@ def test_run_end_to_end_on_a_tiny_budget(tmp_path):
         "improvement.png",
         "rl/candidate-0/best.pt",
         "rl/candidate-0/scenario.json",
+        "rl/candidate-0/learning_curve.png",
         "rl/candidate-1/best.pt",
+        "pinch_candidates.png",
     ):
         assert (out / name).is_file(), name
     report = json.loads((tmp_path / "r.json").read_text())

@@ -153,6 +153,8 @@ def test_smoke_run_writes_run_directory(tmp_path, discrete):
     assert summary["status"] == "completed" and summary["iterations"] == 3
     assert summary["env_steps"] == 3 * 24 * NUM_ENVS
     assert summary["checkpoint"] == "model_2.pt" and summary["final_error"] is not None
+    assert [h["iteration"] for h in summary["history"]] == [1, 2, 3]
+    assert summary["history"][-1]["final_error"] == summary["final_error"]
     config = json.loads((tmp_path / "config.json").read_text())
     assert TrainConfig(**config["train"]) == tiny_config(discrete=discrete)
     assert config["env"] == {
@@ -208,6 +210,7 @@ def test_resume_continues_from_checkpoint(tmp_path):
 
     summary = train(ReachEnv(NUM_ENVS), tiny_config(iterations=5), tmp_path, resume=tmp_path, progress=False)
     assert summary["iterations"] == 5 and summary["env_steps"] == 5 * 24 * NUM_ENVS
+    assert [h["iteration"] for h in summary["history"]] == [1, 2, 3, 4, 5]  # carried over the resume
     assert summary["checkpoint"] == "model_4.pt"
     assert torch.load(tmp_path / "model_4.pt", weights_only=True)["infos"]["iterations_done"] == 5
     steps = [event.step for event in _scalars(tmp_path, "Loss/surrogate")]

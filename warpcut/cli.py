@@ -454,6 +454,7 @@ def _run_dir(out: Path | None, prefix: str) -> Path:
     help="Run directory or checkpoint to continue from (writes into it unless --out is given).",
 )
 @_record_option("of the final evaluation, in the run directory")
+@_plots_option("learning_curve.png/svg in the run directory")
 @click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
 def train(
     contour_name: str,
@@ -474,6 +475,7 @@ def train(
     out: Path | None,
     resume: Path | None,
     record_envs: int | None,
+    no_plots: bool,
     no_progress: bool,
 ) -> None:
     """Train a PPO tensioning policy (rsl-rl, 2x32 MLP, 1 mm moves) for one contour."""
@@ -536,6 +538,10 @@ def train(
         f"rl {e['rl_error_vertices']:.1f} vertices, improvement {e['rl_improvement_pct']:+.1f}% "
         f"± {e['rl_ci95']:.1f}"
     )
+    if not no_plots:
+        from warpcut.plots import plot_learning_curve
+
+        _echo_written(plot_learning_curve(s["history"], s["validation"], out, title=scenario.contour))
     if recorder is not None:
         _echo_written([recorder.path])
     click.echo(f"wrote {out}")
@@ -711,6 +717,7 @@ def evaluate(
                 MethodResult,
                 plans,
                 None if recorder is None else recorder.on_step("rl"),
+                plots=not no_plots,
             )
         report = evaluate_suite(
             contours,
@@ -736,9 +743,11 @@ def evaluate(
     if markdown_path:
         write_atomic(markdown_path, table + "\n")
     if not no_plots:
-        from warpcut.plots import plot_improvements
+        from warpcut.plots import plot_improvements, plot_pinch_candidates
 
         _echo_written(plot_improvements(report, names, out))
+        for p in plans or []:
+            _echo_written(plot_pinch_candidates(p, config, out / "plans", name=p.contour.name))
     if recorder is not None:
         _echo_written([recorder.path])
     click.echo(f"wrote {out}")
@@ -807,9 +816,11 @@ def _rl_results(
     result_type,
     plans,
     on_step=None,
+    plots=False,
 ):
     """Per contour, a trained run (from ``checkpoints`` or trained now, at the planned pinch and
-    segments when ``plans`` are given) rolled out for ``trials``; ``on_step`` sees the first contour's."""
+    segments when ``plans`` are given, with its learning curve when ``plots``) rolled out for ``trials``;
+    ``on_step`` sees the first contour's."""
     import numpy as np
 
     from agents.rl import RECIPE, STAY_PRIOR, Scenario, rollout_errors, train_contour
@@ -844,7 +855,13 @@ def _rl_results(
             cfg = TrainConfig(
                 num_envs=num_envs, iterations=iterations, seed=seed, device="cpu", stay_prior=STAY_PRIOR
             )
-            train_contour(scenario, run, cfg, eval_trials=trials, progress=False, device=device)
+            summary = train_contour(scenario, run, cfg, eval_trials=trials, progress=False, device=device)[
+                "summary"
+            ]
+            if plots:
+                from warpcut.plots import plot_learning_curve
+
+                plot_learning_curve(summary["history"], summary["validation"], run, title=contour.name)
         hook = on_step if k == 0 else None
         result = rollout_errors(run, trials, seed=seed + 1, device=device, on_step=hook)
         errors.append(result["error_vertices"])
@@ -1123,6 +1140,12 @@ def run(
             click.echo(f"interrupted: checkpoint saved in {run_dir}", err=True)
             sys.exit(130)
         best = result["summary"]["best"]
+        if not no_plots:
+            from warpcut.plots import plot_learning_curve
+
+            summary = result["summary"]
+            title = f"{contour.name}, pinch ({point[0]:.1f}, {point[1]:.1f})"
+            plot_learning_curve(summary["history"], summary["validation"], run_dir, title=title)
         rl_runs.append(
             {
                 "run": str(run_dir.relative_to(out)),
@@ -1189,10 +1212,11 @@ def run(
     if json_path:
         write_json(json_path, report)
     if cuts is not None:
-        from warpcut.plots import plot_improvements, plot_regions
+        from warpcut.plots import plot_improvements, plot_pinch_candidates, plot_regions
 
         _echo_written(plot_regions(cuts.cuts, out))
         _echo_written(plot_improvements(report, ["fixed", "analytic", "rl"], out))
+        _echo_written(plot_pinch_candidates(plan, config, out))
     if recorder is not None:
         _echo_written([recorder.path])
     click.echo(f"wrote {out}")
