@@ -94,6 +94,12 @@ fiducials only, x-y moves and a uniform initial policy."""
 STAY_PRIOR = 0.9
 """``TrainConfig.stay_prior`` of the recipe: the initial policy holds still with probability 0.9."""
 
+
+def recipe_config(**fields) -> TrainConfig:
+    """A :class:`TrainConfig` for the recipe: ``fields`` with the recipe's ``stay_prior``."""
+    return TrainConfig(**{"stay_prior": STAY_PRIOR, **fields})
+
+
 VALIDATION_SEED_OFFSET = 7919
 """Validation episodes use seed ``cfg.seed + VALIDATION_SEED_OFFSET``: neither training's ``cfg.seed`` nor the
 evaluations' small seeds, so model selection never sees an evaluation episode."""

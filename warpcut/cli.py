@@ -823,8 +823,7 @@ def _rl_results(
     ``on_step`` sees the first contour's."""
     import numpy as np
 
-    from agents.rl import RECIPE, STAY_PRIOR, Scenario, rollout_errors, train_contour
-    from agents.train import TrainConfig
+    from agents.rl import RECIPE, Scenario, recipe_config, rollout_errors, train_contour
 
     errors, areas, pinches = [], [], []
     for k, contour in enumerate(contours):
@@ -852,9 +851,7 @@ def _rl_results(
                 **RECIPE,
                 **planned,
             )
-            cfg = TrainConfig(
-                num_envs=num_envs, iterations=iterations, seed=seed, device="cpu", stay_prior=STAY_PRIOR
-            )
+            cfg = recipe_config(num_envs=num_envs, iterations=iterations, seed=seed, device="cpu")
             summary = train_contour(scenario, run, cfg, eval_trials=trials, progress=False, device=device)[
                 "summary"
             ]
@@ -1072,8 +1069,7 @@ def run(
     import numpy as np
 
     from agents.evaluation import MethodResult, evaluate_suite
-    from agents.rl import RECIPE, STAY_PRIOR, Scenario, rollout_errors, train_contour
-    from agents.train import TrainConfig
+    from agents.rl import RECIPE, Scenario, recipe_config, rollout_errors, train_contour
     from warpcut.contours import load_contour
     from warpcut.io import write_json
     from warpcut.planning import plan_cut
@@ -1117,9 +1113,7 @@ def run(
         f"({settings['iterations']} PPO iterations each)",
         err=True,
     )
-    cfg = TrainConfig(
-        num_envs=num_envs, iterations=settings["iterations"], seed=seed, device="cpu", stay_prior=STAY_PRIOR
-    )
+    cfg = recipe_config(num_envs=num_envs, iterations=settings["iterations"], seed=seed, device="cpu")
     rl_runs = []
     for rank, c in enumerate(ranked):
         candidate = plan.candidates[c]
