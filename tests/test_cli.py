@@ -7,10 +7,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
 from warpcut.cli import main
+from warpcut.config import SimConfig
 from warpcut.recording import read_summary
 
 
@@ -405,3 +407,14 @@ def test_run_end_to_end_on_a_tiny_budget(tmp_path):
     scenario = json.loads((out / chosen["run"] / "scenario.json").read_text())
     assert len(scenario["segments"]) == len(plan["segments"])
     assert {"none", "fixed", "analytic", "rl"} <= {line.split()[0] for line in stdout.splitlines() if line}
+
+
+def test_bench_times_the_captured_colours_update_on_cpu():
+    """The path ``warpcut bench --device cuda`` takes (colours backend replayed from graphs) also runs on
+    the CPU, so it is exercised without a GPU."""
+    from warpcut.bench import updates_per_second
+
+    rate = updates_per_second(
+        SimConfig(resolution=7, settle_updates=2), 3, "cpu", 1, backend="colours", capture=True
+    )
+    assert np.isfinite(rate) and rate > 0

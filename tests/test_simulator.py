@@ -147,22 +147,28 @@ def test_unknown_device_is_reported():
 
 
 def test_backends_are_bit_identical(device):
-    """simd (several blocks of 8 envs, over threads), fused and colours: the same bits, noise included."""
+    """simd (several blocks of 8 envs, over threads), fused and colours (launched one by one, or replayed
+    from captured graphs): the same bits, noise included, across a reset."""
     config = SimConfig(resolution=13, noise_std=0.05)
     pinches = np.tile([[50.0, 50.0], [np.nan, np.nan], [30.0, 60.0]], (4, 1))[:11]
     cpu = wp.get_device(device).is_cpu
-    variants = [("simd", 1), ("simd", 2), ("fused", 1), ("fused", 2)] if cpu else []
+    variants = (
+        [("simd", 1, False), ("simd", 2, False), ("fused", 1, False), ("fused", 2, False)] if cpu else []
+    )
     results = []
-    for backend, threads in [*variants, ("colours", None)]:
-        sim = Simulator(config, 11, device=device, seed=3, backend=backend, threads=threads)
-        sim.reset(pinches)
+    for backend, threads, capture in [*variants, ("colours", None, False), ("colours", None, True)]:
+        sim = Simulator(config, 11, device=device, seed=3, backend=backend, threads=threads, capture=capture)
         z = sim.settled_positions()[0, 6 * 13 + 10, 2]
-        for k in range(30):
-            sim.move_grasp(np.tile([[0.7, -0.4, 0.1]], (11, 1)))
-            sim.set_tip(np.tile([[80.0 - 1.5 * k, 50.0, z, 1.0]], (11, 1)))
-            sim.update()
-            if k == 10:
-                sim.positions()  # a read-back in the middle must not disturb the packed state
+        for episode in range(2):
+            sim.reset(pinches)
+            for k in range(30 if episode else 7):
+                sim.move_grasp(np.tile([[0.7, -0.4, 0.1]], (11, 1)))
+                sim.set_tip(np.tile([[80.0 - 1.5 * k, 50.0, z, 1.0]], (11, 1)))
+                sim.update()
+                if k == 10:
+                    sim.positions()  # a read-back in the middle must not disturb the packed state
+        if capture:
+            assert len(sim._graphs) == 6  # 3 position buffers x 2 alive buffers, recorded once each
         results.append((sim.positions(), sim.alive_mask()))
     assert (~results[0][1]).sum() > 0
     for positions, alive in results[1:]:
@@ -175,8 +181,13 @@ def test_unknown_backend_is_reported():
         Simulator(SimConfig(resolution=5), 1, backend="magic")
 
 
+def test_capture_needs_the_colours_backend():
+    with pytest.raises(ValueError, match="capture: graph capture applies to the 'colours' backend"):
+        Simulator(SimConfig(resolution=5), 1, device="cpu", backend="simd", capture=True)
+
+
 def test_simd_state_survives_a_switch_to_the_taped_path():
-    config = SimConfig(resolution=9)
+    config = SimConfig(resolution=9, noise_std=0.05)  # with noise: the taped update draws the same stream
     runs = []
     for backend in ("simd", "colours"):
         sim = Simulator(config, 3, backend=backend)

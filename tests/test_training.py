@@ -14,8 +14,8 @@ from tensordict import TensorDict
 
 from agents.distributions import Categorical
 from agents.export import export_policy, load_policy
-from agents.train import FINAL_ERROR_KEY as TRAIN_FINAL_ERROR_KEY
 from agents.train import BEST_CHECKPOINT, Runner, TrainConfig, policy_checkpoint, train
+from agents.train import FINAL_ERROR_KEY as TRAIN_FINAL_ERROR_KEY
 
 NUM_ENVS = 32
 

@@ -39,10 +39,11 @@ def median_time(fn: Callable[[], None], repeats: int, sync: Callable[[], None]) 
 
 
 def updates_per_second(
-    config: SimConfig, num_envs: int, device: str, repeats: int, min_updates: int = 1
+    config: SimConfig, num_envs: int, device: str, repeats: int, min_updates: int = 1, **sim_options
 ) -> float:
-    """Env updates per second (``num_envs`` x updates / s) with cutting active somewhere on the sheet."""
-    sim = Simulator(config, num_envs, device=device)
+    """Env updates per second (``num_envs`` x updates / s) with cutting active somewhere on the sheet.
+    ``sim_options`` go to :class:`Simulator` (e.g. ``capture=False``); default: its own choices."""
+    sim = Simulator(config, num_envs, device=device, **sim_options)
     sim.reset()
     sim.set_tip(np.tile([[50.0, 50.0, -15.0, 1.0]], (num_envs, 1)))
     # Enough updates per timing that launch latency and timer resolution do not dominate small batches.
@@ -123,6 +124,8 @@ def run_bench(
         "cpu_threads": os.cpu_count(),
         "repeats": repeats,
     }
+    probe = Simulator(SimConfig(resolution=5, settle_updates=1), 1, device=device)
+    result["backend"], result["graph_capture"] = probe.backend, probe.capture
     progress("cold and warm start")
     result.update(start_times(device))
     ups, ups_paper = {}, {}
@@ -132,6 +135,13 @@ def run_bench(
         ups_paper[str(b)] = updates_per_second(PAPER_SWEEPS, b, device, repeats)
     result["updates_per_s"] = ups
     result["updates_per_s_paper_sweeps"] = ups_paper
+    if probe.capture:
+        # What the graphs save: the same updates launched one by one, at the largest batch.
+        b = max(batch_sizes)
+        progress(f"updates/s at B={b} without graph capture")
+        result["updates_per_s_no_capture"] = {
+            str(b): updates_per_second(SimConfig(), b, device, repeats, capture=False)
+        }
     progress(f"fls-circle rollouts at B={rollout_envs}")
     result["rollout_envs"] = rollout_envs
     result["rollouts_per_s"] = rollouts_per_second(rollout_envs, device, repeats)

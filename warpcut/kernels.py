@@ -25,7 +25,8 @@ def integrate_kernel(
     gravity: wp.array(dtype=float),
     noise_std: wp.array(dtype=float),
     first_order_z: int,
-    seed: int,
+    seed_base: int,
+    update_counter: wp.array(dtype=wp.int32),
     # Data in:
     x: wp.array(dtype=wp.vec3),
     x_prev: wp.array(dtype=wp.vec3),
@@ -36,7 +37,11 @@ def integrate_kernel(
     # Data out:
     x_out: wp.array(dtype=wp.vec3),
 ):
-    """Damped Verlet: ``x + damping * (x - x_prev) + g dt^2 (+ noise)``; pinned vertices go to target."""
+    """Damped Verlet: ``x + damping * (x - x_prev) + g dt^2 (+ noise)``; pinned vertices go to target.
+
+    The noise seed of this update is ``(seed_base + update_counter[0]) mod (2^31 - 1)``, read from device
+    memory so that a captured graph draws a fresh stream at every replay (see ``count_update_kernel``).
+    """
     env, v = wp.tid()
     i = env * n + v
     p = x[i]
@@ -58,9 +63,16 @@ def integrate_kernel(
     q = p + velocity - wp.vec3(0.0, 0.0, gravity[env % gravity.shape[0]] * h * h)
     sigma = noise_std[env % noise_std.shape[0]]
     if sigma > 0.0:
+        seed = wp.int32((wp.int64(seed_base) + wp.int64(update_counter[0])) % wp.int64(2147483647))
         state = wp.rand_init(seed, i)
         q = q + sigma * wp.vec3(wp.randn(state), wp.randn(state), wp.randn(state))
     x_out[i] = q
+
+
+@wp.kernel
+def count_update_kernel(update_counter: wp.array(dtype=wp.int32)):
+    """Advance the device-side update counter (the last launch of an update; part of a captured graph)."""
+    update_counter[0] = update_counter[0] + 1
 
 
 @wp.kernel
