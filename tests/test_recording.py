@@ -117,12 +117,16 @@ def test_evaluate_writes_the_comparison_plot_and_recording(tmp_path):
         "--candidates",
         "3",
     ]
-    code, stdout = invoke([*args, "--out", str(tmp_path / "run"), "--record"])
+    code, stdout = invoke([*args, "--out", str(tmp_path / "run"), "--record", "--colour-by", "height"])
     assert code == 0, stdout
     for name in ("improvement.png", "improvement.svg", "recording.rrd", "results.json"):
         assert (tmp_path / "run" / name).stat().st_size > 0, name
     entities = read_summary(tmp_path / "run" / "recording.rrd").entity_paths
     assert "/analytic/env_0/sheet" in entities and "/none/env_0/sheet" in entities
+    (info,) = read_columns(tmp_path / "run" / "recording.rrd")[("/none/env_0/info", "TextDocument:text")][0][
+        1
+    ]
+    assert "vertex colours: height" in info
 
     code, stdout = invoke([*args, "--out", str(tmp_path / "bare"), "--no-plots"])
     assert code == 0, stdout
@@ -346,3 +350,20 @@ def test_a_failure_on_the_worker_surfaces_and_the_file_remains(tmp_path, monkeyp
         task.run(None, on_step=recorder.on_step("none"))
     assert read_summary(path).frames == 0
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.rrd"]
+
+
+def test_cut_path_arrow_type_is_reruns_line_strip():
+    import rerun as rr
+
+    from warpcut.recording import _LINE_STRIP3D_TYPE
+
+    batch = rr.components.LineStrip3DBatch([[[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]])
+    assert batch.as_arrow_array().type == _LINE_STRIP3D_TYPE
+
+
+def test_cli_colour_choices_are_the_recorders():
+    from warpcut.cli import RECORD_COLOURS
+
+    assert RECORD_COLOURS == recording.COLOUR_FIELDS
+    result = CliRunner().invoke(main, ["simulate", "--record", "--colour-by", "rainbow"])
+    assert result.exit_code == 2 and "'rainbow' is not one of 'strain', 'height'" in result.output

@@ -43,8 +43,13 @@ class CleanErrors(click.Group):
         sys.exit(result if isinstance(result, int) else 0)
 
 
+RECORD_COLOURS = ("strain", "height")
+"""``--colour-by`` choices: :data:`warpcut.recording.COLOUR_FIELDS` (not imported here: slow to load)."""
+
+
 def _record_option(what: str):
-    return click.option(
+    """``--record [N]`` and ``--colour-by`` (passed to the command as ``record_envs`` and ``colour_by``)."""
+    record = click.option(
         "--record",
         "record_envs",
         type=click.IntRange(min=1),
@@ -55,6 +60,14 @@ def _record_option(what: str):
         help=f"Write recording.rrd ({what}) of the first N envs (default 1) of each method; "
         "view it with 'warpcut replay'.",
     )
+    colour = click.option(
+        "--colour-by",
+        type=click.Choice(RECORD_COLOURS),
+        default="strain",
+        show_default=True,
+        help="What the recorded sheet's vertex colours show: the stretch of its springs, or its height.",
+    )
+    return lambda command: record(colour(command))
 
 
 _device_option = click.option(
@@ -183,6 +196,7 @@ def simulate(
     seed: int,
     json_path: Path | None,
     record_envs: int | None,
+    colour_by: str,
     no_plots: bool,
 ) -> None:
     """Cut a contour with each baseline tensioner and compare their errors."""
@@ -202,7 +216,7 @@ def simulate(
 
         cuts = FinalCuts()
     start = time.perf_counter()
-    with _recorder(out, record_envs) as recorder:
+    with _recorder(out, record_envs, colour_by) as recorder:
         report = compare_policies(
             contour,
             names,
@@ -241,7 +255,7 @@ def simulate(
         _echo_written([recorder.path])
 
 
-def _recorder(out: Path, record_envs: int | None):
+def _recorder(out: Path, record_envs: int | None, colour_by: str = "strain"):
     """A :class:`Recorder` of ``out/recording.rrd``, or a null context when not recording."""
     import contextlib
 
@@ -249,7 +263,7 @@ def _recorder(out: Path, record_envs: int | None):
         return contextlib.nullcontext()
     from warpcut.recording import Recorder
 
-    return Recorder(out / "recording.rrd", envs=record_envs)
+    return Recorder(out / "recording.rrd", envs=record_envs, colour_by=colour_by)
 
 
 def _step_hooks(*hooks):
@@ -475,6 +489,7 @@ def train(
     out: Path | None,
     resume: Path | None,
     record_envs: int | None,
+    colour_by: str,
     no_plots: bool,
     no_progress: bool,
 ) -> None:
@@ -513,7 +528,7 @@ def train(
     )
     click.echo(f"training {scenario.contour} into {out} ({num_envs} envs, {iterations} iterations, {device})")
     try:
-        with _recorder(out, record_envs) as recorder:
+        with _recorder(out, record_envs, colour_by) as recorder:
             result = train_contour(
                 scenario,
                 out,
@@ -658,6 +673,7 @@ def evaluate(
     json_path: Path | None,
     markdown_path: Path | None,
     record_envs: int | None,
+    colour_by: str,
     no_plots: bool,
 ) -> None:
     """The paper's Table I: per contour the no-tension error and each method's improvement (95% CI)."""
@@ -701,7 +717,7 @@ def evaluate(
             )
         write_json(out / "plans.json", {p.contour.name: p.to_json() for p in plans})
     extra = {}
-    with _recorder(out, record_envs) as recorder:
+    with _recorder(out, record_envs, colour_by) as recorder:
         if "rl" in names:
             extra["rl"] = _rl_results(
                 contours,
@@ -1062,6 +1078,7 @@ def run(
     out: Path | None,
     json_path: Path | None,
     record_envs: int | None,
+    colour_by: str,
     no_plots: bool,
 ) -> None:
     """The whole pipeline: plan the cut, train RL at the best pinch candidates, compare
@@ -1164,7 +1181,7 @@ def run(
         from warpcut.plots import FinalCuts
 
         cuts = FinalCuts()
-    with _recorder(out, record_envs) as recorder:
+    with _recorder(out, record_envs, colour_by) as recorder:
         hooks = _step_hooks(recorder, cuts)
         rl = rollout_errors(
             out / rl_runs[chosen_rl]["run"],

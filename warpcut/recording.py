@@ -619,6 +619,13 @@ def _polyline(contour: Contour, spacing_mm: float) -> np.ndarray:
     return np.vstack([points, points[:1]]) if contour.closed else points
 
 
+# Rerun's arrow types of a 3D point and of a 3D line strip (rerun.components.LineStrip3D), spelled out
+# (tests/test_recording.py checks them against rerun's): the strips of all frames are built as one arrow
+# array from flat numpy buffers, without a Python object per strip.
+_POINT3D_TYPE = pa.list_(pa.field("item", pa.float32(), nullable=False), 3)
+_LINE_STRIP3D_TYPE = pa.list_(pa.field("item", _POINT3D_TYPE, nullable=False))
+
+
 def _cut_paths(tip: np.ndarray, runs: np.ndarray, updates: np.ndarray) -> tuple[pa.Array, np.ndarray]:
     """The path cut so far after each of F ``updates``: per frame, the part of every cutting run of the
     (T, 4) ``tip`` trajectory that the scissors have passed (at least two points), as a rerun line strip
@@ -634,11 +641,8 @@ def _cut_paths(tip: np.ndarray, runs: np.ndarray, updates: np.ndarray) -> tuple[
     )
     offsets = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int32)
     points = tip[np.repeat(starts - offsets[:-1], lengths) + np.arange(offsets[-1]), :3]
-    strip_type = rr.components.LineStrip3DBatch._ARROW_DATATYPE
-    inner = pa.FixedSizeListArray.from_arrays(
-        pa.array(points.astype(np.float32).ravel()), type=strip_type.value_type
-    )
-    return pa.ListArray.from_arrays(pa.array(offsets), inner, type=strip_type), counts
+    inner = pa.FixedSizeListArray.from_arrays(pa.array(points.astype(np.float32).ravel()), type=_POINT3D_TYPE)
+    return pa.ListArray.from_arrays(pa.array(offsets), inner, type=_LINE_STRIP3D_TYPE), counts
 
 
 def _cutting_runs(tip: np.ndarray) -> np.ndarray:
