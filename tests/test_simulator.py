@@ -160,6 +160,8 @@ def test_backends_are_bit_identical(device):
         sim = Simulator(config, 11, device=device, seed=3, backend=backend, threads=threads, capture=capture)
         z = sim.settled_positions()[0, 6 * 13 + 10, 2]
         for episode in range(2):
+            if episode:
+                sim.seed = 11  # a new noise stream for the next episode (as CuttingTask.reset(seed=...))
             sim.reset(pinches)
             for k in range(30 if episode else 7):
                 sim.move_grasp(np.tile([[0.7, -0.4, 0.1]], (11, 1)))
@@ -184,6 +186,31 @@ def test_unknown_backend_is_reported():
 def test_capture_needs_the_colours_backend():
     with pytest.raises(ValueError, match="capture: graph capture applies to the 'colours' backend"):
         Simulator(SimConfig(resolution=5), 1, device="cpu", backend="simd", capture=True)
+
+
+def test_captured_graphs_stay_few_and_right_around_taped_updates():
+    """Taped updates and a caller's displacement array run uncaptured; after a reset the simulator's
+    own buffers (and its at most 6 graphs) are used again, with the same bits as launching one by one."""
+    config = SimConfig(resolution=9, noise_std=0.05)
+    runs = []
+    for capture in (False, True):
+        sim = Simulator(config, 2, device="cpu", backend="colours", capture=capture, seed=5)
+        replays = []
+        replay = sim._update_captured
+        sim._update_captured = lambda: (replays.append(sim.update_count), replay())
+        for episode in range(3):
+            sim.reset(np.array([[50.0, 50.0]] * 2))
+            for k in range(8):
+                sim.move_grasp(np.tile([[1.0, 0.0, 0.5]], (2, 1)))
+                sim.update(tape_mode=episode == 1 and k == 3)
+            if episode == 1:
+                sim.displacement = wp.array(sim.displacements(), dtype=wp.vec3, device="cpu")
+                sim.update()
+        runs.append(sim.positions())
+        assert len(sim._graphs) == (6 if capture else 0)
+        # Episodes 0 and 2 replay graphs throughout; episode 1 only before its taped update.
+        assert len(replays) == (8 + 3 + 8 if capture else 0)
+    np.testing.assert_array_equal(runs[0], runs[1])
 
 
 def test_simd_state_survives_a_switch_to_the_taped_path():

@@ -25,7 +25,7 @@ def integrate_kernel(
     gravity: wp.array(dtype=float),
     noise_std: wp.array(dtype=float),
     first_order_z: int,
-    seed_base: int,
+    seed_base: wp.array(dtype=wp.int32),
     update_counter: wp.array(dtype=wp.int32),
     # Data in:
     x: wp.array(dtype=wp.vec3),
@@ -39,8 +39,9 @@ def integrate_kernel(
 ):
     """Damped Verlet: ``x + damping * (x - x_prev) + g dt^2 (+ noise)``; pinned vertices go to target.
 
-    The noise seed of this update is ``(seed_base + update_counter[0]) mod (2^31 - 1)``, read from device
-    memory so that a captured graph draws a fresh stream at every replay (see ``count_update_kernel``).
+    The noise seed of this update is ``(seed_base[0] + update_counter[0]) mod (2^31 - 1)``, read from
+    device memory so that a captured graph draws a fresh stream at every replay and follows a new seed
+    (see ``count_update_kernel``).
     """
     env, v = wp.tid()
     i = env * n + v
@@ -63,7 +64,7 @@ def integrate_kernel(
     q = p + velocity - wp.vec3(0.0, 0.0, gravity[env % gravity.shape[0]] * h * h)
     sigma = noise_std[env % noise_std.shape[0]]
     if sigma > 0.0:
-        seed = wp.int32((wp.int64(seed_base) + wp.int64(update_counter[0])) % wp.int64(2147483647))
+        seed = wp.int32((wp.int64(seed_base[0]) + wp.int64(update_counter[0])) % wp.int64(2147483647))
         state = wp.rand_init(seed, i)
         q = q + sigma * wp.vec3(wp.randn(state), wp.randn(state), wp.randn(state))
     x_out[i] = q

@@ -108,7 +108,8 @@ class Simulator:
         capture: Record the ``colours`` update (its ~2 + iterations x colours launches) once into a Warp
             graph (``wp.ScopedCapture``) and replay it, which removes the per-launch overhead; a graph is
             kept per arrangement of the ping-pong buffers (at most 6). Default: on for ``colours`` on CUDA,
-            off elsewhere. Works on CPU too (same results bit for bit); not with ``tape_mode``.
+            off elsewhere. Works on CPU too (same results bit for bit). Updates with ``tape_mode``, or
+            while a displacement array of the caller's is plugged in, are launched one by one.
     """
 
     def __init__(
@@ -126,6 +127,7 @@ class Simulator:
         self.config = config.validated()
         self.num_envs = num_envs
         self.device = resolve_device(device)
+        self._seed_base = wp.zeros(1, dtype=wp.int32, device=self.device)
         self.seed = int(seed)
         self.grid = SheetGrid.from_config(self.config)
         self.colours = spring_colours(self.config.springs)
@@ -142,6 +144,7 @@ class Simulator:
         self.displacement = wp.zeros(num_envs, dtype=wp.vec3, device=self.device)
         self.tip = wp.zeros(num_envs, dtype=wp.vec4, device=self.device)
         self._action = wp.zeros(num_envs, dtype=wp.vec3, device=self.device)
+        self._displacement_own = self.displacement
         self._displacement_next = wp.zeros(num_envs, dtype=wp.vec3, device=self.device)
         # The update count on the device: the colours path reads its noise seed from it (graph replays).
         self._update_counter = wp.zeros(1, dtype=wp.int32, device=self.device)
@@ -202,6 +205,17 @@ class Simulator:
         self.threads = max(1, min(threads or cores, units)) if is_cpu else 1
         self._slices = [(len(c), int(c[0])) for c in np.array_split(np.arange(units), self.threads)]
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
+
+    @property
+    def seed(self) -> int:
+        """Seed of the process noise; may be changed between episodes (``CuttingTask.reset(seed=...)``)."""
+        return self._seed
+
+    @seed.setter
+    def seed(self, value: int) -> None:
+        self._seed = int(value)
+        # The colours path (and its captured graphs) reads the seed from device memory.
+        self._seed_base.assign(np.array([self._noise_seed_base()], dtype=np.int32))
 
     # ------------------------------------------------------------------ settling
     def settle_groups(self) -> tuple[np.ndarray, np.ndarray]:
@@ -269,6 +283,11 @@ class Simulator:
                     pin[env, disc] = kernels.PIN_GRASP
                     self.grasped[env] = bool(disc.any())
         flat = positions.reshape(-1, 3).astype(np.float32)
+        # Back to the simulator's own arrays (a taped update leaves fresh ones in their place; a caller may
+        # have plugged in a displacement array of its own).
+        self.x, self.x_prev, self._spare = self._buffers
+        self.alive = self._alive[0]
+        self.displacement = self._displacement_own
         for buffer in (self.x, self.x_prev):
             buffer.assign(flat)
         self.anchor.assign(flat)
@@ -289,7 +308,10 @@ class Simulator:
         if not np.all(np.isfinite(action)):
             raise ValueError("action: contains NaN or infinite values; give finite moves in mm")
         self._action.assign(np.where(self.grasped[:, None], action, 0.0))
-        out = self._displacement_next
+        # In place (a captured update graph keeps reading the same array), unless the displacement is
+        # being differentiated: then a new array, so that wp.Tape keeps the history.
+        taped = self.displacement.requires_grad
+        out = wp.empty_like(self.displacement) if taped else self._displacement_next
         wp.launch(
             kernels.move_grasp_kernel,
             dim=self.num_envs,
@@ -302,8 +324,10 @@ class Simulator:
             outputs=[out],
             device=self.device,
         )
-        # In place: a captured update graph keeps reading the same displacement array.
-        wp.copy(self.displacement, out)
+        if taped:
+            self.displacement = out
+        else:
+            wp.copy(self.displacement, out)
 
     def set_tip(self, tip: np.ndarray) -> None:
         """Scissor tips for the next updates: (B, 4) ``(x, y, z, cutting)`` in world mm."""
@@ -328,7 +352,7 @@ class Simulator:
                 if not self._counter_synced:
                     self._update_counter.assign(np.array([self.update_count], dtype=np.int32))
                     self._counter_synced = True
-                if self.capture and not tape_mode:
+                if self.capture and not tape_mode and self._own_arrays():
                     self._update_captured()
                 else:
                     self._update_colours(tape_mode)
@@ -409,18 +433,28 @@ class Simulator:
         # _noise_seed() == (_noise_seed_base() + update_count) % (2^31 - 1), computed on the device.
         return (self.seed * 1_000_003) % 2_147_483_647
 
+    def _own_arrays(self) -> bool:
+        """Whether the update reads and writes only the simulator's own arrays, the ones graphs are
+        recorded with (not so after a taped update, or while a user's displacement array is plugged in)."""
+        own = {id(a) for a in self._buffers}
+        return (
+            {id(self.x), id(self.x_prev), id(self._spare)} == own
+            and any(self.alive is a for a in self._alive)
+            and self.displacement is self._displacement_own
+        )
+
     def _update_captured(self) -> None:
         """Replay the recorded colours update for the current buffer arrangement (record it first)."""
-        key = tuple(
-            a.ptr for a in (self.x, self.x_prev, self._spare, self.alive, self.displacement, self.tip)
-        )
+        key = (id(self.x), id(self.x_prev), id(self.alive))
         entry = self._graphs.get(key)
         if entry is None:
             before = (self.x, self.x_prev, self._spare, self.alive)
-            with wp.ScopedCapture(device=self.device) as capture:
-                self._update_colours(tape_mode=False)
-            after = (self.x, self.x_prev, self._spare, self.alive)
-            self.x, self.x_prev, self._spare, self.alive = before  # recording did not run the update
+            try:
+                with wp.ScopedCapture(device=self.device) as capture:
+                    self._update_colours(tape_mode=False)
+                after = (self.x, self.x_prev, self._spare, self.alive)
+            finally:
+                self.x, self.x_prev, self._spare, self.alive = before  # recording did not run the update
             entry = self._graphs[key] = (capture.graph, after)
         graph, after = entry
         wp.capture_launch(graph)
@@ -442,7 +476,7 @@ class Simulator:
                 p["gravity"],
                 p["noise_std"],
                 int(self.config.first_order_z),
-                self._noise_seed_base(),
+                self._seed_base,
                 self._update_counter,
                 self.x,
                 self.x_prev,
