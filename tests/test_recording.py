@@ -367,3 +367,5 @@ def test_cli_colour_choices_are_the_recorders():
     assert RECORD_COLOURS == recording.COLOUR_FIELDS
     result = CliRunner().invoke(main, ["simulate", "--record", "--colour-by", "rainbow"])
     assert result.exit_code == 2 and "'rainbow' is not one of 'strain', 'height'" in result.output
+    result = CliRunner().invoke(main, ["simulate", "--contour", "circle-small", "--colour-by", "height"])
+    assert result.exit_code == 2 and "--colour-by: colours a recording; add --record" in result.output

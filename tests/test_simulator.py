@@ -197,7 +197,7 @@ def test_captured_graphs_stay_few_and_right_around_taped_updates():
         sim = Simulator(config, 2, device="cpu", backend="colours", capture=capture, seed=5)
         replays = []
         replay = sim._update_captured
-        sim._update_captured = lambda: (replays.append(sim.update_count), replay())
+        sim._update_captured = lambda s=sim, r=replays, f=replay: (r.append(s.update_count), f())
         for episode in range(3):
             sim.reset(np.array([[50.0, 50.0]] * 2))
             for k in range(8):

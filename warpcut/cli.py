@@ -6,6 +6,7 @@ to fix, never a traceback.
 
 from __future__ import annotations
 
+import functools
 import os
 import subprocess
 import sys
@@ -67,7 +68,20 @@ def _record_option(what: str):
         show_default=True,
         help="What the recorded sheet's vertex colours show: the stretch of its springs, or its height.",
     )
-    return lambda command: record(colour(command))
+
+    def check(command):
+        @functools.wraps(command)
+        def checked(**kwargs):
+            source = click.get_current_context().get_parameter_source("colour_by")
+            if kwargs["record_envs"] is None and source == click.core.ParameterSource.COMMANDLINE:
+                raise click.UsageError(
+                    "--colour-by: colours a recording; add --record [N], or drop --colour-by"
+                )
+            return command(**kwargs)
+
+        return checked
+
+    return lambda command: record(colour(check(command)))
 
 
 _device_option = click.option(
