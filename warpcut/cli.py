@@ -269,7 +269,7 @@ def simulate(
         _echo_written([recorder.path])
 
 
-def _recorder(out: Path, record_envs: int | None, colour_by: str = "strain"):
+def _recorder(out: Path, record_envs: int | None, colour_by: str):
     """A :class:`Recorder` of ``out/recording.rrd``, or a null context when not recording."""
     import contextlib
 

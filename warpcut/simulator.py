@@ -145,7 +145,6 @@ class Simulator:
         self.tip = wp.zeros(num_envs, dtype=wp.vec4, device=self.device)
         self._action = wp.zeros(num_envs, dtype=wp.vec3, device=self.device)
         self._displacement_own = self.displacement
-        self._displacement_next = wp.zeros(num_envs, dtype=wp.vec3, device=self.device)
         # The update count on the device: the colours path reads its noise seed from it (graph replays).
         self._update_counter = wp.zeros(1, dtype=wp.int32, device=self.device)
         self._counter_synced = True
@@ -308,10 +307,11 @@ class Simulator:
         if not np.all(np.isfinite(action)):
             raise ValueError("action: contains NaN or infinite values; give finite moves in mm")
         self._action.assign(np.where(self.grasped[:, None], action, 0.0))
-        # In place (a captured update graph keeps reading the same array), unless the displacement is
-        # being differentiated: then a new array, so that wp.Tape keeps the history.
+        # In place (a captured update graph keeps reading the same array; each thread reads and writes
+        # only its env's entry), unless the displacement is being differentiated: then a new array, so
+        # that wp.Tape keeps the history.
         taped = self.displacement.requires_grad
-        out = wp.empty_like(self.displacement) if taped else self._displacement_next
+        out = wp.empty_like(self.displacement) if taped else self.displacement
         wp.launch(
             kernels.move_grasp_kernel,
             dim=self.num_envs,
@@ -324,10 +324,7 @@ class Simulator:
             outputs=[out],
             device=self.device,
         )
-        if taped:
-            self.displacement = out
-        else:
-            wp.copy(self.displacement, out)
+        self.displacement = out
 
     def set_tip(self, tip: np.ndarray) -> None:
         """Scissor tips for the next updates: (B, 4) ``(x, y, z, cutting)`` in world mm."""
@@ -426,11 +423,11 @@ class Simulator:
             list(self._pool.map(launch, self._slices))
 
     def _noise_seed(self) -> int:
-        # A distinct stream per update; kept in int32 range for the kernel argument.
-        return (self.seed * 1_000_003 + self.update_count) % 2_147_483_647
+        # A distinct stream per update; kept in int32 range for the kernel argument. The colours path
+        # computes the same on the device from _noise_seed_base() and its update counter.
+        return (self._noise_seed_base() + self.update_count) % 2_147_483_647
 
     def _noise_seed_base(self) -> int:
-        # _noise_seed() == (_noise_seed_base() + update_count) % (2^31 - 1), computed on the device.
         return (self.seed * 1_000_003) % 2_147_483_647
 
     def _own_arrays(self) -> bool:
