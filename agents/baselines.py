@@ -13,7 +13,7 @@ import numpy as np
 
 from warpcut.config import SimConfig
 from warpcut.contours import Contour
-from warpcut.planning import sample_pinch_candidates
+from warpcut.planning import feasible_centroid, sample_pinch_candidates
 from warpcut.task import CuttingTask
 
 AUTHORS_UNITS_PER_MM = 4.8
@@ -69,16 +69,25 @@ class AnalyticTension:
         gain: Grasp move (mm) per mm of tracking error, per step. The paper's gain is 0.01 per unit of
             its simulator (4.8 units/mm, moves in mm), i.e. 0.048 mm/mm here.
         pinch: Override the centroid (mm).
+        feasible: Without ``pinch``: when the centroid is not a feasible pinch point (e.g. on the cut line
+            of a crescent), pinch at the feasible point nearest to it
+            (:func:`warpcut.planning.feasible_centroid`); False: the centroid wherever it is. A cut plan's
+            arm footprint is applied by the caller (:attr:`warpcut.planning.Plan.analytic_pinch`).
     """
 
     gain: float = 0.01 * AUTHORS_UNITS_PER_MM
     pinch: tuple[float, float] | None = None
+    feasible: bool = True
     name: str = "analytic"
 
     def pinch_point(
         self, contour: Contour, config: SimConfig, device: str | None = None, seed: int = 0
     ) -> np.ndarray:
-        return np.asarray(self.pinch if self.pinch is not None else contour.centroid, dtype=np.float64)
+        if self.pinch is not None:
+            return np.asarray(self.pinch, dtype=np.float64)
+        if self.feasible:
+            return feasible_centroid(contour, config)
+        return np.asarray(contour.centroid, dtype=np.float64)
 
     def __call__(self, task: CuttingTask) -> np.ndarray:
         error = task.target_world() - task.tip_positions()[:, :3]

@@ -78,3 +78,16 @@ def test_table_one_protocol_rows_and_mean():
         values = [r[f"{method}_improvement_pct"] for r in report["rows"]]
         assert report["mean"][f"{method}_improvement_pct"] == pytest.approx(np.mean(values))
     assert report["mean"]["none_improvement_pct"] == 0.0
+
+
+def test_analytic_pinches_the_centroid_unless_it_is_infeasible():
+    circle, crescent = load_contour("fls-circle"), load_contour("crescent")  # crescent's: on the cut line
+    assert AnalyticTension().pinch_point(circle, CONFIG).tolist() == list(circle.centroid)
+    moved = AnalyticTension().pinch_point(crescent, CONFIG)
+    assert (
+        pinch_feasible(moved, crescent, CONFIG)[0]
+        and not pinch_feasible(crescent.centroid, crescent, CONFIG)[0]
+    )
+    literal = AnalyticTension(feasible=False).pinch_point(crescent, CONFIG)
+    assert literal.tolist() == list(crescent.centroid)
+    assert AnalyticTension(pinch=(30.0, 40.0)).pinch_point(crescent, CONFIG).tolist() == [30.0, 40.0]

@@ -13,6 +13,7 @@ from click.testing import CliRunner
 
 from warpcut.cli import main
 from warpcut.config import SimConfig
+from warpcut.contours import load_contour
 from warpcut.recording import read_summary
 
 
@@ -262,8 +263,10 @@ def test_evaluate_two_contours_two_trials_writes_table_json(tmp_path):
     report = json.loads(out.read_text())
     assert report["planned"] is True
     plans = json.loads((tmp_path / "run" / "plans.json").read_text())
-    for row in report["rows"]:  # fixed pinches where planned; analytic keeps the centroid
+    assert report["analytic_pinch"] == "feasible"
+    for row in report["rows"]:  # fixed pinches where planned; analytic at the (here feasible) centroid
         assert row["fixed_pinch"] == pytest.approx(plans[row["contour"]]["chosen"]["pinch"])
+        assert row["analytic_pinch"] == pytest.approx(list(load_contour(row["contour"]).centroid))
     assert [r["contour"] for r in report["rows"]] == ["fls-circle", "s-curve"]
     for row in report["rows"]:
         assert row["none_error_vertices"] > 0

@@ -11,6 +11,7 @@ from warpcut import SimConfig
 from warpcut.contours import load_contour
 from warpcut.planning import (
     Plan,
+    feasible_centroid,
     pinch_candidates,
     pinch_feasible,
     pinch_rules,
@@ -142,3 +143,21 @@ def test_many_segments_use_the_heuristic_orders_with_a_warning():
         orders, errors = search_orders(contour, SIM, segments, np.array([[50.0, 50.0]]), device="cpu")
     assert 1 < len(orders) < math.factorial(len(segments))
     assert errors.shape == (1, len(orders)) and np.isfinite(errors).all()
+
+
+def test_analytic_pinch_is_the_centroid_only_where_the_gripper_can_be(small_plan):
+    """The analytic policy pinches the centroid (the paper's choice) unless it is infeasible: under the
+    cutting arm (circle-offset's, with the plan's arm footprint) or on the cut line (crescent's)."""
+    contour = small_plan.contour
+    segments = small_plan.segments
+    arm = {"arm_radius_mm": small_plan.arm_radius_mm, "arm_length_mm": small_plan.arm_length_mm}
+    assert not pinch_feasible(contour.centroid, contour, SIM, segments, **arm)[0]
+    point = small_plan.analytic_pinch
+    assert pinch_feasible(point, contour, SIM, segments, **arm)[0]
+    assert np.linalg.norm(point - contour.centroid) > 0
+    circle = load_contour("fls-circle")
+    assert feasible_centroid(circle, GEOMETRY).tolist() == list(circle.centroid)
+    crescent = load_contour("crescent")
+    assert pinch_rules(crescent.centroid, crescent, GEOMETRY)["contour"].tolist() == [False]
+    moved = feasible_centroid(crescent, GEOMETRY)
+    assert pinch_feasible(moved, crescent, GEOMETRY)[0]

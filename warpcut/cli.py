@@ -102,6 +102,27 @@ _arm_length_option = click.option(
 )
 
 
+_analytic_pinch_option = click.option(
+    "--analytic-pinch",
+    default="feasible",
+    show_default=True,
+    type=click.Choice(["feasible", "centroid"]),
+    help="Where the analytic policy pinches: the centroid (the paper's choice) when it is feasible, else the "
+    "feasible point nearest to it (feasible); or the centroid even under the cutting arm or on the cut line "
+    "(centroid: a grasp the robot could not make).",
+)
+
+
+def _analytic_pinches(mode: str, contours, plans) -> list | None:
+    """Per contour, the analytic policy's pinch point for ``--analytic-pinch`` (None: its own default, the
+    feasible centroid without an arm footprint)."""
+    import numpy as np
+
+    if mode == "centroid":
+        return [np.asarray(c.centroid, dtype=np.float64) for c in contours]
+    return None if plans is None else [p.analytic_pinch for p in plans]
+
+
 def _plots_option(what: str):
     return click.option("--no-plots", is_flag=True, help=f"Do not write the plots ({what}).")
 
@@ -657,8 +678,8 @@ EVALUATE_METHODS = ("none", "fixed", "analytic", "rl")
     default=True,
     show_default=True,
     help="Cut every contour as planned (segments, order) and pinch fixed and rl at the planned point "
-    "(analytic keeps the centroid, as in the paper); --no-plan: one loop per contour, fixed by random "
-    "search, rl at the centroid.",
+    "(analytic at the centroid, as in the paper; see --analytic-pinch); --no-plan: one loop per contour, "
+    "fixed by random search, rl at the centroid (or the feasible point nearest to it).",
 )
 @click.option(
     "--candidates",
@@ -668,6 +689,7 @@ EVALUATE_METHODS = ("none", "fixed", "analytic", "rl")
     help="Pinch candidates per plan.",
 )
 @_arm_length_option
+@_analytic_pinch_option
 @_record_option("in the run directory; of the first contour")
 @_plots_option("improvement.png/svg in the run directory")
 def evaluate(
@@ -681,6 +703,7 @@ def evaluate(
     plan: bool,
     candidates: int,
     arm_length: float,
+    analytic_pinch: str,
     device: str | None,
     seed: int,
     out: Path | None,
@@ -730,6 +753,10 @@ def evaluate(
                 )
             )
         write_json(out / "plans.json", {p.contour.name: p.to_json() for p in plans})
+    pinches = {} if plans is None else {"fixed": [p.chosen["pinch"] for p in plans]}
+    analytic = _analytic_pinches(analytic_pinch, contours, plans)
+    if analytic is not None:
+        pinches["analytic"] = analytic
     extra = {}
     with _recorder(out, record_envs, colour_by) as recorder:
         if "rl" in names:
@@ -760,9 +787,10 @@ def evaluate(
             progress=lambda what: click.echo(f"  running {what}", err=True),
             on_step=_step_hooks(recorder),
             segments=None if plans is None else [p.ordered_segments() for p in plans],
-            pinches=None if plans is None else {"fixed": [p.chosen["pinch"] for p in plans]},
+            pinches=pinches,
         )
     report["planned"] = plans is not None
+    report["analytic_pinch"] = analytic_pinch
     report["seconds"] = time.perf_counter() - start
     table = _markdown_table(report, names)
     click.echo(table)
@@ -1061,6 +1089,7 @@ BUDGETS = {
     "--resolution", default=25, show_default=True, type=click.IntRange(5, 100), help="Vertices per side."
 )
 @_arm_length_option
+@_analytic_pinch_option
 @_device_option
 @_seed_option
 @click.option(
@@ -1087,6 +1116,7 @@ def run(
     num_envs: int,
     resolution: int,
     arm_length: float,
+    analytic_pinch: str,
     device: str | None,
     seed: int,
     out: Path | None,
@@ -1212,7 +1242,7 @@ def run(
             device=device,
             seed=seed,
             segments=[segments],
-            pinches={"fixed": [pinch]},
+            pinches={"fixed": [pinch], "analytic": _analytic_pinches(analytic_pinch, [contour], [plan])},
             extra={"rl": MethodResult(rl["error_vertices"][None], rl["error_mm2"][None], [rl["pinch"]])},
             on_step=hooks,
         )
@@ -1220,6 +1250,7 @@ def run(
     report["rl_candidates"] = rl_runs
     report["rl_chosen"] = chosen_rl
     report["budget"] = budget
+    report["analytic_pinch"] = analytic_pinch
     report["seconds"] = time.perf_counter() - start
     row = report["rows"][0]
     click.echo(

@@ -240,6 +240,22 @@ def nearest_feasible(
     return grid[np.argmin(np.linalg.norm(grid - point, axis=1))]
 
 
+def feasible_centroid(
+    contour: Contour,
+    config: SimConfig,
+    segments: Path | None = None,
+    arm_radius_mm: float = ARM_RADIUS_MM,
+    arm_length_mm: float = ARM_LENGTH_MM,
+) -> np.ndarray:
+    """The contour's centroid when it is a feasible pinch point (:func:`pinch_feasible`), else the feasible
+    point nearest to it (0.5 mm grid): the default pinch of the analytic policy and of RL without a plan.
+
+    Raises:
+        ValueError: naming the contour when no point is feasible.
+    """
+    return nearest_feasible(contour.centroid, contour, config, segments, arm_radius_mm, arm_length_mm)
+
+
 def search_orders(
     contour: Contour,
     config: SimConfig,
@@ -313,11 +329,22 @@ class Plan:
     ``violates`` (the broken rules of :func:`pinch_rules`)."""
     arm_radius_mm: float = ARM_RADIUS_MM
     arm_length_mm: float = ARM_LENGTH_MM
+    config: SimConfig = field(default_factory=SimConfig)
+    """The simulation parameters the plan was made with (sheet size, grasp radius: feasibility)."""
 
     @property
     def heuristic_orders(self) -> bool:
         """Whether fewer than all K! orders were searched."""
         return len(self.orders) < math.factorial(len(self.segments))
+
+    @property
+    def analytic_pinch(self) -> np.ndarray:
+        """Where the analytic policy pinches under this plan: the contour's centroid (the paper's choice) when
+        it is feasible, else the feasible point nearest to it (:func:`feasible_centroid`): a centroid under
+        the cutting arm or on the cut line is a grasp the robot cannot make."""
+        return feasible_centroid(
+            self.contour, self.config, self.segments, self.arm_radius_mm, self.arm_length_mm
+        )
 
     def ordered_segments(self, order: Sequence[int] | None = None) -> list[np.ndarray]:
         """The segments' polylines (mm) in cutting ``order`` (default: the chosen one), for
@@ -426,7 +453,9 @@ def plan_cut(
     rules = pinch_rules(contour.centroid, contour, config, segments, **arm)
     violates = [name for name, ok in rules.items() if not ok[0]]
     rejected = [{"point": contour.centroid, "feasible": False, "violates": violates}] if violates else []
-    return Plan(contour, segments, chosen["order"], candidates, chosen, orders, errors, rejected, **arm)
+    return Plan(
+        contour, segments, chosen["order"], candidates, chosen, orders, errors, rejected, **arm, config=config
+    )
 
 
 def _polylines(path: Path) -> list[np.ndarray]:
