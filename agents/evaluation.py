@@ -148,6 +148,7 @@ def evaluate_suite(
     on_step: Callable[[str], Callable[[CuttingTask, np.ndarray | None], None] | None] | None = None,
     segments: Sequence[list[np.ndarray] | None] | None = None,
     pinches: dict[str, list[np.ndarray]] | None = None,
+    method_segments: dict[str, list[list[np.ndarray] | None]] | None = None,
 ) -> dict:
     """The Table I protocol: per contour the no-tension error and each method's improvement over it.
 
@@ -170,6 +171,8 @@ def evaluate_suite(
             None (or a None entry): the whole contour as one segment.
         pinches: Per method, a pinch point per contour that replaces the method's own choice (e.g. the
             planned pinch for ``fixed``).
+        method_segments: Per method, segments per contour that replace ``segments`` for that method (e.g.
+            the cutting order that is best at the method's own pinch point).
 
     Returns:
         ``{"rows": [{"contour", "none_error_vertices", "none_error_mm2", "METHOD_error_vertices",
@@ -185,8 +188,12 @@ def evaluate_suite(
         raise ValueError("contours: give at least one contour")
     extra = extra or {}
     order = ["none"] + [m for m in methods if m != "none"]
-    if segments is not None and len(segments) != len(contours):
-        raise ValueError(f"segments: give one list of polylines (or None) per contour ({len(contours)})")
+    method_segments = method_segments or {}
+    for name, value in [("segments", segments)] + [
+        (f"method_segments[{m!r}]", v) for m, v in method_segments.items()
+    ]:
+        if value is not None and len(value) != len(contours):
+            raise ValueError(f"{name}: give one list of polylines (or None) per contour ({len(contours)})")
     specs = baseline_specs(
         contours, [m for m in order if m not in extra], config, pinch, device, seed, pinches
     )
@@ -195,8 +202,9 @@ def evaluate_suite(
         if method not in results:
             progress(f"{method}: {len(contours)} contour(s) x {trials} trial(s)")
             callback = on_step(method) if on_step is not None else None
+            cut = method_segments.get(method, segments)
             results[method] = run_method(
-                contours, specs[method], trials, config, device, seed, callback, segments=segments
+                contours, specs[method], trials, config, device, seed, callback, segments=cut
             )
     errors = {m: r.errors for m, r in results.items()}
     areas = {m: r.areas for m, r in results.items()}

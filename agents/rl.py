@@ -25,7 +25,7 @@ from warpcut.config import SimConfig
 from warpcut.contours import Contour, load_contour
 from warpcut.io import write_json
 from warpcut.planning import nearest_feasible
-from warpcut.task import CuttingTask
+from warpcut.task import CuttingTask, default_segments
 
 
 @dataclass
@@ -44,6 +44,11 @@ class Scenario:
         action_type: ``discrete`` (paper: stay, +-x, +-y at 1 mm) or ``continuous`` (x-y moves up to
             1 mm per axis; a policy that outputs zero holds the grasp still, like fixed tensioning).
         allow_z: Let the grasp move along z too (``+-z``; lifting the sheet into the scissors' reach).
+        observe_pinch: Add the pinch point to the observation (a policy shared across pinch points).
+        candidates: Several pinch candidates for one shared policy, each ``{"pinch": [x, y], "segments":
+            polylines or None}`` (a plan's candidate with its best order): env ``i`` pinches candidate
+            ``i % K`` and cuts its segments; the pinch point is observed. ``pinch`` and ``segments`` must
+            then be None; :meth:`at_candidate` is the single-pinch scenario of one candidate.
     """
 
     contour: str
@@ -55,6 +60,17 @@ class Scenario:
     dense_reward: bool = False
     segments: list[list[list[float]]] | None = None
     allow_z: bool = False
+    observe_pinch: bool = False
+    candidates: list[dict] | None = None
+
+    def __post_init__(self):
+        if self.candidates is None:
+            return
+        if not self.candidates or any(not isinstance(c, dict) or "pinch" not in c for c in self.candidates):
+            raise ValueError('candidates: give a non-empty list of {"pinch": [x, y], "segments": ...}')
+        if self.pinch is not None or self.segments is not None:
+            raise ValueError("candidates: leave pinch and segments None; each candidate carries its own")
+        self.observe_pinch = True
 
     def load_contour(self) -> Contour:
         return load_contour(self.contour)
@@ -63,15 +79,37 @@ class Scenario:
         return SimConfig(**self.sim).validated()
 
     def pinch_point(self) -> np.ndarray:
+        if self.candidates is not None:
+            raise ValueError("pinch_point: a scenario with candidates has several; use at_candidate(k)")
         if self.pinch is not None:
             return np.asarray(self.pinch, dtype=np.float64)
         contour = self.load_contour()
         return nearest_feasible(contour.centroid, contour, self.sim_config())
 
+    def at_candidate(self, k: int) -> Scenario:
+        """The single-pinch scenario of candidate ``k`` (its pinch observed, as the shared policy expects)."""
+        if self.candidates is None:
+            raise ValueError("at_candidate: this scenario has no candidates")
+        if not 0 <= k < len(self.candidates):
+            raise ValueError(f"candidate: {k} is not in 0..{len(self.candidates) - 1}")
+        c = self.candidates[k]
+        fields = {**asdict(self), "candidates": None, "observe_pinch": True}
+        return Scenario(**{**fields, "pinch": [float(v) for v in c["pinch"]], "segments": c.get("segments")})
+
     def vec_env(self, num_envs: int, device: str | None = None) -> PatternCutVecEnv:
+        if self.candidates is None:
+            pinch, segments = self.pinch_point(), self.segments
+        else:  # env i: candidate i % K
+            picks = [self.candidates[i % len(self.candidates)] for i in range(num_envs)]
+            pinch = np.array([c["pinch"] for c in picks], dtype=np.float64)
+            contour = self.load_contour()
+            segments = [
+                c.get("segments") or [np.asarray(p).tolist() for p in default_segments(contour)]
+                for c in picks
+            ]
         options = PatternCutOptions(
             contour=self.load_contour(),
-            pinch_point=self.pinch_point(),
+            pinch_point=pinch,
             sim_config=self.sim_config(),
             device=device,
             num_fiducials=self.num_fiducials,
@@ -79,7 +117,8 @@ class Scenario:
             action_type=self.action_type,
             allow_z=self.allow_z,
             dense_reward=self.dense_reward,
-            segments=self.segments,
+            segments=segments,
+            observe_pinch=self.observe_pinch,
         )
         return PatternCutVecEnv(num_envs, options)
 
@@ -143,22 +182,65 @@ def train_contour(
             f"cfg.discrete={cfg.discrete} does not match the scenario's {scenario.action_type} actions"
         )
     out_dir = Path(out_dir)
+    shared = scenario.candidates is not None
+    if shared and validation_trials < 1:
+        raise ValueError(
+            "validation_trials: a scenario with candidates needs validation to choose one (>= 1)"
+        )
     out_dir.mkdir(parents=True, exist_ok=True)
-    scenario = Scenario(**{**asdict(scenario), "pinch": [float(v) for v in scenario.pinch_point()]})
+    if not shared:
+        scenario = Scenario(**{**asdict(scenario), "pinch": [float(v) for v in scenario.pinch_point()]})
     write_json(out_dir / "scenario.json", asdict(scenario))
     env = PatternCutRslEnv(scenario.vec_env(cfg.num_envs, device=device), device=cfg.device, seed=cfg.seed)
     validate = None
     if validation_trials > 0:
-        validation_env = scenario.vec_env(validation_trials, device=device)
+        candidates = len(scenario.candidates) if shared else 1
+        per_candidate = max(CANDIDATE_VALIDATION_MIN, -(-validation_trials // candidates)) if shared else None
+        validation_env = scenario.vec_env(per_candidate * candidates if shared else validation_trials, device)
+
+        def candidate_errors(actor: torch.nn.Module) -> np.ndarray:
+            """Mean validation error (vertices) per candidate (env i pinches candidate i % K)."""
+            seed = cfg.seed + VALIDATION_SEED_OFFSET
+            errors = policy_errors(actor, validation_env, scenario, seed)["error_vertices"]
+            return errors.reshape(-1, candidates).mean(axis=0)
 
         def validate(actor: torch.nn.Module) -> float:
-            seed = cfg.seed + VALIDATION_SEED_OFFSET
-            return float(np.mean(policy_errors(actor, validation_env, scenario, seed)["error_vertices"]))
+            return float(candidate_errors(actor).min())  # the candidate the pipeline would choose
 
     summary = train(env, cfg, out_dir, resume=resume, progress=progress, validate=validate)
+    if shared:
+        errors = candidate_errors(load_policy(out_dir))
+        chosen = int(np.argmin(errors))  # the first (the better fixed rank, as ordered) among ties
+        selection = {
+            "chosen": chosen,
+            "pinch": [float(v) for v in scenario.candidates[chosen]["pinch"]],
+            "validation_error_vertices": [float(e) for e in errors],
+            "validation_episodes_per_candidate": per_candidate,
+        }
+        write_json(out_dir / CANDIDATES_FILE, selection)
+        summary["candidates"] = selection
     evaluation = evaluate_run(out_dir, trials=eval_trials, seed=cfg.seed + 1, device=device, on_step=on_step)
     write_json(out_dir / "evaluation.json", evaluation)
     return {"summary": summary, "evaluation": evaluation}
+
+
+CANDIDATES_FILE = "candidates.json"
+"""In the run directory of a policy shared across pinch candidates: the chosen candidate (``chosen``, its
+``pinch``) and every candidate's validation error with the run's policy."""
+
+CANDIDATE_VALIDATION_MIN = 4
+"""Validation episodes per candidate of a shared policy, at least (``validation_trials`` are split over the
+candidates)."""
+
+
+def chosen_candidate(run_dir: str | Path) -> int:
+    """The candidate a shared policy's run chose (lowest validation error), from its ``candidates.json``."""
+    path = Path(run_dir) / CANDIDATES_FILE
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"{run_dir}: no {CANDIDATES_FILE}; the shared policy's training did not finish"
+        )
+    return int(json.loads(path.read_text())["chosen"])
 
 
 def load_scenario(run_dir: str | Path) -> Scenario:
@@ -185,6 +267,8 @@ def rollout_errors(
     and after every step, as in :meth:`warpcut.task.CuttingTask.run` (e.g. a recorder's callback).
     """
     scenario = scenario or load_scenario(run_dir)
+    if scenario.candidates is not None:  # a shared policy: at the candidate its run chose
+        scenario = scenario.at_candidate(chosen_candidate(run_dir))
     actor = load_policy(run_dir)
     env = scenario.vec_env(trials, device=device)
     return policy_errors(actor, env, scenario, seed=seed, on_step=on_step)
@@ -219,7 +303,8 @@ def policy_errors(
                 break
     if errors is None:
         raise RuntimeError(f"{scenario.contour}: the episode did not end within {env.task.num_steps} steps")
-    return {"error_vertices": errors, "error_mm2": errors_mm2, "pinch": scenario.pinch_point()}
+    pinch = None if scenario.candidates is not None else scenario.pinch_point()
+    return {"error_vertices": errors, "error_mm2": errors_mm2, "pinch": pinch}
 
 
 def _tensordict(groups: dict[str, torch.Tensor], batch: int):
@@ -243,6 +328,8 @@ def evaluate_run(
     from agents.evaluation import MethodSpec, ci95, paired_improvement, run_method
 
     scenario = load_scenario(run_dir)
+    if scenario.candidates is not None:
+        scenario = scenario.at_candidate(chosen_candidate(run_dir))
     contour = scenario.load_contour()
     start = time.perf_counter()
     hook = on_step or (lambda method: None)

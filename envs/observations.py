@@ -1,6 +1,7 @@
-"""What a pattern-cutting policy observes: time, grasp displacement, fiducials, optional contour features.
+"""What a pattern-cutting policy observes: time, grasp displacement, fiducials, optional contour features
+and pinch point.
 
-The layout of one env's observation (float32, ``D = 4 + 3 * num_fiducials [+ 7]``):
+The layout of one env's observation (float32, ``D = 4 + 3 * num_fiducials [+ 7] [+ 2]``):
 
 =================  =====  =====================================================================  ==========
 slice              size   quantity                                                               bounds
@@ -11,6 +12,7 @@ slice              size   quantity                                              
 ``[4+3K:7+3K]``    3      (``contour_features``) scissor tip position, normalised               [-2, 2]
 ``[7+3K]``         1      (``contour_features``) 1 while the tip cuts, 0 while it travels       [0, 1]
 ``[8+3K:11+3K]``   3      (``contour_features``) tracking error / ``max_displacement_mm``       [-5, 5]
+last 2             2      (``observe_pinch``) the pinch point (material x, y), normalised       [-1, 1]
 =================  =====  =====================================================================  ==========
 
 *Normalised* positions are ``(p - (W/2, H/2, 0)) / (max(W, H) / 2)``: the sheet at rest spans [-1, 1] in
@@ -45,13 +47,18 @@ TRACKING_LIMIT = 5.0
 """Bound on the normalised tracking error: 50 mm at the default ``max_displacement_mm`` of 10 mm."""
 
 
-def observation_bounds(num_fiducials: int, contour_features: bool) -> tuple[np.ndarray, np.ndarray]:
+def observation_bounds(
+    num_fiducials: int, contour_features: bool, observe_pinch: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
     """``(low, high)`` float32 bounds of one env's observation, in the layout of the module docstring."""
     low = [0.0, -1.0, -1.0, -1.0] + [-POSITION_LIMIT] * (3 * num_fiducials)
     high = [1.0, 1.0, 1.0, 1.0] + [POSITION_LIMIT] * (3 * num_fiducials)
     if contour_features:
         low += [-POSITION_LIMIT] * 3 + [0.0] + [-TRACKING_LIMIT] * 3
         high += [POSITION_LIMIT] * 3 + [1.0] + [TRACKING_LIMIT] * 3
+    if observe_pinch:
+        low += [-1.0, -1.0]
+        high += [1.0, 1.0]
     return np.array(low, dtype=np.float32), np.array(high, dtype=np.float32)
 
 

@@ -65,9 +65,12 @@ class PatternCutOptions:
     pinch_point: Sequence[float] | np.ndarray | None = None
     """Material point (mm) the tensioning arm pinches, ``(2,)`` or ``(B, 2)``. Default: each contour's
     centroid, or the feasible point nearest to it (:func:`warpcut.planning.nearest_feasible`)."""
-    segments: Sequence[Sequence[Sequence[float]]] | None = None
-    """Material polylines (mm) the scissors cut, in order, the same for every env (e.g. a plan's
-    ``ordered_segments()``); default: the whole contour as one segment (``warpcut.task.default_segments``)."""
+    segments: Sequence[Sequence[Sequence[float]]] | Sequence[Sequence[Sequence[Sequence[float]]]] | None = (
+        None
+    )
+    """Material polylines (mm) the scissors cut, in order (e.g. a plan's ``ordered_segments()``): one such
+    list for every env, or a list of them, one per env; default: the whole contour as one segment
+    (``warpcut.task.default_segments``)."""
     sim_config: SimConfig = field(default_factory=SimConfig)
     """Base simulation parameters; the fields below override it when given."""
     fixture: str | None = None
@@ -96,6 +99,9 @@ class PatternCutOptions:
     contour_features: bool = False
     """Add the scissor tip, its cutting flag and the tracking error to the observation, for policies
     meant to generalise across contours."""
+    observe_pinch: bool = False
+    """Add the pinch point (material x, y, normalised) to the observation, for one policy shared across
+    pinch points (``warpcut run`` trains one over all pinch candidates)."""
     action_type: str = "discrete"
     """``"discrete"`` (paper: stay, +-x, +-y at 1 mm) or ``"continuous"`` (moves in units of 1 mm)."""
     allow_z: bool = False
@@ -181,12 +187,7 @@ class PatternCut:
             pinch_points = options.pinch_point
         segments = None
         if options.segments is not None:
-            polylines = [np.asarray(p, dtype=np.float64) for p in options.segments]
-            if not polylines or any(p.ndim != 2 or p.shape[1] != 2 or len(p) < 2 for p in polylines):
-                raise ValueError(
-                    "segments: give a list of polylines, each at least 2 points [[x_mm, y_mm], ...]"
-                )
-            segments = [polylines] * num_envs
+            segments = _segments_per_env(options.segments, num_envs)
         self.task = CuttingTask(
             config, contours, num_envs, pinch_points=pinch_points, segments=segments, device=options.device
         )
@@ -194,7 +195,7 @@ class PatternCut:
         self.area_mm2 = np.array([c.area_mm2 for c in contours])
         self.episode_steps = min(self.task.num_steps, options.max_episode_steps or self.task.num_steps)
         self.fiducials = Fiducials(self.task.grid, options.shaft_radius_mm)
-        low, high = observation_bounds(options.num_fiducials, options.contour_features)
+        low, high = observation_bounds(options.num_fiducials, options.contour_features, options.observe_pinch)
         self.observation_space = gym.spaces.Box(low, high, dtype=np.float32)
         num_axes = 3 if options.allow_z else 2
         if options.action_type == "discrete":
@@ -300,6 +301,9 @@ class PatternCut:
         if self.options.contour_features:
             tracking = np.nan_to_num(self.tracking_error(), nan=0.0) / self.config.max_displacement_mm
             parts += [normalise_positions(tip[:, :3], self.config), tip[:, 3:4], tracking]
+        if self.options.observe_pinch:
+            pinch = np.nan_to_num(self.task.pinch_points, nan=0.0)
+            parts.append(normalise_positions(np.pad(pinch, ((0, 0), (0, 1))), self.config)[:, :2])
         obs = np.concatenate(parts, axis=1).astype(np.float32)
         return np.clip(obs, self.observation_space.low, self.observation_space.high)
 
@@ -344,6 +348,30 @@ class PatternCutEnv(gym.Env):
         """Move the grasp by ``action`` and advance the scissors one step (module docstring)."""
         obs, rewards, terminated, truncated, info = self.scene.step(np.asarray(action)[None])
         return obs[0], float(rewards[0]), terminated, truncated, {k: float(v[0]) for k, v in info.items()}
+
+
+def _segments_per_env(segments: Sequence, num_envs: int) -> list[list[np.ndarray]]:
+    """``PatternCutOptions.segments`` as one list of (N, 2) polylines per env."""
+    usage = "give a list of polylines, each at least 2 points [[x_mm, y_mm], ...], or one such list per env"
+
+    def path(value: Sequence, where: str) -> list[np.ndarray]:
+        try:
+            polylines = [np.asarray(p, dtype=np.float64) for p in value]
+        except (TypeError, ValueError) as error:
+            raise ValueError(f"segments{where}: {usage} ({error})") from None
+        if not polylines or any(p.ndim != 2 or p.shape[1] != 2 or len(p) < 2 for p in polylines):
+            raise ValueError(f"segments{where}: {usage}")
+        return polylines
+
+    try:  # one path for every env: segments[i][j] is a point [x, y]
+        per_env = np.ndim(segments[0][0][0]) > 0
+    except (TypeError, IndexError, ValueError):
+        per_env = False
+    if not per_env:
+        return [path(segments, "")] * num_envs
+    if len(segments) != num_envs:
+        raise ValueError(f"segments: got {len(segments)} paths for {num_envs} envs; give one, or one per env")
+    return [path(s, f"[{k}]") for k, s in enumerate(segments)]
 
 
 def reject_reset_options(options: dict[str, Any] | None) -> None:

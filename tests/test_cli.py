@@ -387,10 +387,10 @@ def test_run_end_to_end_on_a_tiny_budget(tmp_path):
         "results.json",
         "regions.png",
         "improvement.png",
-        "rl/candidate-0/best.pt",
-        "rl/candidate-0/scenario.json",
-        "rl/candidate-0/learning_curve.png",
-        "rl/candidate-1/best.pt",
+        "rl/best.pt",
+        "rl/scenario.json",
+        "rl/candidates.json",
+        "rl/learning_curve.png",
         "pinch_candidates.png",
     ):
         assert (out / name).is_file(), name
@@ -398,18 +398,52 @@ def test_run_end_to_end_on_a_tiny_budget(tmp_path):
     row = report["rows"][0]
     plan = json.loads((out / "plan.json").read_text())
     assert row["fixed_pinch"] == pytest.approx(plan["chosen"]["pinch"])  # fixed at the planned pinch
-    # One policy per candidate, the best two by fixed tension; rl uses the one that validated best.
+    # One policy shared by the best two candidates (by fixed tension), each cut in its best order; rl
+    # pinches the candidate that validated best.
     feasible = sorted(
         (c for c in plan["pinch_candidates"] if c["feasible"]), key=lambda c: c["error_vertices"]
     )
-    runs = report["rl_candidates"]
-    assert [r["pinch"] for r in runs] == [pytest.approx(c["point"]) for c in feasible[:2]]
-    chosen = runs[report["rl_chosen"]]
-    assert chosen["validation_error_vertices"] == min(r["validation_error_vertices"] for r in runs)
+    listed = report["candidates"]
+    assert [c["pinch"] for c in listed] == [pytest.approx(c["point"]) for c in feasible[:2]]
+    assert [c["order"] for c in listed] == [c["best_order"] for c in feasible[:2]]
+    chosen = listed[report["chosen_candidate"]]
+    assert chosen["rl_validation_error_vertices"] == min(c["rl_validation_error_vertices"] for c in listed)
     assert row["rl_pinch"] == pytest.approx(chosen["pinch"])
-    scenario = json.loads((out / chosen["run"] / "scenario.json").read_text())
-    assert len(scenario["segments"]) == len(plan["segments"])
+    scenario = json.loads((out / "rl" / "scenario.json").read_text())
+    assert len(scenario["candidates"]) == 2 and scenario["observe_pinch"]
     assert {"none", "fixed", "analytic", "rl"} <= {line.split()[0] for line in stdout.splitlines() if line}
+
+
+def test_run_with_a_quick_analytic_plan(tmp_path):
+    """--policy analytic: no training; the analytic policy picks the candidate and pinches there."""
+    code, stdout, _ = invoke(
+        [
+            "run",
+            "--contour",
+            "fls-circle",
+            "--resolution",
+            "13",
+            "--candidates",
+            "3",
+            "--policy",
+            "analytic",
+            "--trials",
+            "1",
+            "--out",
+            str(tmp_path / "run"),
+            "--json",
+            str(tmp_path / "r.json"),
+            "--no-plots",
+        ]
+    )
+    assert code == 0, stdout
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["policy"] == "analytic" and "rl_error_vertices" not in report["rows"][0]
+    scores = [c["analytic_error_vertices"] for c in report["candidates"]]
+    chosen = report["candidates"][report["chosen_candidate"]]
+    assert chosen["analytic_error_vertices"] == min(scores)
+    assert report["rows"][0]["analytic_pinch"] == pytest.approx(chosen["pinch"])
+    assert not (tmp_path / "run" / "rl").exists()
 
 
 def test_bench_times_the_captured_colours_update_on_cpu():

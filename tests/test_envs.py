@@ -241,3 +241,23 @@ def test_rsl_rl_ppo_runs_on_the_adapter():
     runner = OnPolicyRunner(env, cfg, log_dir=None, device="cpu")
     runner.learn(num_learning_iterations=7)  # 56 steps: across the end of a 48-step episode
     assert env.episode_length_buf.tolist() == [8, 8]
+
+
+def test_segments_one_path_for_all_or_one_per_env():
+    contour = load_contour("circle-small")
+    right, left = contour.points[contour.points[:, 0] >= 36.0], contour.points[contour.points[:, 0] <= 36.0]
+    shared = PatternCutVecEnv(2, contour="circle-small", resolution=9, segments=[right])
+    assert shared.task.num_steps > 0
+    per_env = PatternCutVecEnv(2, contour="circle-small", resolution=9, segments=[[right], [left[::-1]]])
+    assert per_env.task.num_steps > 0
+    with pytest.raises(ValueError, match="got 3 paths for 2 envs"):
+        PatternCutVecEnv(2, contour="circle-small", resolution=9, segments=[[right]] * 3)
+    with pytest.raises(ValueError, match=r"segments\[1\]: give a list of polylines"):
+        PatternCutVecEnv(2, contour="circle-small", resolution=9, segments=[[right], [[[1.0, 2.0]]]])
+
+
+def test_observe_pinch_appends_the_normalised_pinch_point():
+    env = PatternCutVecEnv(2, **SMALL, pinch_point=[[30.0, 40.0], [70.0, 55.0]], observe_pinch=True)
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (2, OBS_DIM + 2) and env.single_observation_space.contains(obs[0])
+    assert obs[:, -2:] == pytest.approx(np.array([[-0.4, -0.2], [0.4, 0.1]]))

@@ -6,7 +6,15 @@ import numpy as np
 import pytest
 import torch
 
-from agents.rl import RECIPE, Scenario, evaluate_run, load_scenario, rollout_errors, train_contour
+from agents.rl import (
+    RECIPE,
+    Scenario,
+    chosen_candidate,
+    evaluate_run,
+    load_scenario,
+    rollout_errors,
+    train_contour,
+)
 from agents.train import TrainConfig
 
 
@@ -50,6 +58,47 @@ def test_mismatched_action_type_is_reported(tmp_path):
         )
     with pytest.raises(FileNotFoundError, match="no scenario.json"):
         load_scenario(tmp_path / "nothing")
+
+
+CANDIDATES = [{"pinch": [50.0, 42.5], "segments": None}, {"pinch": [30.0, 40.0], "segments": None}]
+
+
+def test_shared_policy_observes_its_pinch_and_picks_the_best_candidate(tmp_path):
+    """One policy over two pinch candidates: env i pinches candidate i % 2 and observes that point; the run
+    chooses the candidate whose validation error is lowest and evaluates there."""
+    torch.set_num_threads(1)
+    scenario = Scenario(contour="fls-circle", sim={"resolution": 13}, candidates=CANDIDATES, **RECIPE)
+    assert scenario.observe_pinch
+    env = scenario.vec_env(4)
+    obs, _ = env.reset(seed=0)
+    pinches = np.array([CANDIDATES[i % 2]["pinch"] for i in range(4)])
+    assert env.task.pinch_points == pytest.approx(pinches)
+    assert obs[:, -2:] == pytest.approx((pinches - 50.0) / 50.0)  # normalised material x, y
+    result = train_contour(
+        scenario,
+        tmp_path,
+        TrainConfig(num_envs=4, iterations=2, num_steps_per_env=4, stay_prior=0.9),
+        eval_trials=2,
+        progress=False,
+        validation_trials=4,
+    )
+    selection = json.loads((tmp_path / "candidates.json").read_text())
+    errors = selection["validation_error_vertices"]
+    assert len(errors) == 2 and selection["chosen"] == int(np.argmin(errors)) == chosen_candidate(tmp_path)
+    assert selection["validation_episodes_per_candidate"] == 4  # at least CANDIDATE_VALIDATION_MIN each
+    assert result["evaluation"]["pinch"] == pytest.approx(CANDIDATES[selection["chosen"]]["pinch"])
+    assert load_scenario(tmp_path).candidates == CANDIDATES
+
+
+def test_shared_scenario_rejects_a_single_pinch():
+    with pytest.raises(ValueError, match="leave pinch and segments None"):
+        Scenario(contour="fls-circle", pinch=[50.0, 50.0], candidates=CANDIDATES)
+    with pytest.raises(ValueError, match="candidates: give a non-empty list"):
+        Scenario(contour="fls-circle", candidates=[])
+    with pytest.raises(ValueError, match="several; use at_candidate"):
+        Scenario(contour="fls-circle", candidates=CANDIDATES).pinch_point()
+    with pytest.raises(ValueError, match="candidate: 2 is not in 0..1"):
+        Scenario(contour="fls-circle", candidates=CANDIDATES).at_candidate(2)
 
 
 @pytest.mark.slow

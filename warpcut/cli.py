@@ -1046,11 +1046,11 @@ def plan(
 
 
 BUDGETS = {
-    # candidates for the pinch search, of which the best rl_candidates (by fixed tension) get a PPO policy
-    # each; PPO iterations per policy; evaluation trials
-    "fast": {"candidates": 8, "rl_candidates": 2, "iterations": 60, "trials": 10},
-    "paper": {"candidates": 30, "rl_candidates": 5, "iterations": 200, "trials": 10},
+    # candidates for the pinch search (all of them share one PPO policy); PPO iterations; evaluation trials
+    "fast": {"candidates": 8, "iterations": 60, "trials": 10},
+    "paper": {"candidates": 30, "iterations": 200, "trials": 10},
 }
+RUN_POLICIES = ("rl", "fixed", "analytic")
 
 
 @main.command()
@@ -1066,8 +1066,18 @@ BUDGETS = {
     default="fast",
     show_default=True,
     type=click.Choice(list(BUDGETS)),
-    help="fast: 8 pinch candidates, a PPO policy for each of the best 2, 60 PPO iterations each (a few "
-    "minutes on 2 CPU cores); paper: 30 candidates, policies for the best 5, 200 iterations.",
+    help="fast: 8 pinch candidates (plus the centroid when feasible) sharing one PPO policy, 60 PPO "
+    "iterations (a few minutes on 2 CPU cores); paper: 30 candidates, 200 iterations.",
+)
+@click.option(
+    "--policy",
+    "run_policy",
+    default="rl",
+    show_default=True,
+    type=click.Choice(RUN_POLICIES),
+    help="The tensioner that picks the pinch candidate (each candidate with its best order): rl (one PPO "
+    "policy shared by the candidates, conditioned on the pinch point); fixed or analytic for quick plans "
+    "without training.",
 )
 @click.option(
     "--candidates", type=click.IntRange(min=1), default=None, help="Override the budget's pinch candidates."
@@ -1076,7 +1086,8 @@ BUDGETS = {
     "--rl-candidates",
     type=click.IntRange(min=1),
     default=None,
-    help="Override how many of the best candidates (ranked by fixed tension) get their own PPO policy.",
+    help="Train the shared PPO policy on only this many of the best candidates (ranked by fixed tension); "
+    "default: all.",
 )
 @click.option(
     "--iterations", type=click.IntRange(min=1), default=None, help="Override the budget's PPO iterations."
@@ -1084,7 +1095,12 @@ BUDGETS = {
 @click.option(
     "--trials", type=click.IntRange(min=1), default=None, help="Override the budget's evaluation trials."
 )
-@click.option("--num-envs", default=64, show_default=True, type=click.IntRange(min=1), help="PPO envs.")
+@click.option(
+    "--num-envs",
+    default=None,
+    type=click.IntRange(min=1),
+    help="PPO envs (default: 64, or 8 per candidate when that is more).",
+)
 @click.option(
     "--resolution", default=25, show_default=True, type=click.IntRange(5, 100), help="Vertices per side."
 )
@@ -1109,11 +1125,12 @@ BUDGETS = {
 def run(
     contour_name: str,
     budget: str,
+    run_policy: str,
     candidates: int | None,
     rl_candidates: int | None,
     iterations: int | None,
     trials: int | None,
-    num_envs: int,
+    num_envs: int | None,
     resolution: int,
     arm_length: float,
     analytic_pinch: str,
@@ -1125,11 +1142,12 @@ def run(
     colour_by: str,
     no_plots: bool,
 ) -> None:
-    """The whole pipeline: plan the cut, train RL at the best pinch candidates, compare
-    none/fixed/analytic/RL."""
+    """The whole pipeline: plan the cut, pick the pinch candidate with a tensioner (RL: one policy shared by
+    the candidates), compare none/fixed/analytic/RL."""
     import numpy as np
 
-    from agents.evaluation import MethodResult, evaluate_suite
+    from agents.baselines import AnalyticTension
+    from agents.evaluation import MethodResult, MethodSpec, evaluate_suite, run_method
     from agents.rl import RECIPE, Scenario, recipe_config, rollout_errors, train_contour
     from warpcut.contours import load_contour
     from warpcut.io import write_json
@@ -1137,12 +1155,7 @@ def run(
     from warpcut.simulator import resolve_device
 
     settings = dict(BUDGETS[budget])
-    overrides = {
-        "candidates": candidates,
-        "rl_candidates": rl_candidates,
-        "iterations": iterations,
-        "trials": trials,
-    }
+    overrides = {"candidates": candidates, "iterations": iterations, "trials": trials}
     settings.update({k: v for k, v in overrides.items() if v is not None})
     device = resolve_device(device)
     contour = load_contour(contour_name)
@@ -1168,25 +1181,57 @@ def run(
     )
 
     ranked = sorted(range(len(plan.candidates)), key=lambda c: plan.candidates[c]["error_vertices"])
-    ranked = ranked[: settings["rl_candidates"]]
-    click.echo(
-        f"[2/3] training RL at the best {len(ranked)} pinch candidate(s) "
-        f"({settings['iterations']} PPO iterations each)",
-        err=True,
-    )
-    cfg = recipe_config(num_envs=num_envs, iterations=settings["iterations"], seed=seed, device="cpu")
-    rl_runs = []
-    for rank, c in enumerate(ranked):
-        candidate = plan.candidates[c]
-        point = [float(v) for v in candidate["point"]]
+    ranked = ranked[: rl_candidates or len(ranked)]
+    picked = [plan.candidates[c] for c in ranked]
+    listed = [
+        {
+            "pinch": [float(v) for v in c["point"]],
+            "order": [int(k) for k in c["best_order"]],
+            "fixed_error_vertices": float(c["error_vertices"]),
+        }
+        for c in picked
+    ]
+    methods = ["none", "fixed", "analytic"] + (["rl"] if run_policy == "rl" else [])
+    pinches = {"fixed": [pinch], "analytic": _analytic_pinches(analytic_pinch, [contour], [plan])}
+    method_segments = {}
+    extra = {}
+    if run_policy == "fixed":
+        chosen = 0  # the plan's choice: the best candidate by fixed tension
+        click.echo("[2/3] --policy fixed: the plan's pinch and order", err=True)
+    elif run_policy == "analytic":
+        click.echo(f"[2/3] scoring the analytic policy at {len(picked)} pinch candidate(s)", err=True)
+        scores = run_method(
+            [contour] * len(picked),
+            MethodSpec([np.asarray(c["pinch"]) for c in listed], AnalyticTension()),
+            1,
+            config.replace(noise_std=0.0),
+            device,
+            seed,
+            segments=[plan.ordered_segments(c["order"]) for c in listed],
+        ).errors[:, 0]
+        for c, e in zip(listed, scores, strict=True):
+            c["analytic_error_vertices"] = float(e)
+        chosen = int(np.argmin(scores))
+        pinches["analytic"] = [np.asarray(listed[chosen]["pinch"])]
+        method_segments["analytic"] = plan.ordered_segments(listed[chosen]["order"])
+    else:
+        envs = num_envs or max(64, 8 * len(picked))
+        click.echo(
+            f"[2/3] training one RL policy shared by {len(picked)} pinch candidate(s) "
+            f"({settings['iterations']} PPO iterations, {envs} envs)",
+            err=True,
+        )
+        cfg = recipe_config(num_envs=envs, iterations=settings["iterations"], seed=seed, device="cpu")
         scenario = Scenario(
             contour=contour_name,
-            pinch=point,
             sim={"resolution": resolution} if resolution != 25 else {},
-            segments=[seg.tolist() for seg in plan.ordered_segments(candidate["best_order"])],
+            candidates=[
+                {"pinch": c["pinch"], "segments": [s.tolist() for s in plan.ordered_segments(c["order"])]}
+                for c in listed
+            ],
             **RECIPE,
         )
-        run_dir = out / "rl" / f"candidate-{rank}"
+        run_dir = out / "rl"
         try:
             result = train_contour(
                 scenario, run_dir, cfg, eval_trials=settings["trials"], progress=True, device=device
@@ -1194,32 +1239,30 @@ def run(
         except KeyboardInterrupt:
             click.echo(f"interrupted: checkpoint saved in {run_dir}", err=True)
             sys.exit(130)
-        best = result["summary"]["best"]
+        summary = result["summary"]
+        selection = summary["candidates"]
+        for c, e in zip(listed, selection["validation_error_vertices"], strict=True):
+            c["rl_validation_error_vertices"] = e
+        chosen = selection["chosen"]
         if not no_plots:
             from warpcut.plots import plot_learning_curve
 
-            summary = result["summary"]
-            title = f"{contour.name}, pinch ({point[0]:.1f}, {point[1]:.1f})"
+            title = f"{contour.name}, one policy for {len(picked)} pinch candidates"
             plot_learning_curve(summary["history"], summary["validation"], run_dir, title=title)
-        rl_runs.append(
-            {
-                "run": str(run_dir.relative_to(out)),
-                "pinch": point,
-                "order": [int(k) for k in candidate["best_order"]],
-                "fixed_error_vertices": float(candidate["error_vertices"]),
-                "validation_error_vertices": best["validation_error"],
-                "best_iteration": best["iterations"],
-            }
+    best = listed[chosen]
+    click.echo(
+        f"      chosen by {run_policy}: pinch ({best['pinch'][0]:.1f}, {best['pinch'][1]:.1f}), order "
+        f"{best['order']}"
+        + "".join(
+            f", {k.split('_')[0]} {best[k]:.1f}"
+            for k in ("fixed_error_vertices", "analytic_error_vertices", "rl_validation_error_vertices")
+            if k in best
         )
-        click.echo(
-            f"      candidate ({point[0]:.1f}, {point[1]:.1f}): fixed {candidate['error_vertices']:.1f}, "
-            f"rl {best['validation_error']:.1f} vertices (validation)",
-            err=True,
-        )
-    # The candidate whose policy validated best wins (the better fixed rank on ties).
-    chosen_rl = min(range(len(rl_runs)), key=lambda k: (rl_runs[k]["validation_error_vertices"], k))
+        + " vertices",
+        err=True,
+    )
 
-    click.echo(f"[3/3] evaluating none, fixed, analytic, rl: {settings['trials']} trials each", err=True)
+    click.echo(f"[3/3] evaluating {', '.join(methods)}: {settings['trials']} trials each", err=True)
     cuts = None
     if not no_plots:
         from warpcut.plots import FinalCuts
@@ -1227,28 +1270,32 @@ def run(
         cuts = FinalCuts()
     with _recorder(out, record_envs, colour_by) as recorder:
         hooks = _step_hooks(recorder, cuts)
-        rl = rollout_errors(
-            out / rl_runs[chosen_rl]["run"],
-            settings["trials"],
-            seed=seed + 1,
-            device=device,
-            on_step=None if hooks is None else hooks("rl"),
-        )
+        if run_policy == "rl":
+            rl = rollout_errors(
+                out / "rl",
+                settings["trials"],
+                seed=seed + 1,
+                device=device,
+                on_step=None if hooks is None else hooks("rl"),
+            )
+            extra["rl"] = MethodResult(rl["error_vertices"][None], rl["error_mm2"][None], [rl["pinch"]])
         report = evaluate_suite(
             [contour],
-            ["none", "fixed", "analytic", "rl"],
+            methods,
             trials=settings["trials"],
             config=config,
             device=device,
             seed=seed,
             segments=[segments],
-            pinches={"fixed": [pinch], "analytic": _analytic_pinches(analytic_pinch, [contour], [plan])},
-            extra={"rl": MethodResult(rl["error_vertices"][None], rl["error_mm2"][None], [rl["pinch"]])},
+            pinches=pinches,
+            extra=extra,
             on_step=hooks,
+            method_segments={m: [p] for m, p in method_segments.items()},
         )
     report["plan"] = plan.to_json()["chosen"]
-    report["rl_candidates"] = rl_runs
-    report["rl_chosen"] = chosen_rl
+    report["policy"] = run_policy
+    report["candidates"] = listed
+    report["chosen_candidate"] = chosen
     report["budget"] = budget
     report["analytic_pinch"] = analytic_pinch
     report["seconds"] = time.perf_counter() - start
@@ -1258,7 +1305,7 @@ def run(
         f"{settings['trials']} trials, {report['seconds']:.0f} s"
     )
     click.echo(f"{'method':<10} {'error (vertices)':>16} {'improvement':>14} {'pinch (mm)':>16}")
-    for m in ("none", "fixed", "analytic", "rl"):
+    for m in methods:
         p = row[f"{m}_pinch"]
         p_txt = "-" if p is None else f"({p[0]:.1f}, {p[1]:.1f})"
         imp = row[f"{m}_improvement_pct"]
@@ -1271,7 +1318,7 @@ def run(
         from warpcut.plots import plot_improvements, plot_pinch_candidates, plot_regions
 
         _echo_written(plot_regions(cuts.cuts, out))
-        _echo_written(plot_improvements(report, ["fixed", "analytic", "rl"], out))
+        _echo_written(plot_improvements(report, methods[1:], out))
         _echo_written(plot_pinch_candidates(plan, config, out))
     if recorder is not None:
         _echo_written([recorder.path])
