@@ -1,7 +1,13 @@
 """Recordings (.rrd), plots and ``warpcut replay``: small sheets, short runs."""
 
 import json
+import os
+import signal
+import subprocess
 import sys
+import textwrap
+import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -12,7 +18,14 @@ from warpcut import recording
 from warpcut.cli import main
 from warpcut.config import SheetGrid, SimConfig
 from warpcut.contours import load_contour
-from warpcut.recording import STRAIN_FULL_SCALE, Recorder, _ramp, read_summary, vertex_strain
+from warpcut.recording import (
+    STRAIN_FULL_SCALE,
+    Recorder,
+    RecordingError,
+    _ramp,
+    read_summary,
+    vertex_strain,
+)
 from warpcut.simulator import Simulator, colour_springs
 from warpcut.task import CuttingTask
 
@@ -143,7 +156,8 @@ def test_recording_does_not_change_the_results(tmp_path):
     assert json.dumps(recorded) == json.dumps(plain)
 
 
-def test_interrupted_run_leaves_a_readable_recording(tmp_path):
+@pytest.mark.parametrize("background", ["process", "thread", False])
+def test_interrupted_run_leaves_a_readable_recording(tmp_path, background):
     task = CuttingTask(SimConfig(resolution=RESOLUTION), load_contour("fls-circle"), device="cpu")
     stop_at = 5
 
@@ -153,7 +167,7 @@ def test_interrupted_run_leaves_a_readable_recording(tmp_path):
         return None
 
     path = tmp_path / "recording.rrd"
-    with pytest.raises(KeyboardInterrupt), Recorder(path) as recorder:
+    with pytest.raises(KeyboardInterrupt), Recorder(path, background=background) as recorder:
         task.run(policy, on_step=recorder.on_step("fixed"))
     summary = read_summary(path)
     assert summary.frames == stop_at + 1 and summary.last_step == stop_at
@@ -324,7 +338,7 @@ def test_the_recorded_error_is_the_score(tmp_path):
     assert errors[0][1] == [float(score.intended.sum())]  # uncut: nothing separated yet
 
 
-def test_background_and_inline_recordings_hold_the_same(tmp_path):
+def test_process_thread_and_inline_recordings_hold_the_same(tmp_path):
     task = CuttingTask(
         SimConfig(resolution=RESOLUTION, noise_std=0.02),
         load_contour("fls-circle"),
@@ -332,21 +346,126 @@ def test_background_and_inline_recordings_hold_the_same(tmp_path):
         pinch_points=np.array([50.0, 45.0]),
         device="cpu",
     )
-    for background in (True, False):
+    modes = ("process", "thread", False)
+    for background in modes:
         with Recorder(tmp_path / f"{background}.rrd", envs=2, background=background) as recorder:
             task.run(lambda t: np.full((3, 3), 0.2), on_step=recorder.on_step("fixed"))
             task.run(None, on_step=recorder.on_step("none"))
-    assert read_columns(tmp_path / "True.rrd") == read_columns(tmp_path / "False.rrd")
+    inline = read_columns(tmp_path / "False.rrd")
+    assert ("/fixed/env_1/grasp/displacement", "Arrows3D:vectors") in inline
+    assert len(inline[("/none/env_0/sheet", "Mesh3D:vertex_positions")]) == task.num_steps + 1
+    for background in modes[:-1]:
+        assert read_columns(tmp_path / f"{background}.rrd") == inline, background
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(f"{b}.rrd" for b in modes)
 
 
-def test_a_failure_on_the_worker_surfaces_and_the_file_remains(tmp_path, monkeypatch):
+def test_the_recorder_process_is_reused(tmp_path):
+    task = CuttingTask(SimConfig(resolution=RESOLUTION), load_contour("circle-small"), device="cpu")
+    pids = []
+    for k in range(2):
+        with Recorder(tmp_path / f"{k}.rrd", background="process") as recorder:
+            pids.append(recorder._sink.child.process.pid)
+            task.run(None, on_step=recorder.on_step("none"))
+        assert read_summary(tmp_path / f"{k}.rrd").frames == task.num_steps + 1
+    assert pids[0] == pids[1]
+
+
+def test_a_failure_in_the_recorder_process_names_the_recording(tmp_path):
+    task = CuttingTask(SimConfig(resolution=RESOLUTION), load_contour("circle-small"), device="cpu")
+    # The stepping process copies this trajectory as it is; drawing it fails in the recorder process.
+    task.trajectories = [SimpleNamespace(tip=np.zeros(4))]
+    path = tmp_path / "r.rrd"
+    with pytest.raises(RecordingError, match="IndexError: too many indices") as failure:
+        with Recorder(path, background="process") as recorder:
+            failed = recorder._sink.child.process
+            task.run(None, on_step=recorder.on_step("none"))
+    assert str(path) in str(failure.value) and "recorder process failed" in str(failure.value)
+    assert read_summary(path).frames == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.rrd"]
+    with Recorder(tmp_path / "next.rrd", background="process") as recorder:
+        assert recorder._sink.child.process is not failed  # not reused after a failure
+
+
+def test_a_dead_recorder_process_is_an_error_not_a_hang(tmp_path):
+    task = CuttingTask(SimConfig(resolution=RESOLUTION), load_contour("fls-circle"), device="cpu")
+    path = tmp_path / "r.rrd"
+    with pytest.raises(RecordingError, match="ended unexpectedly") as failure:
+        with Recorder(path, background="process") as recorder:
+            child = recorder._sink.child.process
+
+            def policy(task):
+                if task.step_index == 3:
+                    child.kill()
+                    child.wait()
+                return None
+
+            task.run(policy, on_step=recorder.on_step("none"))
+    assert str(path) in str(failure.value)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.rrd"]
+
+
+def test_ctrl_c_reaches_only_the_stepping_process(tmp_path):
+    task = CuttingTask(SimConfig(resolution=RESOLUTION), load_contour("fls-circle"), device="cpu")
+    with Recorder(tmp_path / "warm.rrd", background="process") as recorder:
+        child = recorder._sink.child.process  # started and ready
+        task.run(None, on_step=recorder.on_step("none"))
+    stop_at = 5
+
+    def policy(task):
+        if task.step_index == stop_at:
+            os.kill(child.pid, signal.SIGINT)  # as a terminal would if it ran in the same group
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(5.0)  # interrupted at once
+        return None
+
+    path = tmp_path / "recording.rrd"
+    with pytest.raises(KeyboardInterrupt), Recorder(path, background="process") as recorder:
+        assert recorder._sink.child.process is child
+        task.run(policy, on_step=recorder.on_step("fixed"))
+    summary = read_summary(path)
+    assert summary.frames == stop_at + 1 and summary.last_step == stop_at
+    assert "/fixed/env_0/sheet" in summary.entity_paths
+    assert child.poll() is None, "the recorder process did not ignore Ctrl-C"
+
+
+def test_the_recorder_process_finishes_the_file_when_the_stepping_process_dies(tmp_path):
+    """Also: recording through the process does not import rerun into the stepping process."""
+    script = textwrap.dedent(
+        f"""
+        import os, sys
+        from warpcut.config import SimConfig
+        from warpcut.contours import load_contour
+        from warpcut.recording import Recorder
+        from warpcut.task import CuttingTask
+
+        task = CuttingTask(SimConfig(resolution={RESOLUTION}), load_contour("circle-small"), device="cpu")
+        with Recorder(sys.argv[1] + "/closed.rrd", background="process") as recorder:
+            task.run(None, on_step=recorder.on_step("none"))
+        assert "rerun" not in sys.modules, "the stepping process imported rerun"
+        recorder = Recorder(sys.argv[1] + "/dead.rrd", background="process")
+        task.run(None, on_step=recorder.on_step("none"))
+        os._exit(3)  # dies without closing the recorder
+        """
+    )
+    done = subprocess.run([sys.executable, "-c", script, str(tmp_path)], timeout=120, capture_output=True)
+    assert done.returncode == 3, done.stderr.decode()[-2000:]
+    assert read_summary(tmp_path / "closed.rrd").frames == num_steps("circle-small") + 1
+    deadline = time.monotonic() + 30.0
+    while not (tmp_path / "dead.rrd").exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert read_summary(tmp_path / "dead.rrd").frames == num_steps("circle-small") + 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["closed.rrd", "dead.rrd"]
+
+
+@pytest.mark.parametrize("background", ["thread", False])
+def test_a_failure_on_the_worker_surfaces_and_the_file_remains(tmp_path, monkeypatch, background):
     def fail(*args, **kwargs):
         raise RuntimeError("boom")
 
-    monkeypatch.setattr(recording._Episode, "_send_env", fail)
+    monkeypatch.setattr(recording._Writer, "_send_env", fail)
     task = CuttingTask(SimConfig(resolution=RESOLUTION), load_contour("circle-small"), device="cpu")
     path = tmp_path / "r.rrd"
-    with pytest.raises(RuntimeError, match="boom"), Recorder(path) as recorder:
+    with pytest.raises(RuntimeError, match="boom"), Recorder(path, background=background) as recorder:
         task.run(None, on_step=recorder.on_step("none"))
     assert read_summary(path).frames == 0
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.rrd"]
@@ -355,10 +474,10 @@ def test_a_failure_on_the_worker_surfaces_and_the_file_remains(tmp_path, monkeyp
 def test_cut_path_arrow_type_is_reruns_line_strip():
     import rerun as rr
 
-    from warpcut.recording import _LINE_STRIP3D_TYPE
+    from warpcut.recording import _arrow_types
 
     batch = rr.components.LineStrip3DBatch([[[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]])
-    assert batch.as_arrow_array().type == _LINE_STRIP3D_TYPE
+    assert batch.as_arrow_array().type == _arrow_types()[1]
 
 
 def test_cli_colour_choices_are_the_recorders():

@@ -18,15 +18,27 @@ Frames are on the ``step`` timeline (0 after the reset, then one per env step) a
 the recorded envs' state, and only theirs (:meth:`~warpcut.simulator.Simulator.read_envs`, a few
 microseconds); the frames are scored and turned into rerun columns (``send_columns``) in batches, all
 frames of a batch at once (one labelling for the errors, shifted grid slices for the strain, one sparse
-product for the contour): on a worker thread where a core is free, every :data:`WORKER_BATCH_FRAMES`
-frames, else in the step callback every :data:`FLUSH_FRAMES` frames (``background``). Without a step
-callback (``on_step=None``) :meth:`CuttingTask.run` does none of this. ``every=k`` keeps only every k-th
-step (plus the first and the last) for long runs or big sheets. ``docs/performance.md`` has the measured
-overhead (``scripts/recording_overhead.py``).
+product for the contour), where ``background`` says:
+
+* ``"process"`` (the default where the machine has more than one core): in a recorder process. The step
+  callback writes each frame's raw state into a pipe (~10 µs); the process scores the frames, builds the
+  columns, runs rerun's encoding and writes the file, on another core and without holding the stepping
+  process's GIL. The stepping process does not import rerun. The process is started when the first
+  :class:`Recorder` is created (its start-up, ~1.5 s, overlaps the caller's work) and is kept for the
+  next one, so later recordings in the same Python process do not pay for it again.
+* ``"thread"``: on a worker thread of the stepping process, every :data:`WORKER_BATCH_FRAMES` frames (it
+  runs only while the stepping thread releases the GIL);
+* ``False``: in the step callback itself, every :data:`FLUSH_FRAMES` frames.
+
+Without a step callback (``on_step=None``) :meth:`CuttingTask.run` does none of this. ``every=k`` keeps
+only every k-th step (plus the first and the last) for long runs or big sheets. ``docs/performance.md``
+has the measured overhead (``scripts/recording_overhead.py``).
 
 The file is written beside its target under a temporary name and renamed when the recorder closes,
 also when an exception or Ctrl-C ends the run early, so a readable recording of what happened so far
-always remains. Use it as a context manager::
+always remains. :meth:`Recorder.close` returns once the file is complete. The recorder process ignores
+Ctrl-C (it runs in its own process group) and finishes the file when the recorder closes, or on its own
+when the stepping process dies. Use a recorder as a context manager::
 
     with Recorder("logs/run/recording.rrd", envs=2) as recorder:
         task.run(policy, on_step=recorder.on_step("fixed"))
@@ -36,18 +48,23 @@ from __future__ import annotations
 
 import math
 import os
+import pickle
 import queue
+import select
+import struct
+import subprocess
+import sys
 import tempfile
 import threading
+import time
+import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cache
 from pathlib import Path
 
 import numpy as np
-import pyarrow as pa
-import rerun as rr
-import rerun.blueprint as rrb
-from scipy import ndimage, sparse
+from scipy import ndimage
 
 from warpcut.config import SheetGrid
 from warpcut.contours import Contour
@@ -60,13 +77,38 @@ StepCallback = Callable[[CuttingTask, "np.ndarray | None"], None]
 """``on_step(task, action)`` as :meth:`CuttingTask.run` calls it."""
 
 FLUSH_FRAMES = 128
-"""Frames buffered per method before they are scored and sent to the file in the step callback (without
-a worker thread). Each batch costs ~3 ms on top of ~0.1 ms per frame (25 x 25 sheet), so few large
+"""Frames buffered per method before they are scored and sent to the file in the step callback
+(``background=False``). Each batch costs ~3 ms on top of ~0.1 ms per frame (25 x 25 sheet), so few large
 batches are cheapest; 128 frames of a 25 x 25 sheet hold ~1 MB per recorded env."""
 
 WORKER_BATCH_FRAMES = 32
-"""Frames handed to the worker thread at a time (and the rest when the episode ends): smaller batches
-than :data:`FLUSH_FRAMES`, so that little work is left for :meth:`Recorder.close` to wait for."""
+"""Frames handed to the worker thread at a time (``background="thread"``; and the rest when the episode
+ends): smaller batches than :data:`FLUSH_FRAMES`, so that little work is left for :meth:`Recorder.close`
+to wait for."""
+
+PROCESS_BATCH_FRAMES = 16
+"""Frames the step callback writes into the pipe to the recorder process at a time (``background=
+"process"``; and the rest when the episode ends), and that the process then scores and sends as one
+batch: one wake-up of the process per batch, not per frame (on a busy machine each wake-up may take the
+stepping thread's core for a moment), and batches small enough that little is left for
+:meth:`Recorder.close` to wait for."""
+
+PROCESS_LEAD_FRAMES = 4
+"""The step callback also hands its frames to the recorder process when the episode is this many frames
+from its end: the process scores them while the last steps run, and only those last few frames (one small
+batch) are left when the episode ends."""
+
+PROCESS_NICE = 10
+"""How much the recorder process lowers its scheduling priority (``nice``): where no core is free, the
+stepping loop keeps its core and the recording catches up while the stepping process waits (at the latest
+in :meth:`Recorder.close`, or when the pipe is full)."""
+
+CLOSE_TIMEOUT_S = 120.0
+"""How long :meth:`Recorder.close` (and a step callback whose pipe is full) waits for the recorder
+process before it gives up, stops the process and raises :class:`RecordingError`."""
+
+BACKGROUND_MODES = ("process", "thread")
+"""``Recorder(background=...)`` besides ``False`` (in the step callback) and ``None`` (the default)."""
 
 COLOUR_FIELDS = ("strain", "height")
 """What the sheet's vertex colours can show (``Recorder(colour_by=...)``)."""
@@ -86,6 +128,10 @@ _RAMP_RGBA = (_RAMP_RGB[:, 0] << 24) | (_RAMP_RGB[:, 1] << 16) | (_RAMP_RGB[:, 2
 _CUTTING_RGB, _TRAVEL_RGB = (230, 40, 40), (150, 150, 150)
 
 
+class RecordingError(RuntimeError):
+    """The recorder process failed, died or stopped answering; the message names the recording."""
+
+
 class Recorder:
     """Records cutting episodes into one ``.rrd`` file.
 
@@ -99,16 +145,19 @@ class Recorder:
             to :data:`STRAIN_FULL_SCALE`; it shows where the grasp and the clips pull the gauze, which the
             mesh's shape does not) or ``"height"`` (z over the settled sheet's range, which the 3D view
             shows anyway).
-        background: Where the copied frames are scored and turned into rerun columns: ``True`` on a
-            worker thread, so that the stepping loop only pays for copying the recorded envs' state;
-            ``False`` in the step callback itself, every :data:`FLUSH_FRAMES` frames; ``None`` (default):
-            on a worker thread when the machine has a core to spare, i.e. more cores than the simulator
-            steps the recorded task with (:attr:`~warpcut.simulator.Simulator.threads`). On a machine
-            whose cores are all busy a worker costs a little more than doing the work in the callback.
+        background: Where the copied frames are scored, turned into rerun columns and written:
+            ``"process"``: in a recorder process, so that the stepping loop only pays for copying the
+            recorded envs' state into a pipe (the process is started here, or an idle one left by an
+            earlier recorder of this Python process is reused); ``"thread"`` (or ``True``): on a worker
+            thread of this process; ``False``: in the step callback itself, every :data:`FLUSH_FRAMES`
+            frames. ``None`` (default): ``"process"`` on a machine with more than one core (a core the
+            stepping loop may leave free; where the simulator's threads use every core the process costs
+            about what ``False`` costs, see ``docs/performance.md``), else ``False``.
 
     Raises:
-        ValueError: ``envs`` or ``every`` is not a positive integer, or ``colour_by`` is not one of
-            :data:`COLOUR_FIELDS`.
+        ValueError: ``envs`` or ``every`` is not a positive integer, ``colour_by`` is not one of
+            :data:`COLOUR_FIELDS`, or ``background`` is none of the above.
+        RecordingError: The recorder process could not be started.
     """
 
     def __init__(
@@ -118,13 +167,21 @@ class Recorder:
         application_id: str = "warpcut",
         every: int = 1,
         colour_by: str = "strain",
-        background: bool | None = None,
+        background: str | bool | None = None,
     ):
         for name, value in (("envs", envs), ("every", every)):
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ValueError(f"{name}: must be a positive integer (got {value!r})")
         if colour_by not in COLOUR_FIELDS:
             raise ValueError(f"colour_by: choose one of {COLOUR_FIELDS} (got {colour_by!r})")
+        if background is None:
+            background = "process" if (os.cpu_count() or 1) > 1 else False
+        elif background is True:
+            background = "thread"
+        if background is not False and background not in BACKGROUND_MODES:
+            raise ValueError(
+                f"background: choose one of {BACKGROUND_MODES}, False or None (got {background!r})"
+            )
         self.path = Path(path)
         self.envs, self.every, self.colour_by, self.background = envs, every, colour_by, background
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -132,14 +189,16 @@ class Recorder:
         os.fchmod(fd, plain_file_mode())
         os.close(fd)
         self._tmp = Path(tmp)
-        self.stream = rr.RecordingStream(application_id)
-        self.stream.save(self._tmp)
-        self.stream.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        try:
+            if background == "process":
+                self._sink = _ProcessSink(self.path, self._tmp, application_id, colour_by)
+            else:
+                writer = _Writer(self._tmp, self.path, application_id, colour_by, bool(background))
+                self._sink = _ThreadSink(writer) if background else _InlineSink(writer)
+        except BaseException:
+            self._tmp.unlink(missing_ok=True)
+            raise
         self._episodes: dict[str, _Episode] = {}
-        self._jobs: queue.SimpleQueue | None = None
-        self._worker: threading.Thread | None = None
-        self._failure: BaseException | None = None
-        self._blueprint_roots: list[str] | None = None
         self.closed = False
 
     def on_step(self, method: str) -> StepCallback:
@@ -154,15 +213,18 @@ class Recorder:
             raise ValueError(f"on_step: the recorder of {self.path} is closed")
         if method in self._episodes:
             raise ValueError(f"on_step: method {method!r} is already recorded in {self.path}")
-        episode = _Episode(self, method)
+        episode = _Episode(self, method, len(self._episodes))
         self._episodes[method] = episode
         return episode
 
     def close(self) -> Path:
-        """Send the buffered frames (waiting for the worker thread to finish them) and the blueprint,
-        finish the file and move it into place.
+        """Send the buffered frames and the blueprint, finish the file and move it into place; return
+        once that is done (in the recorder process too).
 
         Raises:
+            RecordingError: The recorder process failed (the message names the recording and carries the
+                process's error), died or did not finish within :data:`CLOSE_TIMEOUT_S`; the file (what it
+                wrote so far) was moved into place.
             Exception: Whatever failed on the worker thread, after the file was moved into place.
         """
         if self.closed:
@@ -170,16 +232,9 @@ class Recorder:
         self.closed = True
         try:
             for episode in self._episodes.values():
-                episode.flush()
-            self._join()
-            self._send_blueprint()
-            self.stream.flush()
+                episode.flush(final=True)
         finally:
-            self._join()
-            self.stream.disconnect()
-            os.replace(self._tmp, self.path)
-        if self._failure is not None:
-            raise self._failure
+            self._sink.close()
         return self.path
 
     def __enter__(self) -> Recorder:
@@ -188,21 +243,177 @@ class Recorder:
     def __exit__(self, *exc_info) -> None:
         self.close()
 
-    def _threaded(self, task: CuttingTask) -> bool:
-        """Whether the episodes of ``task`` are sent from the worker thread (see ``background``)."""
-        if self.background is None:
-            return (os.cpu_count() or 1) > task.sim.threads
-        return bool(self.background)
 
-    def _submit(self, job: Callable[[], None], threaded: bool) -> None:
-        """Run ``job`` on the worker thread (in submission order), or here unless ``threaded``."""
+@dataclass
+class _Frame:
+    """What one step callback copies out of the task: the recorded envs' state after a step."""
+
+    step: int
+    update: int
+    positions: np.ndarray
+    """(n, V, 3) float32."""
+    alive: np.ndarray
+    """(n, V) bool."""
+    displacements: np.ndarray | None
+    """(n, 3) float64, None when no recorded env is grasped."""
+    action: np.ndarray | None
+    """(n, 3) float64, or None at the reset and for policies that return no moves."""
+
+
+@dataclass
+class _EnvSetup:
+    """One recorded env of one task: what its frames are drawn with, copied from the task when the
+    episode starts (so that the writer never reads a task that the caller goes on changing)."""
+
+    env: int
+    contour: Contour
+    tip: np.ndarray
+    """(T, 4) the scissor trajectory."""
+    pinch: np.ndarray
+    disc: np.ndarray | None
+    """(V,) bool grasped vertices, None without a grasp."""
+    step_s: float
+    """Simulated seconds per env step."""
+    # Filled in by the writer (_Writer.start), then updated frame batch by frame batch:
+    root: str = ""
+    """The env's entity path, ``/{method}/env_{env}``."""
+    contour_matrix: object = None
+    """(K, V) scipy.sparse bilinear weights of the contour's K points on the sheet's vertices."""
+    intended: np.ndarray | None = None
+    cut_runs: np.ndarray | None = None
+    height_range: tuple[float, float] | None = None
+    disc_origin: np.ndarray | None = None
+    last_alive: np.ndarray | None = None
+    last_error: float = 0.0
+
+
+@dataclass
+class _TaskSetup:
+    """What every recorded env of one task shares."""
+
+    grid: SheetGrid
+    springs: tuple[str, ...]
+    envs: list[_EnvSetup]
+    triangles: np.ndarray | None = None
+    """:func:`grid_triangles`, built by the writer once per task."""
+
+
+class _Episode:
+    """The step callback of one method. In the stepping loop it only copies the recorded envs' state
+    (only theirs: :meth:`~warpcut.simulator.Simulator.read_envs`) and hands it to the recorder's sink
+    (the recorder process, the worker thread or the writer itself) in batches of the sink's size."""
+
+    def __init__(self, recorder: Recorder, method: str, key: int):
+        self.recorder, self.method, self.key = recorder, method, key
+        self.sink = recorder._sink
+        self.task: CuttingTask | None = None
+        self.envs = np.zeros(0, dtype=np.intp)
+        self.frames: list[_Frame] = []
+        self.grasped = self.lead_sent = False
+
+    def __call__(self, task: CuttingTask, action: np.ndarray | None) -> None:
+        if task is not self.task:
+            self._start(task)
+        step = task.step_index
+        if step % self.recorder.every and not task.done:
+            return
+        envs = self.envs
+        positions, alive = task.sim.read_envs(envs)
+        self.frames.append(
+            _Frame(
+                step,
+                task.update_index,
+                positions,
+                alive,
+                task.sim.displacement.numpy()[envs].astype(np.float64) if self.grasped else None,
+                None if action is None else np.asarray(action, dtype=np.float64).reshape(-1, 3)[envs],
+            )
+        )
+        if len(self.frames) >= self.sink.batch_frames or task.done:
+            self.flush(final=task.done)
+        elif not self.lead_sent and task.num_steps - step <= self.sink.lead_frames * self.recorder.every:
+            # Near the end: hand over what has gathered, so that only the last few frames are left for
+            # close() to wait for.
+            self.lead_sent = True
+            self.flush()
+
+    def _start(self, task: CuttingTask) -> None:
+        """Copy what the frames of ``task`` are drawn with; the writer derives the rest."""
+        self.flush(final=True)
+        self.task, self.lead_sent = task, False
+        grid, config = task.grid, task.config
+        self.envs = np.arange(min(self.recorder.envs, task.num_envs))
+        dt = np.asarray(task.sim.params["dt"], dtype=np.float64).reshape(-1)
+        envs = [
+            _EnvSetup(
+                env=int(env),
+                contour=task.contours[env],
+                tip=task.trajectories[env].tip,
+                pinch=task.pinch_points[env].copy(),
+                disc=grid.disc_mask(task.pinch_points[env], config.grasp_radius) & ~task.sim.fixture
+                if task.sim.grasped[env]
+                else None,
+                step_s=float(dt[env % dt.size]) * config.updates_per_step,
+            )
+            for env in self.envs
+        ]
+        self.grasped = any(env.disc is not None for env in envs)
+        self.sink.start(self.key, self.method, _TaskSetup(grid, tuple(config.springs), envs))
+
+    def flush(self, final: bool = False) -> None:
+        """Hand the buffered frames to the sink; ``final``: the episode (or the recording) ends here."""
+        frames, self.frames = self.frames, []
+        if frames:
+            self.sink.frames(self.key, frames, final)
+
+
+class _InlineSink:
+    """``background=False``: the step callback writes its frames itself, every :data:`FLUSH_FRAMES`."""
+
+    batch_frames, lead_frames = FLUSH_FRAMES, 0
+
+    def __init__(self, writer: _Writer):
+        self.writer = writer
+
+    def start(self, key: int, method: str, setup: _TaskSetup) -> None:
+        self.writer.start(key, method, setup)
+
+    def frames(self, key: int, frames: list[_Frame], final: bool) -> None:
+        self.writer.frames(key, frames)
+
+    def close(self) -> None:
+        self.writer.finish()
+
+
+class _ThreadSink:
+    """``background="thread"``: a worker thread writes the frames, in submission order."""
+
+    batch_frames, lead_frames = WORKER_BATCH_FRAMES, 0
+
+    def __init__(self, writer: _Writer):
+        self.writer = writer
+        self._jobs: queue.SimpleQueue = queue.SimpleQueue()
+        self._worker: threading.Thread | None = None
+        self._failure: BaseException | None = None
+
+    def start(self, key: int, method: str, setup: _TaskSetup) -> None:
+        self._submit(lambda: self.writer.start(key, method, setup))
+
+    def frames(self, key: int, frames: list[_Frame], final: bool) -> None:
+        self._submit(lambda: self.writer.frames(key, frames))
+
+    def close(self) -> None:
+        try:
+            self._join()
+        finally:
+            self.writer.finish(complete=self._failure is None)
         if self._failure is not None:
             raise self._failure
-        if not threaded:
-            job()
-            return
+
+    def _submit(self, job: Callable[[], None]) -> None:
+        if self._failure is not None:
+            raise self._failure
         if self._worker is None:
-            self._jobs = queue.SimpleQueue()
             self._worker = threading.Thread(target=self._work, name="warpcut-recorder", daemon=True)
             self._worker.start()
         self._jobs.put(job)
@@ -222,160 +433,466 @@ class Recorder:
             self._worker.join()
             self._worker = None
 
-    def _send_blueprint(self) -> None:
-        """Send the layout of the envs recorded so far, unless it was sent already. Each episode's setup
-        sends it on the worker thread, so that closing the recorder seldom has to."""
-        roots = [root for e in list(self._episodes.values()) for root in e.env_roots]
-        if roots != self._blueprint_roots:
-            self._blueprint_roots = roots
-            self.stream.send_blueprint(self._blueprint(roots))
 
-    def _blueprint(self, roots: list[str]) -> rrb.Blueprint:
-        """A 3D view per recorded env side by side, above the errors and the actions over time."""
-        if not roots:
-            return rrb.Blueprint(rrb.Spatial3DView(origin="/"))
-        return rrb.Blueprint(
-            rrb.Vertical(
-                rrb.Grid(*[rrb.Spatial3DView(origin=r, name=r.strip("/").replace("/", " ")) for r in roots]),
-                rrb.Horizontal(
-                    rrb.TimeSeriesView(
-                        name="error (vertices)", origin="/", contents=[f"{r}/error_vertices" for r in roots]
-                    ),
-                    rrb.TimeSeriesView(
-                        name="action (mm)", origin="/", contents=[f"{r}/action" for r in roots]
-                    ),
-                ),
-                row_shares=[3, 1],
-            ),
-            collapse_panels=True,
+# The pipe to the recorder process carries messages of a kind byte and a payload length, then the payload:
+# b"P", a pickled tuple (``open``, ``start``, ``close``; and every reply), or b"F", one frame in raw bytes:
+# _FRAME_HEAD, then the recorded envs' positions (float32), alive masks (bool), and if flagged their
+# displacements and actions (float64).
+_HEAD = struct.Struct("<cI")
+_FRAME_HEAD = struct.Struct("<Iqqb")
+_HAS_DISPLACEMENTS, _HAS_ACTION, _FINAL = 1, 2, 4
+
+
+def _pickled(message: tuple) -> bytes:
+    data = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
+    return _HEAD.pack(b"P", len(data)) + data
+
+
+class _Messages:
+    """The messages arriving on a pipe's reading end ``fd``."""
+
+    def __init__(self, fd: int):
+        self.fd = fd
+        self.buffer = bytearray()
+        self.eof = False
+
+    def next(self, block: bool = True, timeout: float | None = None):
+        """The next message as ``(kind, payload)``; None at the end of the pipe, or when none arrived in
+        time (``block=False``: none is waiting now; ``timeout``: seconds)."""
+        while True:
+            if len(self.buffer) >= _HEAD.size:
+                kind, size = _HEAD.unpack_from(self.buffer)
+                end = _HEAD.size + size
+                if len(self.buffer) >= end:
+                    payload = bytes(self.buffer[_HEAD.size : end])
+                    del self.buffer[:end]
+                    return kind, payload
+            if self.eof:
+                return None
+            if not block or timeout is not None:
+                ready, _, _ = select.select([self.fd], [], [], 0.0 if not block else timeout)
+                if not ready:
+                    return None
+            data = os.read(self.fd, 1 << 20)
+            if not data:
+                self.eof = True
+            self.buffer += data
+
+
+class _Child:
+    """A recorder process (:func:`_serve`) and the two pipes to it; one recording at a time."""
+
+    _idle: list[_Child] = []
+    _lock = threading.Lock()
+
+    def __init__(self):
+        cmd_read, self.cmd = os.pipe()
+        reply_read, reply_write = os.pipe()
+        try:
+            import fcntl
+
+            # Room for ~125 frames of a 25 x 25 sheet: the stepping loop never waits for a busy process.
+            fcntl.fcntl(self.cmd, getattr(fcntl, "F_SETPIPE_SZ", 1031), 1 << 20)
+        except OSError:
+            pass
+        os.set_blocking(self.cmd, False)
+        source = str(Path(__file__).resolve().parents[1])
+        kwargs = {"process_group": 0} if sys.version_info >= (3, 11) else {"start_new_session": True}
+        try:
+            self.process = subprocess.Popen(
+                [
+                    sys.executable,
+                    "-c",
+                    _CHILD_MAIN.format(nice=PROCESS_NICE, source=source, cmd=cmd_read, reply=reply_write),
+                ],
+                pass_fds=(cmd_read, reply_write),
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL,
+                close_fds=True,
+                **kwargs,
+            )
+        except BaseException:
+            for fd in (self.cmd, reply_read):
+                os.close(fd)
+            raise
+        finally:
+            os.close(cmd_read)
+            os.close(reply_write)
+        self.replies = _Messages(reply_read)
+        self.owner = os.getpid()
+        self._unsent = b""
+
+    @classmethod
+    def acquire(cls) -> _Child:
+        """An idle recorder process of this Python process, or a new one."""
+        with cls._lock:
+            while cls._idle:
+                child = cls._idle.pop()
+                if child.owner == os.getpid() and child.process.poll() is None:
+                    return child
+                child.detach()
+        return cls()
+
+    def release(self) -> None:
+        """Keep the process for the next recorder (one at most), or let it end."""
+        with self._lock:
+            if not self._idle and self.owner == os.getpid() and self.process.poll() is None:
+                self._idle.append(self)
+                return
+        self.detach()
+
+    def detach(self) -> None:
+        """Close this end of the pipes: the process finishes the recording it holds (if any) and ends (a
+        thread waits for it, so that it does not linger as a zombie)."""
+        self._close_pipes()
+        threading.Thread(target=self.process.wait, name="warpcut-recorder-reaper", daemon=True).start()
+
+    def _close_pipes(self) -> None:
+        for fd in (self.cmd, self.replies.fd):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+        self.cmd = self.replies.fd = -1
+
+    def send(self, parts: list, wait_s: float = CLOSE_TIMEOUT_S) -> None:
+        """Write one message (its ``parts``, bytes-like) into the pipe, waiting while the pipe is full.
+        A message cut short by an exception (Ctrl-C) is completed before the next one.
+
+        Raises:
+            BrokenPipeError: The process has ended.
+            TimeoutError: The pipe stayed full for ``wait_s``.
+        """
+        views = [memoryview(p).cast("B") for p in ([self._unsent] if self._unsent else []) + parts]
+        unsent, self._unsent = len(self._unsent), b""  # the end of an earlier message comes first
+        deadline = None
+        try:
+            while views:
+                try:
+                    written = os.writev(self.cmd, views)
+                except BlockingIOError:
+                    written = 0
+                unsent -= written
+                while views and written >= len(views[0]):
+                    written -= len(views[0])
+                    views.pop(0)
+                if written:
+                    views[0] = views[0][written:]
+                if views:
+                    deadline = deadline or time.monotonic() + wait_s
+                    select.select([], [self.cmd], [], 0.5)
+                    if self.process.poll() is not None:
+                        raise BrokenPipeError(f"the recorder process (pid {self.process.pid}) has ended")
+                    if time.monotonic() > deadline:
+                        raise TimeoutError(f"the recorder process took no data for {wait_s:.0f} s")
+        except BaseException:
+            if unsent < 0:  # this message began: the rest of it goes first next time
+                self._unsent = b"".join(views)
+            elif unsent > 0:  # an earlier message is still not complete; this one was not sent
+                self._unsent = b"".join(views)[:unsent]
+            raise
+
+    def __del__(self):  # no thread here: it may run at interpreter exit
+        try:
+            if self.cmd >= 0:
+                self._close_pipes()
+        except Exception:  # noqa: BLE001 - at interpreter exit
+            pass
+
+
+# The recorder process: ignores Ctrl-C (the terminal sends it to the stepping process's group; this one
+# runs in its own group, but the signal may come by other ways), lowers its priority, imports the writer
+# and serves recordings. A failure to start is reported through the reply pipe like any other.
+_CHILD_MAIN = """\
+import os, signal, sys
+signal.signal(signal.SIGINT, signal.SIG_IGN)
+try:
+    os.nice({nice})
+except OSError:
+    pass
+sys.path[0] = {source!r}
+try:
+    from warpcut.recording import _serve
+except BaseException as exc:
+    import pickle, struct, traceback
+    data = pickle.dumps(("failed", type(exc).__name__, str(exc), traceback.format_exc()))
+    os.write({reply}, struct.pack("<cI", b"P", len(data)) + data)
+    sys.exit(1)
+_serve({cmd}, {reply})
+"""
+
+
+class _ProcessSink:
+    """``background="process"``: the frames go through a pipe to a recorder process (:func:`_serve`),
+    which scores them, writes the file and moves it into place."""
+
+    batch_frames, lead_frames = PROCESS_BATCH_FRAMES, PROCESS_LEAD_FRAMES
+
+    def __init__(self, path: Path, tmp: Path, application_id: str, colour_by: str):
+        self.path, self.tmp = path, tmp
+        self._failure: RecordingError | None = None
+        self.process_cpu_s: float | None = None
+        """The recorder process's CPU time (s, all its threads) since it started, once it has closed."""
+        try:
+            self.child = _Child.acquire()
+        except OSError as exc:
+            raise RecordingError(f"{path}: could not start the recorder process ({exc})") from exc
+        self._send([_pickled(("open", str(tmp), str(path), application_id, colour_by))])
+
+    def start(self, key: int, method: str, setup: _TaskSetup) -> None:
+        self._send([_pickled(("start", key, method, setup))])
+
+    def frames(self, key: int, frames: list[_Frame], final: bool) -> None:
+        parts = []
+        for k, frame in enumerate(frames):
+            flags = _FINAL if final and k == len(frames) - 1 else 0
+            arrays = [
+                np.ascontiguousarray(frame.positions, dtype=np.float32),
+                np.ascontiguousarray(frame.alive, dtype=np.bool_),
+            ]
+            if frame.displacements is not None:
+                flags |= _HAS_DISPLACEMENTS
+                arrays.append(np.ascontiguousarray(frame.displacements, dtype=np.float64))
+            if frame.action is not None:
+                flags |= _HAS_ACTION
+                arrays.append(np.ascontiguousarray(frame.action, dtype=np.float64))
+            size = _FRAME_HEAD.size + sum(a.nbytes for a in arrays)
+            parts.append(_HEAD.pack(b"F", size) + _FRAME_HEAD.pack(key, frame.step, frame.update, flags))
+            parts.extend(arrays)
+        self._send(parts)
+        self._check_replies()
+
+    def close(self) -> None:
+        """Tell the process to finish the file and wait until it has (or has failed or died)."""
+        child, closed = self.child, False
+        try:
+            self._send([_pickled(("close",))], check=False)
+            deadline = time.monotonic() + CLOSE_TIMEOUT_S
+            while not closed:
+                message = child.replies.next(timeout=0.5)
+                if message is not None:
+                    closed = self._reply(message)
+                elif child.replies.eof or child.process.poll() is not None:
+                    while (message := child.replies.next(block=False)) is not None and not closed:
+                        closed = self._reply(message)
+                    if not closed:
+                        raise self._died()
+                elif time.monotonic() > deadline:
+                    child.process.kill()
+                    raise self._fail(
+                        f"the recorder process did not finish the file within {CLOSE_TIMEOUT_S:.0f} s "
+                        "and was stopped; the file holds what it wrote so far"
+                    )
+        except RecordingError:
+            if self.tmp.exists():
+                os.replace(self.tmp, self.path)
+            raise
+        finally:
+            if closed and self._failure is None:
+                child.release()
+            else:  # a failed or interrupted process finishes the file on its own once the pipe closes
+                child.detach()
+        if self._failure is not None:
+            raise self._failure
+
+    def _send(self, parts: list, check: bool = True) -> None:
+        if check and self._failure is not None:
+            raise self._failure
+        try:
+            self.child.send(parts)
+        except BrokenPipeError:
+            self._check_replies()  # it may have said why
+            raise self._died() from None
+        except TimeoutError as exc:
+            self.child.process.kill()
+            raise self._fail(f"{exc}; it was stopped") from None
+
+    def _check_replies(self) -> None:
+        """Raise the process's failure as soon as it reports one."""
+        while (message := self.child.replies.next(block=False)) is not None:
+            self._reply(message)
+        if self._failure is not None:
+            raise self._failure
+
+    def _reply(self, message: tuple[bytes, bytes]) -> bool:
+        """Take in one reply; whether it says that the file is finished."""
+        kind, *details = pickle.loads(message[1])
+        if kind == "failed" and self._failure is None:
+            name, text, trace = details
+            self._fail(f"the recorder process failed: {name}: {text}", trace)
+        elif kind == "closed":
+            (self.process_cpu_s,) = details
+        return kind == "closed"
+
+    def _died(self) -> RecordingError:
+        if self._failure is not None:
+            return self._failure
+        try:
+            code = self.child.process.wait(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            code = None
+        return self._fail(
+            f"the recorder process (pid {self.child.process.pid}) ended unexpectedly (exit code {code})"
         )
 
-
-@dataclass
-class _Frame:
-    """What one step callback copies out of the task: the recorded envs' state after a step."""
-
-    step: int
-    update: int
-    positions: np.ndarray
-    """(n, V, 3) float32."""
-    alive: np.ndarray
-    """(n, V) bool."""
-    displacements: np.ndarray | None
-    """(n, 3), None when no recorded env is grasped."""
-    action: np.ndarray | None
-    """(n, 3), or None at the reset and for policies that return no moves."""
+    def _fail(self, text: str, trace: str | None = None) -> RecordingError:
+        if self._failure is None:
+            self._failure = RecordingError(f"{self.path}: {text}")
+            if trace and hasattr(self._failure, "add_note"):
+                self._failure.add_note(f"in the recorder process:\n{trace.rstrip()}")
+        return self._failure
 
 
-@dataclass
-class _EnvSetup:
-    """One recorded env of one task: what its frames are drawn with, copied from the task when the
-    episode starts (so that the worker thread never reads a task that the caller goes on changing)."""
+def _serve(cmd_fd: int, reply_fd: int) -> None:
+    """The recorder process: serve recordings one after the other until the pipe from the stepping
+    process ends (it closed us, or it died: the recording it held open is finished then)."""
+    messages = _Messages(cmd_fd)
 
-    root: str
-    contour: Contour
-    tip: np.ndarray
-    """(T, 4) the scissor trajectory."""
-    pinch: np.ndarray
-    disc: np.ndarray | None
-    """(V,) bool grasped vertices, None without a grasp."""
-    step_s: float
-    """Simulated seconds per env step."""
-    # Filled in on the worker thread by _Episode._prepare, then updated frame batch by frame batch:
-    contour_matrix: sparse.csr_matrix | None = None
-    """(K, V) bilinear weights of the contour's K points on the sheet's vertices."""
-    intended: np.ndarray | None = None
-    cut_runs: np.ndarray | None = None
-    height_range: tuple[float, float] | None = None
-    disc_origin: np.ndarray | None = None
-    last_alive: np.ndarray | None = None
-    last_error: float = 0.0
+    def reply(*message) -> None:
+        try:
+            os.write(reply_fd, _pickled(message))
+        except OSError:  # the stepping process is gone; the file is finished anyway
+            pass
 
-
-@dataclass
-class _TaskSetup:
-    """What every recorded env of one task shares."""
-
-    grid: SheetGrid
-    springs: tuple[str, ...]
-    triangles: np.ndarray
-    """:func:`grid_triangles`, built once per task."""
-    envs: list[_EnvSetup]
-
-
-class _Episode:
-    """The step callback of one method. In the stepping loop it only copies the recorded envs' state
-    (only theirs: :meth:`~warpcut.simulator.Simulator.read_envs`); every :data:`WORKER_BATCH_FRAMES`
-    frames it hands the batch to the recorder's worker, which scores it and sends it as rerun columns
-    (or, without a worker, does that itself every :data:`FLUSH_FRAMES` frames)."""
-
-    def __init__(self, recorder: Recorder, method: str):
-        self.recorder = recorder
-        self.root = "/" + rr.escape_entity_path_part(method)
-        self.task: CuttingTask | None = None
-        self.envs = np.zeros(0, dtype=np.intp)
-        self.env_roots: list[str] = []
-        self.frames: list[_Frame] = []
-        self.threaded = self.grasped = False
-
-    def __call__(self, task: CuttingTask, action: np.ndarray | None) -> None:
-        if task is not self.task:
-            self._start(task)
-        step = task.step_index
-        if step % self.recorder.every and not task.done:
+    while (message := messages.next()) is not None:
+        command, *args = pickle.loads(message[1])
+        if command != "open":
+            reply("failed", "RuntimeError", f"protocol: expected 'open', got {command!r}", "")
             return
-        envs = self.envs
-        positions, alive = task.sim.read_envs(envs)
-        self.frames.append(
-            _Frame(
-                step,
-                task.update_index,
-                positions,
-                alive,
-                task.sim.displacement.numpy()[envs] if self.grasped else None,
-                None if action is None else np.asarray(action, dtype=np.float64).reshape(-1, 3)[envs],
-            )
-        )
-        if self.threaded:
-            if len(self.frames) >= WORKER_BATCH_FRAMES or task.done:
-                self.flush()
-        elif len(self.frames) >= FLUSH_FRAMES:
-            self.flush()
+        if not _serve_recording(messages, reply, *args):
+            return
 
-    def _start(self, task: CuttingTask) -> None:
-        """Copy what the frames of ``task`` are drawn with; the worker derives the rest."""
-        self.flush()
-        self.task = task
-        self.threaded = self.recorder._threaded(task)
-        grid, config = task.grid, task.config
-        self.envs = np.arange(min(self.recorder.envs, task.num_envs))
-        self.env_roots = [f"{self.root}/env_{env}" for env in self.envs]
-        dt = np.asarray(task.sim.params["dt"], dtype=np.float64).reshape(-1)
-        envs = [
-            _EnvSetup(
-                root=root,
-                contour=task.contours[env],
-                tip=task.trajectories[env].tip,
-                pinch=task.pinch_points[env].copy(),
-                disc=grid.disc_mask(task.pinch_points[env], config.grasp_radius) & ~task.sim.fixture
-                if task.sim.grasped[env]
-                else None,
-                step_s=float(dt[env % dt.size]) * config.updates_per_step,
-            )
-            for env, root in zip(self.envs, self.env_roots, strict=True)
-        ]
-        self.grasped = any(env.disc is not None for env in envs)
-        setup = _TaskSetup(grid, config.springs, grid_triangles(grid), envs)
-        self.setup = setup
-        self.recorder._submit(lambda: self._prepare(setup), self.threaded)
 
-    def _prepare(self, task_setup: _TaskSetup) -> None:
-        """Per-env constants (contour cells, intended region, cutting runs) and the static entities."""
-        stream, grid = self.recorder.stream, task_setup.grid
+def _serve_recording(messages: _Messages, reply, tmp: str, path: str, application_id: str, colour_by: str):
+    """Write one recording from the messages; whether the stepping process closed it (else the pipe
+    ended). The first failure is reported at once; the frames after it are read and dropped."""
+    failure: list = []
+    pending: dict[int, list[_Frame]] = {}
+    shapes: dict[int, tuple[int, int]] = {}
+    writer: _Writer | None = None
+
+    def attempt(method: str, *args) -> None:
+        """``writer.method(*args)``, unless something failed already."""
+        if not failure:
+            try:
+                getattr(writer, method)(*args)
+            except Exception as exc:  # noqa: BLE001 - reported to the stepping process
+                failure[:] = [type(exc).__name__, str(exc), traceback.format_exc()]
+                reply("failed", *failure)
+
+    def send(key: int) -> None:
+        frames = pending.pop(key, None)
+        if frames:
+            attempt("frames", key, frames)
+
+    def send_all() -> None:
+        for key in list(pending):
+            send(key)
+
+    try:
+        writer = _Writer(Path(tmp), Path(path), application_id, colour_by, eager_blueprint=True)
+    except Exception as exc:  # noqa: BLE001 - reported to the stepping process
+        failure[:] = [type(exc).__name__, str(exc), traceback.format_exc()]
+        reply("failed", *failure)
+    closed = False
+    while (message := messages.next()) is not None:
+        kind, payload = message
+        try:
+            if kind == b"F":
+                key, frame, final = _read_frame(payload, shapes)
+                frames = pending.setdefault(key, [])
+                frames.append(frame)
+                if final or len(frames) >= PROCESS_BATCH_FRAMES:
+                    send(key)
+                continue
+            command, *args = pickle.loads(payload)
+            if command == "close":
+                closed = True
+                break
+            if command != "start":
+                raise RuntimeError(f"protocol: unexpected message {command!r}")
+            send_all()
+            key, method, setup = args
+            shapes[key] = (len(setup.envs), setup.grid.num_vertices)
+            attempt("start", key, method, setup)
+        except Exception as exc:  # noqa: BLE001 - reported to the stepping process
+            if not failure:
+                failure[:] = [type(exc).__name__, str(exc), traceback.format_exc()]
+                reply("failed", *failure)
+    send_all()
+    try:
+        if writer is not None:
+            writer.finish(complete=not failure)
+        else:
+            os.replace(tmp, path)
+    except Exception as exc:  # noqa: BLE001 - reported to the stepping process
+        if not failure:
+            failure[:] = [type(exc).__name__, str(exc), traceback.format_exc()]
+            reply("failed", *failure)
+    reply("closed", time.process_time())
+    return closed
+
+
+def _read_frame(payload: bytes, shapes: dict[int, tuple[int, int]]) -> tuple[int, _Frame, bool]:
+    """A b"F" message's episode key, frame and whether it is the episode's last."""
+    key, step, update, flags = _FRAME_HEAD.unpack_from(payload)
+    n, v = shapes[key]
+    offset = _FRAME_HEAD.size
+    arrays = []
+    for dtype, shape, present in (
+        (np.float32, (n, v, 3), True),
+        (np.bool_, (n, v), True),
+        (np.float64, (n, 3), flags & _HAS_DISPLACEMENTS),
+        (np.float64, (n, 3), flags & _HAS_ACTION),
+    ):
+        if present:
+            count = math.prod(shape)
+            arrays.append(np.frombuffer(payload, dtype, count, offset).reshape(shape))
+            offset += count * np.dtype(dtype).itemsize
+        else:
+            arrays.append(None)
+    return key, _Frame(step, update, *arrays), bool(flags & _FINAL)
+
+
+class _Writer:
+    """Turns what the step callbacks copied into rerun data in one ``.rrd`` file (in the recorder
+    process, on the worker thread or in the step callback), and finishes the file."""
+
+    def __init__(self, tmp: Path, path: Path, application_id: str, colour_by: str, eager_blueprint: bool):
+        import rerun as rr
+
+        self.tmp, self.path, self.colour_by, self.eager_blueprint = tmp, path, colour_by, eager_blueprint
+        self.stream = rr.RecordingStream(application_id)
+        self.stream.save(tmp)
+        self.stream.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        self.episodes: dict[int, _TaskSetup] = {}
+        self._blueprint_roots: list[str] | None = None
+
+    def finish(self, complete: bool = True) -> None:
+        """Send the blueprint (if ``complete``: no frame batch failed), finish the file and move it into
+        place."""
+        try:
+            if complete:
+                self._send_blueprint()
+                self.stream.flush()
+        finally:
+            self.stream.disconnect()
+            os.replace(self.tmp, self.path)
+
+    def start(self, key: int, method: str, task_setup: _TaskSetup) -> None:
+        """Per-env constants (contour cells, intended region, cutting runs) and the static entities of a
+        new episode (``key``: its callback) of ``method``."""
+        import rerun as rr
+        from scipy import sparse
+
+        stream, grid = self.stream, task_setup.grid
+        root = "/" + rr.escape_entity_path_part(method)
+        task_setup.triangles = grid_triangles(grid)
         # Points every half spacing follow the deformed sheet closely enough; the contour's own points
         # (every 0.5 mm for the built-ins) would cost several times more to interpolate every frame.
         spacing = 0.5 * min(grid.spacing_mm)
         for setup in task_setup.envs:
+            setup.root = f"{root}/env_{setup.env}"
             vertices, weights = material_cells(_polyline(setup.contour, spacing), grid)
             rows = np.repeat(np.arange(len(vertices)), vertices.shape[1])
             setup.contour_matrix = sparse.csr_matrix(
@@ -387,25 +904,26 @@ class _Episode:
             stream.log(
                 f"{setup.root}/info",
                 rr.TextDocument(
-                    f"contour {setup.contour.name}, pinch point {where}; "
-                    f"vertex colours: {self.recorder.colour_by}"
+                    f"contour {setup.contour.name}, pinch point {where}; vertex colours: {self.colour_by}"
                 ),
                 static=True,
             )
             stream.log(f"{setup.root}/action", rr.SeriesLines(names=["x", "y", "z"]), static=True)
             stream.log(f"{setup.root}/error_vertices", rr.SeriesLines(names="error (vertices)"), static=True)
-        if self.threaded:
-            self.recorder._send_blueprint()  # off the stepping thread; close() sends it otherwise
+        self.episodes[key] = task_setup
+        if self.eager_blueprint:
+            self._send_blueprint()  # off the stepping thread; finish() sends it otherwise
 
-    def flush(self) -> None:
-        """Hand the buffered frames to the worker (or send them now, unless ``threaded``)."""
-        frames, self.frames = self.frames, []
-        if frames:
-            setup = self.setup
-            self.recorder._submit(lambda: self._send(frames, setup), self.threaded)
+    def _send_blueprint(self) -> None:
+        """Send the layout of the envs recorded so far, unless it was sent already."""
+        roots = [env.root for _, setup in sorted(self.episodes.items()) for env in setup.envs]
+        if roots != self._blueprint_roots:
+            self._blueprint_roots = roots
+            self.stream.send_blueprint(_blueprint(roots))
 
-    def _send(self, frames: list[_Frame], task_setup: _TaskSetup) -> None:
-        """Send a batch of frames of every recorded env."""
+    def frames(self, key: int, frames: list[_Frame]) -> None:
+        """Send a batch of frames of every recorded env of episode ``key``."""
+        task_setup = self.episodes[key]
         steps = np.array([f.step for f in frames])
         updates = np.array([f.update for f in frames])
         positions = np.stack([f.positions for f in frames], axis=1)  # (n, F, V, 3)
@@ -444,14 +962,18 @@ class _Episode:
         actions: np.ndarray,
     ) -> None:
         """One env's frames: ``positions`` (F, V, 3), ``alive`` (F, V), ``displacements`` (F, 3)."""
-        stream, grid = self.recorder.stream, task_setup.grid
+        import rerun as rr
+
+        stream, grid = self.stream, task_setup.grid
         frames, num_vertices = len(steps), grid.num_vertices
 
-        def send(entity: str, columns, at: np.ndarray = steps) -> None:
-            times = [
-                rr.TimeColumn("step", sequence=at),
-                rr.TimeColumn("sim_time", duration=at * setup.step_s),
-            ]
+        def timeline(at: np.ndarray) -> list:
+            return [rr.TimeColumn("step", sequence=at), rr.TimeColumn("sim_time", duration=at * setup.step_s)]
+
+        every_frame = timeline(steps)
+
+        def send(entity: str, columns, at: np.ndarray | None = None) -> None:
+            times = every_frame if at is None else timeline(at)
             stream.send_columns(f"{setup.root}/{entity}", indexes=times, columns=columns, strict=True)
 
         if setup.height_range is None:
@@ -461,7 +983,7 @@ class _Episode:
             if setup.disc is not None:
                 setup.disc_origin = positions[0, setup.disc].mean(axis=0)
 
-        if self.recorder.colour_by == "strain":
+        if self.colour_by == "strain":
             colours = _ramp(vertex_strain(positions, alive, grid, task_setup.springs), 0.0, STRAIN_FULL_SCALE)
         else:
             colours = _ramp(positions[..., 2], *setup.height_range)
@@ -529,6 +1051,27 @@ class _Episode:
             )
         if len(action_steps):
             send("action", rr.Scalars.columns(scalars=actions).partition([3] * len(actions)), at=action_steps)
+
+
+def _blueprint(roots: list[str]):
+    """A 3D view per recorded env side by side, above the errors and the actions over time."""
+    import rerun.blueprint as rrb
+
+    if not roots:
+        return rrb.Blueprint(rrb.Spatial3DView(origin="/"))
+    return rrb.Blueprint(
+        rrb.Vertical(
+            rrb.Grid(*[rrb.Spatial3DView(origin=r, name=r.strip("/").replace("/", " ")) for r in roots]),
+            rrb.Horizontal(
+                rrb.TimeSeriesView(
+                    name="error (vertices)", origin="/", contents=[f"{r}/error_vertices" for r in roots]
+                ),
+                rrb.TimeSeriesView(name="action (mm)", origin="/", contents=[f"{r}/action" for r in roots]),
+            ),
+            row_shares=[3, 1],
+        ),
+        collapse_panels=True,
+    )
 
 
 def vertex_strain(
@@ -619,17 +1162,24 @@ def _polyline(contour: Contour, spacing_mm: float) -> np.ndarray:
     return np.vstack([points, points[:1]]) if contour.closed else points
 
 
-# Rerun's arrow types of a 3D point and of a 3D line strip (rerun.components.LineStrip3D), spelled out
-# (tests/test_recording.py checks them against rerun's): the strips of all frames are built as one arrow
-# array from flat numpy buffers, without a Python object per strip.
-_POINT3D_TYPE = pa.list_(pa.field("item", pa.float32(), nullable=False), 3)
-_LINE_STRIP3D_TYPE = pa.list_(pa.field("item", _POINT3D_TYPE, nullable=False))
+@cache
+def _arrow_types():
+    """Rerun's arrow types of a 3D point and of a 3D line strip (rerun.components.LineStrip3D), spelled
+    out (tests/test_recording.py checks them against rerun's): the strips of all frames are built as one
+    arrow array from flat numpy buffers, without a Python object per strip."""
+    import pyarrow as pa
+
+    point = pa.list_(pa.field("item", pa.float32(), nullable=False), 3)
+    return point, pa.list_(pa.field("item", point, nullable=False))
 
 
-def _cut_paths(tip: np.ndarray, runs: np.ndarray, updates: np.ndarray) -> tuple[pa.Array, np.ndarray]:
+def _cut_paths(tip: np.ndarray, runs: np.ndarray, updates: np.ndarray):
     """The path cut so far after each of F ``updates``: per frame, the part of every cutting run of the
     (T, 4) ``tip`` trajectory that the scissors have passed (at least two points), as a rerun line strip
-    array of all frames' strips, and (F,) how many strips each frame has."""
+    array (pyarrow) of all frames' strips, and (F,) how many strips each frame has."""
+    import pyarrow as pa
+
+    point_type, strip_type = _arrow_types()
     starts = runs[:, 0]
     lengths = np.minimum(runs[None, :, 1], np.asarray(updates)[:, None]) - starts[None, :]  # (F, R)
     lengths = np.where(lengths >= 2, lengths, 0)
@@ -641,8 +1191,8 @@ def _cut_paths(tip: np.ndarray, runs: np.ndarray, updates: np.ndarray) -> tuple[
     )
     offsets = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int32)
     points = tip[np.repeat(starts - offsets[:-1], lengths) + np.arange(offsets[-1]), :3]
-    inner = pa.FixedSizeListArray.from_arrays(pa.array(points.astype(np.float32).ravel()), type=_POINT3D_TYPE)
-    return pa.ListArray.from_arrays(pa.array(offsets), inner, type=_LINE_STRIP3D_TYPE), counts
+    inner = pa.FixedSizeListArray.from_arrays(pa.array(points.astype(np.float32).ravel()), type=point_type)
+    return pa.ListArray.from_arrays(pa.array(offsets), inner, type=strip_type), counts
 
 
 def _cutting_runs(tip: np.ndarray) -> np.ndarray:
