@@ -20,7 +20,7 @@ the process CPU time (all threads of the stepping process; for ``process`` the r
 time, from ``/proc``, is added: what recording costs where no core is free), and the median time spent
 in ``close()``.
 
-    python scripts/recording_overhead.py [--repeats 15] [--json PATH]
+    python scripts/recording_overhead.py [--repeats 15] [--batches 1,64] [--json PATH]
 """
 
 from __future__ import annotations
@@ -85,10 +85,14 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=15, help="timed runs per variant (default 15)")
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--json", type=Path, help="also write the figures here")
+    parser.add_argument(
+        "--batches", default="1,64", help="batch sizes to time, env 0 recorded (default 1,64)"
+    )
     args = parser.parse_args()
     report = {"load_average": os.getloadavg()}
     with tempfile.TemporaryDirectory(prefix="warpcut-rec-") as tmp:
-        for label, num_envs in (("B = 1", 1), ("B = 64, env 0 recorded", 64)):
+        for num_envs in (int(b) for b in args.batches.split(",")):
+            label = "B = 1" if num_envs == 1 else f"B = {num_envs}, env 0 recorded"
             times = time_case(num_envs, args.repeats, Path(tmp), args.device)
             wall = {v: [t[0] for t in ts] for v, ts in times.items()}
             cpu = {v: [t[1] for t in ts] for v, ts in times.items()}

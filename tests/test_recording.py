@@ -471,13 +471,90 @@ def test_a_failure_on_the_worker_surfaces_and_the_file_remains(tmp_path, monkeyp
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.rrd"]
 
 
-def test_cut_path_arrow_type_is_reruns_line_strip():
+def test_columns_are_the_rerun_archetypes_columns():
+    """The writer builds its columns from arrow arrays; they must be what rerun's archetypes build."""
     import rerun as rr
 
-    from warpcut.recording import _arrow_types
+    from warpcut.recording import (
+        _CUTTING_RGB,
+        _CUTTING_RGBA,
+        _TRAVEL_RGB,
+        _TRAVEL_RGBA,
+        _column,
+        _cut_paths,
+        _cutting_runs,
+        _float64,
+        _strips,
+        _triangles,
+        _uint32,
+        _vec3,
+    )
 
-    batch = rr.components.LineStrip3DBatch([[[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]])
-    assert batch.as_arrow_array().type == _arrow_types()[1]
+    rng = np.random.default_rng(0)
+    points = rng.normal(size=(2, 5, 3)).astype(np.float32)
+    colours = rng.integers(0, 2**32, size=(2, 5), dtype=np.uint32)
+    faces = np.array([[0, 1, 2], [2, 3, 4], [1, 2, 3]], dtype=np.uint32)
+    scalars = rng.normal(size=(2, 3))
+    cutting = np.array([True, False, True, False, False])
+    tip = np.column_stack([rng.normal(size=(12, 3)), [0, 1, 1, 1, 0, 0, 1, 1, 1, 1, 0, 1]])
+    runs, updates = _cutting_runs(tip), np.array([0, 3, 5, 9, 12])
+    strips, counts = _cut_paths(tip, runs, updates)
+    cut_so_far = [
+        [tip[a : min(b, u), :3] for a, b in runs if min(b, u) - a >= 2] for u in updates
+    ]  # what the scissors have cut after each update (runs of two points at least)
+    pairs = [
+        (
+            rr.Mesh3D.columns(
+                vertex_positions=points.reshape(-1, 3), vertex_colors=colours.ravel()
+            ).partition([5, 5]),
+            [
+                _column("Mesh3D:vertex_positions", _vec3(points), [5, 5]),
+                _column("Mesh3D:vertex_colors", _uint32(colours), [5, 5]),
+            ],
+        ),
+        (
+            rr.Mesh3D.columns(triangle_indices=faces).partition([1, 2]),
+            [_column("Mesh3D:triangle_indices", _triangles(faces), [1, 2])],
+        ),
+        (rr.Scalars.columns(scalars=scalars[:, 0]), [_column("Scalars:scalars", _float64(scalars[:, 0]))]),
+        (
+            rr.Scalars.columns(scalars=scalars).partition([3, 3]),
+            [_column("Scalars:scalars", _float64(scalars), [3, 3])],
+        ),
+        (rr.LineStrips3D.columns(strips=points), [_column("LineStrips3D:strips", _strips(points))]),
+        (
+            rr.LineStrips3D.columns(strips=[s for frame in cut_so_far for s in frame]).partition(
+                [len(frame) for frame in cut_so_far]
+            ),
+            [_column("LineStrips3D:strips", strips, counts)],
+        ),
+        (
+            rr.Points3D.columns(
+                positions=points[0], colors=np.where(cutting[:, None], _CUTTING_RGB, _TRAVEL_RGB)
+            ),
+            [
+                _column("Points3D:positions", _vec3(points[0])),
+                _column("Points3D:colors", _uint32(np.where(cutting, _CUTTING_RGBA, _TRAVEL_RGBA))),
+            ],
+        ),
+        (
+            rr.Points3D.columns(positions=points.reshape(-1, 3)).partition([5, 5]),
+            [_column("Points3D:positions", _vec3(points), [5, 5])],
+        ),
+        (
+            rr.Arrows3D.columns(origins=points[0], vectors=points[1]),
+            [_column("Arrows3D:origins", _vec3(points[0])), _column("Arrows3D:vectors", _vec3(points[1]))],
+        ),
+    ]
+    for theirs, ours in pairs:
+        theirs = {c.component_descriptor().component: c for c in theirs}
+        assert sorted(theirs) == sorted(c.component_descriptor().component for c in ours)
+        for column in ours:
+            reference = theirs[column.component_descriptor().component]
+            assert column.component_descriptor() == reference.component_descriptor()
+            assert column.as_arrow_array().equals(reference.as_arrow_array()), (
+                reference.component_descriptor()
+            )
 
 
 def test_cli_colour_choices_are_the_recorders():

@@ -126,6 +126,9 @@ _RAMP_RGB = np.stack(
 ).astype(np.uint32)
 _RAMP_RGBA = (_RAMP_RGB[:, 0] << 24) | (_RAMP_RGB[:, 1] << 16) | (_RAMP_RGB[:, 2] << 8) | 0xFF
 _CUTTING_RGB, _TRAVEL_RGB = (230, 40, 40), (150, 150, 150)
+_CUTTING_RGBA, _TRAVEL_RGBA = (
+    (r << 24) | (g << 16) | (b << 8) | 0xFF for r, g, b in (_CUTTING_RGB, _TRAVEL_RGB)
+)
 
 
 class RecordingError(RuntimeError):
@@ -150,9 +153,8 @@ class Recorder:
             recorded envs' state into a pipe (the process is started here, or an idle one left by an
             earlier recorder of this Python process is reused); ``"thread"`` (or ``True``): on a worker
             thread of this process; ``False``: in the step callback itself, every :data:`FLUSH_FRAMES`
-            frames. ``None`` (default): ``"process"`` on a machine with more than one core (a core the
-            stepping loop may leave free; where the simulator's threads use every core the process costs
-            about what ``False`` costs, see ``docs/performance.md``), else ``False``.
+            frames. ``None`` (default): ``"process"`` on a POSIX machine with more than one core (a core
+            the stepping loop may leave free), else ``False``.
 
     Raises:
         ValueError: ``envs`` or ``every`` is not a positive integer, ``colour_by`` is not one of
@@ -175,7 +177,7 @@ class Recorder:
         if colour_by not in COLOUR_FIELDS:
             raise ValueError(f"colour_by: choose one of {COLOUR_FIELDS} (got {colour_by!r})")
         if background is None:
-            background = "process" if (os.cpu_count() or 1) > 1 else False
+            background = "process" if os.name == "posix" and (os.cpu_count() or 1) > 1 else False
         elif background is True:
             background = "thread"
         if background is not False and background not in BACKGROUND_MODES:
@@ -437,10 +439,11 @@ class _ThreadSink:
 # The pipe to the recorder process carries messages of a kind byte and a payload length, then the payload:
 # b"P", a pickled tuple (``open``, ``start``, ``close``; and every reply), or b"F", one frame in raw bytes:
 # _FRAME_HEAD, then the recorded envs' positions (float32), alive masks (bool), and if flagged their
-# displacements and actions (float64).
+# displacements and actions (float64). The last frame of each group that a step callback hands over is
+# flagged _GROUP_END: the process scores a group (or, when it has fallen behind, several) at once.
 _HEAD = struct.Struct("<cI")
 _FRAME_HEAD = struct.Struct("<Iqqb")
-_HAS_DISPLACEMENTS, _HAS_ACTION, _FINAL = 1, 2, 4
+_HAS_DISPLACEMENTS, _HAS_ACTION, _GROUP_END = 1, 2, 4
 
 
 def _pickled(message: tuple) -> bytes:
@@ -454,18 +457,20 @@ class _Messages:
     def __init__(self, fd: int):
         self.fd = fd
         self.buffer = bytearray()
+        self.start = 0  # where the next message begins in the buffer
         self.eof = False
 
     def next(self, block: bool = True, timeout: float | None = None):
         """The next message as ``(kind, payload)``; None at the end of the pipe, or when none arrived in
         time (``block=False``: none is waiting now; ``timeout``: seconds)."""
         while True:
-            if len(self.buffer) >= _HEAD.size:
-                kind, size = _HEAD.unpack_from(self.buffer)
-                end = _HEAD.size + size
-                if len(self.buffer) >= end:
-                    payload = bytes(self.buffer[_HEAD.size : end])
-                    del self.buffer[:end]
+            if len(self.buffer) - self.start >= _HEAD.size:
+                kind, size = _HEAD.unpack_from(self.buffer, self.start)
+                begin = self.start + _HEAD.size
+                if len(self.buffer) >= begin + size:
+                    with memoryview(self.buffer) as view:
+                        payload = bytes(view[begin : begin + size])
+                    self.start = begin + size
                     return kind, payload
             if self.eof:
                 return None
@@ -476,6 +481,8 @@ class _Messages:
             data = os.read(self.fd, 1 << 20)
             if not data:
                 self.eof = True
+            del self.buffer[: self.start]
+            self.start = 0
             self.buffer += data
 
 
@@ -491,9 +498,10 @@ class _Child:
         try:
             import fcntl
 
-            # Room for ~125 frames of a 25 x 25 sheet: the stepping loop never waits for a busy process.
-            fcntl.fcntl(self.cmd, getattr(fcntl, "F_SETPIPE_SZ", 1031), 1 << 20)
-        except OSError:
+            # Room for ~125 frames of a 25 x 25 sheet (Linux; 64 KiB elsewhere): the stepping loop seldom
+            # has to wait for a busy recorder process.
+            fcntl.fcntl(self.cmd, fcntl.F_SETPIPE_SZ, 1 << 20)
+        except (ImportError, AttributeError, OSError):
             pass
         os.set_blocking(self.cmd, False)
         source = str(Path(__file__).resolve().parents[1])
@@ -645,7 +653,7 @@ class _ProcessSink:
     def frames(self, key: int, frames: list[_Frame], final: bool) -> None:
         parts = []
         for k, frame in enumerate(frames):
-            flags = _FINAL if final and k == len(frames) - 1 else 0
+            flags = _GROUP_END if k == len(frames) - 1 else 0
             arrays = [
                 np.ascontiguousarray(frame.positions, dtype=np.float32),
                 np.ascontiguousarray(frame.alive, dtype=np.bool_),
@@ -765,9 +773,12 @@ def _serve(cmd_fd: int, reply_fd: int) -> None:
 
 def _serve_recording(messages: _Messages, reply, tmp: str, path: str, application_id: str, colour_by: str):
     """Write one recording from the messages; whether the stepping process closed it (else the pipe
-    ended). The first failure is reported at once; the frames after it are read and dropped."""
+    ended). The frames are scored and sent a group at a time once no further message is waiting, so
+    that a process that has fallen behind (no core free) catches up in fewer, larger batches. The first
+    failure is reported at once; the frames after it are read and dropped."""
     failure: list = []
     pending: dict[int, list[_Frame]] = {}
+    ready: set[int] = set()  # keys whose pending frames end with a whole group
     shapes: dict[int, tuple[int, int]] = {}
     writer: _Writer | None = None
 
@@ -781,6 +792,7 @@ def _serve_recording(messages: _Messages, reply, tmp: str, path: str, applicatio
                 reply("failed", *failure)
 
     def send(key: int) -> None:
+        ready.discard(key)
         frames = pending.pop(key, None)
         if frames:
             attempt("frames", key, frames)
@@ -795,15 +807,24 @@ def _serve_recording(messages: _Messages, reply, tmp: str, path: str, applicatio
         failure[:] = [type(exc).__name__, str(exc), traceback.format_exc()]
         reply("failed", *failure)
     closed = False
-    while (message := messages.next()) is not None:
+    while True:
+        message = messages.next(block=False)
+        if message is None and not messages.eof:
+            for key in list(ready):  # nothing else is waiting: send the whole groups
+                send(key)
+            message = messages.next()
+        if message is None:
+            break
         kind, payload = message
         try:
             if kind == b"F":
-                key, frame, final = _read_frame(payload, shapes)
+                key, frame, group_end = _read_frame(payload, shapes)
                 frames = pending.setdefault(key, [])
                 frames.append(frame)
-                if final or len(frames) >= PROCESS_BATCH_FRAMES:
-                    send(key)
+                if group_end:
+                    ready.add(key)
+                    if len(frames) >= FLUSH_FRAMES:
+                        send(key)
                 continue
             command, *args = pickle.loads(payload)
             if command == "close":
@@ -834,7 +855,7 @@ def _serve_recording(messages: _Messages, reply, tmp: str, path: str, applicatio
 
 
 def _read_frame(payload: bytes, shapes: dict[int, tuple[int, int]]) -> tuple[int, _Frame, bool]:
-    """A b"F" message's episode key, frame and whether it is the episode's last."""
+    """A b"F" message's episode key, frame and whether it ends a group."""
     key, step, update, flags = _FRAME_HEAD.unpack_from(payload)
     n, v = shapes[key]
     offset = _FRAME_HEAD.size
@@ -851,7 +872,7 @@ def _read_frame(payload: bytes, shapes: dict[int, tuple[int, int]]) -> tuple[int
             offset += count * np.dtype(dtype).itemsize
         else:
             arrays.append(None)
-    return key, _Frame(step, update, *arrays), bool(flags & _FINAL)
+    return key, _Frame(step, update, *arrays), bool(flags & _GROUP_END)
 
 
 class _Writer:
@@ -983,15 +1004,20 @@ class _Writer:
             if setup.disc is not None:
                 setup.disc_origin = positions[0, setup.disc].mean(axis=0)
 
+        # The columns are built straight from numpy buffers as arrow arrays (_column and its helpers), which
+        # costs a fraction of what rerun's archetype constructors (rr.Mesh3D.columns, ...) spend on a batch;
+        # tests/test_recording.py checks that they are the archetypes' columns.
         if self.colour_by == "strain":
             colours = _ramp(vertex_strain(positions, alive, grid, task_setup.springs), 0.0, STRAIN_FULL_SCALE)
         else:
             colours = _ramp(positions[..., 2], *setup.height_range)
+        rows = np.full(frames, num_vertices)
         send(
             "sheet",
-            rr.Mesh3D.columns(
-                vertex_positions=positions.reshape(-1, 3), vertex_colors=colours.reshape(-1)
-            ).partition(np.full(frames, num_vertices)),
+            [
+                _column("Mesh3D:vertex_positions", _vec3(positions), rows),
+                _column("Mesh3D:vertex_colors", _uint32(colours), rows),
+            ],
         )
         # The topology and the error change only when the scissors remove vertices.
         changed = np.ones(frames, dtype=bool)
@@ -1005,7 +1031,7 @@ class _Writer:
             faces = triangles[np.nonzero(kept)[1]]
             send(
                 "sheet",
-                rr.Mesh3D.columns(triangle_indices=faces).partition(kept.sum(axis=1)),
+                [_column("Mesh3D:triangle_indices", _triangles(faces), kept.sum(axis=1))],
                 at=steps[changed],
             )
             # Unchanged frames carry the last error forward.
@@ -1016,41 +1042,50 @@ class _Writer:
         else:
             errors = np.full(frames, setup.last_error)
         setup.last_error = float(errors[-1])
-        send("error_vertices", rr.Scalars.columns(scalars=errors))
+        send("error_vertices", [_column("Scalars:scalars", _float64(errors))])
 
         # All frames' contours in one product: (K, V) @ (V, F * 3).
         by_vertex = np.moveaxis(positions, 0, 1).reshape(num_vertices, frames * 3)
         contour = np.moveaxis((setup.contour_matrix @ by_vertex).reshape(-1, frames, 3), 1, 0)
-        send("contour", rr.LineStrips3D.columns(strips=contour))
+        send("contour", [_column("LineStrips3D:strips", _strips(contour))])
 
         trajectory = setup.tip
         current = np.clip(updates - 1, 0, len(trajectory) - 1)
         cutting = (trajectory[current, 3] > 0) & (updates <= len(trajectory))
         send(
             "tip",
-            rr.Points3D.columns(
-                positions=trajectory[current, :3],
-                colors=np.where(cutting[:, None], _CUTTING_RGB, _TRAVEL_RGB),
-            ),
+            [
+                _column("Points3D:positions", _vec3(trajectory[current, :3])),
+                _column("Points3D:colors", _uint32(np.where(cutting, _CUTTING_RGBA, _TRAVEL_RGBA))),
+            ],
         )
         strips, counts = _cut_paths(trajectory, setup.cut_runs, updates)
-        send("cut_path", rr.LineStrips3D.columns(strips=strips).partition(counts))
+        send("cut_path", [_column("LineStrips3D:strips", strips, counts)])
 
         if setup.disc is not None:
             send(
                 "grasp/disc",
-                rr.Points3D.columns(positions=positions[:, setup.disc].reshape(-1, 3)).partition(
-                    [int(setup.disc.sum())] * frames
-                ),
+                [
+                    _column(
+                        "Points3D:positions",
+                        _vec3(positions[:, setup.disc]),
+                        np.full(frames, setup.disc.sum()),
+                    )
+                ],
             )
             send(
                 "grasp/displacement",
-                rr.Arrows3D.columns(
-                    origins=np.broadcast_to(setup.disc_origin, (frames, 3)), vectors=displacements
-                ),
+                [
+                    _column("Arrows3D:origins", _vec3(np.broadcast_to(setup.disc_origin, (frames, 3)))),
+                    _column("Arrows3D:vectors", _vec3(displacements)),
+                ],
             )
         if len(action_steps):
-            send("action", rr.Scalars.columns(scalars=actions).partition([3] * len(actions)), at=action_steps)
+            send(
+                "action",
+                [_column("Scalars:scalars", _float64(actions), np.full(len(actions), 3))],
+                at=action_steps,
+            )
 
 
 def _blueprint(roots: list[str]):
@@ -1164,13 +1199,94 @@ def _polyline(contour: Contour, spacing_mm: float) -> np.ndarray:
 
 @cache
 def _arrow_types():
-    """Rerun's arrow types of a 3D point and of a 3D line strip (rerun.components.LineStrip3D), spelled
-    out (tests/test_recording.py checks them against rerun's): the strips of all frames are built as one
-    arrow array from flat numpy buffers, without a Python object per strip."""
+    """Rerun's arrow types of a 3D point or vector, of a 3D line strip (rerun.components.LineStrip3D) and
+    of a triangle's vertex indices, spelled out (tests/test_recording.py checks them against rerun's):
+    columns are built as arrow arrays from flat numpy buffers, without a Python object per element."""
     import pyarrow as pa
 
     point = pa.list_(pa.field("item", pa.float32(), nullable=False), 3)
-    return point, pa.list_(pa.field("item", point, nullable=False))
+    strip = pa.list_(pa.field("item", point, nullable=False))
+    triangle = pa.list_(pa.field("item", pa.uint32(), nullable=False), 3)
+    return point, strip, triangle
+
+
+@cache
+def _descriptors() -> dict:
+    """Rerun's descriptors of the components recorded, by name (``Archetype:component``)."""
+    import rerun as rr
+
+    return {
+        d.component: d
+        for d in (
+            rr.Mesh3D.descriptor_vertex_positions(),
+            rr.Mesh3D.descriptor_vertex_colors(),
+            rr.Mesh3D.descriptor_triangle_indices(),
+            rr.Scalars.descriptor_scalars(),
+            rr.LineStrips3D.descriptor_strips(),
+            rr.Points3D.descriptor_positions(),
+            rr.Points3D.descriptor_colors(),
+            rr.Arrows3D.descriptor_origins(),
+            rr.Arrows3D.descriptor_vectors(),
+        )
+    }
+
+
+class _Arrow:
+    """A ready-made arrow array as rerun's ``ComponentBatchLike``."""
+
+    __slots__ = ("array",)
+
+    def __init__(self, array):
+        self.array = array
+
+    def as_arrow_array(self):
+        return self.array
+
+
+def _column(component: str, array, rows: np.ndarray | None = None):
+    """The ``rr.ComponentColumn`` of ``component`` (e.g. ``"Mesh3D:vertex_positions"``) holding the arrow
+    ``array``, ``rows[i]`` elements in the i-th row (default: one)."""
+    import rerun as rr
+
+    offsets = None if rows is None else np.concatenate([[0], np.cumsum(rows)]).astype(np.int32)
+    return rr.ComponentColumn(_descriptors()[component], _Arrow(array), offsets=offsets)
+
+
+def _vec3(values: np.ndarray):
+    """(..., 3) values as an arrow array of 3D points (or vectors)."""
+    import pyarrow as pa
+
+    flat = pa.array(np.ascontiguousarray(values, dtype=np.float32).reshape(-1))
+    return pa.FixedSizeListArray.from_arrays(flat, type=_arrow_types()[0])
+
+
+def _strips(points: np.ndarray):
+    """(F, K, 3) points as an arrow array of F line strips of K points."""
+    import pyarrow as pa
+
+    frames, k = points.shape[:2]
+    offsets = pa.array(np.arange(frames + 1, dtype=np.int32) * k)
+    return pa.ListArray.from_arrays(offsets, _vec3(points), type=_arrow_types()[1])
+
+
+def _triangles(faces: np.ndarray):
+    """(T, 3) vertex indices as an arrow array of triangles."""
+    import pyarrow as pa
+
+    flat = pa.array(np.ascontiguousarray(faces, dtype=np.uint32).reshape(-1))
+    return pa.FixedSizeListArray.from_arrays(flat, type=_arrow_types()[2])
+
+
+def _uint32(values: np.ndarray):
+    import pyarrow as pa
+
+    return pa.array(np.ascontiguousarray(values, dtype=np.uint32).reshape(-1))
+
+
+def _float64(values: np.ndarray):
+    import pyarrow as pa
+
+    return pa.array(np.ascontiguousarray(values, dtype=np.float64).reshape(-1))
 
 
 def _cut_paths(tip: np.ndarray, runs: np.ndarray, updates: np.ndarray):
@@ -1179,7 +1295,7 @@ def _cut_paths(tip: np.ndarray, runs: np.ndarray, updates: np.ndarray):
     array (pyarrow) of all frames' strips, and (F,) how many strips each frame has."""
     import pyarrow as pa
 
-    point_type, strip_type = _arrow_types()
+    point_type, strip_type, _ = _arrow_types()
     starts = runs[:, 0]
     lengths = np.minimum(runs[None, :, 1], np.asarray(updates)[:, None]) - starts[None, :]  # (F, R)
     lengths = np.where(lengths >= 2, lengths, 0)
