@@ -1,6 +1,7 @@
 """How much recording an episode with rerun slows a run down (docs/performance.md, "Recording overhead").
 
-Times, interleaved in one process so that machine load hits all variants alike, the median wall time of
+Times, interleaved with runs without recording so that machine load hits all variants alike, the median
+wall time of
 
 * ``plain``: ``CuttingTask(...).run(None)`` (no step callback: recording off);
 * ``process``: the same run with ``Recorder(path, envs=1, background="process").on_step(...)`` as the
@@ -16,9 +17,12 @@ Times, interleaved in one process so that machine load hits all variants alike, 
 on (a) one 25 x 25 ``fls-circle`` sheet without tension, and (b) a batch of 64 such sheets with env 0
 recorded (N = 1), and prints each recording's overhead over ``plain`` in %: of the median wall times, the
 median of the overheads of neighbouring runs (paired, less sensitive to load that comes and goes), and of
-the process CPU time (all threads of the stepping process; for ``process`` the recorder process's CPU
-time, from ``/proc``, is added: what recording costs where no core is free), and the median time spent
-in ``close()``.
+the CPU time (all threads of the stepping process; for ``process`` plus the recorder process's, which it
+reports when it closes a file: what recording costs where no core is free), and the median time spent in
+``close()``.
+
+Two phases, each interleaved with its own plain runs: first ``process`` for every batch size, in a
+process that has not imported rerun (as in the CLI); then the in-process variants, which import it.
 
     python scripts/recording_overhead.py [--repeats 15] [--batches 1,64] [--json PATH]
 """
@@ -29,6 +33,7 @@ import argparse
 import json
 import os
 import statistics
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -38,14 +43,14 @@ from warpcut.contours import load_contour
 from warpcut.recording import Recorder
 from warpcut.task import CuttingTask
 
-VARIANTS = ("plain", "process", "worker thread", "no thread")
+PHASES = (("plain", "process"), ("plain", "worker thread", "no thread"))
 BACKGROUND = {"process": "process", "worker thread": "thread", "no thread": False}
 
 
-def time_case(num_envs: int, repeats: int, out_dir: Path, device: str) -> dict[str, list[tuple[float, ...]]]:
-    """(wall, CPU, close) times (s) of every variant on a batch of ``num_envs`` fls-circle sheets,
-    interleaved."""
-    task = CuttingTask(SimConfig(), load_contour("fls-circle"), num_envs=num_envs, device=device)
+def time_variants(
+    task: CuttingTask, variants: tuple[str, ...], repeats: int, out_dir: Path
+) -> dict[str, list[tuple[float, float, float]]]:
+    """(wall, CPU, close) times (s) of ``variants`` on ``task``, interleaved."""
     counter = iter(range(10**9))
     process_cpu = {}  # the recorder process's CPU time at its last close, by pid
 
@@ -71,13 +76,33 @@ def time_case(num_envs: int, repeats: int, out_dir: Path, device: str) -> dict[s
         path.unlink()
         return end - start, cpu, end - closing
 
-    for variant in VARIANTS:  # warm-up: kernels, rerun's first use, the recorder process's start
+    for variant in variants:  # warm-up: kernels, rerun's first use, the recorder process's start
         run(variant)
-    times: dict[str, list[tuple[float, ...]]] = {v: [] for v in VARIANTS}
+    times: dict[str, list[tuple[float, float, float]]] = {v: [] for v in variants}
     for _ in range(repeats):
-        for variant in VARIANTS:
+        for variant in variants:
             times[variant].append(run(variant))
     return times
+
+
+def summarize(times: dict[str, list[tuple[float, float, float]]]) -> dict:
+    wall = {v: [t[0] for t in ts] for v, ts in times.items()}
+    cpu = {v: [t[1] for t in ts] for v, ts in times.items()}
+    medians = {v: statistics.median(t) for v, t in wall.items()}
+    recorded = [v for v in times if v != "plain"]
+    return {
+        "median_wall_s": medians,
+        "median_cpu_s": {v: statistics.median(t) for v, t in cpu.items()},
+        "median_close_s": {v: statistics.median(t[2] for t in times[v]) for v in recorded},
+        "overhead_pct": {v: 100.0 * (medians[v] / medians["plain"] - 1.0) for v in recorded},
+        "paired_overhead_pct": {
+            v: 100.0 * statistics.median(r / p - 1.0 for r, p in zip(wall[v], wall["plain"], strict=True))
+            for v in recorded
+        },
+        "cpu_overhead_pct": {
+            v: 100.0 * (statistics.median(cpu[v]) / statistics.median(cpu["plain"]) - 1.0) for v in recorded
+        },
+    }
 
 
 def main() -> None:
@@ -89,58 +114,48 @@ def main() -> None:
         "--batches", default="1,64", help="batch sizes to time, env 0 recorded (default 1,64)"
     )
     args = parser.parse_args()
-    report = {"load_average": os.getloadavg()}
+    batches = [int(b) for b in args.batches.split(",")]
+    tasks = {
+        b: CuttingTask(SimConfig(), load_contour("fls-circle"), num_envs=b, device=args.device)
+        for b in batches
+    }
+    report: dict = {"load_average_start": os.getloadavg(), "cores": os.cpu_count()}
     with tempfile.TemporaryDirectory(prefix="warpcut-rec-") as tmp:
-        for num_envs in (int(b) for b in args.batches.split(",")):
-            label = "B = 1" if num_envs == 1 else f"B = {num_envs}, env 0 recorded"
-            times = time_case(num_envs, args.repeats, Path(tmp), args.device)
-            wall = {v: [t[0] for t in ts] for v, ts in times.items()}
-            cpu = {v: [t[1] for t in ts] for v, ts in times.items()}
-            medians = {v: statistics.median(t) for v, t in wall.items()}
-            task = CuttingTask(SimConfig(), load_contour("fls-circle"), num_envs=num_envs, device=args.device)
-            steps, threads = task.num_steps, task.sim.threads
-            recorded = [v for v in VARIANTS if v != "plain"]
-            report[label] = {
-                "num_envs": num_envs,
-                "steps": steps,
-                "stepping_threads": threads,
-                "cores": os.cpu_count(),
-                "median_wall_s": medians,
-                "median_cpu_s": {v: statistics.median(t) for v, t in cpu.items()},
-                "median_close_s": {v: statistics.median(t[2] for t in times[v]) for v in recorded},
-                "overhead_pct": {v: 100.0 * (medians[v] / medians["plain"] - 1.0) for v in recorded},
-                "paired_overhead_pct": {
-                    v: 100.0
-                    * statistics.median(r / p - 1.0 for r, p in zip(wall[v], wall["plain"], strict=True))
-                    for v in recorded
-                },
-                "cpu_overhead_pct": {
-                    v: 100.0 * (statistics.median(cpu[v]) / statistics.median(cpu["plain"]) - 1.0)
-                    for v in recorded
-                },
-            }
-            print(
-                f"fls-circle 25 x 25, no tension, {label} ({steps} steps + reset; medians of {args.repeats}; "
-                f"{threads} stepping thread(s) on {os.cpu_count()} cores)"
-            )
-            head = ("wall", 9), ("overhead", 9), ("paired", 8), ("CPU", 9), ("overhead", 9), ("close", 8)
-            print(f"  {'':<14}" + "".join(f" {name:>{width}}" for name, width in head))
-            for variant in VARIANTS:
-                line = f"  {variant:<14} {1e3 * medians[variant]:6.1f} ms"
-                cpu_ms = 1e3 * report[label]["median_cpu_s"][variant]
+        for phase, variants in enumerate(PHASES):
+            for b in batches:
+                if phase == 0:
+                    assert "rerun" not in sys.modules, "the process variant must run without rerun loaded"
+                times = time_variants(tasks[b], variants, args.repeats, Path(tmp))
+                entry = report.setdefault(f"B = {b}", {"steps": tasks[b].num_steps})
+                entry["stepping_threads"] = tasks[b].sim.threads
+                entry[f"phase {phase + 1}"] = summarize(times)
+    report["load_average_end"] = os.getloadavg()
+    for b in batches:
+        entry = report[f"B = {b}"]
+        label = "B = 1" if b == 1 else f"B = {b}, env 0 recorded"
+        print(
+            f"fls-circle 25 x 25, no tension, {label} ({entry['steps']} steps + reset; medians of "
+            f"{args.repeats}; {entry['stepping_threads']} stepping thread(s) on {os.cpu_count()} cores)"
+        )
+        head = ("wall", 9), ("overhead", 9), ("paired", 8), ("CPU", 9), ("overhead", 9), ("close", 8)
+        print(f"  {'':<14}" + "".join(f" {name:>{width}}" for name, width in head))
+        for phase, variants in enumerate(PHASES):
+            r = entry[f"phase {phase + 1}"]
+            for variant in variants:
+                line = f"  {variant:<14} {1e3 * r['median_wall_s'][variant]:6.1f} ms"
+                cpu_ms = 1e3 * r["median_cpu_s"][variant]
                 if variant == "plain":
                     line += f" {'':>9} {'':>8} {cpu_ms:6.1f} ms"
                 else:
-                    r = report[label]
                     line += (
                         f" {r['overhead_pct'][variant]:+8.1f}% {r['paired_overhead_pct'][variant]:+7.1f}%"
                         f" {cpu_ms:6.1f} ms {r['cpu_overhead_pct'][variant]:+8.1f}%"
                         f" {1e3 * r['median_close_s'][variant]:5.1f} ms"
                     )
                 print(line)
-    load = report["load_average"], os.getloadavg()
-    print(f"load average (1, 5, 15 min) at the start {load[0]}, at the end {load[1]}")
-    report["load_average_end"] = load[1]
+    start, end = report["load_average_start"], report["load_average_end"]
+    print(f"load average (1, 5, 15 min): {tuple(round(x, 2) for x in start)} at the start, ", end="")
+    print(f"{tuple(round(x, 2) for x in end)} at the end")
     if args.json:
         args.json.write_text(json.dumps(report, indent=2) + "\n")
 

@@ -802,7 +802,7 @@ def _serve_recording(messages: _Messages, reply, tmp: str, path: str, applicatio
             send(key)
 
     try:
-        writer = _Writer(Path(tmp), Path(path), application_id, colour_by, eager_blueprint=True)
+        writer = _Writer(Path(tmp), Path(path), application_id, colour_by, background=True)
     except Exception as exc:  # noqa: BLE001 - reported to the stepping process
         failure[:] = [type(exc).__name__, str(exc), traceback.format_exc()]
         reply("failed", *failure)
@@ -879,10 +879,13 @@ class _Writer:
     """Turns what the step callbacks copied into rerun data in one ``.rrd`` file (in the recorder
     process, on the worker thread or in the step callback), and finishes the file."""
 
-    def __init__(self, tmp: Path, path: Path, application_id: str, colour_by: str, eager_blueprint: bool):
+    def __init__(self, tmp: Path, path: Path, application_id: str, colour_by: str, background: bool):
         import rerun as rr
 
-        self.tmp, self.path, self.colour_by, self.eager_blueprint = tmp, path, colour_by, eager_blueprint
+        self.tmp, self.path, self.colour_by = tmp, path, colour_by
+        self.background = background
+        """Off the stepping thread: send the blueprint when an episode starts, and start encoding every
+        batch at once (less left for :meth:`finish`)."""
         self.stream = rr.RecordingStream(application_id)
         self.stream.save(tmp)
         self.stream.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
@@ -932,7 +935,7 @@ class _Writer:
             stream.log(f"{setup.root}/action", rr.SeriesLines(names=["x", "y", "z"]), static=True)
             stream.log(f"{setup.root}/error_vertices", rr.SeriesLines(names="error (vertices)"), static=True)
         self.episodes[key] = task_setup
-        if self.eager_blueprint:
+        if self.background:
             self._send_blueprint()  # off the stepping thread; finish() sends it otherwise
 
     def _send_blueprint(self) -> None:
@@ -969,6 +972,8 @@ class _Writer:
                 action_steps,
                 actions,
             )
+        if self.background:
+            self.stream.flush(timeout_sec=0.0)  # starts encoding and writing, does not wait
 
     def _send_env(
         self,
