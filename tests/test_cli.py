@@ -353,7 +353,8 @@ def test_plan_prints_and_writes_the_plan_json(tmp_path):
     assert plan["chosen"]["error_vertices"] == min(c["error_vertices"] for c in feasible)
 
 
-def test_run_end_to_end_on_a_tiny_budget(tmp_path):
+@pytest.mark.parametrize("shared", [False, True], ids=["policy-per-candidate", "shared-policy"])
+def test_run_end_to_end_on_a_tiny_budget(tmp_path, shared):
     out = tmp_path / "run"
     code, stdout, _ = invoke(
         [
@@ -376,30 +377,25 @@ def test_run_end_to_end_on_a_tiny_budget(tmp_path):
             str(out),
             "--json",
             str(tmp_path / "r.json"),
-            "--record",
         ]
+        + (["--shared-policy"] if shared else ["--record"])
     )
     assert code == 0, stdout
-    entities = read_summary(out / "recording.rrd").entity_paths
-    assert {f"/{m}/env_0/sheet" for m in ("none", "fixed", "analytic", "rl")} <= set(entities)
-    for name in (
-        "plan.json",
-        "results.json",
-        "regions.png",
-        "improvement.png",
-        "rl/best.pt",
-        "rl/scenario.json",
-        "rl/candidates.json",
-        "rl/learning_curve.png",
-        "pinch_candidates.png",
-    ):
+    runs = ["rl"] if shared else ["rl/candidate-0", "rl/candidate-1"]
+    names = ["plan.json", "results.json", "regions.png", "improvement.png", "pinch_candidates.png"]
+    for name in names + [
+        f"{r}/{f}" for r in runs for f in ("best.pt", "scenario.json", "learning_curve.png")
+    ]:
         assert (out / name).is_file(), name
+    if not shared:
+        entities = read_summary(out / "recording.rrd").entity_paths
+        assert {f"/{m}/env_0/sheet" for m in ("none", "fixed", "analytic", "rl")} <= set(entities)
     report = json.loads((tmp_path / "r.json").read_text())
     row = report["rows"][0]
     plan = json.loads((out / "plan.json").read_text())
     assert row["fixed_pinch"] == pytest.approx(plan["chosen"]["pinch"])  # fixed at the planned pinch
-    # One policy shared by the best two candidates (by fixed tension), each cut in its best order; rl
-    # pinches the candidate that validated best.
+    # RL for the best two candidates (by fixed tension), each cut in its best order; rl pinches the
+    # candidate that validated best.
     feasible = sorted(
         (c for c in plan["pinch_candidates"] if c["feasible"]), key=lambda c: c["error_vertices"]
     )
@@ -409,8 +405,13 @@ def test_run_end_to_end_on_a_tiny_budget(tmp_path):
     chosen = listed[report["chosen_candidate"]]
     assert chosen["rl_validation_error_vertices"] == min(c["rl_validation_error_vertices"] for c in listed)
     assert row["rl_pinch"] == pytest.approx(chosen["pinch"])
-    scenario = json.loads((out / "rl" / "scenario.json").read_text())
-    assert len(scenario["candidates"]) == 2 and scenario["observe_pinch"]
+    scenario = json.loads((out / chosen["run"] / "scenario.json").read_text())
+    if shared:
+        assert len(scenario["candidates"]) == 2 and scenario["observe_pinch"]
+        assert (out / "rl" / "candidates.json").is_file()
+    else:
+        assert scenario["pinch"] == pytest.approx(chosen["pinch"]) and not scenario["observe_pinch"]
+        assert len(scenario["segments"]) == len(plan["segments"])
     assert {"none", "fixed", "analytic", "rl"} <= {line.split()[0] for line in stdout.splitlines() if line}
 
 

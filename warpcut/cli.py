@@ -1045,10 +1045,91 @@ def plan(
         click.echo(f"wrote {json_path}")
 
 
+def _train_run_candidates(
+    contour_spec: str,
+    name: str,
+    plan,
+    listed: list[dict],
+    settings: dict,
+    num_envs: int | None,
+    resolution: int,
+    seed: int,
+    device: str | None,
+    out: Path,
+    shared: bool,
+    trials: int,
+    plots: bool,
+) -> tuple[Path, int]:
+    """``warpcut run``'s RL step: a PPO policy per candidate in ``listed`` (or one shared by all), each
+    candidate cut in its best order; records each candidate's validation error in ``listed`` and returns
+    the run directory of the winner and its index (the first, i.e. the better fixed rank, among ties)."""
+    from agents.rl import RECIPE, Scenario, recipe_config, train_contour
+    from warpcut.plots import plot_learning_curve
+
+    sim = {"resolution": resolution} if resolution != 25 else {}
+    cuts = [[s.tolist() for s in plan.ordered_segments(c["order"])] for c in listed]
+    if shared:
+        envs = num_envs or max(64, 8 * len(listed))
+        jobs = [
+            (
+                out / "rl",
+                Scenario(
+                    contour=contour_spec,
+                    sim=sim,
+                    candidates=[
+                        {"pinch": c["pinch"], "segments": s} for c, s in zip(listed, cuts, strict=True)
+                    ],
+                    **RECIPE,
+                ),
+                f"one policy for {len(listed)} pinch candidates",
+            )
+        ]
+        what = f"one RL policy shared by {len(listed)} pinch candidate(s) ({envs} envs"
+    else:
+        envs = num_envs or 64
+        jobs = [
+            (
+                out / "rl" / f"candidate-{k}",
+                Scenario(contour=contour_spec, pinch=c["pinch"], segments=s, sim=sim, **RECIPE),
+                f"pinch ({c['pinch'][0]:.1f}, {c['pinch'][1]:.1f})",
+            )
+            for k, (c, s) in enumerate(zip(listed, cuts, strict=True))
+        ]
+        what = f"an RL policy for each of the best {len(listed)} pinch candidate(s) ({envs} envs each"
+    click.echo(f"[2/3] training {what}, {settings['iterations']} PPO iterations)", err=True)
+    cfg = recipe_config(num_envs=envs, iterations=settings["iterations"], seed=seed, device="cpu")
+    for k, (run_dir, scenario, title) in enumerate(jobs):
+        try:
+            result = train_contour(scenario, run_dir, cfg, eval_trials=trials, progress=True, device=device)
+        except KeyboardInterrupt:
+            click.echo(f"interrupted: checkpoint saved in {run_dir}", err=True)
+            sys.exit(130)
+        summary = result["summary"]
+        if plots:
+            plot_learning_curve(summary["history"], summary["validation"], run_dir, title=f"{name}, {title}")
+        if shared:
+            errors = summary["candidates"]["validation_error_vertices"]
+            for c, e in zip(listed, errors, strict=True):
+                c["rl_validation_error_vertices"], c["run"] = e, str(run_dir.relative_to(out))
+            return run_dir, int(summary["candidates"]["chosen"])
+        listed[k]["rl_validation_error_vertices"] = summary["best"]["validation_error"]
+        listed[k]["rl_best_iteration"] = summary["best"]["iterations"]
+        listed[k]["run"] = str(run_dir.relative_to(out))
+        click.echo(
+            f"      candidate ({listed[k]['pinch'][0]:.1f}, {listed[k]['pinch'][1]:.1f}): fixed "
+            f"{listed[k]['fixed_error_vertices']:.1f}, rl {summary['best']['validation_error']:.1f} vertices "
+            "(validation)",
+            err=True,
+        )
+    chosen = min(range(len(listed)), key=lambda k: (listed[k]["rl_validation_error_vertices"], k))
+    return out / listed[chosen]["run"], chosen
+
+
 BUDGETS = {
-    # candidates for the pinch search (all of them share one PPO policy); PPO iterations; evaluation trials
-    "fast": {"candidates": 8, "iterations": 60, "trials": 10},
-    "paper": {"candidates": 30, "iterations": 200, "trials": 10},
+    # candidates for the pinch search, of which the best rl_candidates (by fixed tension; None: all, as in
+    # the paper) get a PPO policy each; PPO iterations per policy; evaluation trials
+    "fast": {"candidates": 8, "rl_candidates": 2, "iterations": 60, "trials": 10},
+    "paper": {"candidates": 30, "rl_candidates": None, "iterations": 200, "trials": 10},
 }
 RUN_POLICIES = ("rl", "fixed", "analytic")
 
@@ -1066,8 +1147,9 @@ RUN_POLICIES = ("rl", "fixed", "analytic")
     default="fast",
     show_default=True,
     type=click.Choice(list(BUDGETS)),
-    help="fast: 8 pinch candidates (plus the centroid when feasible) sharing one PPO policy, 60 PPO "
-    "iterations (a few minutes on 2 CPU cores); paper: 30 candidates, 200 iterations.",
+    help="fast: 8 pinch candidates (plus the centroid when feasible), a PPO policy for each of the best 2, "
+    "60 PPO iterations each (a few minutes on 2 CPU cores); paper: 30 candidates, a policy for every one, "
+    "200 iterations each (hours).",
 )
 @click.option(
     "--policy",
@@ -1075,9 +1157,15 @@ RUN_POLICIES = ("rl", "fixed", "analytic")
     default="rl",
     show_default=True,
     type=click.Choice(RUN_POLICIES),
-    help="The tensioner that picks the pinch candidate (each candidate with its best order): rl (one PPO "
-    "policy shared by the candidates, conditioned on the pinch point); fixed or analytic for quick plans "
-    "without training.",
+    help="The tensioner that picks the pinch candidate (each candidate with its best order): rl (a PPO "
+    "policy per candidate, the one that validates best wins); fixed or analytic for quick plans without "
+    "training.",
+)
+@click.option(
+    "--shared-policy",
+    is_flag=True,
+    help="Train one PPO policy for all the RL candidates (it observes its pinch point) instead of one each: "
+    "about K times faster, but it lost to separate policies where they learn (docs/learning.md).",
 )
 @click.option(
     "--candidates", type=click.IntRange(min=1), default=None, help="Override the budget's pinch candidates."
@@ -1086,8 +1174,7 @@ RUN_POLICIES = ("rl", "fixed", "analytic")
     "--rl-candidates",
     type=click.IntRange(min=1),
     default=None,
-    help="Train the shared PPO policy on only this many of the best candidates (ranked by fixed tension); "
-    "default: all.",
+    help="Override how many of the best candidates (ranked by fixed tension) get a PPO policy.",
 )
 @click.option(
     "--iterations", type=click.IntRange(min=1), default=None, help="Override the budget's PPO iterations."
@@ -1099,7 +1186,7 @@ RUN_POLICIES = ("rl", "fixed", "analytic")
     "--num-envs",
     default=None,
     type=click.IntRange(min=1),
-    help="PPO envs (default: 64, or 8 per candidate when that is more).",
+    help="PPO envs per policy (default: 64; with --shared-policy 64, or 8 per candidate when more).",
 )
 @click.option(
     "--resolution", default=25, show_default=True, type=click.IntRange(5, 100), help="Vertices per side."
@@ -1126,6 +1213,7 @@ def run(
     contour_name: str,
     budget: str,
     run_policy: str,
+    shared_policy: bool,
     candidates: int | None,
     rl_candidates: int | None,
     iterations: int | None,
@@ -1142,20 +1230,21 @@ def run(
     colour_by: str,
     no_plots: bool,
 ) -> None:
-    """The whole pipeline: plan the cut, pick the pinch candidate with a tensioner (RL: one policy shared by
-    the candidates), compare none/fixed/analytic/RL."""
+    """The whole pipeline: plan the cut, pick the pinch candidate with a tensioner (RL: a policy per
+    candidate), compare none/fixed/analytic/RL."""
     import numpy as np
 
     from agents.baselines import AnalyticTension
     from agents.evaluation import MethodResult, MethodSpec, evaluate_suite, run_method
-    from agents.rl import RECIPE, Scenario, recipe_config, rollout_errors, train_contour
+    from agents.rl import rollout_errors
     from warpcut.contours import load_contour
     from warpcut.io import write_json
     from warpcut.planning import plan_cut
     from warpcut.simulator import resolve_device
 
     settings = dict(BUDGETS[budget])
-    overrides = {"candidates": candidates, "iterations": iterations, "trials": trials}
+    overrides = {"candidates": candidates, "rl_candidates": rl_candidates, "iterations": iterations}
+    overrides["trials"] = trials
     settings.update({k: v for k, v in overrides.items() if v is not None})
     device = resolve_device(device)
     contour = load_contour(contour_name)
@@ -1181,7 +1270,8 @@ def run(
     )
 
     ranked = sorted(range(len(plan.candidates)), key=lambda c: plan.candidates[c]["error_vertices"])
-    ranked = ranked[: rl_candidates or len(ranked)]
+    if run_policy == "rl" and settings["rl_candidates"] is not None:
+        ranked = ranked[: settings["rl_candidates"]]
     picked = [plan.candidates[c] for c in ranked]
     listed = [
         {
@@ -1215,40 +1305,10 @@ def run(
         pinches["analytic"] = [np.asarray(listed[chosen]["pinch"])]
         method_segments["analytic"] = plan.ordered_segments(listed[chosen]["order"])
     else:
-        envs = num_envs or max(64, 8 * len(picked))
-        click.echo(
-            f"[2/3] training one RL policy shared by {len(picked)} pinch candidate(s) "
-            f"({settings['iterations']} PPO iterations, {envs} envs)",
-            err=True,
-        )
-        cfg = recipe_config(num_envs=envs, iterations=settings["iterations"], seed=seed, device="cpu")
-        scenario = Scenario(
-            contour=contour_name,
-            sim={"resolution": resolution} if resolution != 25 else {},
-            candidates=[
-                {"pinch": c["pinch"], "segments": [s.tolist() for s in plan.ordered_segments(c["order"])]}
-                for c in listed
-            ],
-            **RECIPE,
-        )
-        run_dir = out / "rl"
-        try:
-            result = train_contour(
-                scenario, run_dir, cfg, eval_trials=settings["trials"], progress=True, device=device
-            )
-        except KeyboardInterrupt:
-            click.echo(f"interrupted: checkpoint saved in {run_dir}", err=True)
-            sys.exit(130)
-        summary = result["summary"]
-        selection = summary["candidates"]
-        for c, e in zip(listed, selection["validation_error_vertices"], strict=True):
-            c["rl_validation_error_vertices"] = e
-        chosen = selection["chosen"]
-        if not no_plots:
-            from warpcut.plots import plot_learning_curve
-
-            title = f"{contour.name}, one policy for {len(picked)} pinch candidates"
-            plot_learning_curve(summary["history"], summary["validation"], run_dir, title=title)
+        rl_dir, chosen = _train_run_candidates(
+            contour_name, contour.name, plan, listed, settings, num_envs, resolution, seed, device, out,
+            shared_policy, settings["trials"], not no_plots,
+        )  # fmt: skip
     best = listed[chosen]
     click.echo(
         f"      chosen by {run_policy}: pinch ({best['pinch'][0]:.1f}, {best['pinch'][1]:.1f}), order "
@@ -1272,7 +1332,7 @@ def run(
         hooks = _step_hooks(recorder, cuts)
         if run_policy == "rl":
             rl = rollout_errors(
-                out / "rl",
+                rl_dir,
                 settings["trials"],
                 seed=seed + 1,
                 device=device,
