@@ -312,6 +312,7 @@ class _Episode:
         self.envs = np.zeros(0, dtype=np.intp)
         self.frames: list[_Frame] = []
         self.grasped = self.lead_sent = False
+        self.batch_frames, self.lead_frames = self.sink.batching(None)
 
     def __call__(self, task: CuttingTask, action: np.ndarray | None) -> None:
         if task is not self.task:
@@ -331,9 +332,9 @@ class _Episode:
                 None if action is None else np.asarray(action, dtype=np.float64).reshape(-1, 3)[envs],
             )
         )
-        if len(self.frames) >= self.sink.batch_frames or task.done:
+        if len(self.frames) >= self.batch_frames or task.done:
             self.flush(final=task.done)
-        elif not self.lead_sent and task.num_steps - step <= self.sink.lead_frames * self.recorder.every:
+        elif not self.lead_sent and task.num_steps - step <= self.lead_frames * self.recorder.every:
             # Near the end: hand over what has gathered, so that only the last few frames are left for
             # close() to wait for.
             self.lead_sent = True
@@ -343,6 +344,7 @@ class _Episode:
         """Copy what the frames of ``task`` are drawn with; the writer derives the rest."""
         self.flush(final=True)
         self.task, self.lead_sent = task, False
+        self.batch_frames, self.lead_frames = self.sink.batching(task)
         grid, config = task.grid, task.config
         self.envs = np.arange(min(self.recorder.envs, task.num_envs))
         dt = np.asarray(task.sim.params["dt"], dtype=np.float64).reshape(-1)
@@ -372,7 +374,9 @@ class _Episode:
 class _InlineSink:
     """``background=False``: the step callback writes its frames itself, every :data:`FLUSH_FRAMES`."""
 
-    batch_frames, lead_frames = FLUSH_FRAMES, 0
+    def batching(self, task: CuttingTask | None) -> tuple[int, int]:
+        """Frames per batch, and how many frames before an episode's end the rest is handed over."""
+        return FLUSH_FRAMES, 0
 
     def __init__(self, writer: _Writer):
         self.writer = writer
@@ -390,7 +394,8 @@ class _InlineSink:
 class _ThreadSink:
     """``background="thread"``: a worker thread writes the frames, in submission order."""
 
-    batch_frames, lead_frames = WORKER_BATCH_FRAMES, 0
+    def batching(self, task: CuttingTask | None) -> tuple[int, int]:
+        return WORKER_BATCH_FRAMES, 0
 
     def __init__(self, writer: _Writer):
         self.writer = writer
@@ -634,7 +639,14 @@ class _ProcessSink:
     """``background="process"``: the frames go through a pipe to a recorder process (:func:`_serve`),
     which scores them, writes the file and moves it into place."""
 
-    batch_frames, lead_frames = PROCESS_BATCH_FRAMES, PROCESS_LEAD_FRAMES
+    def batching(self, task: CuttingTask | None) -> tuple[int, int]:
+        """Groups of :data:`PROCESS_BATCH_FRAMES` and the rest :data:`PROCESS_LEAD_FRAMES` before the end;
+        but where the simulator's threads use every core, groups of :data:`FLUSH_FRAMES` (as the step
+        callback batches them): there the recorder process only runs on time taken from the stepping
+        threads, and fewer, larger batches cost it less."""
+        if task is not None and (os.cpu_count() or 1) <= task.sim.threads:
+            return FLUSH_FRAMES, 0
+        return PROCESS_BATCH_FRAMES, PROCESS_LEAD_FRAMES
 
     def __init__(self, path: Path, tmp: Path, application_id: str, colour_by: str):
         self.path, self.tmp = path, tmp
