@@ -900,8 +900,7 @@ class _Writer:
 
         self.tmp, self.path, self.colour_by = tmp, path, colour_by
         self.background = background
-        """Off the stepping thread: send the blueprint when an episode starts, and start encoding every
-        batch at once (less left for :meth:`finish`)."""
+        """Off the stepping thread: send the blueprint when an episode starts (else :meth:`finish` does)."""
         self.stream = rr.RecordingStream(application_id)
         self.stream.save(tmp)
         self.stream.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
@@ -988,8 +987,6 @@ class _Writer:
                 action_steps,
                 actions,
             )
-        if self.background:
-            self.stream.flush(timeout_sec=0.0)  # starts encoding and writing, does not wait
 
     def _send_env(
         self,
