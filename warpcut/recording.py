@@ -1266,8 +1266,7 @@ def _column(component: str, array, rows: np.ndarray | None = None):
     ``array``, ``rows[i]`` elements in the i-th row (default: one)."""
     import rerun as rr
 
-    offsets = None if rows is None else np.concatenate([[0], np.cumsum(rows)]).astype(np.int32)
-    return rr.ComponentColumn(_descriptors()[component], _Arrow(array), offsets=offsets)
+    return rr.ComponentColumn(_descriptors()[component], _Arrow(array), lengths=rows)
 
 
 def _vec3(values: np.ndarray):
