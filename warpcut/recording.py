@@ -378,12 +378,12 @@ class _Episode:
 class _InlineSink:
     """``background=False``: the step callback writes its frames itself, every :data:`FLUSH_FRAMES`."""
 
+    def __init__(self, writer: _Writer):
+        self.writer = writer
+
     def batching(self, task: CuttingTask | None) -> tuple[int, int]:
         """Frames per batch, and how many frames before an episode's end the rest is handed over."""
         return FLUSH_FRAMES, 0
-
-    def __init__(self, writer: _Writer):
-        self.writer = writer
 
     def start(self, key: int, method: str, setup: _TaskSetup) -> None:
         self.writer.start(key, method, setup)
@@ -398,14 +398,14 @@ class _InlineSink:
 class _ThreadSink:
     """``background="thread"``: a worker thread writes the frames, in submission order."""
 
-    def batching(self, task: CuttingTask | None) -> tuple[int, int]:
-        return WORKER_BATCH_FRAMES, 0
-
     def __init__(self, writer: _Writer):
         self.writer = writer
         self._jobs: queue.SimpleQueue = queue.SimpleQueue()
         self._worker: threading.Thread | None = None
         self._failure: BaseException | None = None
+
+    def batching(self, task: CuttingTask | None) -> tuple[int, int]:
+        return WORKER_BATCH_FRAMES, 0
 
     def start(self, key: int, method: str, setup: _TaskSetup) -> None:
         self._submit(lambda: self.writer.start(key, method, setup))
@@ -643,15 +643,6 @@ class _ProcessSink:
     """``background="process"``: the frames go through a pipe to a recorder process (:func:`_serve`),
     which scores them, writes the file and moves it into place."""
 
-    def batching(self, task: CuttingTask | None) -> tuple[int, int]:
-        """Groups of :data:`PROCESS_BATCH_FRAMES` and the rest :data:`PROCESS_LEAD_FRAMES` before the end;
-        but where the simulator's threads use every core, groups of :data:`FLUSH_FRAMES` (as the step
-        callback batches them): there the recorder process only runs on time taken from the stepping
-        threads, and fewer, larger batches cost it less."""
-        if task is not None and (os.cpu_count() or 1) <= task.sim.threads:
-            return FLUSH_FRAMES, 0
-        return PROCESS_BATCH_FRAMES, PROCESS_LEAD_FRAMES
-
     def __init__(self, path: Path, tmp: Path, application_id: str, colour_by: str):
         self.path, self.tmp = path, tmp
         self._failure: RecordingError | None = None
@@ -662,6 +653,15 @@ class _ProcessSink:
         except OSError as exc:
             raise RecordingError(f"{path}: could not start the recorder process ({exc})") from exc
         self._send([_pickled(("open", str(tmp), str(path), application_id, colour_by))])
+
+    def batching(self, task: CuttingTask | None) -> tuple[int, int]:
+        """Groups of :data:`PROCESS_BATCH_FRAMES` and the rest :data:`PROCESS_LEAD_FRAMES` before the end;
+        but where the simulator's threads use every core, groups of :data:`FLUSH_FRAMES` (as the step
+        callback batches them): there the recorder process only runs on time taken from the stepping
+        threads, and fewer, larger batches cost it less."""
+        if task is not None and (os.cpu_count() or 1) <= task.sim.threads:
+            return FLUSH_FRAMES, 0
+        return PROCESS_BATCH_FRAMES, PROCESS_LEAD_FRAMES
 
     def start(self, key: int, method: str, setup: _TaskSetup) -> None:
         self._send([_pickled(("start", key, method, setup))])
