@@ -102,11 +102,8 @@ class Scenario:
         else:  # env i: candidate i % K
             picks = [self.candidates[i % len(self.candidates)] for i in range(num_envs)]
             pinch = np.array([c["pinch"] for c in picks], dtype=np.float64)
-            contour = self.load_contour()
-            segments = [
-                c.get("segments") or [np.asarray(p).tolist() for p in default_segments(contour)]
-                for c in picks
-            ]
+            whole = [p.tolist() for p in default_segments(self.load_contour())]
+            segments = [c.get("segments") or whole for c in picks]
         options = PatternCutOptions(
             contour=self.load_contour(),
             pinch_point=pinch,

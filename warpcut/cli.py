@@ -1047,7 +1047,6 @@ def plan(
 
 def _train_run_candidates(
     contour_spec: str,
-    name: str,
     plan,
     listed: list[dict],
     settings: dict,
@@ -1057,7 +1056,6 @@ def _train_run_candidates(
     device: str | None,
     out: Path,
     shared: bool,
-    trials: int,
     plots: bool,
 ) -> tuple[Path, int]:
     """``warpcut run``'s RL step: a PPO policy per candidate in ``listed`` (or one shared by all), each
@@ -1100,13 +1098,17 @@ def _train_run_candidates(
     cfg = recipe_config(num_envs=envs, iterations=settings["iterations"], seed=seed, device="cpu")
     for k, (run_dir, scenario, title) in enumerate(jobs):
         try:
-            result = train_contour(scenario, run_dir, cfg, eval_trials=trials, progress=True, device=device)
+            result = train_contour(
+                scenario, run_dir, cfg, eval_trials=settings["trials"], progress=True, device=device
+            )
         except KeyboardInterrupt:
             click.echo(f"interrupted: checkpoint saved in {run_dir}", err=True)
             sys.exit(130)
         summary = result["summary"]
         if plots:
-            plot_learning_curve(summary["history"], summary["validation"], run_dir, title=f"{name}, {title}")
+            plot_learning_curve(
+                summary["history"], summary["validation"], run_dir, title=f"{plan.contour.name}, {title}"
+            )
         if shared:
             errors = summary["candidates"]["validation_error_vertices"]
             for c, e in zip(listed, errors, strict=True):
@@ -1243,8 +1245,7 @@ def run(
     from warpcut.simulator import resolve_device
 
     settings = dict(BUDGETS[budget])
-    overrides = {"candidates": candidates, "rl_candidates": rl_candidates, "iterations": iterations}
-    overrides["trials"] = trials
+    overrides = dict(candidates=candidates, rl_candidates=rl_candidates, iterations=iterations, trials=trials)
     settings.update({k: v for k, v in overrides.items() if v is not None})
     device = resolve_device(device)
     contour = load_contour(contour_name)
@@ -1272,14 +1273,13 @@ def run(
     ranked = sorted(range(len(plan.candidates)), key=lambda c: plan.candidates[c]["error_vertices"])
     if run_policy == "rl" and settings["rl_candidates"] is not None:
         ranked = ranked[: settings["rl_candidates"]]
-    picked = [plan.candidates[c] for c in ranked]
     listed = [
         {
             "pinch": [float(v) for v in c["point"]],
             "order": [int(k) for k in c["best_order"]],
             "fixed_error_vertices": float(c["error_vertices"]),
         }
-        for c in picked
+        for c in (plan.candidates[k] for k in ranked)
     ]
     methods = ["none", "fixed", "analytic"] + (["rl"] if run_policy == "rl" else [])
     pinches = {"fixed": [pinch], "analytic": _analytic_pinches(analytic_pinch, [contour], [plan])}
@@ -1289,9 +1289,9 @@ def run(
         chosen = 0  # the plan's choice: the best candidate by fixed tension
         click.echo("[2/3] --policy fixed: the plan's pinch and order", err=True)
     elif run_policy == "analytic":
-        click.echo(f"[2/3] scoring the analytic policy at {len(picked)} pinch candidate(s)", err=True)
+        click.echo(f"[2/3] scoring the analytic policy at {len(listed)} pinch candidate(s)", err=True)
         scores = run_method(
-            [contour] * len(picked),
+            [contour] * len(listed),
             MethodSpec([np.asarray(c["pinch"]) for c in listed], AnalyticTension()),
             1,
             config.replace(noise_std=0.0),
@@ -1306,8 +1306,8 @@ def run(
         method_segments["analytic"] = plan.ordered_segments(listed[chosen]["order"])
     else:
         rl_dir, chosen = _train_run_candidates(
-            contour_name, contour.name, plan, listed, settings, num_envs, resolution, seed, device, out,
-            shared_policy, settings["trials"], not no_plots,
+            contour_name, plan, listed, settings, num_envs, resolution, seed, device, out, shared_policy,
+            plots=not no_plots,
         )  # fmt: skip
     best = listed[chosen]
     click.echo(
