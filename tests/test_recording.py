@@ -238,15 +238,28 @@ def test_read_envs_reads_only_the_asked_envs_and_the_same_values(backend):
     sim = Simulator(SimConfig(resolution=RESOLUTION, noise_std=0.05), 11, device="cpu", backend=backend)
     sim.reset(np.full((11, 2), 50.0))
     envs = [10, 0, 8]
+    read = sim.state_reader(envs)  # made once, used after every update (as a recorder's step callback does)
+    out = np.empty((3, sim.grid.num_vertices, 4), dtype=np.float32)
     for _ in range(3):
-        positions, alive = sim.read_envs(envs)  # before any update and between updates
+        state = read()  # before any update and between updates: the packed state is the current one
+        assert read(out) is out and np.array_equal(out, state)
+        positions, alive = sim.read_envs(envs)
         assert positions.dtype == np.float32 and alive.dtype == bool
         assert np.array_equal(positions, sim.positions()[envs])
         assert np.array_equal(alive, sim.alive_mask()[envs])
+        assert np.array_equal(state[..., :3], positions) and np.array_equal(
+            state[..., 3], alive.astype(np.float32)
+        )
+        assert np.array_equal(read(), state)  # positions() made the unpacked state current: the same values
         sim.set_tip(np.tile([50.0, 50.0, 0.0, 1.0], (11, 1)))
         sim.update()
+    assert not alive.all()  # the scissors removed vertices: the masks were compared where it matters
     with pytest.raises(ValueError, match="envs"):
         sim.read_envs([11])
+    with pytest.raises(ValueError, match="envs"):
+        sim.state_reader([-1])
+    with pytest.raises(ValueError, match="out: expected a float32 array of shape"):
+        read(np.empty((3, sim.grid.num_vertices, 3), dtype=np.float32))
 
 
 def test_read_envs_leaves_the_simulation_bit_identical():

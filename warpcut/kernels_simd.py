@@ -484,7 +484,7 @@ class SimdState:
         self.anchor = wp.zeros(size, dtype=k.Anchor, device=device)
         self.lane_params = wp.zeros(self.blocks, dtype=k.Lanes, device=device)
         self.any_noise = 0
-        self._fields: tuple[np.ndarray, ...] | None = None
+        self._lanes_view: np.ndarray | None = None
 
     def load(self, x: wp.array, x_prev: wp.array, alive: wp.array, pin: wp.array, anchor: wp.array) -> None:
         """Env-major state (``B * n`` entries each, as the fused kernel takes it) into blocks."""
@@ -514,24 +514,17 @@ class SimdState:
             device=self.device,
         )
 
-    def read_envs(self, envs: list[int]) -> tuple[np.ndarray, np.ndarray]:
-        """Positions (k, n, 3) float32 and alive masks (k, n) bool of the envs ``envs`` (k valid indices),
-        read straight from their blocks' lanes (CPU memory, no kernel launch, nothing else of the batch
-        touched: a few microseconds per env)."""
-        if self._fields is None:
-            # Zero-copy (blocks, n, lanes) views of the x, y, z and alive lanes; numpy() costs ~70 us.
-            view = self.vert.numpy().reshape(self.blocks, self.n)
-            self._fields = tuple(view[c] for c in ("x", "y", "z", "alive"))
-        x, y, z, alive = self._fields
-        positions = np.empty((len(envs), self.n, 3), dtype=np.float32)
-        masks = np.empty((len(envs), self.n), dtype=bool)
-        for k, env in enumerate(envs):
-            block, lane = divmod(env, self.lanes)
-            positions[k, :, 0] = x[block, :, lane]
-            positions[k, :, 1] = y[block, :, lane]
-            positions[k, :, 2] = z[block, :, lane]
-            np.not_equal(alive[block, :, lane], 0.0, out=masks[k])
-        return positions, masks
+    def lane_views(self, envs: list[int]) -> list[np.ndarray]:
+        """Per env of ``envs`` (valid indices), a zero-copy (n, 4) float32 view of its x, y, z and alive
+        (1.0 or 0.0) lanes in the packed blocks (CPU memory; valid as long as this state): copying one out
+        reads that env and nothing else of the batch, one strided copy (~10 µs for a 25 x 25 sheet)."""
+        if self._lanes_view is None:
+            # (blocks, n, fields, lanes) over ``struct V`` (x, y, z, alive, free); numpy() costs ~70 us.
+            packed = self.vert.numpy()
+            if packed.dtype.names[:4] != ("x", "y", "z", "alive") or packed.dtype.itemsize != 20 * self.lanes:
+                raise RuntimeError(f"lane_views: unexpected vertex layout {packed.dtype}")
+            self._lanes_view = packed.view(np.float32).reshape(self.blocks, self.n, 5, self.lanes)
+        return [self._lanes_view[env // self.lanes, :, :4, env % self.lanes] for env in envs]
 
     def store(self, x: wp.array, x_prev: wp.array, alive: wp.array) -> None:
         """Blocks back into env-major arrays (padding lanes dropped)."""

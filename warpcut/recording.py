@@ -15,7 +15,7 @@ can be compared side by side in one viewer (the recording carries a blueprint th
 
 Frames are on the ``step`` timeline (0 after the reset, then one per env step) and on ``sim_time``
 (simulated seconds). Recording must not slow the stepping loop down, so the step callback only copies
-the recorded envs' state, and only theirs (:meth:`~warpcut.simulator.Simulator.read_envs`, a few
+the recorded envs' state, and only theirs (:meth:`~warpcut.simulator.Simulator.read_state`, a few
 microseconds); the frames are scored and turned into rerun columns (``send_columns``) in batches, all
 frames of a batch at once (one labelling for the errors, shifted grid slices for the strain, one sparse
 product for the contour), where ``background`` says:
@@ -97,10 +97,11 @@ batches small enough that little is left for :meth:`Recorder.close` to wait for.
 threads use every core the groups hold :data:`FLUSH_FRAMES` frames instead: the process then only runs
 on time taken from the stepping threads, and one large batch costs it least."""
 
-PROCESS_LEAD_FRAMES = 4
+PROCESS_LEAD_FRAMES = (10, 4)
 """The step callback also hands its frames to the recorder process when the episode is this many frames
-from its end: the process scores them while the last steps run, and only those last few frames (one small
-batch) are left when the episode ends."""
+from its end (each of them): the process scores them while the last steps run, in batches small enough
+to be done before the next arrives, and only the last few frames (one small batch) are left when the
+episode ends."""
 
 PROCESS_NICE = 10
 """How much the recorder process lowers its scheduling priority (``nice``): where no core is free, the
@@ -256,10 +257,9 @@ class _Frame:
 
     step: int
     update: int
-    positions: np.ndarray
-    """(n, V, 3) float32."""
-    alive: np.ndarray
-    """(n, V) bool."""
+    state: np.ndarray
+    """(n, V, 4) float32: positions (mm) and alive (1.0, or 0.0 where cut), as
+    :meth:`~warpcut.simulator.Simulator.read_state` copies them."""
     displacements: np.ndarray | None
     """(n, 3) float64, None when no recorded env is grasped."""
     action: np.ndarray | None
@@ -306,7 +306,7 @@ class _TaskSetup:
 
 class _Episode:
     """The step callback of one method. In the stepping loop it only copies the recorded envs' state
-    (only theirs: :meth:`~warpcut.simulator.Simulator.read_envs`) and hands it to the recorder's sink
+    (only theirs: :meth:`~warpcut.simulator.Simulator.read_state`) and hands it to the recorder's sink
     (the recorder process, the worker thread or the writer itself) in batches of the sink's size."""
 
     def __init__(self, recorder: Recorder, method: str, key: int):
@@ -314,9 +314,10 @@ class _Episode:
         self.sink = recorder._sink
         self.task: CuttingTask | None = None
         self.envs = np.zeros(0, dtype=np.intp)
+        self.read_state: Callable[..., np.ndarray] | None = None
         self.frames: list[_Frame] = []
-        self.grasped = self.lead_sent = False
-        self.batch_frames, self.lead_frames = self.sink.batching(None)
+        self.grasped = False
+        self.batch_frames, self.leads = self.sink.batching(None)
 
     def __call__(self, task: CuttingTask, action: np.ndarray | None) -> None:
         if task is not self.task:
@@ -325,32 +326,30 @@ class _Episode:
         if step % self.recorder.every and not task.done:
             return
         envs = self.envs
-        positions, alive = task.sim.read_envs(envs)
         self.frames.append(
             _Frame(
                 step,
                 task.update_index,
-                positions,
-                alive,
+                self.read_state(),
                 task.sim.displacement.numpy()[envs].astype(np.float64) if self.grasped else None,
                 None if action is None else np.asarray(action, dtype=np.float64).reshape(-1, 3)[envs],
             )
         )
         if len(self.frames) >= self.batch_frames or task.done:
             self.flush(final=task.done)
-        elif not self.lead_sent and task.num_steps - step <= self.lead_frames * self.recorder.every:
+        elif (task.num_steps - step) // self.recorder.every in self.leads:
             # Near the end: hand over what has gathered, so that only the last few frames are left for
             # close() to wait for.
-            self.lead_sent = True
             self.flush()
 
     def _start(self, task: CuttingTask) -> None:
         """Copy what the frames of ``task`` are drawn with; the writer derives the rest."""
         self.flush(final=True)
-        self.task, self.lead_sent = task, False
-        self.batch_frames, self.lead_frames = self.sink.batching(task)
+        self.task = task
+        self.batch_frames, self.leads = self.sink.batching(task)
         grid, config = task.grid, task.config
         self.envs = np.arange(min(self.recorder.envs, task.num_envs))
+        self.read_state = task.sim.state_reader(self.envs)
         dt = np.asarray(task.sim.params["dt"], dtype=np.float64).reshape(-1)
         envs = [
             _EnvSetup(
@@ -381,9 +380,9 @@ class _InlineSink:
     def __init__(self, writer: _Writer):
         self.writer = writer
 
-    def batching(self, task: CuttingTask | None) -> tuple[int, int]:
+    def batching(self, task: CuttingTask | None) -> tuple[int, tuple[int, ...]]:
         """Frames per batch, and how many frames before an episode's end the rest is handed over."""
-        return FLUSH_FRAMES, 0
+        return FLUSH_FRAMES, ()
 
     def start(self, key: int, method: str, setup: _TaskSetup) -> None:
         self.writer.start(key, method, setup)
@@ -404,8 +403,8 @@ class _ThreadSink:
         self._worker: threading.Thread | None = None
         self._failure: BaseException | None = None
 
-    def batching(self, task: CuttingTask | None) -> tuple[int, int]:
-        return WORKER_BATCH_FRAMES, 0
+    def batching(self, task: CuttingTask | None) -> tuple[int, tuple[int, ...]]:
+        return WORKER_BATCH_FRAMES, ()
 
     def start(self, key: int, method: str, setup: _TaskSetup) -> None:
         self._submit(lambda: self.writer.start(key, method, setup))
@@ -447,7 +446,7 @@ class _ThreadSink:
 
 # The pipe to the recorder process carries messages of a kind byte and a payload length, then the payload:
 # b"P", a pickled tuple (``open``, ``start``, ``close``; and every reply), or b"F", one frame in raw bytes:
-# _FRAME_HEAD, then the recorded envs' positions (float32), alive masks (bool), and if flagged their
+# _FRAME_HEAD, then the recorded envs' state (float32: positions and alive), and if flagged their
 # displacements and actions (float64). The last frame of each group that a step callback hands over is
 # flagged _GROUP_END: the process scores a group (or, when it has fallen behind, several) at once.
 _HEAD = struct.Struct("<cI")
@@ -654,13 +653,13 @@ class _ProcessSink:
             raise RecordingError(f"{path}: could not start the recorder process ({exc})") from exc
         self._send([_pickled(("open", str(tmp), str(path), application_id, colour_by))])
 
-    def batching(self, task: CuttingTask | None) -> tuple[int, int]:
+    def batching(self, task: CuttingTask | None) -> tuple[int, tuple[int, ...]]:
         """Groups of :data:`PROCESS_BATCH_FRAMES` and the rest :data:`PROCESS_LEAD_FRAMES` before the end;
         but where the simulator's threads use every core, groups of :data:`FLUSH_FRAMES` (as the step
         callback batches them): there the recorder process only runs on time taken from the stepping
         threads, and fewer, larger batches cost it less."""
         if task is not None and (os.cpu_count() or 1) <= task.sim.threads:
-            return FLUSH_FRAMES, 0
+            return FLUSH_FRAMES, ()
         return PROCESS_BATCH_FRAMES, PROCESS_LEAD_FRAMES
 
     def start(self, key: int, method: str, setup: _TaskSetup) -> None:
@@ -670,10 +669,7 @@ class _ProcessSink:
         parts = []
         for k, frame in enumerate(frames):
             flags = _GROUP_END if k == len(frames) - 1 else 0
-            arrays = [
-                np.ascontiguousarray(frame.positions, dtype=np.float32),
-                np.ascontiguousarray(frame.alive, dtype=np.bool_),
-            ]
+            arrays = [frame.state]
             if frame.displacements is not None:
                 flags |= _HAS_DISPLACEMENTS
                 arrays.append(np.ascontiguousarray(frame.displacements, dtype=np.float64))
@@ -877,8 +873,7 @@ def _read_frame(payload: bytes, shapes: dict[int, tuple[int, int]]) -> tuple[int
     offset = _FRAME_HEAD.size
     arrays = []
     for dtype, shape, present in (
-        (np.float32, (n, v, 3), True),
-        (np.bool_, (n, v), True),
+        (np.float32, (n, v, 4), True),
         (np.float64, (n, 3), flags & _HAS_DISPLACEMENTS),
         (np.float64, (n, 3), flags & _HAS_ACTION),
     ):
@@ -965,8 +960,8 @@ class _Writer:
         task_setup = self.episodes[key]
         steps = np.array([f.step for f in frames])
         updates = np.array([f.update for f in frames])
-        positions = np.stack([f.positions for f in frames], axis=1)  # (n, F, V, 3)
-        alive = np.stack([f.alive for f in frames], axis=1)
+        state = np.stack([f.state for f in frames], axis=1)  # (n, F, V, 4)
+        positions, alive = np.ascontiguousarray(state[..., :3]), state[..., 3] != 0.0
         displacements = (
             np.stack([f.displacements for f in frames], axis=1)
             if frames[0].displacements is not None
