@@ -40,6 +40,7 @@ import numpy as np
 from envs.observations import Fiducials, normalise_positions, observation_bounds, sample_fiducials
 from warpcut.config import PerEnv, SimConfig
 from warpcut.contours import Contour, load_contour
+from warpcut.fiducials import NUM_FIDUCIALS, SHAFT_RADIUS_MM
 from warpcut.planning import nearest_feasible
 from warpcut.task import CuttingTask
 
@@ -89,12 +90,12 @@ class PatternCutOptions:
     """Process noise per free vertex per update (mm), paper sigma; default 0."""
     device: str | None = None
     """Warp device of the simulator (``"cpu"``, ``"cuda"``); default: CUDA when available."""
-    num_fiducials: int = 12
+    num_fiducials: int = NUM_FIDUCIALS
     """Fiducial points observed on the sheet (paper: 12)."""
     resample_fiducials: bool = False
     """Draw new fiducials at every reset. Otherwise they are drawn at a seeded reset (and the first one)
     and kept, so a given seed always gives the same fiducials."""
-    shaft_radius_mm: float = 5.0
+    shaft_radius_mm: float = SHAFT_RADIUS_MM
     """Radius of the cutting arm's shaft, which hides the fiducials under it (mm)."""
     contour_features: bool = False
     """Add the scissor tip, its cutting flag and the tracking error to the observation, for policies
@@ -195,6 +196,7 @@ class PatternCut:
         self.area_mm2 = np.array([c.area_mm2 for c in contours])
         self.episode_steps = min(self.task.num_steps, options.max_episode_steps or self.task.num_steps)
         self.fiducials = Fiducials(self.task.grid, options.shaft_radius_mm)
+        self.task.fiducials = self.fiducials  # what a recording of the task shows
         low, high = observation_bounds(options.num_fiducials, options.contour_features, options.observe_pinch)
         self.observation_space = gym.spaces.Box(low, high, dtype=np.float32)
         num_axes = 3 if options.allow_z else 2

@@ -30,7 +30,7 @@ from warpcut.simulator import Simulator, colour_springs
 from warpcut.task import CuttingTask
 
 RESOLUTION = 9
-ENV_ENTITIES = ("sheet", "contour", "tip", "cut_path", "error_vertices")
+ENV_ENTITIES = ("sheet", "contour", "tip", "cut_path", "fiducials", "error_vertices")
 
 
 def invoke(args):
@@ -578,3 +578,50 @@ def test_cli_colour_choices_are_the_recorders():
     assert result.exit_code == 2 and "'rainbow' is not one of 'strain', 'height'" in result.output
     result = CliRunner().invoke(main, ["simulate", "--contour", "circle-small", "--colour-by", "height"])
     assert result.exit_code == 2 and "--colour-by: colours a recording; add --record" in result.output
+
+
+def test_recorded_fiducials_are_where_the_env_tracks_them_and_hidden_when_it_cannot_see_them(tmp_path):
+    from envs.pattern_cut import PatternCut, PatternCutOptions
+    from warpcut.fiducials import sample_fiducials
+
+    scene = PatternCut(
+        PatternCutOptions(resolution=RESOLUTION, device="cpu", num_fiducials=40, pinch_point=(50.0, 45.0)),
+        num_envs=2,
+    )
+    world, seen = [], []
+    with Recorder(tmp_path / "env.rrd", envs=2, background=False) as recorder:
+        callback = recorder.on_step("env")
+        scene.reset(np.random.default_rng(3), resample_fiducials=True)
+        for step in range(scene.task.num_steps + 1):
+            if step:
+                scene.step(np.zeros(2, dtype=np.int64))  # hold still
+            callback(scene.task, None)
+            world.append(scene.fiducials.world(scene.task.sim.positions()))
+            seen.append(scene.fiducials.visible.copy())
+    columns = read_columns(tmp_path / "env.rrd")
+    visible_rgba = int(recording._VISIBLE_RGBA)
+    for env in (0, 1):
+        positions = columns[(f"/env/env_{env}/fiducials", "Points3D:positions")]
+        colours = columns[(f"/env/env_{env}/fiducials", "Points3D:colors")]
+        assert [s for s, _ in positions] == list(range(scene.task.num_steps + 1))
+        for step, (_, points), (_, rgba) in zip(range(len(positions)), positions, colours, strict=True):
+            np.testing.assert_allclose(points, world[step][env], atol=1e-3)
+            assert [c == visible_rgba for c in rgba] == seen[step][env].tolist()
+    hidden = ~np.array(seen)
+    assert hidden.any() and not hidden.all()  # the scissors hid some of the 40 fiducials, not all
+
+    # A task without an env's fiducials (a baseline): the recording draws them as an env would.
+    task = CuttingTask(SimConfig(resolution=RESOLUTION), load_contour("fls-circle"), device="cpu")
+    with Recorder(tmp_path / "task.rrd", background=False) as recorder:
+        task.run(None, on_step=recorder.on_step("none"))
+    first = read_columns(tmp_path / "task.rrd")[("/none/env_0/fiducials", "Points3D:positions")][0][1]
+    expected = sample_fiducials(
+        np.random.default_rng(0), 12, task.contours, np.full((1, 2), np.nan), task.config
+    )
+    settled = CuttingTask(SimConfig(resolution=RESOLUTION), load_contour("fls-circle"), device="cpu")
+    settled.reset()
+    from warpcut.task import material_to_world
+
+    np.testing.assert_allclose(
+        first, material_to_world(expected[0], settled.sim.positions()[0], task.grid), atol=1e-3
+    )

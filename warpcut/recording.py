@@ -10,6 +10,11 @@ can be compared side by side in one viewer (the recording carries a blueprint th
 * ``contour``: the intended contour carried along with the material (bilinear lookup on the sheet);
 * ``tip`` and ``cut_path``: the scissor tip (red while cutting) and the path it has cut so far;
 * ``grasp/disc`` and ``grasp/displacement``: the grasped vertices and the grasp's displacement;
+* ``fiducials``: the fiducial points a camera tracks on the gauze (what the paper's policy observes), green
+  where visible, grey where hidden (cut away or under the cutting arm's shaft; :mod:`warpcut.fiducials`):
+  the fiducials of the env that the task belongs to, or where a task has none (baselines, ``simulate``),
+  :data:`~warpcut.fiducials.NUM_FIDUCIALS` drawn for the recording as an env draws them (seeded by the env
+  index);
 * ``action``: the tensioning action (mm) as three scalar series;
 * ``error_vertices``: the running symmetric difference between the intended and the separated region.
 
@@ -68,12 +73,13 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 
-from warpcut.config import SheetGrid
+from warpcut.config import SheetGrid, SimConfig
 from warpcut.contours import Contour
+from warpcut.fiducials import NUM_FIDUCIALS, SHAFT_RADIUS_MM, sample_fiducials, visible
 from warpcut.io import plain_file_mode
 from warpcut.scoring import achieved_mask, intended_mask
 from warpcut.simulator import spring_colours
-from warpcut.task import CuttingTask, material_cells
+from warpcut.task import CuttingTask, interpolate, material_cells
 
 StepCallback = Callable[[CuttingTask, "np.ndarray | None"], None]
 """``on_step(task, action)`` as :meth:`CuttingTask.run` calls it."""
@@ -131,8 +137,10 @@ _RAMP_RGB = np.stack(
 ).astype(np.uint32)
 _RAMP_RGBA = (_RAMP_RGB[:, 0] << 24) | (_RAMP_RGB[:, 1] << 16) | (_RAMP_RGB[:, 2] << 8) | 0xFF
 _CUTTING_RGB, _TRAVEL_RGB = (230, 40, 40), (150, 150, 150)
-_CUTTING_RGBA, _TRAVEL_RGBA = (
-    (r << 24) | (g << 16) | (b << 8) | 0xFF for r, g, b in (_CUTTING_RGB, _TRAVEL_RGB)
+_VISIBLE_RGB, _HIDDEN_RGB = (40, 200, 60), (110, 110, 110)
+_CUTTING_RGBA, _TRAVEL_RGBA, _VISIBLE_RGBA, _HIDDEN_RGBA = (
+    (r << 24) | (g << 16) | (b << 8) | 0xFF
+    for r, g, b in (_CUTTING_RGB, _TRAVEL_RGB, _VISIBLE_RGB, _HIDDEN_RGB)
 )
 
 
@@ -280,6 +288,10 @@ class _EnvSetup:
     """(V,) bool grasped vertices, None without a grasp."""
     step_s: float
     """Simulated seconds per env step."""
+    fiducials: np.ndarray | None
+    """(K, 2) material points of the env's fiducials; None: the writer draws them."""
+    shaft_radius_mm: float
+    """The cutting arm's shaft radius, which hides the fiducials under it (mm)."""
     # Filled in by the writer (_Writer.start), then updated frame batch by frame batch:
     root: str = ""
     """The env's entity path, ``/{method}/env_{env}``."""
@@ -291,6 +303,8 @@ class _EnvSetup:
     disc_origin: np.ndarray | None = None
     last_alive: np.ndarray | None = None
     last_error: float = 0.0
+    fiducial_cells: tuple[np.ndarray, np.ndarray] | None = None
+    """(1, K, 4) vertices and weights of the fiducials' cells (:func:`~warpcut.task.material_cells`)."""
 
 
 @dataclass
@@ -298,7 +312,7 @@ class _TaskSetup:
     """What every recorded env of one task shares."""
 
     grid: SheetGrid
-    springs: tuple[str, ...]
+    config: SimConfig
     envs: list[_EnvSetup]
     triangles: np.ndarray | None = None
     """:func:`grid_triangles`, built by the writer once per task."""
@@ -351,6 +365,7 @@ class _Episode:
         self.envs = np.arange(min(self.recorder.envs, task.num_envs))
         self.read_state = task.sim.state_reader(self.envs)
         dt = np.asarray(task.sim.params["dt"], dtype=np.float64).reshape(-1)
+        fiducials = task.fiducials if task.fiducials is not None and len(task.fiducials.material) else None
         envs = [
             _EnvSetup(
                 env=int(env),
@@ -361,11 +376,13 @@ class _Episode:
                 if task.sim.grasped[env]
                 else None,
                 step_s=float(dt[env % dt.size]) * config.updates_per_step,
+                fiducials=None if fiducials is None else fiducials.material[env].copy(),
+                shaft_radius_mm=SHAFT_RADIUS_MM if fiducials is None else fiducials.shaft_radius_mm,
             )
             for env in self.envs
         ]
         self.grasped = any(env.disc is not None for env in envs)
-        self.sink.start(self.key, self.method, _TaskSetup(grid, tuple(config.springs), envs))
+        self.sink.start(self.key, self.method, _TaskSetup(grid, config, envs))
 
     def flush(self, final: bool = False) -> None:
         """Hand the buffered frames to the sink; ``final``: the episode (or the recording) ends here."""
@@ -934,6 +951,13 @@ class _Writer:
             )
             setup.intended = intended_mask(setup.contour.intended_region(), grid)
             setup.cut_runs = _cutting_runs(setup.tip)
+            if setup.fiducials is None:
+                pinch = setup.pinch[None] if setup.disc is not None else np.full((1, 2), np.nan)
+                rng = np.random.default_rng(setup.env)
+                setup.fiducials = sample_fiducials(
+                    rng, NUM_FIDUCIALS, [setup.contour], pinch, task_setup.config
+                )[0]
+            setup.fiducial_cells = material_cells(setup.fiducials[None], grid)
             where = "none" if setup.disc is None else f"({setup.pinch[0]:.1f}, {setup.pinch[1]:.1f}) mm"
             stream.log(
                 f"{setup.root}/info",
@@ -1021,7 +1045,9 @@ class _Writer:
         # costs a fraction of what rerun's archetype constructors (rr.Mesh3D.columns, ...) spend on a batch;
         # tests/test_recording.py checks that they are the archetypes' columns.
         if self.colour_by == "strain":
-            colours = _ramp(vertex_strain(positions, alive, grid, task_setup.springs), 0.0, STRAIN_FULL_SCALE)
+            colours = _ramp(
+                vertex_strain(positions, alive, grid, task_setup.config.springs), 0.0, STRAIN_FULL_SCALE
+            )
         else:
             colours = _ramp(positions[..., 2], *setup.height_range)
         rows = np.full(frames, num_vertices)
@@ -1074,6 +1100,21 @@ class _Writer:
         )
         strips, counts = _cut_paths(trajectory, setup.cut_runs, updates)
         send("cut_path", [_column("LineStrips3D:strips", strips, counts)])
+
+        if len(setup.fiducials):
+            cells, weights = setup.fiducial_cells
+            world = interpolate(positions, cells, np.broadcast_to(weights, (frames, *weights.shape[1:])))
+            seen = visible(world, alive, cells, trajectory[current], setup.shaft_radius_mm)
+            per_frame = np.full(frames, len(setup.fiducials))
+            send(
+                "fiducials",
+                [
+                    _column("Points3D:positions", _vec3(world), per_frame),
+                    _column(
+                        "Points3D:colors", _uint32(np.where(seen, _VISIBLE_RGBA, _HIDDEN_RGBA)), per_frame
+                    ),
+                ],
+            )
 
         if setup.disc is not None:
             send(

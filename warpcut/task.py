@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -17,6 +18,9 @@ from warpcut.config import SheetGrid, SimConfig
 from warpcut.contours import Contour
 from warpcut.scoring import Score, symmetric_difference
 from warpcut.simulator import Simulator
+
+if TYPE_CHECKING:
+    from warpcut.fiducials import Fiducials
 
 
 def material_cells(points: np.ndarray, grid: SheetGrid) -> tuple[np.ndarray, np.ndarray]:
@@ -181,6 +185,9 @@ class CuttingTask:
             self._tips[env, t:, :3] = trajectory.tip[-1, :3]  # parked, not cutting, once done
             self._targets[env, :t] = trajectory.material
         self.update_index = 0
+        self.fiducials: Fiducials | None = None
+        """The fiducials a camera tracks on the sheets, where an env observes them (it sets them here):
+        recordings show them, and draw their own where this is None."""
 
     @property
     def num_steps(self) -> int:

@@ -1,0 +1,137 @@
+"""Fiducials: material points of the gauze that a camera tracks, as the paper's policy observes them.
+
+Fiducials are material points, drawn at random, whose world position is read by bilinear interpolation
+over their grid cell, as a camera tracks markers on the gauze. A fiducial is *hidden* when its cell has
+lost a vertex to the scissors, or when it lies under the cutting arm's shaft: a cylinder of radius
+``shaft_radius_mm`` from the scissor tip toward +x (``x > tip_x`` and distance to the line
+``{y = tip_y, z = tip_z}`` below the radius). A hidden fiducial reports its last visible position; at reset
+every fiducial reports its position on the settled sheet.
+
+The envs (:mod:`envs.observations`) observe them; recordings (:mod:`warpcut.recording`) show them, visible
+or hidden, with the same rule (:func:`visible`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import shapely
+
+from warpcut.config import SheetGrid, SimConfig
+from warpcut.contours import Contour
+from warpcut.task import interpolate, material_cells
+
+NUM_FIDUCIALS = 12
+"""Fiducials per sheet (the paper's 12)."""
+
+SHAFT_RADIUS_MM = 5.0
+"""Radius of the cutting arm's shaft, which hides the fiducials under it (mm)."""
+
+
+def visible(
+    world: np.ndarray, alive: np.ndarray, cells: np.ndarray, tip: np.ndarray, shaft_radius_mm: float
+) -> np.ndarray:
+    """Which fiducials a camera sees: their cell keeps all its vertices and the shaft does not cover them.
+
+    Args:
+        world: (B, K, 3) fiducial world positions (mm); B sheets (or frames of one sheet).
+        alive: (B, N) bool, False where the scissors removed the vertex.
+        cells: (B, K, 4) (or (1, K, 4)) vertex indices of each fiducial's cell (:func:`material_cells`).
+        tip: (B, 3 or 4) scissor tip (mm); the shaft runs from it toward +x.
+        shaft_radius_mm: Radius of the shaft (mm).
+
+    Returns:
+        (B, K) bool.
+    """
+    cells = np.broadcast_to(cells, world.shape[:2] + (4,))
+    uncut = np.all(np.take_along_axis(alive[:, None], cells, axis=2), axis=2)
+    off_axis = np.linalg.norm(world[..., 1:] - tip[:, None, 1:3], axis=2)
+    shaded = (world[..., 0] > tip[:, None, 0]) & (off_axis < shaft_radius_mm)
+    return uncut & ~shaded
+
+
+def sample_fiducials(
+    rng: np.random.Generator,
+    num: int,
+    contours: Sequence[Contour],
+    pinch_points: np.ndarray,
+    config: SimConfig,
+) -> np.ndarray:
+    """``num`` random material points per env, preferably where they stay informative.
+
+    Points are drawn uniformly over the sheet; those at least one cut radius from the env's contour (away
+    from the kerf) and outside its grasp disc (which moves rigidly with the gripper) are taken first, and
+    only if too few are found are the others used.
+
+    Args:
+        rng: Random source.
+        num: Fiducials per env.
+        contours: (B,) each env's contour.
+        pinch_points: (B, 2) each env's pinch point (mm); NaN rows for no grasp.
+        config: Simulation parameters (sheet size, cut and grasp radii).
+
+    Returns:
+        (B, num, 2) material coordinates (mm).
+    """
+    num_envs = len(contours)
+    draws = rng.uniform([0.0, 0.0], [config.width_mm, config.height_mm], size=(num_envs, 16 * num, 2))
+    preferred = np.ones(draws.shape[:2], dtype=bool)
+    for contour in {id(c): c for c in contours}.values():
+        envs = np.array([c is contour for c in contours])
+        line = shapely.LinearRing(contour.points) if contour.closed else shapely.LineString(contour.points)
+        distance = shapely.distance(shapely.points(draws[envs].reshape(-1, 2)), line).reshape(-1, 16 * num)
+        preferred[envs] = distance >= config.cut_radius
+    with np.errstate(invalid="ignore"):  # NaN pinch points (no grasp) exclude nothing
+        preferred &= ~(np.linalg.norm(draws - pinch_points[:, None], axis=2) <= config.grasp_radius)
+    order = np.argsort(~preferred, axis=1, kind="stable")[:, :num]
+    return np.take_along_axis(draws, order[:, :, None], axis=1)
+
+
+class Fiducials:
+    """Material points tracked on every sheet of a batch, with occlusion and cut-away (module docstring).
+
+    Args:
+        grid: The sheet's rest layout.
+        shaft_radius_mm: Radius of the cutting arm's shaft, a cylinder from the tip toward +x (mm).
+
+    Attributes:
+        material: (B, K, 2) material coordinates (mm); set by :func:`sample_fiducials` or by hand, then call
+            :meth:`reset`.
+        last_visible: (B, K, 3) world position (mm) each fiducial was last seen at.
+        visible: (B, K) bool, whether each fiducial was seen at the last :meth:`track`.
+    """
+
+    def __init__(self, grid: SheetGrid, shaft_radius_mm: float):
+        self.grid = grid
+        self.shaft_radius_mm = shaft_radius_mm
+        self.material = np.zeros((0, 0, 2))
+        self.last_visible = np.zeros((0, 0, 3))
+        self.visible = np.zeros((0, 0), dtype=bool)
+        self._cells = (np.zeros((0, 0, 4), dtype=np.int64), np.zeros((0, 0, 4)))
+
+    def world(self, positions: np.ndarray) -> np.ndarray:
+        """(B, K, 3) world positions (mm) of the fiducials on sheets at ``positions`` (B, N, 3)."""
+        return interpolate(positions, *self._cells)
+
+    def reset(self, positions: np.ndarray) -> None:
+        """Start an episode: every fiducial is seen where it lies on sheets at ``positions`` (B, N, 3)."""
+        self._cells = material_cells(self.material, self.grid)
+        self.last_visible = self.world(positions)
+        self.visible = np.ones(self.material.shape[:2], dtype=bool)
+
+    def track(self, positions: np.ndarray, alive: np.ndarray, tip: np.ndarray) -> np.ndarray:
+        """See the fiducials that are visible now; return every fiducial's last visible position.
+
+        Args:
+            positions: (B, N, 3) vertex positions (mm).
+            alive: (B, N) bool, False where the scissors removed the vertex.
+            tip: (B, 3 or 4) scissor tip (mm); the shaft runs from it toward +x.
+
+        Returns:
+            (B, K, 3) last visible world positions (mm), a copy.
+        """
+        world = self.world(positions)
+        self.visible = visible(world, alive, self._cells[0], tip, self.shaft_radius_mm)
+        self.last_visible = np.where(self.visible[..., None], world, self.last_visible)
+        return self.last_visible.copy()
