@@ -234,6 +234,8 @@ def test_train_resume_export_and_evaluate_with_checkpoints(tmp_path):
     )
     assert "rl_improvement_pct" in report["mean"]
     assert "| **mean** |" in (tmp_path / "t.md").read_text()
+    svg = (tmp_path / "eval" / "regions" / "circle-small.svg").read_text()  # rl's cut shown beside the rest
+    assert all(f"{m}: " in svg for m in ("none", "analytic", "rl"))
 
 
 def test_evaluate_two_contours_two_trials_writes_table_json(tmp_path):
@@ -276,6 +278,45 @@ def test_evaluate_two_contours_two_trials_writes_table_json(tmp_path):
     assert (tmp_path / "run" / "results.json").is_file()
     for name in ("improvement.png", "plans/fls-circle.png", "plans/s-curve.svg"):
         assert (tmp_path / "run" / name).stat().st_size > 0, name
+    # The cut regions: a figure per contour, every method's first trial.
+    regions = tmp_path / "run" / "regions"
+    assert sorted(p.name for p in regions.iterdir()) == [
+        "fls-circle.png",
+        "fls-circle.svg",
+        "s-curve.png",
+        "s-curve.svg",
+    ]
+    for path in regions.iterdir():
+        assert path.stat().st_size > 1000, path
+    svg = (regions / "s-curve.svg").read_text()
+    assert "<svg" in svg[:1000] and "first of 2 trials" in svg
+    assert all(f"wrote {regions / name}" in stdout for name in ("fls-circle.png", "s-curve.svg"))
+
+
+def test_evaluate_no_plots_and_record_clamped_to_the_first_contour(tmp_path):
+    out = tmp_path / "run"
+    code, stdout, stderr = invoke(
+        [
+            "evaluate",
+            "--contours",
+            "fls-circle,s-curve",
+            "--methods",
+            "none",
+            "--trials",
+            "1",
+            "--no-plan",
+            "--no-plots",
+            "--record",
+            "3",
+            "--out",
+            str(out),
+        ]
+    )
+    assert code == 0, stdout
+    assert stderr.count("warning: --record 3") == 1 and "recording 1" in stderr, stderr
+    assert not list(out.rglob("*.png")) and not list(out.rglob("*.svg")) and not (out / "regions").exists()
+    entities = read_summary(out / "recording.rrd").entity_paths
+    assert "/none/env_0/sheet" in entities and "/none/env_1/sheet" not in entities  # not s-curve's env
 
 
 def test_evaluate_reports_missing_checkpoints(tmp_path, capfd):

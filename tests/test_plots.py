@@ -1,4 +1,5 @@
-"""Plots: the learning curve and the pinch candidate map (files written, PNGs decode, feasibility agrees)."""
+"""Plots: the learning curve, the pinch candidate map and the cut regions (files written, PNGs decode,
+feasibility agrees, the regions show the first trial of each contour)."""
 
 import math
 
@@ -9,7 +10,8 @@ from matplotlib.image import imread
 from warpcut.config import SimConfig
 from warpcut.contours import load_contour
 from warpcut.planning import Plan, pinch_feasible, plan_cut
-from warpcut.plots import feasible_grid, plot_learning_curve, plot_pinch_candidates
+from warpcut.plots import FinalCuts, feasible_grid, plot_learning_curve, plot_pinch_candidates, plot_regions
+from warpcut.task import CuttingTask
 
 SIM = SimConfig(resolution=13)
 
@@ -103,3 +105,39 @@ def test_feasible_grid_agrees_with_planning(small_plan):
     assert not feasible[j, i]
     with pytest.raises(ValueError, match="step_mm"):
         feasible_grid(small_plan, SIM, step_mm=0.0)
+
+
+def test_regions_of_a_two_contour_batch(tmp_path):
+    """Envs contour by contour, trials within (as agents.evaluation.run_method lays them out): one figure
+    per contour, each method's cut the first trial of that contour, scored once, at the end."""
+    contours = [load_contour("fls-circle"), load_contour("s-curve")]
+    trials = 2
+    envs = [c for c in contours for _ in range(trials)]
+    config = SIM.replace(noise_std=0.05)
+    cuts = FinalCuts()
+    captured, capture = [], cuts.capture
+    cuts.capture = lambda task, method: (captured.append(method), capture(task, method))
+    scores = {}
+    for method, pinches in (("none", None), ("fixed", np.array([c.centroid for c in envs]))):
+        task = CuttingTask(config, envs, pinch_points=pinches, device="cpu", seed=3)
+        scores[method] = task.run(None, on_step=cuts.on_step(method))
+    assert captured == ["none", "fixed"]  # once per batch, at the end
+    assert list(cuts.cuts) == ["fls-circle", "s-curve"]
+    for k, contour in enumerate(contours):
+        by_method = cuts.of(contour.name, ["fixed", "none", "rl"])
+        assert list(by_method) == ["fixed", "none"]
+        for method, cut in by_method.items():
+            assert cut.contour is contour and cut.trials == trials
+            assert cut.score.error_vertices[0] == scores[method].error_vertices[k * trials]
+            assert np.array_equal(cut.score.achieved[0], scores[method].achieved[k * trials])
+        assert by_method["none"].pinch is None
+        assert by_method["fixed"].pinch == pytest.approx(contour.centroid)
+    paths = cuts.plot(tmp_path / "regions", ["none", "fixed"])
+    assert [p.name for p in paths] == ["fls-circle.png", "fls-circle.svg", "s-curve.png", "s-curve.svg"]
+    for name in ("fls-circle", "s-curve"):
+        assert_figure([p for p in paths if p.stem == name], tmp_path / "regions", name)
+    assert "first of 2 trials" in (tmp_path / "regions" / "s-curve.svg").read_text()
+    with pytest.raises(ValueError, match="one contour"):
+        plot_regions({"a": cuts.of("fls-circle")["none"], "b": cuts.of("s-curve")["none"]}, tmp_path)
+    with pytest.raises(ValueError, match="no cuts"):
+        plot_regions(cuts.of("missing"), tmp_path)

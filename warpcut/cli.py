@@ -285,7 +285,7 @@ def simulate(
     if cuts is not None:
         from warpcut.plots import plot_regions
 
-        _echo_written(plot_regions(cuts.cuts, out))
+        _echo_written(plot_regions(cuts.of(contour.name), out))
     if recorder is not None:
         _echo_written([recorder.path])
 
@@ -690,8 +690,11 @@ EVALUATE_METHODS = ("none", "fixed", "analytic", "rl")
 )
 @_arm_length_option
 @_analytic_pinch_option
-@_record_option("in the run directory; of the first contour")
-@_plots_option("improvement.png/svg in the run directory")
+@_record_option("in the run directory; of the first contour, at most --trials envs")
+@_plots_option(
+    "improvement.png/svg, regions/CONTOUR.png/svg and plans/CONTOUR.png/svg in the run directory, and "
+    "policies/CONTOUR/learning_curve.png/svg when training"
+)
 def evaluate(
     contour_args: tuple[str, ...],
     methods: str,
@@ -733,6 +736,13 @@ def evaluate(
     by_name = dict(zip([c.name for c in contours], specs, strict=True))
     device = resolve_device(device)
     config = SimConfig(noise_std=noise).validated()
+    if record_envs is not None and record_envs > trials:
+        click.echo(
+            f"warning: --record {record_envs}: the first contour has only {trials} env(s) per method "
+            f"(--trials); recording {trials}",
+            err=True,
+        )
+        record_envs = trials
     out = _run_dir(out, "evaluate")
     start = time.perf_counter()
     plans = None
@@ -757,9 +767,21 @@ def evaluate(
     analytic = _analytic_pinches(analytic_pinch, contours, plans)
     if analytic is not None:
         pinches["analytic"] = analytic
+    cuts = None
+    if not no_plots:
+        from warpcut.plots import FinalCuts
+
+        cuts = FinalCuts()
     extra = {}
     with _recorder(out, record_envs, colour_by) as recorder:
+        hooks = _step_hooks(recorder, cuts)
         if "rl" in names:
+            regions = _step_hooks(cuts)
+
+            def rl_hook(k: int):  # the recorder sees the first contour's batch only
+                hook = hooks if k == 0 else regions
+                return None if hook is None else hook("rl")
+
             extra["rl"] = _rl_results(
                 contours,
                 by_name,
@@ -773,7 +795,7 @@ def evaluate(
                 seed,
                 MethodResult,
                 plans,
-                None if recorder is None else recorder.on_step("rl"),
+                rl_hook,
                 plots=not no_plots,
             )
         report = evaluate_suite(
@@ -785,7 +807,7 @@ def evaluate(
             seed=seed,
             extra=extra,
             progress=lambda what: click.echo(f"  running {what}", err=True),
-            on_step=_step_hooks(recorder),
+            on_step=hooks,
             segments=None if plans is None else [p.ordered_segments() for p in plans],
             pinches=pinches,
         )
@@ -804,6 +826,8 @@ def evaluate(
         from warpcut.plots import plot_improvements, plot_pinch_candidates
 
         _echo_written(plot_improvements(report, names, out))
+        shown = ["none"] + [m for m in names if m != "none"]
+        _echo_written(cuts.plot(out / "regions", shown, [c.name for c in contours]))
         for p in plans or []:
             _echo_written(plot_pinch_candidates(p, config, out / "plans", name=p.contour.name))
     if recorder is not None:
@@ -878,7 +902,7 @@ def _rl_results(
 ):
     """Per contour, a trained run (from ``checkpoints`` or trained now, at the planned pinch and
     segments when ``plans`` are given, with its learning curve when ``plots``) rolled out for ``trials``;
-    ``on_step`` sees the first contour's."""
+    ``on_step(k)`` gives the step callback of contour ``k``'s rollout (or None)."""
     import numpy as np
 
     from agents.rl import RECIPE, Scenario, recipe_config, rollout_errors, train_contour
@@ -917,7 +941,7 @@ def _rl_results(
                 from warpcut.plots import plot_learning_curve
 
                 plot_learning_curve(summary["history"], summary["validation"], run, title=contour.name)
-        hook = on_step if k == 0 else None
+        hook = None if on_step is None else on_step(k)
         result = rollout_errors(run, trials, seed=seed + 1, device=device, on_step=hook)
         errors.append(result["error_vertices"])
         areas.append(result["error_mm2"])
@@ -1377,7 +1401,7 @@ def run(
     if cuts is not None:
         from warpcut.plots import plot_improvements, plot_pinch_candidates, plot_regions
 
-        _echo_written(plot_regions(cuts.cuts, out))
+        _echo_written(plot_regions(cuts.of(contour.name, methods), out))
         _echo_written(plot_improvements(report, methods[1:], out))
         _echo_written(plot_pinch_candidates(plan, config, out))
     if recorder is not None:

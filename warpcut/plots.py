@@ -84,42 +84,93 @@ def plot_improvements(report: dict, methods: Sequence[str], out_dir: str | os.Pa
 
 @dataclass
 class FinalCut:
-    """One method's cut of the first env of its batch, as it ended."""
+    """One method's cut of one env (the first of its contour in the batch), as it ended."""
 
     contour: Contour
     grid: SheetGrid
     score: Score
-    """The first env's score alone (``B = 1``)."""
+    """That env's score alone (``B = 1``)."""
     pinch: np.ndarray | None
     """Material pinch point (mm), ``None`` without a grasp."""
+    trials: int = 1
+    """Envs of this contour in the batch (the trials); the cut shown is the first's."""
 
 
 class FinalCuts:
-    """Step callbacks that keep the end of each method's episode for :func:`plot_regions`."""
+    """Step callbacks that keep, per contour of a batch, the end of each method's episode in the first env
+    of that contour, for :func:`plot_regions`.
+
+    Envs of a contour are found by the contour's name in ``task.contours``, so a batch may hold several
+    contours in any order (e.g. :func:`agents.evaluation.evaluate_suite`'s, contour by contour, trials
+    within) and several batches of one method may fill different contours (e.g. the rl column, one batch
+    per contour). The cut is scored once per batch, when the episode is done.
+    """
 
     def __init__(self) -> None:
-        self.cuts: dict[str, FinalCut] = {}
+        self.cuts: dict[str, dict[str, FinalCut]] = {}
+        """Contour name to method name to its final cut, contours and methods in the order first seen."""
 
     def on_step(self, method: str):
-        """A callback for ``task.run(policy, on_step=...)`` that scores the first env at the end."""
+        """A callback for ``task.run(policy, on_step=...)`` that keeps ``method``'s cuts at the end."""
 
         def on_step(task: CuttingTask, action) -> None:
             if task.done:
-                contour = task.contours[0]
-                score = symmetric_difference(task.sim.alive_mask()[0], contour.intended_region(), task.grid)
-                pinch = task.pinch_points[0]
-                self.cuts[method] = FinalCut(
-                    contour, task.grid, score, pinch if task.sim.grasped[0] else None
-                )
+                self.capture(task, method)
 
         return on_step
 
+    def capture(self, task: CuttingTask, method: str) -> None:
+        """Score the first env of each contour of ``task`` as it stands and keep it as ``method``'s cut."""
+        first: dict[str, int] = {}
+        trials: dict[str, int] = {}
+        for env, contour in enumerate(task.contours):
+            first.setdefault(contour.name, env)
+            trials[contour.name] = trials.get(contour.name, 0) + 1
+        alive = task.sim.alive_mask()
+        for name, env in first.items():
+            contour = task.contours[env]
+            score = symmetric_difference(alive[env], contour.intended_region(), task.grid)
+            pinch = task.pinch_points[env].copy() if task.sim.grasped[env] else None
+            self.cuts.setdefault(name, {})[method] = FinalCut(contour, task.grid, score, pinch, trials[name])
+
+    def of(self, contour: str, methods: Sequence[str] | None = None) -> dict[str, FinalCut]:
+        """``contour``'s cuts by method: those of ``methods`` in that order (default: all, as captured)."""
+        cuts = self.cuts.get(contour, {})
+        if methods is None:
+            return dict(cuts)
+        return {m: cuts[m] for m in methods if m in cuts}
+
+    def plot(
+        self,
+        out_dir: str | os.PathLike,
+        methods: Sequence[str] | None = None,
+        contours: Sequence[str] | None = None,
+    ) -> list[Path]:
+        """One :func:`plot_regions` figure per contour, ``out_dir/CONTOUR.png`` and ``.svg``.
+
+        Args:
+            out_dir: Where the figures go.
+            methods: The methods to show, in order (default: all captured).
+            contours: The contours to plot, in order (default: all captured); those without a cut are
+                skipped.
+
+        Returns:
+            The paths written.
+        """
+        paths = []
+        for name in self.cuts if contours is None else contours:
+            cuts = self.of(name, methods)
+            if cuts:
+                paths += plot_regions(cuts, out_dir, name=name)
+        return paths
+
 
 def plot_regions(cuts: dict[str, FinalCut], out_dir: str | os.PathLike, name: str = "regions") -> list[Path]:
-    """Per method, the intended region over the region its cut separated, on the sheet at rest.
+    """One contour, per method the intended region over the region its cut separated, on the sheet at
+    rest.
 
     Args:
-        cuts: Method name to its final cut (see :class:`FinalCuts`).
+        cuts: Method name to its final cut of one contour (see :meth:`FinalCuts.of`).
         out_dir: Where ``NAME.png`` and ``NAME.svg`` go.
         name: File name stem.
 
@@ -127,10 +178,13 @@ def plot_regions(cuts: dict[str, FinalCut], out_dir: str | os.PathLike, name: st
         The paths written.
 
     Raises:
-        ValueError: ``cuts`` is empty.
+        ValueError: ``cuts`` is empty, or its cuts are of different contours.
     """
     if not cuts:
         raise ValueError("plot_regions: no cuts to plot")
+    first = next(iter(cuts.values()))
+    if len({cut.contour.name for cut in cuts.values()}) > 1:
+        raise ValueError("plot_regions: give the cuts of one contour (see FinalCuts.of)")
     fig = Figure(figsize=(3.4 * len(cuts) + 0.6, 4.4), layout="constrained")
     axes = fig.subplots(1, len(cuts), squeeze=False)[0]
     cmap = ListedColormap(_REGION_COLOURS)
@@ -164,9 +218,8 @@ def plot_regions(cuts: dict[str, FinalCut], out_dir: str | os.PathLike, name: st
         ax.set_aspect("equal")
     handles = [Patch(color=c, label=label) for c, label in zip(_REGION_COLOURS, _REGION_LABELS, strict=True)]
     fig.legend(handles=handles, loc="outside lower center", ncol=2, fontsize="small", frameon=False)
-    fig.suptitle(
-        f"{next(iter(cuts.values())).contour.name}: intended contour (line) over the separated region"
-    )
+    trial = f", first of {first.trials} trials" if first.trials > 1 else ""
+    fig.suptitle(f"{first.contour.name}{trial}: intended contour (line) over the separated region")
     return save_figure(fig, out_dir, name)
 
 
