@@ -24,7 +24,11 @@ reports when it closes a file: what recording costs where no core is free), and 
 Two phases, each interleaved with its own plain runs: first ``process`` for every batch size, in a
 process that has not imported rerun (as in the CLI); then the in-process variants, which import it.
 
-    python scripts/recording_overhead.py [--repeats 15] [--batches 1,64] [--json PATH]
+With ``--cli-repeats K`` (default 5; 0 skips it) it also times what a user sees: the whole command
+``warpcut simulate --contour fls-circle --policy none --trials 1 --no-plots`` with and without
+``--record`` (default N = 1), K runs of each, interleaved, and prints the median overhead.
+
+    python scripts/recording_overhead.py [--repeats 15] [--batches 1,64] [--cli-repeats 5] [--json PATH]
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ import argparse
 import json
 import os
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -105,6 +110,29 @@ def summarize(times: dict[str, list[tuple[float, float, float]]]) -> dict:
     }
 
 
+def time_cli(repeats: int, out_dir: Path) -> dict:
+    """Median wall times (s) of ``warpcut simulate`` without and with ``--record``, interleaved."""
+    base = [sys.executable, "-m", "warpcut", "simulate", "--contour", "fls-circle", "--policy", "none"]
+    base += ["--trials", "1", "--device", "cpu", "--no-plots"]
+    times: dict[str, list[float]] = {"plain": [], "record": []}
+    for k in range(repeats + 1):  # the first pair warms the kernel cache and the file system
+        for variant in times:
+            args = base + ["--json", str(out_dir / f"cli{k}-{variant}" / "results.json")]
+            if variant == "record":
+                args.append("--record")
+            start = time.perf_counter()
+            subprocess.run(args, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            if k:
+                times[variant].append(time.perf_counter() - start)
+    medians = {v: statistics.median(t) for v, t in times.items()}
+    return {
+        "median_wall_s": medians,
+        "overhead_pct": 100.0 * (medians["record"] / medians["plain"] - 1.0),
+        "paired_overhead_pct": 100.0
+        * statistics.median(r / p - 1.0 for r, p in zip(times["record"], times["plain"], strict=True)),
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeats", type=int, default=15, help="timed runs per variant (default 15)")
@@ -112,6 +140,9 @@ def main() -> None:
     parser.add_argument("--json", type=Path, help="also write the figures here")
     parser.add_argument(
         "--batches", default="1,64", help="batch sizes to time, env 0 recorded (default 1,64)"
+    )
+    parser.add_argument(
+        "--cli-repeats", type=int, default=5, help="runs of the whole simulate command per variant (0: skip)"
     )
     args = parser.parse_args()
     batches = [int(b) for b in args.batches.split(",")]
@@ -129,6 +160,8 @@ def main() -> None:
                 entry = report.setdefault(f"B = {b}", {"steps": tasks[b].num_steps})
                 entry["stepping_threads"] = tasks[b].sim.threads
                 entry[f"phase {phase + 1}"] = summarize(times)
+        if args.cli_repeats:
+            report["cli"] = time_cli(args.cli_repeats, Path(tmp))
     report["load_average_end"] = os.getloadavg()
     for b in batches:
         entry = report[f"B = {b}"]
@@ -153,6 +186,13 @@ def main() -> None:
                         f" {1e3 * r['median_close_s'][variant]:5.1f} ms"
                     )
                 print(line)
+    if "cli" in report:
+        cli = report["cli"]
+        print(
+            f"warpcut simulate (fls-circle, one trial, --no-plots; medians of {args.cli_repeats}): "
+            f"{cli['median_wall_s']['plain']:.2f} s, with --record {cli['median_wall_s']['record']:.2f} s: "
+            f"{cli['overhead_pct']:+.1f}% (paired {cli['paired_overhead_pct']:+.1f}%)"
+        )
     start, end = report["load_average_start"], report["load_average_end"]
     print(f"load average (1, 5, 15 min): {tuple(round(x, 2) for x in start)} at the start, ", end="")
     print(f"{tuple(round(x, 2) for x in end)} at the end")

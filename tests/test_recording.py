@@ -625,3 +625,25 @@ def test_recorded_fiducials_are_where_the_env_tracks_them_and_hidden_when_it_can
     np.testing.assert_allclose(
         first, material_to_world(expected[0], settled.sim.positions()[0], task.grid), atol=1e-3
     )
+
+
+def test_a_started_recorder_process_is_taken_by_the_next_recorder(tmp_path):
+    if recording._default_background() != "process":
+        pytest.skip("recorders use no process here (not POSIX, or one core)")
+    assert recording.start_recorder_process()
+    waiting = [c for c in recording._Child._idle if c.process.poll() is None]
+    assert waiting
+    assert recording.start_recorder_process()  # one is waiting already: no second one
+    assert [c for c in recording._Child._idle if c.process.poll() is None] == waiting
+    recorder = Recorder(tmp_path / "r.rrd")
+    assert recorder._sink.child is waiting[-1]
+    recorder.close()
+    assert read_summary(tmp_path / "r.rrd").frames == 0
+
+
+def test_the_recorder_process_and_the_cli_start_without_warp():
+    # Warp costs ~0.4 s to import: the recorder process (warpcut.recording) and the CLI's start-up, which
+    # starts that process, do without it until a simulator is made.
+    code = "import sys, warpcut.cli, warpcut.recording; print('warp' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "False"

@@ -15,8 +15,8 @@ import time
 from collections.abc import Callable
 
 import numpy as np
-import warp as wp
 
+from warpcut._warp import wp
 from warpcut.config import SimConfig
 from warpcut.simulator import Simulator
 

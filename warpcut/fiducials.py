@@ -20,7 +20,7 @@ import shapely
 
 from warpcut.config import SheetGrid, SimConfig
 from warpcut.contours import Contour
-from warpcut.task import interpolate, material_cells
+from warpcut.material import interpolate, material_cells
 
 NUM_FIDUCIALS = 12
 """Fiducials per sheet (the paper's 12)."""

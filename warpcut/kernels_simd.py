@@ -40,8 +40,8 @@ from dataclasses import dataclass
 from types import SimpleNamespace
 
 import numpy as np
-import warp as wp
 
+from warpcut._warp import wp
 from warpcut.kernels import PIN_FREE, PIN_GRASP
 
 DEFAULT_LANES = 8

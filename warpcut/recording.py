@@ -69,6 +69,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import ndimage
@@ -78,10 +79,13 @@ from warpcut.contours import Contour
 from warpcut.fiducials import NUM_FIDUCIALS, SHAFT_RADIUS_MM, sample_fiducials, visible
 from warpcut.io import plain_file_mode
 from warpcut.scoring import achieved_mask, intended_mask
-from warpcut.simulator import spring_colours
-from warpcut.task import CuttingTask, interpolate, material_cells
+from warpcut.springs import spring_colours
 
-StepCallback = Callable[[CuttingTask, "np.ndarray | None"], None]
+if TYPE_CHECKING:
+    from warpcut.task import CuttingTask
+from warpcut.material import interpolate, material_cells
+
+StepCallback = Callable[["CuttingTask", "np.ndarray | None"], None]
 """``on_step(task, action)`` as :meth:`CuttingTask.run` calls it."""
 
 FLUSH_FRAMES = 128
@@ -94,7 +98,7 @@ WORKER_BATCH_FRAMES = 32
 ends): smaller batches than :data:`FLUSH_FRAMES`, so that little work is left for :meth:`Recorder.close`
 to wait for."""
 
-PROCESS_BATCH_FRAMES = 16
+PROCESS_BATCH_FRAMES = 32
 """Frames the step callback writes into the pipe to the recorder process at a time (``background=
 "process"``; and the rest when the episode ends), and that the process then scores and sends as one
 batch (or several such groups at once when it has fallen behind): one wake-up of the process per group,
@@ -148,6 +152,33 @@ class RecordingError(RuntimeError):
     """The recorder process failed, died or stopped answering; the message names the recording."""
 
 
+def start_recorder_process() -> bool:
+    """Start a recorder process now, where recorders use one by default (``Recorder(background=None)``),
+    for the next :class:`Recorder` of this Python process to take: its start-up (~1 s: Python, numpy,
+    scipy and rerun) then overlaps the caller's own (the CLI calls it first thing when ``--record`` is
+    given). Whether one is started (or an idle one is already waiting).
+
+    Raises:
+        RecordingError: The process could not be started.
+    """
+    if _default_background() != "process":
+        return False
+    with _Child._lock:
+        if any(child.owner == os.getpid() and child.process.poll() is None for child in _Child._idle):
+            return True
+    try:
+        _Child().release()
+    except OSError as exc:
+        raise RecordingError(f"could not start the recorder process ({exc})") from exc
+    return True
+
+
+def _default_background() -> str | bool:
+    """``Recorder(background=None)``: a recorder process on a POSIX machine with more than one core (a
+    core the stepping loop may leave free), else the step callback itself."""
+    return "process" if os.name == "posix" and (os.cpu_count() or 1) > 1 else False
+
+
 class Recorder:
     """Records cutting episodes into one ``.rrd`` file.
 
@@ -190,7 +221,7 @@ class Recorder:
         if colour_by not in COLOUR_FIELDS:
             raise ValueError(f"colour_by: choose one of {COLOUR_FIELDS} (got {colour_by!r})")
         if background is None:
-            background = "process" if os.name == "posix" and (os.cpu_count() or 1) > 1 else False
+            background = _default_background()
         elif background is True:
             background = "thread"
         if background is not False and background not in BACKGROUND_MODES:

@@ -16,56 +16,21 @@ import numpy as np
 
 from warpcut.config import SheetGrid, SimConfig
 from warpcut.contours import Contour
+from warpcut.material import interpolate, material_cells, material_to_world
 from warpcut.scoring import Score, symmetric_difference
 from warpcut.simulator import Simulator
 
 if TYPE_CHECKING:
     from warpcut.fiducials import Fiducials
 
-
-def material_cells(points: np.ndarray, grid: SheetGrid) -> tuple[np.ndarray, np.ndarray]:
-    """The grid cell holding each material point, for bilinear interpolation.
-
-    Args:
-        points: (..., 2) material coordinates (mm); clipped onto the sheet.
-        grid: The sheet's rest layout.
-
-    Returns:
-        ``(vertices, weights)``: (..., 4) indices of the cell's corner vertices and their (..., 4)
-        bilinear weights.
-    """
-    points = np.asarray(points, dtype=np.float64)
-    hx, hy = grid.spacing_mm
-    u = np.clip(points[..., 0] / hx, 0.0, grid.nx - 1 - 1e-9)
-    v = np.clip(points[..., 1] / hy, 0.0, grid.ny - 1 - 1e-9)
-    col, row = np.floor(u).astype(np.int64), np.floor(v).astype(np.int64)
-    fu, fv = u - col, v - row
-    corner = row * grid.nx + col
-    vertices = np.stack([corner, corner + 1, corner + grid.nx, corner + grid.nx + 1], axis=-1)
-    weights = np.stack([(1 - fu) * (1 - fv), fu * (1 - fv), (1 - fu) * fv, fu * fv], axis=-1)
-    return vertices, weights
-
-
-def interpolate(positions: np.ndarray, vertices: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """World positions (B, K, 3) of material points whose cells are ``vertices``/``weights`` (B, K, 4)
-    on sheets at ``positions`` (B, N, 3)."""
-    corners = np.take_along_axis(positions[:, None], vertices[..., None], axis=2)  # (B, K, 4, 3)
-    return np.einsum("bkc,bkcd->bkd", weights, corners)
-
-
-def material_to_world(points: np.ndarray, positions: np.ndarray, grid: SheetGrid) -> np.ndarray:
-    """World positions of material points on one sheet, by bilinear interpolation over their cells.
-
-    Args:
-        points: (M, 2) material coordinates (mm).
-        positions: (N, 3) vertex positions of one sheet (mm).
-        grid: The sheet's rest layout.
-
-    Returns:
-        (M, 3) world positions (mm).
-    """
-    vertices, weights = material_cells(points, grid)
-    return interpolate(np.asarray(positions, dtype=np.float64)[None], vertices[None], weights[None])[0]
+__all__ = [
+    "CuttingTask",
+    "Trajectory",
+    "default_segments",
+    "interpolate",
+    "material_cells",
+    "material_to_world",
+]
 
 
 def default_segments(contour: Contour) -> list[np.ndarray]:
