@@ -27,12 +27,13 @@ product for the contour), where ``background`` says:
 
 * ``"process"`` (the default on a POSIX machine with more than one core): in a recorder process. The step
   callback writes the copied state into a pipe, :data:`PROCESS_BATCH_FRAMES` frames at a time (one
-  ``writev``, ~70 µs for 16 frames of a 25 x 25 sheet; :data:`FLUSH_FRAMES` where the simulator's threads
+  ``writev``, ~0.1 ms for 32 frames of a 25 x 25 sheet; :data:`FLUSH_FRAMES` where the simulator's threads
   use every core); the process scores the frames, builds the columns, runs rerun's encoding and writes
   the file, on another core and without holding the stepping process's GIL, at a lower priority
   (:data:`PROCESS_NICE`). The stepping process does not import rerun. The process is started when the
-  first :class:`Recorder` is created (its start-up, ~1.5 s, overlaps the caller's work) and is kept for
-  the next one, so later recordings in the same Python process do not pay for it again.
+  first :class:`Recorder` is created, or earlier by :func:`start_recorder_process` (its start-up, ~0.9 s,
+  overlaps the caller's work), and is kept for the next one, so later recordings in the same Python
+  process do not pay for it again.
 * ``"thread"``: on a worker thread of the stepping process, every :data:`WORKER_BATCH_FRAMES` frames (it
   runs only while the stepping thread releases the GIL);
 * ``False``: in the step callback itself, every :data:`FLUSH_FRAMES` frames.
