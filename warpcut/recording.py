@@ -79,12 +79,12 @@ from warpcut.config import SheetGrid, SimConfig
 from warpcut.contours import Contour
 from warpcut.fiducials import NUM_FIDUCIALS, SHAFT_RADIUS_MM, sample_fiducials, visible
 from warpcut.io import plain_file_mode
+from warpcut.material import interpolate, material_cells
 from warpcut.scoring import achieved_mask, intended_mask
 from warpcut.springs import spring_colours
 
 if TYPE_CHECKING:
     from warpcut.task import CuttingTask
-from warpcut.material import interpolate, material_cells
 
 StepCallback = Callable[["CuttingTask", "np.ndarray | None"], None]
 """``on_step(task, action)`` as :meth:`CuttingTask.run` calls it."""
@@ -336,7 +336,7 @@ class _EnvSetup:
     last_alive: np.ndarray | None = None
     last_error: float = 0.0
     fiducial_cells: tuple[np.ndarray, np.ndarray] | None = None
-    """(1, K, 4) vertices and weights of the fiducials' cells (:func:`~warpcut.task.material_cells`)."""
+    """(1, K, 4) vertices and weights of the fiducials' cells (:func:`~warpcut.material.material_cells`)."""
 
 
 @dataclass
