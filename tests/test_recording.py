@@ -19,6 +19,7 @@ from warpcut.cli import main
 from warpcut.config import SheetGrid, SimConfig
 from warpcut.contours import load_contour
 from warpcut.recording import (
+    PROCESS_NICE,
     STRAIN_FULL_SCALE,
     Recorder,
     RecordingError,
@@ -639,6 +640,19 @@ def test_a_started_recorder_process_is_taken_by_the_next_recorder(tmp_path):
     assert recorder._sink.child is waiting[-1]
     recorder.close()
     assert read_summary(tmp_path / "r.rrd").frames == 0
+    # It has imported what it needs (at the caller's priority) and serves at a lower one.
+    pid = recorder._sink.child.process.pid
+    assert os.getpriority(os.PRIO_PROCESS, pid) == os.getpriority(os.PRIO_PROCESS, 0) + PROCESS_NICE
+
+
+def test_the_cli_starts_the_recorder_process_before_importing_anything_slow():
+    # The CLI starts the recorder process first thing (warpcut.recorder_process): its start-up overlaps
+    # the command's only if starting it needs none of what the process itself imports.
+    code = "import json, sys, warpcut.recorder_process; print(json.dumps(sorted(sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    loaded = set(json.loads(out))
+    assert "warpcut.recorder_process" in loaded and "warpcut.recording" not in loaded
+    assert not {m.split(".")[0] for m in loaded} & {"scipy", "rerun", "pyarrow", "shapely", "warp", "torch"}
 
 
 def test_the_recorder_process_and_the_cli_start_without_warp():

@@ -78,7 +78,7 @@ def _record_option(what: str):
                     "--colour-by: colours a recording; add --record [N], or drop --colour-by"
                 )
             if kwargs["record_envs"] is not None:
-                from warpcut.recording import start_recorder_process
+                from warpcut.recorder_process import start_recorder_process
 
                 start_recorder_process()  # its start-up overlaps the command's own
             return command(**kwargs)

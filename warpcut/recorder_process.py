@@ -1,0 +1,257 @@
+"""The recorder process behind ``Recorder(background="process")`` (:mod:`warpcut.recording`): starting it,
+and the pipes to and from it.
+
+This module imports only the standard library, so that :func:`start_recorder_process` can start the
+process before its caller has imported anything slow (the CLI calls it first thing when ``--record`` is
+given): the process's own start-up (Python, numpy, scipy, shapely and rerun, ~0.7 s on an idle core) then
+overlaps the caller's. The process runs :func:`warpcut.recording._serve`.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import select
+import struct
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+PROCESS_NICE = 10
+"""How much the recorder process lowers its scheduling priority (``nice``): where no core is free, the
+stepping loop keeps its core and the recording catches up while the stepping process waits (at the latest
+in :meth:`Recorder.close`, or when the pipe is full)."""
+
+CLOSE_TIMEOUT_S = 120.0
+"""How long :meth:`Recorder.close` (and a step callback whose pipe is full) waits for the recorder
+process before it gives up, stops the process and raises :class:`RecordingError`."""
+
+
+class RecordingError(RuntimeError):
+    """The recorder process failed, died or stopped answering; the message names the recording.
+    (:mod:`warpcut.recording` exports it.)"""
+
+
+def start_recorder_process() -> bool:
+    """Start a recorder process now, where recorders use one by default (``Recorder(background=None)``),
+    for the next :class:`~warpcut.recording.Recorder` of this Python process to take: its start-up
+    (~0.7 s on an idle core: Python, numpy, scipy, shapely and rerun) then overlaps the caller's own (the
+    CLI calls it first thing when ``--record`` is given). Whether one is started (or an idle one is
+    already waiting).
+
+    Raises:
+        RecordingError: The process could not be started.
+    """
+    if _default_background() != "process":
+        return False
+    with _Child._lock:
+        if any(child.owner == os.getpid() and child.process.poll() is None for child in _Child._idle):
+            return True
+    try:
+        _Child().release()
+    except OSError as exc:
+        raise RecordingError(f"could not start the recorder process ({exc})") from exc
+    return True
+
+
+def _default_background() -> str | bool:
+    """``Recorder(background=None)``: a recorder process on a POSIX machine with more than one core (a
+    core the stepping loop may leave free), else the step callback itself."""
+    return "process" if os.name == "posix" and (os.cpu_count() or 1) > 1 else False
+
+
+# The pipe to the recorder process carries messages of a kind byte and a payload length, then the payload:
+# b"P", a pickled tuple (``open``, ``start``, ``close``; and every reply), or b"F", one frame in raw bytes
+# (warpcut.recording._FRAME_HEAD and what follows it).
+_HEAD = struct.Struct("<cI")
+
+
+def _pickled(message: tuple) -> bytes:
+    data = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
+    return _HEAD.pack(b"P", len(data)) + data
+
+
+class _Messages:
+    """The messages arriving on a pipe's reading end ``fd``."""
+
+    def __init__(self, fd: int):
+        self.fd = fd
+        self.buffer = bytearray()
+        self.start = 0  # where the next message begins in the buffer
+        self.eof = False
+
+    def next(self, block: bool = True, timeout: float | None = None):
+        """The next message as ``(kind, payload)``; None at the end of the pipe, or when none arrived in
+        time (``block=False``: none is waiting now; ``timeout``: seconds)."""
+        while True:
+            if len(self.buffer) - self.start >= _HEAD.size:
+                kind, size = _HEAD.unpack_from(self.buffer, self.start)
+                begin = self.start + _HEAD.size
+                if len(self.buffer) >= begin + size:
+                    with memoryview(self.buffer) as view:
+                        payload = bytes(view[begin : begin + size])
+                    self.start = begin + size
+                    return kind, payload
+            if self.eof:
+                return None
+            if not block or timeout is not None:
+                ready, _, _ = select.select([self.fd], [], [], 0.0 if not block else timeout)
+                if not ready:
+                    return None
+            data = os.read(self.fd, 1 << 20)
+            if not data:
+                self.eof = True
+            del self.buffer[: self.start]
+            self.start = 0
+            self.buffer += data
+
+
+class _Child:
+    """A recorder process (:func:`_serve`) and the two pipes to it; one recording at a time."""
+
+    _idle: list[_Child] = []
+    _lock = threading.Lock()
+
+    def __init__(self):
+        cmd_read, self.cmd = os.pipe()
+        reply_read, reply_write = os.pipe()
+        try:
+            import fcntl
+
+            # Room for ~125 frames of a 25 x 25 sheet (Linux; 64 KiB elsewhere): the stepping loop seldom
+            # has to wait for a busy recorder process.
+            fcntl.fcntl(self.cmd, fcntl.F_SETPIPE_SZ, 1 << 20)
+        except (ImportError, AttributeError, OSError):
+            pass
+        os.set_blocking(self.cmd, False)
+        source = str(Path(__file__).resolve().parents[1])
+        kwargs = {"process_group": 0} if sys.version_info >= (3, 11) else {"start_new_session": True}
+        try:
+            self.process = subprocess.Popen(
+                [
+                    sys.executable,
+                    "-c",
+                    _CHILD_MAIN.format(nice=PROCESS_NICE, source=source, cmd=cmd_read, reply=reply_write),
+                ],
+                pass_fds=(cmd_read, reply_write),
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL,
+                close_fds=True,
+                **kwargs,
+            )
+        except BaseException:
+            for fd in (self.cmd, reply_read):
+                os.close(fd)
+            raise
+        finally:
+            os.close(cmd_read)
+            os.close(reply_write)
+        self.replies = _Messages(reply_read)
+        self.owner = os.getpid()
+        self._unsent = b""
+
+    @classmethod
+    def acquire(cls) -> _Child:
+        """An idle recorder process of this Python process, or a new one."""
+        with cls._lock:
+            while cls._idle:
+                child = cls._idle.pop()
+                if child.owner == os.getpid() and child.process.poll() is None:
+                    return child
+                child.detach()
+        return cls()
+
+    def release(self) -> None:
+        """Keep the process for the next recorder (one at most), or let it end."""
+        with self._lock:
+            if not self._idle and self.owner == os.getpid() and self.process.poll() is None:
+                self._idle.append(self)
+                return
+        self.detach()
+
+    def detach(self) -> None:
+        """Close this end of the pipes: the process finishes the recording it holds (if any) and ends (a
+        thread waits for it, so that it does not linger as a zombie)."""
+        self._close_pipes()
+        threading.Thread(target=self.process.wait, name="warpcut-recorder-reaper", daemon=True).start()
+
+    def _close_pipes(self) -> None:
+        for fd in (self.cmd, self.replies.fd):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+        self.cmd = self.replies.fd = -1
+
+    def send(self, parts: list, wait_s: float = CLOSE_TIMEOUT_S) -> None:
+        """Write one message (its ``parts``, bytes-like) into the pipe, waiting while the pipe is full.
+        A message cut short by an exception (Ctrl-C) is completed before the next one.
+
+        Raises:
+            BrokenPipeError: The process has ended.
+            TimeoutError: The pipe stayed full for ``wait_s``.
+        """
+        views = [memoryview(p).cast("B") for p in ([self._unsent] if self._unsent else []) + parts]
+        unsent, self._unsent = len(self._unsent), b""  # the end of an earlier message comes first
+        deadline = None
+        try:
+            while views:
+                try:
+                    written = os.writev(self.cmd, views)
+                except BlockingIOError:
+                    written = 0
+                unsent -= written
+                while views and written >= len(views[0]):
+                    written -= len(views[0])
+                    views.pop(0)
+                if written:
+                    views[0] = views[0][written:]
+                if views:
+                    deadline = deadline or time.monotonic() + wait_s
+                    select.select([], [self.cmd], [], 0.5)
+                    if self.process.poll() is not None:
+                        raise BrokenPipeError(f"the recorder process (pid {self.process.pid}) has ended")
+                    if time.monotonic() > deadline:
+                        raise TimeoutError(f"the recorder process took no data for {wait_s:.0f} s")
+        except BaseException:
+            if unsent < 0:  # this message began: the rest of it goes first next time
+                self._unsent = b"".join(views)
+            elif unsent > 0:  # an earlier message is still not complete; this one was not sent
+                self._unsent = b"".join(views)[:unsent]
+            raise
+
+    def __del__(self):  # no thread here: it may run at interpreter exit
+        try:
+            if self.cmd >= 0:
+                self._close_pipes()
+        except Exception:  # noqa: BLE001 - at interpreter exit
+            pass
+
+
+# The recorder process: ignores Ctrl-C (the terminal sends it to the stepping process's group; this one
+# runs in its own group, but the signal may come by other ways), imports the writer, lowers its priority
+# and serves recordings. It imports at the caller's priority: niced, its start-up would get only a sliver
+# of a core that the caller (importing and building its own task) or another process also wants, and
+# would still be running when the first episode ends. A failure to start is reported through the reply
+# pipe like any other.
+_CHILD_MAIN = """\
+import os, signal, sys
+signal.signal(signal.SIGINT, signal.SIG_IGN)
+sys.path[0] = {source!r}
+try:
+    from warpcut.recording import _import_writer, _serve
+
+    _import_writer()
+except BaseException as exc:
+    import pickle, struct, traceback
+    data = pickle.dumps(("failed", type(exc).__name__, str(exc), traceback.format_exc()))
+    os.write({reply}, struct.pack("<cI", b"P", len(data)) + data)
+    sys.exit(1)
+try:
+    os.nice({nice})
+except OSError:
+    pass
+_serve({cmd}, {reply})
+"""
