@@ -28,7 +28,10 @@ With ``--cli-repeats K`` (default 5; 0 skips it) it also times what a user sees:
 ``warpcut simulate --contour fls-circle --policy none --trials 1 --no-plots`` with and without
 ``--record`` (default N = 1), K runs of each, interleaved, and prints the median overhead.
 
-    python scripts/recording_overhead.py [--repeats 15] [--batches 1,64] [--cli-repeats 5] [--json PATH]
+    python scripts/recording_overhead.py [--repeats 15] [--batches 1,64] [--phases 1,2] [--cli-repeats 5]
+        [--json PATH]
+
+(``--phases 1``: only ``process`` and its plain runs.)
 """
 
 from __future__ import annotations
@@ -142,17 +145,24 @@ def main() -> None:
         "--batches", default="1,64", help="batch sizes to time, env 0 recorded (default 1,64)"
     )
     parser.add_argument(
+        "--phases", default="1,2", help="1: process; 2: worker thread and no thread (default 1,2)"
+    )
+    parser.add_argument(
         "--cli-repeats", type=int, default=5, help="runs of the whole simulate command per variant (0: skip)"
     )
     args = parser.parse_args()
     batches = [int(b) for b in args.batches.split(",")]
+    phases = [int(p) - 1 for p in args.phases.split(",") if p.strip().isdigit()]
+    if len(phases) != len(args.phases.split(",")) or any(p not in range(len(PHASES)) for p in phases):
+        parser.error(f"--phases: comma-separated numbers from 1 to {len(PHASES)} (got {args.phases!r})")
     tasks = {
         b: CuttingTask(SimConfig(), load_contour("fls-circle"), num_envs=b, device=args.device)
         for b in batches
     }
     report: dict = {"load_average_start": os.getloadavg(), "cores": os.cpu_count()}
     with tempfile.TemporaryDirectory(prefix="warpcut-rec-") as tmp:
-        for phase, variants in enumerate(PHASES):
+        for phase in phases:
+            variants = PHASES[phase]
             for b in batches:
                 if phase == 0:
                     assert "rerun" not in sys.modules, "the process variant must run without rerun loaded"
@@ -172,8 +182,8 @@ def main() -> None:
         )
         head = ("wall", 9), ("overhead", 9), ("paired", 8), ("CPU", 9), ("overhead", 9), ("close", 8)
         print(f"  {'':<14}" + "".join(f" {name:>{width}}" for name, width in head))
-        for phase, variants in enumerate(PHASES):
-            r = entry[f"phase {phase + 1}"]
+        for phase in phases:
+            variants, r = PHASES[phase], entry[f"phase {phase + 1}"]
             for variant in variants:
                 line = f"  {variant:<14} {1e3 * r['median_wall_s'][variant]:6.1f} ms"
                 cpu_ms = 1e3 * r["median_cpu_s"][variant]
