@@ -255,7 +255,10 @@ def plot_learning_curve(
     handles = []
     if ended:
         x, y = zip(*ended, strict=True)
-        handles += top.plot(x, y, color="C0", linewidth=1.2, label="final error, training episodes")
+        marker = "o" if len(x) == 1 else None  # a line needs two points
+        handles += top.plot(
+            x, y, color="C0", linewidth=1.2, marker=marker, label="final error, training episodes"
+        )
     else:
         top.text(0.5, 0.5, "no training episode has ended", transform=top.transAxes, ha="center", color="C0")
     top.set_ylabel("final error (error mm² / intended area)", color="C0")
@@ -286,7 +289,7 @@ def plot_learning_curve(
     rates = [(m["iteration"], m["iteration_steps_per_s"]) for m in metrics if m.get("iteration_steps_per_s")]
     if rates:
         x, y = zip(*rates, strict=True)
-        bottom.plot(x, y, color="C2", linewidth=1.2)
+        bottom.plot(x, y, color="C2", linewidth=1.2, marker="o" if len(x) == 1 else None)
         bottom.set_ylim(bottom=0.0)
     bottom.set_ylabel("env steps/s")
     bottom.set_xlabel("learning iteration")
