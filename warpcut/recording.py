@@ -45,7 +45,8 @@ has the measured overhead (``scripts/recording_overhead.py``).
 
 The file is written beside its target under a temporary name and renamed when the recorder closes,
 also when an exception or Ctrl-C ends the run early, so a readable recording of what happened so far
-always remains. :meth:`Recorder.close` returns once the file is complete. The recorder process ignores
+always remains; a recorder that recorded no episode writes nothing (and leaves a file already at its
+path as it was). :meth:`Recorder.close` returns once the file is complete. The recorder process ignores
 Ctrl-C (it runs in its own process group) and finishes the file when the recorder closes, or on its own
 when the stepping process dies. Use a recorder as a context manager::
 
@@ -65,6 +66,7 @@ import tempfile
 import threading
 import time
 import traceback
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cache
@@ -217,6 +219,8 @@ class Recorder:
             raise
         self._episodes: dict[str, _Episode] = {}
         self.closed = False
+        self.written = False
+        """Whether :meth:`close` put the file in place (an episode was recorded)."""
 
     def on_step(self, method: str) -> StepCallback:
         """A callback recording one episode of ``method`` under ``/{method}``, for
@@ -234,9 +238,11 @@ class Recorder:
         self._episodes[method] = episode
         return episode
 
-    def close(self) -> Path:
+    def close(self) -> Path | None:
         """Send the buffered frames and the blueprint, finish the file and move it into place; return
-        once that is done (in the recorder process too).
+        its path once that is done (in the recorder process too). A recorder closed before any episode
+        started (e.g. a run interrupted before its recorded evaluation) writes nothing, leaves a file
+        already at :attr:`path` as it was, and returns None (:attr:`written` says which).
 
         Raises:
             RecordingError: The recorder process failed (the message names the recording and carries the
@@ -245,14 +251,22 @@ class Recorder:
             Exception: Whatever failed on the worker thread, after the file was moved into place.
         """
         if self.closed:
-            return self.path
+            return self.path if self.written else None
         self.closed = True
+        keep = any(episode.task is not None for episode in self._episodes.values())
         try:
             for episode in self._episodes.values():
                 episode.flush(final=True)
         finally:
-            self._sink.close()
-        return self.path
+            self.written = keep  # also when the sink fails: it moves what it wrote into place
+            self._sink.close(keep)
+        return self.path if keep else None
+
+    @property
+    def recorded_envs(self) -> dict[str, int]:
+        """How many envs were recorded of each method whose episode started: ``envs``, or fewer where its
+        task had fewer."""
+        return {method: len(e.envs) for method, e in self._episodes.items() if e.task is not None}
 
     def __enter__(self) -> Recorder:
         return self
@@ -409,8 +423,8 @@ class _InlineSink:
     def frames(self, key: int, frames: list[_Frame], final: bool) -> None:
         self.writer.frames(key, frames)
 
-    def close(self) -> None:
-        self.writer.finish()
+    def close(self, keep: bool) -> None:
+        self.writer.finish(keep=keep)
 
 
 class _ThreadSink:
@@ -431,11 +445,11 @@ class _ThreadSink:
     def frames(self, key: int, frames: list[_Frame], final: bool) -> None:
         self._submit(lambda: self.writer.frames(key, frames))
 
-    def close(self) -> None:
+    def close(self, keep: bool) -> None:
         try:
             self._join()
         finally:
-            self.writer.finish(complete=self._failure is None)
+            self.writer.finish(complete=self._failure is None, keep=keep)
         if self._failure is not None:
             raise self._failure
 
@@ -515,11 +529,12 @@ class _ProcessSink:
         self._send(parts)
         self._check_replies()
 
-    def close(self) -> None:
-        """Tell the process to finish the file and wait until it has (or has failed or died)."""
+    def close(self, keep: bool) -> None:
+        """Tell the process to finish the file (``keep``: and move it into place, else delete it) and wait
+        until it has (or has failed or died)."""
         child, closed = self.child, False
         try:
-            self._send([_pickled(("close",))], check=False)
+            self._send([_pickled(("close", keep))], check=False)
             deadline = time.monotonic() + CLOSE_TIMEOUT_S
             while not closed:
                 message = child.replies.next(timeout=0.5)
@@ -538,7 +553,10 @@ class _ProcessSink:
                     )
         except RecordingError:
             if self.tmp.exists():
-                os.replace(self.tmp, self.path)
+                if keep:
+                    os.replace(self.tmp, self.path)
+                else:
+                    self.tmp.unlink()
             raise
         finally:
             if closed and self._failure is None:
@@ -685,6 +703,7 @@ def _serve_recording(messages: _Messages, reply, tmp: str, path: str, applicatio
             command, *args = pickle.loads(payload)
             if command == "close":
                 closed = True
+                (keep,) = args
                 break
             if command != "start":
                 raise RuntimeError(f"protocol: unexpected message {command!r}")
@@ -697,11 +716,15 @@ def _serve_recording(messages: _Messages, reply, tmp: str, path: str, applicatio
                 failure[:] = [type(exc).__name__, str(exc), traceback.format_exc()]
                 reply("failed", *failure)
     send_all()
+    if not closed:  # the stepping process died: keep what it recorded, if anything
+        keep = bool(shapes)
     try:
         if writer is not None:
-            writer.finish(complete=not failure)
-        else:
+            writer.finish(complete=not failure, keep=keep)
+        elif keep:
             os.replace(tmp, path)
+        else:
+            os.unlink(tmp)
     except Exception as exc:  # noqa: BLE001 - reported to the stepping process
         if not failure:
             failure[:] = [type(exc).__name__, str(exc), traceback.format_exc()]
@@ -746,16 +769,19 @@ class _Writer:
         self.episodes: dict[int, _TaskSetup] = {}
         self._blueprint_roots: list[str] | None = None
 
-    def finish(self, complete: bool = True) -> None:
+    def finish(self, complete: bool = True, keep: bool = True) -> None:
         """Send the blueprint (if ``complete``: no frame batch failed), finish the file and move it into
-        place."""
+        place; or, unless ``keep``, delete it (nothing was recorded)."""
         try:
-            if complete:
+            if complete and keep:
                 self._send_blueprint()
                 self.stream.flush()
         finally:
             self.stream.disconnect()
-            os.replace(self.tmp, self.path)
+            if keep:
+                os.replace(self.tmp, self.path)
+            else:
+                self.tmp.unlink()
 
     def start(self, key: int, method: str, task_setup: _TaskSetup) -> None:
         """Per-env constants (contour cells, intended region, cutting runs) and the static entities of a
@@ -1234,8 +1260,11 @@ def read_summary(path: str | os.PathLike) -> RecordingSummary:
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such recording")
     try:
-        reader = RrdReader(path)
-        recordings = reader.recordings()
+        with warnings.catch_warnings():
+            # A file without rerun's footer (cut short) is read by scanning it: said by the error, if any.
+            warnings.simplefilter("ignore")
+            reader = RrdReader(path)
+            recordings = reader.recordings()
         if not recordings:
             raise ValueError("it holds no recording")
         steps, durations, entities = set(), [], set()
