@@ -1,6 +1,7 @@
 """End-to-end tests of the ``warpcut`` command line (fast ones; one runs the installed console script)."""
 
 import json
+import os
 import re
 import shutil
 import subprocess
@@ -92,6 +93,28 @@ def test_simulate_accepts_a_contour_file(tmp_path):
         (["simulate", "--contour", "fls-circle", "--trials", "0"], "--trials"),
         (["simulate", "--contour", "fls-circle", "--device", "tpu"], "device: unknown device 'tpu'"),
         (["simulate"], "Missing option '--contour'"),
+        (["simulate", "--contour", "fls-circle", "--record", "-1"], "--record: N must be a positive integer"),
+        (
+            ["simulate", "--contour", "fls-circle", "--record=-2"],
+            r"--record: N must be a positive integer \(got -2",
+        ),
+        (["simulate", "--contour", "fls-circle", "-5"], "No such option '-5'"),
+        (["simulate", "--contour", "fls-circle", "--seed", "-1"], "--seed.*-1 is not in the range x>=0"),
+        (
+            [
+                "simulate",
+                "--contour",
+                "circle-small",
+                "--policy",
+                "none",
+                "--trials",
+                "1",
+                "--resolution",
+                "9",
+            ]
+            + ["--no-plots", "--json", "/dev/null/sub/results.json"],
+            "Not a directory: '/dev/null/sub'",
+        ),
         (["nonsense"], "No such command"),
     ],
 )
@@ -104,6 +127,21 @@ def test_bad_arguments_exit_2_with_one_line(args, message, capfd):
     assert len(err) == 1, err
     assert err[0].startswith("error: ")
     assert re.search(message, err[0]), err[0]
+
+
+def test_warp_starts_quietly_unless_asked():
+    # Without NVIDIA's driver, Warp's C code prints a CUDA warning on every start; warpcut silences it
+    # (and Warp's banner) unless WARPCUT_VERBOSE is set.
+    code = "import warpcut.simulator, warpcut._warp as w; w.wp.init(); print(w.wp.is_cuda_available())"
+    env = {k: v for k, v in os.environ.items() if k != "WARPCUT_VERBOSE"}
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
+    assert done.stderr == "", done.stderr
+    verbose = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env={**env, "WARPCUT_VERBOSE": "1"}
+    )
+    assert "Warp 1." in verbose.stdout + verbose.stderr  # the banner is back
+    if done.stdout.strip() == "False":
+        assert "CUDA" in verbose.stdout + verbose.stderr  # what a CPU-only machine says about CUDA
 
 
 def test_console_script_runs():

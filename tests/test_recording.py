@@ -198,6 +198,37 @@ def test_replay_without_a_display_prints_how_and_a_summary(simulated, monkeypatc
 
 
 @pytest.mark.parametrize(
+    ("viewer", "opened"),
+    [
+        # rerun's viewer, where DISPLAY is set but no X server answers, says so and ends with status 0.
+        (
+            "print('Error: winit EventLoopError: Failed to open connection to X server', file=sys.stderr)",
+            False,
+        ),
+        ("sys.exit(3)", False),
+        ("time.sleep(4)", True),  # a window opened: it runs on (here for 4 s)
+    ],
+)
+def test_replay_says_when_the_viewer_cannot_open_a_window(simulated, monkeypatch, capfd, viewer, opened):
+    from warpcut import cli
+
+    out, _ = simulated
+    monkeypatch.setenv("DISPLAY", ":99")
+    monkeypatch.setattr(cli, "VIEWER", [sys.executable, "-c", f"import sys, time; {viewer}"])
+    monkeypatch.setattr(cli, "VIEWER_START_S", 1.0)
+    with pytest.raises(SystemExit) as exit_info:
+        main.main(args=["replay", str(out / "recording.rrd")], prog_name="warpcut")
+    captured = capfd.readouterr()
+    if opened:
+        assert exit_info.value.code == 0 and "opened" in captured.out and not captured.err
+    else:
+        assert exit_info.value.code == 1
+        reason = "Failed to open connection to X server" if "winit" in viewer else "exit code 3"
+        assert captured.err.startswith(f"error: the rerun viewer ended at once ({reason})"), captured.err
+        assert "/analytic/env_1/sheet" in captured.out and "--web" in captured.out
+
+
+@pytest.mark.parametrize(
     ("content", "message"), [(None, "no such recording"), (b"not a recording", "not a readable rerun")]
 )
 def test_replay_of_a_missing_or_bad_file_exits_2_with_one_line(tmp_path, capfd, content, message):
@@ -571,6 +602,17 @@ def test_columns_are_the_rerun_archetypes_columns():
             )
 
 
+def test_simulate_says_when_fewer_envs_ran_than_record_asks(tmp_path):
+    args = ["simulate", "--contour", "circle-small", "--policy", "none", "--trials", "1", "--no-plots"]
+    args += ["--resolution", str(RESOLUTION), "--device", "cpu", "--json", str(tmp_path / "r.json")]
+    result = CliRunner().invoke(main, [*args, "--record", "2"], catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    assert "warning: --record 2: fewer envs ran, all of them recorded (none: 1)" in result.stderr
+    assert f"wrote {tmp_path / 'recording.rrd'}" in result.stdout
+    entities = read_summary(tmp_path / "recording.rrd").entity_paths
+    assert "/none/env_0/sheet" in entities and not any(e.startswith("/none/env_1") for e in entities)
+
+
 def test_cli_colour_choices_are_the_recorders():
     from warpcut.cli import RECORD_COLOURS
 
@@ -628,6 +670,23 @@ def test_recorded_fiducials_are_where_the_env_tracks_them_and_hidden_when_it_can
     )
 
 
+@pytest.mark.parametrize("background", ["process", "thread", False])
+def test_a_recorder_that_recorded_nothing_leaves_an_earlier_file_alone(tmp_path, background):
+    # E.g. `train --resume DIR --record` interrupted during training, before its recorded evaluation.
+    task = CuttingTask(SimConfig(resolution=RESOLUTION), load_contour("circle-small"), device="cpu")
+    path = tmp_path / "recording.rrd"
+    with Recorder(path, background=background) as recorder:
+        task.run(None, on_step=recorder.on_step("none"))
+    assert recorder.written and recorder.close() == path
+    before = path.read_bytes()
+    with pytest.raises(KeyboardInterrupt), Recorder(path, background=background) as recorder:
+        recorder.on_step("rl")  # made, never called
+        raise KeyboardInterrupt
+    assert not recorder.written and recorder.close() is None
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["recording.rrd"]  # no temporary file left
+
+
 def test_a_started_recorder_process_is_taken_by_the_next_recorder(tmp_path):
     if recording._default_background() != "process":
         pytest.skip("recorders use no process here (not POSIX, or one core)")
@@ -638,8 +697,7 @@ def test_a_started_recorder_process_is_taken_by_the_next_recorder(tmp_path):
     assert [c for c in recording._Child._idle if c.process.poll() is None] == waiting
     recorder = Recorder(tmp_path / "r.rrd")
     assert recorder._sink.child is waiting[-1]
-    recorder.close()
-    assert read_summary(tmp_path / "r.rrd").frames == 0
+    assert recorder.close() is None  # nothing recorded: no file
     # It has imported what it needs (at the caller's priority) and serves at a lower one.
     pid = recorder._sink.child.process.pid
     expected = min(os.getpriority(os.PRIO_PROCESS, 0) + PROCESS_NICE, 19)  # 19: the lowest there is

@@ -8,20 +8,25 @@ from __future__ import annotations
 
 import functools
 import os
+import re
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 import click
 
 from warpcut.config import FIXTURES, SimConfig
+from warpcut.recorder_process import RecordingError
 
 POLICY_NAMES = ("none", "fixed", "analytic")
 
 
 class CleanErrors(click.Group):
-    """Turn usage errors and the library's ValueErrors into one line on stderr and exit status 2."""
+    """Turn usage errors, the library's ValueErrors and files that cannot be read or written into one line
+    on stderr and exit status 2; a failed recording (:class:`RecordingError`) into one line and status 1
+    (with ``WARPCUT_VERBOSE`` set, also the recorder process's traceback)."""
 
     def main(self, *args, **kwargs):
         kwargs["standalone_mode"] = False
@@ -36,11 +41,28 @@ class CleanErrors(click.Group):
                 if getattr(exc, "ctx", None) and exc.ctx.command is not self
                 else ""
             )
-            click.echo(f"error: {exc.format_message()}{hint}", err=True)
+            message = exc.format_message()
+            given = kwargs.get("args") or (args[0] if args else sys.argv[1:])
+            if (
+                isinstance(exc, click.NoSuchOption)
+                and re.fullmatch(r"-\d+", exc.option_name)
+                and any(a == "--record" or a.startswith("--record=") for a in given)
+            ):
+                # click reads "--record -1" (an option whose value is optional) as --record, then -1.
+                message = f"--record: N must be a positive integer (got {exc.option_name})"
+            click.echo(f"error: {message}{hint}", err=True)
             sys.exit(2)
-        except (ValueError, FileNotFoundError) as exc:
+        except (
+            ValueError,
+            OSError,
+        ) as exc:  # OSError: a missing input, an output path that cannot be written
             click.echo(f"error: {exc}", err=True)
             sys.exit(2)
+        except RecordingError as exc:  # the file holds what was recorded until then
+            click.echo(f"error: {exc}", err=True)
+            for note in getattr(exc, "__notes__", ()) if os.environ.get("WARPCUT_VERBOSE") else ():
+                click.echo(note, err=True)
+            sys.exit(1)
         sys.exit(result if isinstance(result, int) else 0)
 
 
@@ -92,7 +114,11 @@ _device_option = click.option(
     "--device", default=None, help="Warp device: cpu or cuda (default: cuda if available, else cpu)."
 )
 _seed_option = click.option(
-    "--seed", default=0, show_default=True, type=int, help="Seed of everything random (noise, sampling, PPO)."
+    "--seed",
+    default=0,
+    show_default=True,
+    type=click.IntRange(min=0),
+    help="Seed of everything random (noise, sampling, PPO); a non-negative integer.",
 )
 
 
@@ -290,8 +316,7 @@ def simulate(
         from warpcut.plots import plot_regions
 
         _echo_written(plot_regions(cuts.of(contour.name), out))
-    if recorder is not None:
-        _echo_written([recorder.path])
+    _echo_recording(recorder)
 
 
 def _recorder(out: Path, record_envs: int | None, colour_by: str):
@@ -323,6 +348,20 @@ def _step_hooks(*hooks):
         return on_step
 
     return for_method
+
+
+def _echo_recording(recorder) -> None:
+    """Say where the recording went (if anything was recorded), and which methods had fewer envs than
+    ``--record`` asked for."""
+    if recorder is None or not recorder.written:
+        return
+    fewer = {m: k for m, k in recorder.recorded_envs.items() if k < recorder.envs}
+    if fewer:
+        ran = ", ".join(f"{m}: {k}" for m, k in fewer.items())
+        click.echo(
+            f"warning: --record {recorder.envs}: fewer envs ran, all of them recorded ({ran})", err=True
+        )
+    _echo_written([recorder.path])
 
 
 def _echo_written(paths: list[Path]) -> None:
@@ -596,8 +635,7 @@ def train(
         from warpcut.plots import plot_learning_curve
 
         _echo_written(plot_learning_curve(s["history"], s["validation"], out, title=scenario.contour))
-    if recorder is not None:
-        _echo_written([recorder.path])
+    _echo_recording(recorder)
     click.echo(f"wrote {out}")
 
 
@@ -834,9 +872,16 @@ def evaluate(
         _echo_written(cuts.plot(out / "regions", shown, [c.name for c in contours]))
         for p in plans or []:
             _echo_written(plot_pinch_candidates(p, config, out / "plans", name=p.contour.name))
-    if recorder is not None:
-        _echo_written([recorder.path])
+    _echo_recording(recorder)
     click.echo(f"wrote {out}")
+
+
+VIEWER = [sys.executable, "-m", "rerun_cli"]
+"""The rerun viewer (rerun-sdk's ``rerun`` command), as ``replay`` runs it."""
+
+VIEWER_START_S = 3.0
+"""How long ``replay`` watches the viewer it started: one that ends within this time with an error could
+not open a window, and ``replay`` then prints what it prints without a display."""
 
 
 @main.command()
@@ -847,12 +892,13 @@ def evaluate(
 def replay(path: Path, web: bool) -> None:
     """Open a recording (.rrd from --record) in the rerun viewer.
 
-    Without a display (no DISPLAY or WAYLAND_DISPLAY) it prints how to view the file and what it holds.
+    Without a display (no DISPLAY or WAYLAND_DISPLAY) it prints how to view the file and what it holds;
+    so it does, exiting with status 1, where the viewer ends at once (a display that cannot be reached).
     """
     from warpcut.recording import read_summary
 
     summary = read_summary(path)
-    viewer = [sys.executable, "-m", "rerun_cli"]
+    viewer = VIEWER
     if web:
         click.echo(f"serving {path} at http://127.0.0.1:9090 (gRPC on port 9876); Ctrl-C stops it")
         sys.exit(subprocess.run([*viewer, "--web-viewer", "--bind", "127.0.0.1", str(path)]).returncode)
@@ -860,14 +906,28 @@ def replay(path: Path, web: bool) -> None:
         os.environ.get(v) for v in ("DISPLAY", "WAYLAND_DISPLAY")
     )
     if has_display:
-        subprocess.Popen(
-            [*viewer, str(path)],
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-            start_new_session=True,
+        with tempfile.TemporaryFile() as log:  # not a pipe: the viewer outlives this command
+            process = subprocess.Popen(
+                [*viewer, str(path)], stdout=subprocess.DEVNULL, stderr=log, start_new_session=True
+            )
+            try:  # a viewer that cannot open a window (a display that is set but unreachable) ends at once
+                code = process.wait(timeout=VIEWER_START_S)
+            except subprocess.TimeoutExpired:
+                click.echo(f"opened {path} in the rerun viewer")
+                return
+            log.seek(0)
+            said = re.sub(r"\x1b\[[0-9;]*m", "", log.read().decode(errors="replace")).splitlines()
+        errors = [line.strip() for line in said if line.startswith("Error")]
+        if code == 0 and not errors:  # e.g. handed the file to a viewer that was open already
+            click.echo(f"opened {path} in the rerun viewer")
+            return
+        # (rerun's viewer ends with status 0 also when it cannot reach the display)
+        reason = errors[-1].rsplit(": ", 1)[-1] if errors else f"exit code {code}"
+        click.echo(
+            f"error: the rerun viewer ended at once ({reason}); is the display reachable? "
+            "What the recording holds:",
+            err=True,
         )
-        click.echo(f"opened {path} in the rerun viewer")
-        return
     size_mb = path.stat().st_size / 1e6
     click.echo(f"recording {path} ({size_mb:.1f} MB, application {summary.application_id})")
     click.echo(
@@ -880,12 +940,18 @@ def replay(path: Path, web: bool) -> None:
         click.echo(f"    {entity}")
     if len(summary.entity_paths) > shown:
         click.echo(f"    ... and {len(summary.entity_paths) - shown} more")
-    click.echo("no display here (DISPLAY and WAYLAND_DISPLAY are unset); to view it, either")
+    click.echo(
+        "no display here (DISPLAY and WAYLAND_DISPLAY are unset); to view it, either"
+        if not has_display
+        else "to view it, either"
+    )
     click.echo(f"  run 'rerun {path}' (pip install rerun-sdk) on a machine with a display, or")
     click.echo(
         f"  run 'warpcut replay {path} --web' and open http://localhost:9090 "
         "(over ssh, forward ports 9090 and 9876: ssh -L 9090:localhost:9090 -L 9876:localhost:9876 HOST)"
     )
+    if has_display:  # the viewer could not be opened
+        sys.exit(1)
 
 
 def _rl_results(
@@ -1408,6 +1474,5 @@ def run(
         _echo_written(plot_regions(cuts.of(contour.name, methods), out))
         _echo_written(plot_improvements(report, methods[1:], out))
         _echo_written(plot_pinch_candidates(plan, config, out))
-    if recorder is not None:
-        _echo_written([recorder.path])
+    _echo_recording(recorder)
     click.echo(f"wrote {out}")
