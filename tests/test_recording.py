@@ -502,6 +502,27 @@ def test_the_recorder_process_finishes_the_file_when_the_stepping_process_dies(t
     assert sorted(p.name for p in tmp_path.iterdir()) == ["closed.rrd", "dead.rrd"]
 
 
+def test_a_stepping_process_that_dies_before_recording_leaves_an_earlier_file_alone(tmp_path):
+    script = textwrap.dedent(
+        """
+        import os, sys
+        from warpcut.recording import Recorder
+
+        recorder = Recorder(sys.argv[1] + "/recording.rrd", background="process")
+        recorder.on_step("none")  # made, never called
+        os._exit(3)  # dies without closing the recorder
+        """
+    )
+    (tmp_path / "recording.rrd").write_bytes(b"earlier")
+    done = subprocess.run([sys.executable, "-c", script, str(tmp_path)], timeout=120, capture_output=True)
+    assert done.returncode == 3, done.stderr.decode()[-2000:]
+    deadline = time.monotonic() + 30.0
+    while len(list(tmp_path.iterdir())) > 1 and time.monotonic() < deadline:  # the process discards its file
+        time.sleep(0.05)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["recording.rrd"]
+    assert (tmp_path / "recording.rrd").read_bytes() == b"earlier"
+
+
 @pytest.mark.parametrize("background", ["thread", False])
 def test_a_failure_on_the_worker_surfaces_and_the_file_remains(tmp_path, monkeypatch, background):
     def fail(*args, **kwargs):
@@ -683,6 +704,16 @@ def test_a_recorder_that_recorded_nothing_leaves_an_earlier_file_alone(tmp_path,
         recorder.on_step("rl")  # made, never called
         raise KeyboardInterrupt
     assert not recorder.written and recorder.close() is None
+    assert path.read_bytes() == before
+
+    # Interrupted while the episode starts (here: copying what its frames are drawn with).
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    task.sim.state_reader = interrupted
+    with pytest.raises(KeyboardInterrupt), Recorder(path, background=background) as recorder:
+        task.run(None, on_step=recorder.on_step("rl"))
+    assert not recorder.written and recorder.recorded_envs == {}
     assert path.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["recording.rrd"]  # no temporary file left
 

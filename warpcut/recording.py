@@ -253,7 +253,7 @@ class Recorder:
         if self.closed:
             return self.path if self.written else None
         self.closed = True
-        keep = any(episode.task is not None for episode in self._episodes.values())
+        keep = any(episode.started for episode in self._episodes.values())
         try:
             for episode in self._episodes.values():
                 episode.flush(final=True)
@@ -266,7 +266,7 @@ class Recorder:
     def recorded_envs(self) -> dict[str, int]:
         """How many envs were recorded of each method whose episode started: ``envs``, or fewer where its
         task had fewer."""
-        return {method: len(e.envs) for method, e in self._episodes.items() if e.task is not None}
+        return {method: len(e.envs) for method, e in self._episodes.items() if e.started}
 
     def __enter__(self) -> Recorder:
         return self
@@ -343,6 +343,8 @@ class _Episode:
         self.recorder, self.method, self.key = recorder, method, key
         self.sink = recorder._sink
         self.task: CuttingTask | None = None
+        self.started = False
+        """Whether the sink took this episode's start (then the recording holds it, and is kept)."""
         self.envs = np.zeros(0, dtype=np.intp)
         self.read_state: Callable[..., np.ndarray] | None = None
         self.frames: list[_Frame] = []
@@ -375,7 +377,6 @@ class _Episode:
     def _start(self, task: CuttingTask) -> None:
         """Copy what the frames of ``task`` are drawn with; the writer derives the rest."""
         self.flush(final=True)
-        self.task = task
         self.batch_frames, self.leads = self.sink.batching(task)
         grid, config = task.grid, task.config
         self.envs = np.arange(min(self.recorder.envs, task.num_envs))
@@ -399,6 +400,8 @@ class _Episode:
         ]
         self.grasped = any(env.disc is not None for env in envs)
         self.sink.start(self.key, self.method, _TaskSetup(grid, config, envs))
+        self.started = True
+        self.task = task  # last: a start cut short (Ctrl-C) is made again by the next step
 
     def flush(self, final: bool = False) -> None:
         """Hand the buffered frames to the sink; ``final``: the episode (or the recording) ends here."""
