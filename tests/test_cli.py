@@ -99,6 +99,8 @@ def test_simulate_accepts_a_contour_file(tmp_path):
             r"--record: N must be a positive integer \(got -2",
         ),
         (["simulate", "--contour", "fls-circle", "-5"], "No such option '-5'"),
+        (["simulate", "--contour", "fls-circle", "--record", "-12"], r"--record: .*\(got -12\)"),
+        (["simulate", "--contour", "fls-circle", "--record", "2", "-7"], "No such option '-7'"),
         (["simulate", "--contour", "fls-circle", "--seed", "-1"], "--seed.*-1 is not in the range x>=0"),
         (
             [
@@ -142,6 +144,11 @@ def test_warp_starts_quietly_unless_asked():
     assert "Warp 1." in verbose.stdout + verbose.stderr  # the banner is back
     if done.stdout.strip() == "False":
         assert "CUDA" in verbose.stdout + verbose.stderr  # what a CPU-only machine says about CUDA
+    # Started with standard error closed (cron, daemons): nothing to silence, and nothing breaks.
+    closed = subprocess.run(
+        ["bash", "-c", f'"{sys.executable}" -c "{code}" 2>&-'], capture_output=True, text=True, env=env
+    )
+    assert closed.returncode == 0 and closed.stdout.strip() == done.stdout.strip()
 
 
 def test_console_script_runs():

@@ -6,7 +6,9 @@ recorder process and the CLI's start-up do not pay for Warp.
 On a machine without NVIDIA's driver, Warp's native code prints "Warp CUDA warning: Could not find or
 load the NVIDIA CUDA driver" on every start, which says nothing to someone who runs on the CPU anyway
 (``--device cuda`` still fails with a clear error there): unless ``WARPCUT_VERBOSE`` is set, Warp is
-initialised here with its standard error silenced when the driver cannot be loaded.
+initialised here, at import, with its standard error silenced when the driver cannot be loaded (so set
+``wp.config`` options that ``wp.init()`` reads, such as the kernel cache, by their environment variables,
+e.g. ``WARP_CACHE_PATH``, or before importing warpcut's simulator).
 """
 
 import ctypes
@@ -27,9 +29,15 @@ def _cuda_driver_loadable() -> bool:
 
 
 def _init_quietly() -> None:
-    """``wp.init()`` with file descriptor 2 pointed at /dev/null (the message comes from C)."""
-    sys.stderr.flush()
-    saved = os.dup(2)
+    """``wp.init()`` with file descriptor 2 pointed at /dev/null (the message comes from C); a plain
+    ``wp.init()`` where there is no standard error to silence."""
+    if sys.stderr is not None:
+        sys.stderr.flush()
+    try:
+        saved = os.dup(2)
+    except OSError:  # fd 2 is closed: nothing would be printed anyway
+        wp.init()
+        return
     try:
         with open(os.devnull, "w") as null:
             os.dup2(null.fileno(), 2)

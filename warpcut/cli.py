@@ -24,8 +24,9 @@ POLICY_NAMES = ("none", "fixed", "analytic")
 
 
 class CleanErrors(click.Group):
-    """Turn usage errors, the library's ValueErrors and files that cannot be read or written into one line
-    on stderr and exit status 2; a failed recording (:class:`RecordingError`) into one line and status 1
+    """Turn usage errors, the library's ValueErrors and files that cannot be read or written (an OSError
+    naming a path; with ``WARPCUT_VERBOSE`` set, its traceback instead) into one line on stderr and exit
+    status 2; a failed recording (:class:`RecordingError`) into one line and status 1
     (with ``WARPCUT_VERBOSE`` set, also the recorder process's traceback)."""
 
     def main(self, *args, **kwargs):
@@ -42,20 +43,17 @@ class CleanErrors(click.Group):
                 else ""
             )
             message = exc.format_message()
-            given = kwargs.get("args") or (args[0] if args else sys.argv[1:])
-            if (
-                isinstance(exc, click.NoSuchOption)
-                and re.fullmatch(r"-\d+", exc.option_name)
-                and any(a == "--record" or a.startswith("--record=") for a in given)
-            ):
+            if isinstance(exc, click.NoSuchOption) and (value := _negative_record(kwargs, args, exc)):
                 # click reads "--record -1" (an option whose value is optional) as --record, then -1.
-                message = f"--record: N must be a positive integer (got {exc.option_name})"
+                message = f"--record: N must be a positive integer (got {value})"
             click.echo(f"error: {message}{hint}", err=True)
             sys.exit(2)
-        except (
-            ValueError,
-            OSError,
-        ) as exc:  # OSError: a missing input, an output path that cannot be written
+        except (ValueError, FileNotFoundError) as exc:
+            click.echo(f"error: {exc}", err=True)
+            sys.exit(2)
+        except OSError as exc:  # a file that cannot be read or written (a path named), unless debugging
+            if exc.filename is None or os.environ.get("WARPCUT_VERBOSE"):
+                raise
             click.echo(f"error: {exc}", err=True)
             sys.exit(2)
         except RecordingError as exc:  # the file holds what was recorded until then
@@ -64,6 +62,22 @@ class CleanErrors(click.Group):
                 click.echo(note, err=True)
             sys.exit(1)
         sys.exit(result if isinstance(result, int) else 0)
+
+
+def _negative_record(kwargs: dict, args: tuple, exc: click.NoSuchOption) -> str | None:
+    """The negative number given to ``--record`` that click took for the unknown option ``exc`` names,
+    if that is what happened."""
+    given = list(kwargs.get("args") or (args[0] if args else sys.argv[1:]))
+    for k, token in enumerate(given):
+        if token == "--record" and k + 1 < len(given):
+            value = given[k + 1]
+        elif token.startswith("--record="):
+            value = token.split("=", 1)[1]
+        else:
+            continue
+        if re.fullmatch(r"-\d[\d.eE+-]*", value) and value.startswith(exc.option_name):
+            return value
+    return None
 
 
 RECORD_COLOURS = ("strain", "height")
