@@ -11,13 +11,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from warpcut.config import SimConfig
+from warpcut.config import AUTHORS_UNITS_PER_MM, SimConfig
 from warpcut.contours import Contour
 from warpcut.planning import feasible_centroid, sample_pinch_candidates
 from warpcut.task import CuttingTask
-
-AUTHORS_UNITS_PER_MM = 4.8
-"""The authors' simulator measured the 100 mm sheet in units of 1/4.8 mm."""
 
 
 @dataclass

@@ -47,7 +47,7 @@ def bench_setting(label: str, config, args) -> None:
         sim._colour_start,
         int(config.first_order_z),
         config.cut_radius,
-        config.cut_height_mm,
+        config.cut_height,
     )
 
     def packed(lanes: int) -> SimdState:

@@ -9,7 +9,7 @@ import shapely
 
 from warpcut.config import SheetGrid
 from warpcut.scoring import (
-    Score,
+    Separation,
     achieved_mask,
     improvement_pct,
     intended_mask,
@@ -174,7 +174,7 @@ def test_batch_with_one_region_per_env_matches_single_envs():
     alive = np.stack([circle_cut(grid), uncut, circle_cut(grid, radius=30.0)])
     regions = [disc(), disc(radius=20.0), disc(radius=30.0)]
     score = symmetric_difference(alive, regions, grid)
-    assert isinstance(score, Score)
+    assert isinstance(score, Separation)
     assert score.intended.shape == score.achieved.shape == (3, grid.num_vertices)
     for field in ("error_vertices", "error_mm2", "missed_vertices", "excess_vertices"):
         assert getattr(score, field).shape == (3,)

@@ -30,7 +30,7 @@ class SimdDriver:
             sim._colour_start,
             int(sim.config.first_order_z),
             sim.config.cut_radius,
-            sim.config.cut_height_mm,
+            sim.config.cut_height,
         )
         self.state = SimdState(sim.num_envs, n, lanes, sim.device)
         self.state.load(sim.x, sim.x_prev, sim.alive, sim.pin, sim.anchor)
@@ -110,7 +110,7 @@ def fused_arguments(sim: Simulator, seed: int) -> list:
         int(sim.config.first_order_z),
         seed,
         sim.config.cut_radius,
-        sim.config.cut_height_mm,
+        sim.config.cut_height,
         sim.pin,
         sim.anchor,
         sim.displacement,

@@ -113,9 +113,20 @@ def test_cutting_removes_vertices_near_the_tip_only(device):
     sim.set_tip(np.array([[50.0, 50.0, 0.0, 0.0]]))  # travelling: no cut
     sim.update()
     assert sim.alive_mask().all()
-    sim.set_tip(np.array([[50.0, 50.0, 20.0, 1.0]]))  # above the height limit: no cut
+    sim.set_tip(np.array([[50.0, 50.0, 20.0, 1.0]]))  # no height limit (the default): cut from above
+    sim.update()
+    np.testing.assert_array_equal(~sim.alive_mask()[0], near)
+
+
+def test_a_cut_height_limit_misses_material_far_from_the_tip(device):
+    sim = Simulator(SimConfig(resolution=11, gravity=0.0, cut_height_mm=8.0), 1, device=device)
+    sim.reset()
+    sim.set_tip(np.array([[50.0, 50.0, 20.0, 1.0]]))  # 20 mm above the sheet: out of reach
     sim.update()
     assert sim.alive_mask().all()
+    sim.set_tip(np.array([[50.0, 50.0, 5.0, 1.0]]))
+    sim.update()
+    assert not sim.alive_mask().all()
 
 
 @pytest.mark.parametrize(
@@ -128,7 +139,8 @@ def test_cutting_removes_vertices_near_the_tip_only(device):
         ({"springs": ("shear",)}, "springs: choose from"),
         ({"iterations": 0}, "iterations: must be an integer"),
         ({"gravity": [1.0, float("nan")]}, "gravity: must be finite"),
-        ({"cut_height_mm": -1.0}, "cut_height_mm: must be a positive number"),
+        ({"cut_height_mm": -1.0}, "cut_height_mm: must be a positive number .* None .*no limit"),
+        ({"score": "area"}, "score: choose one of"),
     ],
 )
 def test_bad_config_names_the_field(change, message):

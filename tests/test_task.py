@@ -58,7 +58,13 @@ def test_uncut_sheet_scores_the_intended_area(device):
     task = CuttingTask(SimConfig(resolution=13), contour, device=device)
     task.reset()
     score = task.score()
-    assert score.error_vertices[0] == score.missed_vertices[0] == score.intended.sum() > 0
+    # Nothing cut: the path encloses nothing (its error is the whole intended area) and nothing came free.
+    assert score.metric == "path"
+    assert score.error_mm2[0] == pytest.approx(contour.area_mm2)
+    assert score.error_vertices[0] == pytest.approx(contour.area_mm2 / task.grid.vertex_area_mm2)
+    assert np.isnan(score.dropped_fraction[0])
+    assert score.separated_error_vertices[0] == score.missed_vertices[0] == score.intended.sum() > 0
+    assert not score.separated[0]
 
 
 def test_tasks_batch_different_contours_and_pinches(device):

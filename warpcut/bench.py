@@ -60,12 +60,44 @@ def updates_per_second(
 
 def rollouts_per_second(num_envs: int, device: str, repeats: int, config: SimConfig | None = None) -> float:
     """Complete no-tension ``fls-circle`` rollouts per second; settling and trajectories are built once
-    (amortised), the timed part is reset + every step + scoring. ``config``: default physics if None."""
+    (amortised), the timed part is reset + every step + scoring (the path score included: traced every
+    update). ``config``: default physics if None."""
     from warpcut.contours import load_contour
     from warpcut.task import CuttingTask
 
     task = CuttingTask(config or SimConfig(), load_contour("fls-circle"), num_envs=num_envs, device=device)
     return num_envs / median_time(lambda: task.run(None), repeats, lambda: wp.synchronize_device(device))
+
+
+def scoring_overhead_pct(num_envs: int, device: str, repeats: int) -> float:
+    """What the path score adds to a no-tension ``fls-circle`` rollout (reset, every step, scoring), in %:
+    tracing the tip through the mesh every update and scoring both ways, against the same rollout scored
+    only by separated material. The two are timed alternately, ``2 * repeats + 1`` times each; the ratio of
+    their medians."""
+    from warpcut.contours import load_contour
+    from warpcut.task import CuttingTask
+
+    contour = load_contour("fls-circle")
+    tasks = {
+        traced: CuttingTask(
+            SimConfig(score="path" if traced else "separated"),
+            contour,
+            num_envs=num_envs,
+            device=device,
+            trace_path=traced,
+        )
+        for traced in (True, False)
+    }
+    times: dict[bool, list[float]] = {True: [], False: []}
+    for traced, task in tasks.items():
+        task.run(None)  # warm-up
+    for _ in range(2 * repeats + 1):
+        for traced, task in tasks.items():
+            start = time.perf_counter()
+            task.run(None)
+            wp.synchronize_device(device)
+            times[traced].append(time.perf_counter() - start)
+    return 100.0 * (statistics.median(times[True]) / statistics.median(times[False]) - 1.0)
 
 
 def numpy_updates_per_second(repeats: int) -> float:
@@ -148,6 +180,8 @@ def run_bench(
     result["rollout_envs"] = rollout_envs
     result["rollouts_per_s"] = rollouts_per_second(rollout_envs, device, repeats)
     result["rollouts_per_s_paper_sweeps"] = rollouts_per_second(rollout_envs, device, repeats, PAPER_SWEEPS)
+    progress(f"path-scoring overhead at B={rollout_envs}")
+    result["scoring_overhead_pct"] = scoring_overhead_pct(rollout_envs, device, repeats)
     progress("NumPy reference")
     result["numpy_updates_per_s"] = numpy_updates_per_second(repeats)
     best = max(ups.values())

@@ -300,3 +300,177 @@ def fused_update_kernel(
                 dy = p[1] - t[1]
                 if dx * dx + dy * dy <= cut_radius * cut_radius and wp.abs(p[2] - t[2]) <= cut_height:
                     alive[i] = 0
+
+
+# ---------------------------------------------------------------------------------------------- path
+# Where the scissors went through the material: after every cutting update, the tip is located in the
+# deformed mesh (two triangles per grid cell) and mapped back to rest (material) coordinates. The flat
+# kernel below and the SIMD-layout kernel in ``kernels_simd`` share these functions, so both backends map
+# bit-identically; they differ only in how they fetch a vertex.
+
+PATH_MAPPED = wp.constant(1.0)
+PATH_DROPPED = wp.constant(0.0)
+PATH_IDLE = wp.constant(-1.0)
+
+
+@wp.func
+def triangle_weights(a: wp.vec3, b: wp.vec3, c: wp.vec3, tx: float, ty: float) -> wp.vec3:
+    """Barycentric weights of ``(tx, ty)`` in triangle ``abc`` projected on x-y; a negative first weight
+    when the point lies outside it or the triangle is degenerate."""
+    e1x = b[0] - a[0]
+    e1y = b[1] - a[1]
+    e2x = c[0] - a[0]
+    e2y = c[1] - a[1]
+    det = e1x * e2y - e2x * e1y
+    if wp.abs(det) < 1.0e-9:
+        return wp.vec3(-1.0, 0.0, 0.0)
+    px = tx - a[0]
+    py = ty - a[1]
+    wb = (px * e2y - e2x * py) / det
+    wc = (e1x * py - px * e1y) / det
+    wa = 1.0 - wb - wc
+    tol = -1.0e-5
+    if wa < tol or wb < tol or wc < tol:
+        return wp.vec3(-1.0, 0.0, 0.0)
+    return wp.vec3(wa, wb, wc)
+
+
+@wp.func
+def locate_in_cell(
+    p00: wp.vec3,
+    p10: wp.vec3,
+    p01: wp.vec3,
+    p11: wp.vec3,
+    ok00: int,
+    ok10: int,
+    ok01: int,
+    ok11: int,
+    mx0: float,
+    my0: float,
+    hx: float,
+    hy: float,
+    tip: wp.vec4,
+    best: wp.vec4,
+) -> wp.vec4:
+    """Test the cell's triangles ``(00, 10, 11)`` and ``(00, 11, 01)`` for the tip; keep the hit nearest
+    the tip in height. ``best = (|dz|, mx, my, found)``: ``mx, my`` the tip's material position (the
+    cell's rest square starts at ``(mx0, my0)``); only usable triangles (``ok`` at every corner) count."""
+    out = best
+    if ok00 != 0 and ok10 != 0 and ok11 != 0:
+        w = triangle_weights(p00, p10, p11, tip[0], tip[1])
+        if w[0] >= -1.0e-5:
+            dz = wp.abs(w[0] * p00[2] + w[1] * p10[2] + w[2] * p11[2] - tip[2])
+            if out[3] == 0.0 or dz < out[0]:
+                out = wp.vec4(dz, mx0 + (w[1] + w[2]) * hx, my0 + w[2] * hy, 1.0)
+    if ok00 != 0 and ok11 != 0 and ok01 != 0:
+        w = triangle_weights(p00, p11, p01, tip[0], tip[1])
+        if w[0] >= -1.0e-5:
+            dz = wp.abs(w[0] * p00[2] + w[1] * p11[2] + w[2] * p01[2] - tip[2])
+            if out[3] == 0.0 or dz < out[0]:
+                out = wp.vec4(dz, mx0 + w[1] * hx, my0 + (w[1] + w[2]) * hy, 1.0)
+    return out
+
+
+@wp.func
+def usable(alive: int, removed_at: int, update: int, window: int) -> int:
+    """Whether a vertex may carry the tip: alive, or cut within the last ``window`` updates (the tip
+    always sits on freshly cut material; older cuts are holes)."""
+    if alive != 0 or update - removed_at <= window:
+        return 1
+    return 0
+
+
+@wp.func
+def search_window(
+    attempt: int,
+    path: wp.array2d(dtype=wp.vec3),
+    env: int,
+    update: int,
+    tip: wp.vec4,
+    nx: int,
+    ny: int,
+    hx: float,
+    hy: float,
+    reach: int,
+) -> wp.vec4i:
+    """Cells ``(row_lo, row_hi, col_lo, col_hi)`` searched by attempt 0 (the cells around the previous
+    update's material point, if it was mapped) and 1 (``reach`` cells around the tip's x-y taken as a
+    material point); an empty range skips the attempt."""
+    cx = tip[0]
+    cy = tip[1]
+    r = reach
+    if attempt == 0:
+        if update == 0:
+            return wp.vec4i(1, 0, 1, 0)
+        previous = path[env, update - 1]
+        if previous[2] != PATH_MAPPED:
+            return wp.vec4i(1, 0, 1, 0)
+        cx = previous[0]
+        cy = previous[1]
+        r = 1
+    c0 = wp.clamp(int(cx / hx), 0, nx - 2)
+    r0 = wp.clamp(int(cy / hy), 0, ny - 2)
+    return wp.vec4i(wp.max(r0 - r, 0), wp.min(r0 + r, ny - 2), wp.max(c0 - r, 0), wp.min(c0 + r, nx - 2))
+
+
+@wp.kernel
+def map_tip_kernel(
+    # Model:
+    nx: int,
+    ny: int,
+    hx: float,
+    hy: float,
+    window: int,
+    reach: int,
+    env_offset: int,
+    update: int,
+    # Data in:
+    x: wp.array(dtype=wp.vec3),
+    alive: wp.array(dtype=wp.int32),
+    tip: wp.array(dtype=wp.vec4),
+    # Data in/out:
+    removed_at: wp.array(dtype=wp.int32),
+    # Data out:
+    path: wp.array2d(dtype=wp.vec3),
+):
+    """Map each env's tip of update ``update`` to material coordinates: ``path[env, update] = (mx, my,
+    PATH_MAPPED)``, ``(0, 0, PATH_DROPPED)`` off the sheet or over a hole, ``(0, 0, PATH_IDLE)`` while the
+    scissors do not cut. First records when vertices were cut (``removed_at``). The cells of
+    :func:`search_window` are searched in turn until one holds the tip."""
+    env = wp.tid() + env_offset
+    n = nx * ny
+    base = env * n
+    for v in range(n):
+        if alive[base + v] == 0 and removed_at[base + v] < 0:
+            removed_at[base + v] = update
+    t = tip[env]
+    status = PATH_IDLE
+    best = wp.vec4(0.0, 0.0, 0.0, 0.0)
+    if t[3] > 0.5:
+        status = PATH_DROPPED
+        for attempt in range(2):
+            cells = search_window(attempt, path, env, update, t, nx, ny, hx, hy, reach)
+            if cells[0] <= cells[1]:
+                for r in range(cells[0], cells[1] + 1):
+                    for c in range(cells[2], cells[3] + 1):
+                        i = base + r * nx + c
+                        best = locate_in_cell(
+                            x[i],
+                            x[i + 1],
+                            x[i + nx],
+                            x[i + nx + 1],
+                            usable(alive[i], removed_at[i], update, window),
+                            usable(alive[i + 1], removed_at[i + 1], update, window),
+                            usable(alive[i + nx], removed_at[i + nx], update, window),
+                            usable(alive[i + nx + 1], removed_at[i + nx + 1], update, window),
+                            float(c) * hx,
+                            float(r) * hy,
+                            hx,
+                            hy,
+                            t,
+                            best,
+                        )
+                if best[3] != 0.0:
+                    status = PATH_MAPPED
+                    break
+    path[env, update] = wp.vec3(best[1], best[2], status)

@@ -42,7 +42,16 @@ from types import SimpleNamespace
 import numpy as np
 
 from warpcut._warp import wp
-from warpcut.kernels import PIN_FREE, PIN_GRASP
+from warpcut.kernels import (
+    PATH_DROPPED,
+    PATH_IDLE,
+    PATH_MAPPED,
+    PIN_FREE,
+    PIN_GRASP,
+    locate_in_cell,
+    search_window,
+    usable,
+)
 
 DEFAULT_LANES = 8
 RELAX_MODES = ("warp", "native")
@@ -394,6 +403,93 @@ def simd_kernels(lanes: int = DEFAULT_LANES) -> SimpleNamespace:
             lane_params[blk].tz[lane] = t[2]
             lane_params[blk].cutting[lane] = t[3]
 
+    @wp.func
+    def lane_vertex(vert: wp.array(dtype=Vert), i: int, lane: int) -> wp.vec4:
+        return wp.vec4(vert[i].x[lane], vert[i].y[lane], vert[i].z[lane], vert[i].alive[lane])
+
+    @wp.kernel(enable_backward=False, module=module)
+    def map_tip_kernel(
+        # Model:
+        nx: int,
+        ny: int,
+        hx: float,
+        hy: float,
+        window: int,
+        reach: int,
+        block_offset: int,
+        num_envs: int,
+        update: int,
+        # Data in:
+        vert: wp.array(dtype=Vert),
+        tip: wp.array(dtype=wp.vec4),
+        # Data in/out:
+        removed_at: wp.array(dtype=wp.int32),
+        # Data out:
+        path: wp.array2d(dtype=wp.vec3),
+    ):
+        """:func:`warpcut.kernels.map_tip_kernel` for the ``L`` envs of a block: the same search and
+        arithmetic (:func:`warpcut.kernels.locate_in_cell`), reading the packed state."""
+        blk = wp.tid() + block_offset
+        n = nx * ny
+        base = blk * n
+        for v in range(n):
+            alive = vert[base + v].alive
+            for lane in range(L):
+                env = blk * L + lane
+                if alive[lane] == 0.0 and env < num_envs:
+                    if removed_at[env * n + v] < 0:
+                        removed_at[env * n + v] = update
+        for lane in range(L):
+            env = blk * L + lane
+            if env < num_envs:
+                flat = env * n
+                t = tip[env]
+                status = PATH_IDLE
+                best = wp.vec4(0.0, 0.0, 0.0, 0.0)
+                if t[3] > 0.5:
+                    status = PATH_DROPPED
+                    for attempt in range(2):
+                        window_cells = search_window(attempt, path, env, update, t, nx, ny, hx, hy, reach)
+                        if window_cells[0] <= window_cells[1]:
+                            for r in range(window_cells[0], window_cells[1] + 1):
+                                for c in range(window_cells[2], window_cells[3] + 1):
+                                    v = r * nx + c
+                                    i = base + v
+                                    j = flat + v
+                                    a = lane_vertex(vert, i, lane)
+                                    b = lane_vertex(vert, i + 1, lane)
+                                    d = lane_vertex(vert, i + nx, lane)
+                                    e = lane_vertex(vert, i + nx + 1, lane)
+                                    best = locate_in_cell(
+                                        wp.vec3(a[0], a[1], a[2]),
+                                        wp.vec3(b[0], b[1], b[2]),
+                                        wp.vec3(d[0], d[1], d[2]),
+                                        wp.vec3(e[0], e[1], e[2]),
+                                        usable(wp.where(a[3] != 0.0, 1, 0), removed_at[j], update, window),
+                                        usable(
+                                            wp.where(b[3] != 0.0, 1, 0), removed_at[j + 1], update, window
+                                        ),
+                                        usable(
+                                            wp.where(d[3] != 0.0, 1, 0), removed_at[j + nx], update, window
+                                        ),
+                                        usable(
+                                            wp.where(e[3] != 0.0, 1, 0),
+                                            removed_at[j + nx + 1],
+                                            update,
+                                            window,
+                                        ),
+                                        float(c) * hx,
+                                        float(r) * hy,
+                                        hx,
+                                        hy,
+                                        t,
+                                        best,
+                                    )
+                            if best[3] != 0.0:
+                                status = PATH_MAPPED
+                                break
+                path[env, update] = wp.vec3(best[1], best[2], status)
+
     return SimpleNamespace(
         lanes=L,
         vec=vecL,
@@ -406,6 +502,7 @@ def simd_kernels(lanes: int = DEFAULT_LANES) -> SimpleNamespace:
         unpack=unpack_kernel,
         pack_params=pack_params_kernel,
         pack_controls=pack_controls_kernel,
+        map_tip=map_tip_kernel,
     )
 
 

@@ -74,7 +74,7 @@ class ReferenceSheet:
         if tip is not None and tip[3] > 0.5:
             d2 = (self.x[:, 0] - tip[0]) ** 2 + (self.x[:, 1] - tip[1]) ** 2
             hit = (d2 <= np.float32(self.config.cut_radius) ** 2) & (
-                np.abs(self.x[:, 2] - tip[2]) <= self.config.cut_height_mm
+                np.abs(self.x[:, 2] - tip[2]) <= self.config.cut_height
             )
             self.alive &= ~hit
 

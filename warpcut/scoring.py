@@ -1,38 +1,47 @@
-"""Cut quality: the symmetric difference between the intended and the achieved region.
+"""Cut quality: the symmetric difference between the intended and the achieved region, two ways.
 
-Both regions are compared in *material* coordinates, i.e. on the sheet's rest layout
-(:attr:`SheetGrid.material`), so a cut is scored by which material ended up separated, however the
-tensioned sheet was deformed while it was cut. Regions are sets of vertices; each vertex stands for an
-``hx * hy`` cell, so a vertex count times :attr:`SheetGrid.vertex_area_mm2` is an area in mm^2.
+Both are measured in *material* coordinates (the sheet's rest layout, :attr:`SheetGrid.material`), so a
+cut is judged by which material it went through, however the tensioned sheet was deformed while it was
+cut. Errors are areas in mm^2 and in vertices (mm^2 over :attr:`SheetGrid.vertex_area_mm2`, the paper's
+unit). The intended region X is the inside of a closed contour, or the piece an open contour cuts off
+the sheet (:meth:`warpcut.contours.Contour.intended_region`).
 
-* **Intended**: vertices whose rest position lies in the intended region (a shapely polygon: the inside
-  of a closed contour, or the piece an open contour cuts off the sheet).
-* **Achieved**: the material the cut actually separated from the sheet. The alive vertices are split into
-  pieces by 4-connectivity; the piece holding the most alive vertices *outside* the intended region is the
-  sheet and every other alive vertex is separated. Removed vertices (the kerf) take the label of their
-  nearest alive vertex, so the achieved region's boundary runs along the centre line of the cut.
+* **path** (the paper's, Section III-B, and the default): Y is the region enclosed by the *cut path*,
+  where the scissors actually went through the material. The simulator maps the tip of every cutting
+  update into material coordinates (:meth:`warpcut.simulator.Simulator.trace_path`); the points are put
+  in contour order (by the arc length of the contour point each was meant to cut), gaps bridged with
+  straight lines, and closed: as a ring for a closed contour, for an open one along the sheet's edges on
+  the intended side. Self-intersections are repaired (``shapely.make_valid``). The error is the area of
+  X xor Y: graded (a cut that wanders by d costs about perimeter x d) and independent of whether the
+  piece came free. Tip positions off the sheet or over a hole are dropped (``dropped_fraction``).
+* **separated**: Y is the material that actually came free. The alive vertices are split into pieces by
+  4-connectivity; the piece holding the most alive vertices outside X is the sheet and every other alive
+  vertex is separated. Removed vertices (the kerf) take the label of their nearest alive vertex. Regions
+  are vertex sets; each vertex stands for an ``hx * hy`` cell. Nearly all-or-nothing: a cut that misses
+  by one vertex leaves the piece attached and scores its whole area. ``separated`` says whether the
+  intended piece came free (at least half of X's vertices were separated).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import shapely
 from scipy import ndimage
 
-from warpcut.config import SheetGrid
+from warpcut.config import SCORES, SheetGrid
 
 Region = shapely.Polygon | shapely.MultiPolygon
 
 
 @dataclass
-class Score:
-    """Per-env cut error; ``B`` envs on a grid of ``V = ny * nx`` vertices."""
+class Separation:
+    """Separated-material error per env; ``B`` envs on a grid of ``V = ny * nx`` vertices."""
 
     error_vertices: np.ndarray
-    """(B,) float64: vertices in exactly one of the intended and achieved regions."""
+    """(B,) float64: vertices in exactly one of the intended and separated regions."""
     error_mm2: np.ndarray
     """(B,) float64: ``error_vertices * grid.vertex_area_mm2`` (mm^2)."""
     missed_vertices: np.ndarray
@@ -43,6 +52,83 @@ class Score:
     """(B, V) bool: vertices separated from the sheet."""
     intended: np.ndarray
     """(V,) bool for one region shared by all envs, or (B, V) bool for one region per env."""
+
+    @property
+    def separated(self) -> np.ndarray:
+        """(B,) bool: the intended piece came free (at least half of its vertices were separated)."""
+        intended = np.broadcast_to(self.intended, self.achieved.shape)
+        return (self.achieved & intended).sum(axis=1) >= 0.5 * intended.sum(axis=1)
+
+
+@dataclass
+class Score:
+    """Per-env cut error under both scores; ``error_*`` is the one ``metric`` names (tables, rewards)."""
+
+    metric: str
+    """``"path"`` or ``"separated"``: what ``error_vertices`` and ``error_mm2`` measure."""
+    error_vertices: np.ndarray
+    """(B,) float64: the ``metric``'s error in vertices (mm^2 / vertex area)."""
+    error_mm2: np.ndarray
+    """(B,) float64: the ``metric``'s error (mm^2)."""
+    path_error_mm2: np.ndarray
+    """(B,) float64: the path score, area of X xor (region enclosed by the cut path) (mm^2)."""
+    path_error_vertices: np.ndarray
+    """(B,) float64: ``path_error_mm2`` in vertices."""
+    dropped_fraction: np.ndarray
+    """(B,) float64: share of the cutting updates whose tip lay off the sheet or over a hole (dropped
+    from the path and bridged); NaN for an env that never cut."""
+    cut_paths: list[np.ndarray]
+    """Per env, the (K, 2) material points the scissors went through, in contour order (mm)."""
+    cut_regions: list
+    """Per env, the region the cut path encloses (a shapely geometry, possibly empty)."""
+    separation: Separation
+    """The separated-material score (``missed_vertices``, ``achieved`` ...)."""
+
+    @property
+    def separated_error_vertices(self) -> np.ndarray:
+        """(B,) float64: the separated-material error in vertices."""
+        return self.separation.error_vertices
+
+    @property
+    def separated_error_mm2(self) -> np.ndarray:
+        """(B,) float64: the separated-material error (mm^2)."""
+        return self.separation.error_mm2
+
+    @property
+    def separated(self) -> np.ndarray:
+        """(B,) bool: the intended piece came free."""
+        return self.separation.separated
+
+    @property
+    def missed_vertices(self) -> np.ndarray:
+        return self.separation.missed_vertices
+
+    @property
+    def excess_vertices(self) -> np.ndarray:
+        return self.separation.excess_vertices
+
+    @property
+    def achieved(self) -> np.ndarray:
+        return self.separation.achieved
+
+    @property
+    def intended(self) -> np.ndarray:
+        return self.separation.intended
+
+    def info(self) -> dict[str, np.ndarray]:
+        """The (B,) per-env figures by name (env ``info``, results files)."""
+        return {
+            "error_vertices": self.error_vertices,
+            "error_mm2": self.error_mm2,
+            "path_error_vertices": self.path_error_vertices,
+            "path_error_mm2": self.path_error_mm2,
+            "separated_error_vertices": self.separated_error_vertices,
+            "separated_error_mm2": self.separated_error_mm2,
+            "separated": self.separated,
+            "dropped_fraction": self.dropped_fraction,
+            "missed_vertices": self.missed_vertices,
+            "excess_vertices": self.excess_vertices,
+        }
 
 
 def intended_mask(region: Region, grid: SheetGrid) -> np.ndarray:
@@ -120,8 +206,8 @@ def achieved_mask(alive: np.ndarray, intended: np.ndarray, grid: SheetGrid) -> n
 
 def symmetric_difference(
     alive: np.ndarray, region_or_regions: Region | Sequence[Region], grid: SheetGrid
-) -> Score:
-    """Score a batch of cuts against the intended region(s).
+) -> Separation:
+    """The separated-material score of a batch of cuts against the intended region(s).
 
     Args:
         alive: (B, ny * nx) or (ny * nx,) bool; False where the scissors removed the vertex.
@@ -130,7 +216,7 @@ def symmetric_difference(
         grid: The sheet's rest layout.
 
     Returns:
-        The :class:`Score` of each env (``B = 1`` for a 1-D ``alive``).
+        The :class:`Separation` of each env (``B = 1`` for a 1-D ``alive``).
 
     Raises:
         ValueError: ``alive`` has the wrong shape, or the number of regions is not ``B``.
@@ -146,12 +232,16 @@ def symmetric_difference(
                 f"region_or_regions: got {len(regions)} regions for {alive.shape[0]} envs; "
                 "give one polygon for all envs or one per env"
             )
-        intended = np.stack([intended_mask(region, grid) for region in regions])
+        masks: dict[int, np.ndarray] = {}  # envs cutting the same contour share its region object
+        for region in regions:
+            if id(region) not in masks:
+                masks[id(region)] = intended_mask(region, grid)
+        intended = np.stack([masks[id(region)] for region in regions])
     achieved = achieved_mask(alive, intended, grid)
     missed = (intended & ~achieved).sum(axis=1).astype(np.float64)
     excess = (achieved & ~intended).sum(axis=1).astype(np.float64)
     error = missed + excess
-    return Score(
+    return Separation(
         error_vertices=error,
         error_mm2=error * grid.vertex_area_mm2,
         missed_vertices=missed,
@@ -201,3 +291,173 @@ def _batch_mask(mask: np.ndarray, name: str, grid: SheetGrid, batch: int | None 
             f"{grid.ny} x {grid.nx} grid (ny x nx), got {mask.shape}"
         )
     return batched
+
+
+# ---------------------------------------------------------------------------------------------- path
+def order_cut_path(path: np.ndarray, arc_mm: np.ndarray) -> tuple[np.ndarray, float]:
+    """One env's traced tips in contour order.
+
+    Args:
+        path: (T, 3) per update ``(mx, my, status)`` from :attr:`warpcut.simulator.Simulator.path`: status
+            1 mapped, 0 dropped, -1 not cutting.
+        arc_mm: (T,) arc length along the contour of the point each update meant to cut (NaN while the
+            scissors travel).
+
+    Returns:
+        ``(points, dropped_fraction)``: (K, 2) mapped material points sorted by ``arc_mm`` (stable), and
+        the share of cutting updates that were dropped (NaN if none cut).
+    """
+    status = path[:, 2]
+    cutting = (status >= 0.0) & np.isfinite(arc_mm)
+    mapped = cutting & (status > 0.5)
+    total = int(np.count_nonzero(cutting))
+    dropped = float(total - np.count_nonzero(mapped)) / total if total else float("nan")
+    order = np.argsort(arc_mm[mapped], kind="stable")
+    return path[mapped][order, :2].astype(np.float64), dropped
+
+
+def path_region(points: np.ndarray, contour) -> shapely.Geometry:
+    """The region a cut path encloses, closed as the contour's intended region is.
+
+    Args:
+        points: (K, 2) material points in contour order (mm), e.g. from :func:`order_cut_path`.
+        contour: The :class:`~warpcut.contours.Contour` being cut (closed or open, its sheet size).
+
+    Returns:
+        A polygonal shapely geometry (empty for fewer than 3 points, or 2 for an open contour). Closed: the
+        ring through the points. Open: the path, its ends carried straight onto the sheet edges the
+        contour's ends lie on, closed along the sheet's edges on the intended side.
+    """
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    if contour.closed:
+        if len(points) < 3:
+            return shapely.Polygon()
+        ring = points
+    else:
+        if len(points) < 2:
+            return shapely.Polygon()
+        width, height = contour.sheet_size
+        ends = np.asarray(contour.points)[[0, -1]]
+        start = _onto_edge(points[0], ends[0], width, height)
+        stop = _onto_edge(points[-1], ends[1], width, height)
+        ccw = _intended_side_ccw(contour)
+        chain = _boundary_corners(
+            _perimeter(stop, width, height), _perimeter(start, width, height), ccw, width, height
+        )
+        ring = np.vstack([start, points, stop, *chain]) if chain else np.vstack([start, points, stop])
+    polygon = shapely.make_valid(shapely.Polygon(ring), method="structure", keep_collapsed=False)
+    if not contour.closed:
+        polygon = shapely.intersection(polygon, shapely.box(0.0, 0.0, *contour.sheet_size))
+    return polygon
+
+
+def path_errors(
+    points: Sequence[np.ndarray], contours: Sequence, grid: SheetGrid
+) -> tuple[np.ndarray, np.ndarray, list]:
+    """The path score of a batch: ``(error_mm2 (B,), error_vertices (B,), regions)``.
+
+    Args:
+        points: Per env, (K, 2) cut-path points in contour order (:func:`order_cut_path`).
+        contours: Per env, the contour being cut.
+        grid: The sheet's rest layout (for the vertex area).
+    """
+    regions = [path_region(p, c) for p, c in zip(points, contours, strict=True)]
+    intended = np.array([c.intended_region() for c in contours], dtype=object)
+    error = shapely.area(shapely.symmetric_difference(np.array(regions, dtype=object), intended))
+    error = np.asarray(error, dtype=np.float64)
+    return error, error / grid.vertex_area_mm2, regions
+
+
+def score_cut(
+    metric: str,
+    paths: np.ndarray | None,
+    arc_mm: np.ndarray,
+    alive: np.ndarray,
+    contours: Sequence,
+    grid: SheetGrid,
+) -> Score:
+    """Both scores of a batch of finished cuts.
+
+    Args:
+        metric: ``"path"`` or ``"separated"``: which one ``Score.error_*`` holds.
+        paths: (B, T, 3) traced tips (:attr:`warpcut.simulator.Simulator.path`), or None where the path
+            was not traced: the path fields are then NaN, and ``metric`` must be ``"separated"``.
+        arc_mm: (B, T) arc length along each env's contour of the point each update meant to cut.
+        alive: (B, V) bool alive masks after the cut.
+        contours: Per env, the contour cut.
+        grid: The sheet's rest layout.
+    """
+    if metric not in SCORES:
+        raise ValueError(f"metric: choose one of {SCORES} (got {metric!r})")
+    if paths is None:
+        if metric == "path":
+            raise ValueError("paths: the path score needs the traced cut path (Simulator.trace_path)")
+        nan = np.full(len(contours), np.nan)
+        ordered = [(np.zeros((0, 2)), np.nan)] * len(contours)
+        points, regions, error_mm2, error_vertices = [o[0] for o in ordered], [None] * len(contours), nan, nan
+    else:
+        ordered = [order_cut_path(p, a) for p, a in zip(paths, arc_mm, strict=True)]
+        points = [o[0] for o in ordered]
+        error_mm2, error_vertices, regions = path_errors(points, contours, grid)
+    separation = symmetric_difference(alive, [c.intended_region() for c in contours], grid)
+    chosen = (
+        (error_mm2, error_vertices) if metric == "path" else (separation.error_mm2, separation.error_vertices)
+    )
+    return Score(
+        metric=metric,
+        error_vertices=chosen[1],
+        error_mm2=chosen[0],
+        path_error_mm2=error_mm2,
+        path_error_vertices=error_vertices,
+        dropped_fraction=np.array([o[1] for o in ordered]),
+        cut_paths=points,
+        cut_regions=regions,
+        separation=separation,
+    )
+
+
+def _onto_edge(point: np.ndarray, edge_point: np.ndarray, width: float, height: float) -> np.ndarray:
+    """``point`` carried straight onto the sheet edge that ``edge_point`` lies on (the nearest one)."""
+    x, y = edge_point
+    gaps = np.array([x, width - x, y, height - y])
+    edge = int(np.argmin(gaps))
+    out = np.clip(np.asarray(point, dtype=np.float64), 0.0, [width, height])
+    out[edge // 2] = (0.0, width, 0.0, height)[edge]
+    return out
+
+
+def _perimeter(point: np.ndarray, width: float, height: float) -> float:
+    """Position of a point on the sheet's boundary, counter-clockwise from (0, 0) (mm)."""
+    x, y = point
+    gaps = np.array([y, width - x, height - y, x])  # bottom, right, top, left
+    edge = int(np.argmin(gaps))
+    return float((x, width + y, 2 * width + height - x, 2 * (width + height) - y)[edge])
+
+
+def _boundary_corners(t_from: float, t_to: float, ccw: bool, width: float, height: float) -> list:
+    """The sheet corners passed walking its boundary from ``t_from`` to ``t_to`` (perimeter positions)."""
+    total = 2.0 * (width + height)
+    corners = [
+        (0.0, (0.0, 0.0)),
+        (width, (width, 0.0)),
+        (width + height, (width, height)),
+        (2 * width + height, (0.0, height)),
+    ]
+    sign = 1.0 if ccw else -1.0
+    span = (sign * (t_to - t_from)) % total
+    passed = [(sign * (t - t_from)) % total for t, _ in corners]
+    inside = sorted((d, c) for d, (_, c) in zip(passed, corners, strict=True) if 0.0 < d < span)
+    return [np.array(c) for _, c in inside]
+
+
+def _intended_side_ccw(contour) -> bool:
+    """Whether the open contour's intended region closes from its end back to its start counter-clockwise
+    along the sheet's boundary."""
+    width, height = contour.sheet_size
+    pts = np.asarray(contour.points, dtype=np.float64)
+    start, stop = pts[0], pts[-1]
+    chain = _boundary_corners(
+        _perimeter(stop, width, height), _perimeter(start, width, height), True, width, height
+    )
+    ccw = shapely.Polygon(np.vstack([pts, *chain]) if chain else pts)
+    return abs(abs(ccw.area) - contour.area_mm2) <= 1e-6 * width * height

@@ -7,6 +7,7 @@ its own scissor tip. One *update* is: integrate, relax every spring colour ``ite
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -111,6 +112,10 @@ class Simulator:
         self._update_counter = wp.zeros(1, dtype=wp.int32, device=self.device)
         self._counter_synced = True
         self._graphs: dict[tuple, tuple] = {}
+        self.path: wp.array | None = None
+        """(B, T) ``vec3`` while tracing (:meth:`trace_path`): per update, the tip in material coordinates and
+        its status (``kernels.PATH_MAPPED``, ``PATH_DROPPED``, ``PATH_IDLE``)."""
+        self._removed_at: wp.array | None = None
         self.grasped = np.zeros(num_envs, dtype=bool)
         self.x, self.x_prev, self._spare = self._buffers
         self.alive = self._alive[0]
@@ -151,7 +156,7 @@ class Simulator:
                 self._colour_start,
                 int(self.config.first_order_z),
                 self.config.cut_radius,
-                self.config.cut_height_mm,
+                self.config.cut_height,
             )
             units = self._simd.blocks
         if capture is None:
@@ -256,10 +261,76 @@ class Simulator:
         self.alive.fill_(1)
         self.displacement.zero_()
         self.tip.zero_()
+        if self.path is not None:
+            self._removed_at.fill_(-1)
+            self.path.fill_(wp.vec3(0.0, 0.0, kernels.PATH_IDLE))
         self.update_count = 0
         self._update_counter.zero_()
         self._counter_synced = True
         self._flat_current, self._packed_current = True, False
+
+    # ------------------------------------------------------------------ cut path
+    def trace_path(self, horizon: int | None) -> None:
+        """Map the scissor tip of each of the first ``horizon`` updates after a reset into material (rest)
+        coordinates, into :attr:`path`; ``None`` stops tracing.
+
+        After every cutting update the tip is located in the deformed mesh (two triangles per grid cell,
+        projected on x-y) and its material position interpolated barycentrically. A triangle may carry the
+        tip while each of its vertices is alive or was cut within the last :attr:`path_window` updates: the
+        tip always sits on freshly cut material, older cuts are holes. Where several layers lie under the
+        tip, the one nearest it in height is taken. A tip over no such triangle (off the sheet, over a
+        hole) is dropped. Cells near the tip's x-y read as a material point (:attr:`path_reach` cells) are
+        searched first, the whole sheet only if none holds it. Updates with ``tape_mode`` are not traced.
+        """
+        if horizon is None:
+            self.path = self._removed_at = None
+            return
+        if not isinstance(horizon, int) or horizon < 1:
+            raise ValueError(f"horizon: must be a positive number of updates (got {horizon!r})")
+        b, n = self.num_envs, self.grid.num_vertices
+        self.path = wp.full(
+            (b, horizon), wp.vec3(0.0, 0.0, kernels.PATH_IDLE), dtype=wp.vec3, device=self.device
+        )
+        self._removed_at = wp.full(b * n, -1, dtype=wp.int32, device=self.device)
+
+    @property
+    def path_window(self) -> int:
+        """Updates for which a cut vertex still carries the tip: twice the tip's travel from first touching
+        a cell's corner to leaving the cell (cut radius plus a cell diagonal)."""
+        hx, hy = self.grid.spacing_mm
+        reach_mm = self.config.cut_radius + math.hypot(hx, hy)
+        return math.ceil(2.0 * reach_mm / self.config.trajectory_spacing_mm)
+
+    @property
+    def path_reach(self) -> int:
+        """Cells around the tip searched first: the grasp's largest displacement plus the cut radius."""
+        reach_mm = self.config.max_displacement_mm + self.config.cut_radius
+        return math.ceil(reach_mm / min(self.grid.spacing_mm))
+
+    def _map_args(self) -> list:
+        hx, hy = self.grid.spacing_mm
+        return [self.grid.nx, self.grid.ny, float(hx), float(hy), self.path_window, self.path_reach]
+
+    def _map_flat(self, count: int, offset: int) -> None:
+        """Trace the tips of envs ``offset .. offset + count`` from the env-major state."""
+        wp.launch(
+            kernels.map_tip_kernel,
+            dim=count,
+            inputs=[
+                *self._map_args(),
+                offset,
+                self.update_count,
+                self.x,
+                self.alive,
+                self.tip,
+                self._removed_at,
+            ],
+            outputs=[self.path],
+            device=self.device,
+        )
+
+    def _tracing(self) -> bool:
+        return self.path is not None and self.update_count < self.path.shape[1]
 
     # ------------------------------------------------------------------ stepping
     def move_grasp(self, action: np.ndarray) -> None:
@@ -315,6 +386,8 @@ class Simulator:
                     self._update_captured()
                 else:
                     self._update_colours(tape_mode)
+                if self._tracing() and not tape_mode:
+                    self._map_flat(self.num_envs, 0)
             self._packed_current = False
         self.update_count += 1
 
@@ -327,10 +400,26 @@ class Simulator:
             self._packed_current = True
         state.load_controls(self.displacement, self.tip)
         seed = self._noise_seed()
+        tracing = self._tracing()
 
         def launch(part: tuple[int, int]) -> None:
             count, offset = part
             state.step(self._simd_model, seed, block_offset=offset, block_count=count)
+            if tracing:
+                wp.launch(
+                    state.kernels.map_tip,
+                    dim=count,
+                    inputs=[
+                        *self._map_args(),
+                        offset,
+                        self.num_envs,
+                        self.update_count,
+                        state.vert,
+                        self.tip,
+                    ],
+                    outputs=[self._removed_at, self.path],
+                    device=self.device,
+                )
 
         if self._pool is None:
             launch(self._slices[0])
@@ -369,7 +458,7 @@ class Simulator:
                     int(self.config.first_order_z),
                     seed,
                     self.config.cut_radius,
-                    self.config.cut_height_mm,
+                    self.config.cut_height,
                     self.pin,
                     self.anchor,
                     self.displacement,
@@ -378,7 +467,10 @@ class Simulator:
                 outputs=[self.x, self.x_prev, self.alive],
                 device=self.device,
             )
+            if tracing:
+                self._map_flat(count, offset)
 
+        tracing = self._tracing()
         if self._pool is None:
             launch(self._slices[0])
         else:
@@ -480,7 +572,7 @@ class Simulator:
         wp.launch(
             kernels.cut_kernel,
             dim=(b, n),
-            inputs=[n, self.config.cut_radius, self.config.cut_height_mm, work, self.alive, self.tip],
+            inputs=[n, self.config.cut_radius, self.config.cut_height, work, self.alive, self.tip],
             outputs=[alive_out],
             device=self.device,
         )

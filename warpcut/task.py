@@ -13,11 +13,12 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+import shapely
 
 from warpcut.config import SheetGrid, SimConfig
 from warpcut.contours import Contour
 from warpcut.material import interpolate, material_cells, material_to_world
-from warpcut.scoring import Score, symmetric_difference
+from warpcut.scoring import Score, score_cut
 from warpcut.simulator import Simulator
 
 if TYPE_CHECKING:
@@ -111,6 +112,8 @@ class CuttingTask:
         seed: Process-noise seed.
         backend: Simulator backend (``auto``, ``fused`` or ``colours``; see :class:`Simulator`).
         threads: CPU threads stepping the batch (default: all cores).
+        trace_path: Trace the cut path (:meth:`Simulator.trace_path`) for the path score; without it
+            :meth:`score` has only the separated-material score (its path fields are NaN), a little faster.
     """
 
     def __init__(
@@ -124,6 +127,7 @@ class CuttingTask:
         seed: int = 0,
         backend: str = "auto",
         threads: int | None = None,
+        trace_path: bool = True,
     ):
         if isinstance(contours, Contour):
             contours = [contours] * (num_envs or 1)
@@ -149,6 +153,13 @@ class CuttingTask:
             self._tips[env, :t] = trajectory.tip
             self._tips[env, t:, :3] = trajectory.tip[-1, :3]  # parked, not cutting, once done
             self._targets[env, :t] = trajectory.material
+        self._arc_mm = self._target_arcs()
+        if trace_path:
+            self.sim.trace_path(self.horizon_updates)
+        elif config.score == "path":
+            raise ValueError(
+                "trace_path: the path score needs the traced path; keep trace_path=True or score='separated'"
+            )
         self.update_index = 0
         self.fiducials: Fiducials | None = None
         """The fiducials a camera tracks on the sheets, where an env observes them (it sets them here):
@@ -203,6 +214,24 @@ class CuttingTask:
             trajectories.append(cache[key])
         return trajectories
 
+    def _target_arcs(self) -> np.ndarray:
+        """(B, horizon) arc length along each env's contour of the point each update meant to cut (NaN
+        while travelling or parked): the order in which the cut path is closed."""
+        arcs = np.full(self._targets.shape[:2], np.nan)
+        cache: dict[tuple[int, int], np.ndarray] = {}
+        for env, (contour, trajectory) in enumerate(zip(self.contours, self.trajectories, strict=True)):
+            key = (id(contour), id(trajectory))
+            if key not in cache:
+                points = np.asarray(contour.points)
+                line = shapely.LineString(np.vstack([points, points[:1]]) if contour.closed else points)
+                material = trajectory.material
+                finite = np.all(np.isfinite(material), axis=1)
+                arc = np.full(len(material), np.nan)
+                arc[finite] = shapely.line_locate_point(line, shapely.points(material[finite]))
+                cache[key] = arc
+            arcs[env, : len(trajectory.material)] = cache[key]
+        return arcs
+
     def reset(self, seed: int | None = None) -> None:
         """Settled, uncut sheets; grasps at the pinch points; scissors at their trajectories' starts.
 
@@ -244,10 +273,34 @@ class CuttingTask:
         world = interpolate(self.sim.positions(), vertices, weights)[:, 0]
         return np.where(active[:, None], world, np.nan)
 
+    def cut_path(self) -> np.ndarray | None:
+        """(B, T, 3) the tips traced so far (:attr:`Simulator.path`): material x, y and status per update;
+        None when the path is not traced."""
+        return None if self.sim.path is None else self.sim.path.numpy()
+
+    def cut_deviation(self, first_update: int, stop_update: int) -> tuple[np.ndarray, np.ndarray]:
+        """Distance in material coordinates between where the scissors cut and where they meant to cut,
+        over updates ``first_update .. stop_update - 1``: the path score's own increment.
+
+        Returns:
+            ``(mean_mm, count)``: (B,) mean distance over the mapped cutting updates (NaN where none) and
+            (B,) how many there were.
+        """
+        path = self.sim.path.numpy()[:, first_update:stop_update]
+        target = self._targets[:, first_update:stop_update]
+        mapped = (path[..., 2] > 0.5) & np.all(np.isfinite(target), axis=-1)
+        distance = np.linalg.norm(np.where(mapped[..., None], path[..., :2] - target, 0.0), axis=-1)
+        count = mapped.sum(axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = np.where(count > 0, distance.sum(axis=1) / count, np.nan)
+        return mean, count
+
     def score(self) -> Score:
-        """Symmetric difference between each env's intended region and what its cut separated."""
-        regions = [c.intended_region() for c in self.contours]
-        return symmetric_difference(self.sim.alive_mask(), regions, self.grid)
+        """Each env's error under both scores (:mod:`warpcut.scoring`); ``error_*`` follows
+        ``config.score``."""
+        return score_cut(
+            self.config.score, self.cut_path(), self._arc_mm, self.sim.alive_mask(), self.contours, self.grid
+        )
 
     def run(self, policy, on_step: Callable[[CuttingTask, np.ndarray | None], None] | None = None) -> Score:
         """Reset, then step ``policy(task) -> (B, 3)`` (or ``None`` for no moves) to the end; score.
