@@ -89,7 +89,7 @@ def scoring_overhead_pct(num_envs: int, device: str, repeats: int) -> float:
         for traced in (True, False)
     }
     times: dict[bool, list[float]] = {True: [], False: []}
-    for traced, task in tasks.items():
+    for task in tasks.values():
         task.run(None)  # warm-up
     for _ in range(2 * repeats + 1):
         for traced, task in tasks.items():

@@ -25,7 +25,7 @@ the sheet (:meth:`warpcut.contours.Contour.intended_region`).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import shapely
