@@ -13,17 +13,23 @@ Actions:
     simulator also caps the grasp's total displacement at ``max_displacement_mm``.
 
 Reward:
-    Sparse (paper): 0 before the last step; at it, ``-error_mm2 / contour.area_mm2``, the symmetric
-    difference between the intended and the achieved region relative to the intended area. With
-    ``dense_reward``, every step also adds ``-|tracking error| / max_displacement_mm / num_steps`` (the
-    tracking error of :mod:`envs.observations`; 0 while the tip travels), so an episode's shaping sums to
-    minus the mean tracking error in units of ``max_displacement_mm``.
+    Sparse (paper): 0 before the last step; at it, ``-error_mm2 / contour.area_mm2``, the cut's error
+    (``sim_config.score``: the paper's path score by default, :mod:`warpcut.scoring`) relative to the
+    intended area. With ``dense_reward``, every step also adds ``-deviation / max_displacement_mm /
+    num_steps``, where ``deviation`` is the mean distance, in material coordinates, between where the
+    scissors cut during the step and where they meant to cut (:meth:`CuttingTask.cut_deviation`: the path
+    score's own increment; 0 while the tip travels), so an episode's shaping sums to about minus the mean
+    deviation in units of ``max_displacement_mm``.
 
 Episode:
-    Ends (``terminated``) once the scissors have followed the whole trajectory, ``num_steps`` steps; the
-    last step's ``info`` holds the score: ``error_vertices``, ``error_mm2``, ``missed_vertices``,
-    ``excess_vertices`` and ``relative_error`` (``error_mm2 / area_mm2``). With ``max_episode_steps`` below
-    ``num_steps`` the episode is instead cut short (``truncated``) with no score and no final reward.
+    Ends (``terminated``) once the scissors have followed the whole trajectory, ``num_steps`` steps. Every
+    step's ``info`` has ``cut_deviation_mm`` (that step's mean deviation, NaN while travelling) and
+    ``running_path_error_mm2`` (the deviations so far times the tip's advance: the area between the
+    intended and the cut path so far, about what the path score will charge). The last step's ``info``
+    also holds the score (:meth:`warpcut.scoring.Score.info`: ``error_vertices``, ``error_mm2``, the path
+    and separated errors, ``separated``, ``dropped_fraction``, ``missed_vertices``, ``excess_vertices``)
+    and ``relative_error`` (``error_mm2 / area_mm2``). With ``max_episode_steps`` below ``num_steps`` the
+    episode is instead cut short (``truncated``) with no score and no final reward.
 """
 
 from __future__ import annotations
@@ -108,7 +114,7 @@ class PatternCutOptions:
     allow_z: bool = False
     """Let the grasp move along z too: ``Discrete(7)``, or a 3-D continuous action (paper: x-y only)."""
     dense_reward: bool = False
-    """Add the per-step tracking-error penalty to the sparse final reward."""
+    """Add the per-step cut-deviation penalty (the path score's increment) to the sparse final reward."""
     max_episode_steps: int | None = None
     """Truncate episodes after this many steps; default: the whole cut."""
 
@@ -205,6 +211,7 @@ class PatternCut:
         else:
             self.action_space = gym.spaces.Box(-1.0, 1.0, (num_axes,), dtype=np.float32)
         self._sampled = False
+        self._running_path_error = np.zeros(num_envs)
 
     @property
     def step_index(self) -> int:
@@ -225,6 +232,7 @@ class PatternCut:
             )
             self._sampled = True
         self.task.reset(seed=seed)
+        self._running_path_error = np.zeros(self.num_envs)
         self.fiducials.reset(self.task.sim.positions())
         return self.observe()
 
@@ -237,29 +245,27 @@ class PatternCut:
 
         Returns:
             ``(observations (B, D) float32, rewards (B,) float64, terminated, truncated, info)``; ``info``
-            holds the (B,) score arrays at the last step of a completed cut and is empty otherwise.
+            holds (B,) arrays: every step the cut's deviation, and at the last step of a completed cut the
+            score (module docstring).
         """
         if self.task.done or self.step_index >= self.episode_steps:
             raise RuntimeError("step: the episode is over; call reset() first")
+        first_update = self.task.update_index
         self.task.step(self.moves(actions))
         terminated = self.task.done
         truncated = not terminated and self.step_index >= self.episode_steps
         rewards = np.zeros(self.num_envs)
+        deviation, count = self.task.cut_deviation(first_update, self.task.update_index)
+        moved = np.nan_to_num(deviation, nan=0.0)
+        self._running_path_error += moved * count * self.config.trajectory_spacing_mm
         if self.options.dense_reward:
-            tracking = np.nan_to_num(np.linalg.norm(self.tracking_error(), axis=1), nan=0.0)
-            rewards -= tracking / self.config.max_displacement_mm / self.task.num_steps
-        info = {}
+            rewards -= moved / self.config.max_displacement_mm / self.task.num_steps
+        info = {"cut_deviation_mm": deviation, "running_path_error_mm2": self._running_path_error.copy()}
         if terminated:
             score = self.task.score()
             relative = score.error_mm2 / self.area_mm2
             rewards -= relative
-            info = {
-                "error_vertices": score.error_vertices,
-                "error_mm2": score.error_mm2,
-                "missed_vertices": score.missed_vertices,
-                "excess_vertices": score.excess_vertices,
-                "relative_error": relative,
-            }
+            info.update(score.info(), relative_error=relative)
         return self.observe(), rewards, terminated, truncated, info
 
     def moves(self, actions: np.ndarray) -> np.ndarray:

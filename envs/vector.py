@@ -5,7 +5,9 @@ the same step; the env then resets all of them at once inside that ``step`` and 
 episodes' first observations. Following the Gymnasium spec for same-step autoreset
 (https://farama.org/Vector-Autoreset-Mode), the ending step's observations and score are in
 ``info["final_obs"]`` (an object array of B observations) and ``info["final_info"]`` (a dict of (B,)
-arrays), each with its ``"_final_obs"`` / ``"_final_info"`` mask (all True). Same-step rather than
+arrays), each with its ``"_final_obs"`` / ``"_final_info"`` mask (all True). Every step's info also has
+the per-step ``cut_deviation_mm`` and ``running_path_error_mm2`` of :mod:`envs.pattern_cut` (of the
+episode that the step ended, where it ended one), with their masks. Same-step rather than
 next-step because a next-step reset would spend a whole ``step`` call of B envs ignoring their actions
 after every episode, and because rsl-rl (:mod:`envs.rsl`) expects resets inside ``step``.
 """
@@ -70,14 +72,17 @@ class PatternCutVecEnv(VectorEnv):
             raise RuntimeError("step: call reset() first")
         obs, rewards, terminated, truncated, info = self.scene.step(actions)
         b = self.num_envs
-        infos: dict[str, Any] = {}
+        every_env = np.ones(b, dtype=bool)
+        step_keys = ("cut_deviation_mm", "running_path_error_mm2")
+        infos: dict[str, Any] = {k: info[k] for k in step_keys}
+        infos.update({f"_{k}": every_env for k in step_keys})
         if terminated or truncated:
             final_obs = np.empty(b, dtype=object)
             for env in range(b):
                 final_obs[env] = obs[env]
             everyone = np.ones(b, dtype=bool)
             final_info = {**info, **{f"_{k}": everyone.copy() for k in info}}
-            infos = {
+            infos |= {
                 "final_obs": final_obs,
                 "_final_obs": everyone,
                 "final_info": final_info,

@@ -14,7 +14,7 @@ import envs
 from envs import ENV_ID, PatternCutEnv, PatternCutVecEnv
 from envs.observations import Fiducials
 from envs.rsl import FINAL_ERROR_KEY, PatternCutRslEnv
-from warpcut.config import SheetGrid
+from warpcut.config import SheetGrid, SimConfig
 from warpcut.contours import load_contour
 
 SMALL = {"contour": "circle-small", "resolution": 9}
@@ -49,6 +49,9 @@ def test_make_and_make_vec_build_the_registered_envs():
         gym.make(ENV_ID, contuor="fls-circle")
 
 
+STEP_INFO = ["cut_deviation_mm", "running_path_error_mm2"]
+
+
 def test_vector_env_shapes_dtypes_and_discrete_moves(device):
     vec = PatternCutVecEnv(4, device=device, contour_features=True, allow_z=True, **SMALL)
     obs, info = vec.reset(seed=0)
@@ -58,7 +61,10 @@ def test_vector_env_shapes_dtypes_and_discrete_moves(device):
     assert obs.shape == (4, OBS_DIM + 7) and obs.dtype == np.float32 and obs in vec.observation_space
     assert rewards.shape == (4,) and rewards.dtype == np.float64 and np.all(rewards == 0.0)
     assert terminated.dtype == bool and truncated.dtype == bool and not (terminated.any() or truncated.any())
-    assert info == {}
+    assert sorted(info) == sorted(STEP_INFO + [f"_{k}" for k in STEP_INFO])
+    assert info["cut_deviation_mm"].shape == (4,) and info["_cut_deviation_mm"].all()
+    deviation = np.nan_to_num(info["cut_deviation_mm"])
+    np.testing.assert_allclose(info["running_path_error_mm2"], deviation * 2 * vec.task.config.trajectory_spacing_mm)
     moves = [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, 0, -1]]
     np.testing.assert_allclose(vec.task.sim.displacements(), moves, atol=1e-6)
     np.testing.assert_allclose(obs[:, 0], 1 / vec.task.num_steps)
@@ -85,7 +91,8 @@ def test_vector_autoreset_is_same_step_with_final_obs_and_score():
     num_steps = vec.task.num_steps
     for _ in range(num_steps - 1):
         obs, rewards, terminated, truncated, info = vec.step(np.array([1, 3]))
-        assert not terminated.any() and not truncated.any() and np.all(rewards == 0.0) and info == {}
+        assert not terminated.any() and not truncated.any() and np.all(rewards == 0.0)
+        assert "final_info" not in info and set(STEP_INFO) <= set(info)
     obs, rewards, terminated, truncated, info = vec.step(np.array([1, 3]))
     assert terminated.all() and not truncated.any()
     assert info["_final_obs"].all() and info["_final_info"].all() and info["final_obs"].dtype == object
@@ -93,6 +100,9 @@ def test_vector_autoreset_is_same_step_with_final_obs_and_score():
     assert final.shape == (2, OBS_DIM) and np.all(final[:, 0] == 1.0)
     score = info["final_info"]
     assert score["_error_mm2"].all()
+    for key in ("path_error_vertices", "separated_error_vertices", "separated", "dropped_fraction"):
+        assert score[key].shape == (2,)
+    np.testing.assert_allclose(score["error_mm2"], score["path_error_mm2"])  # the default score
     areas = [load_contour(name).area_mm2 for name in ("circle-small", "edge-bite")]
     np.testing.assert_allclose(rewards, -score["error_mm2"] / areas)
     np.testing.assert_allclose(score["relative_error"], -rewards)
@@ -110,7 +120,8 @@ def test_truncated_episodes_have_no_score_and_reset_in_the_same_step():
     for _ in range(3):
         obs, rewards, terminated, truncated, info = vec.step(np.array([0, 0]))
     assert truncated.all() and not terminated.any() and np.all(rewards == 0.0)
-    assert info["final_info"] == {} and info["_final_info"].all()
+    assert "error_mm2" not in info["final_info"] and info["_final_info"].all()
+    assert set(STEP_INFO) <= set(info["final_info"])
     assert obs[0, 0] == 0.0 and not np.array_equal(obs[:, 4:], start[:, 4:])  # resampled fiducials
 
 
@@ -179,17 +190,40 @@ def test_sparse_reward_is_zero_until_the_last_step_then_minus_the_relative_error
     assert set(info) == {
         "error_vertices",
         "error_mm2",
+        "path_error_vertices",
+        "path_error_mm2",
+        "separated_error_vertices",
+        "separated_error_mm2",
+        "separated",
+        "dropped_fraction",
         "missed_vertices",
         "excess_vertices",
         "relative_error",
+        *STEP_INFO,
     }
+    # The running path error (deviation x advance) approximates the path score's charge along the cut.
+    assert info["running_path_error_mm2"] > 0
 
 
-def test_dense_reward_penalises_tracking_error_every_step():
+def test_separated_score_drives_the_reward_when_chosen():
+    env = gym.make(ENV_ID, device="cpu", sim_config=SimConfig(score="separated"), **SMALL)
+    env.reset(seed=0)
+    terminated = False
+    while not terminated:
+        _, reward, terminated, _, info = env.step(0)
+    assert info["error_mm2"] == info["separated_error_mm2"] != info["path_error_mm2"]
+    assert reward == pytest.approx(-info["separated_error_mm2"] / env.unwrapped.task.contours[0].area_mm2)
+
+
+def test_dense_reward_penalises_the_cut_deviation_every_step():
     env = PatternCutEnv(device="cpu", dense_reward=True, **SMALL)
     env.reset(seed=0)
-    rewards = [env.step(1)[1] for _ in range(20)]  # pulling +x drags the contour off the scissors' path
+    steps = [env.step(1) for _ in range(20)]  # pulling +x drags the contour off the scissors' path
+    rewards = [s[1] for s in steps]
     assert all(r <= 0.0 for r in rewards) and min(rewards) < 0.0
+    scale = env.scene.config.max_displacement_mm * env.task.num_steps
+    for _, reward, _, _, info in steps:
+        assert reward == pytest.approx(-np.nan_to_num(info["cut_deviation_mm"]) / scale)
 
 
 def test_rsl_adapter_steps_logs_and_resets_itself():
