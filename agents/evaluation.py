@@ -48,12 +48,30 @@ class MethodSpec:
 
 @dataclass
 class MethodResult:
-    """A method's outcome on a suite: errors (num_contours, trials) in vertices and mm^2, and the pinch
-    point used per contour (None: no grasp)."""
+    """A method's outcome on a suite: per (contour, trial) the error under the protocol's score, whether
+    the piece came free and the share of the cut path dropped; the pinch point used per contour (None: no
+    grasp)."""
 
     errors: np.ndarray
+    """(num_contours, trials) error in vertices (``config.score``: path or separated)."""
     areas: np.ndarray
+    """(num_contours, trials) the same error in mm^2."""
     pinches: list[np.ndarray | None]
+    separated: np.ndarray | None = None
+    """(num_contours, trials) bool: the intended piece came free (None: not measured)."""
+    dropped: np.ndarray | None = None
+    """(num_contours, trials) share of cutting updates dropped from the path (None: not measured)."""
+
+    @classmethod
+    def from_rollouts(cls, rollouts: Sequence[dict]) -> MethodResult:
+        """From one :func:`agents.rl.policy_errors` dict per contour."""
+        return cls(
+            np.array([r["error_vertices"] for r in rollouts]),
+            np.array([r["error_mm2"] for r in rollouts]),
+            [r["pinch"] for r in rollouts],
+            np.array([r["separated"] for r in rollouts]),
+            np.array([r["dropped_fraction"] for r in rollouts]),
+        )
 
 
 def baseline_specs(
@@ -131,7 +149,11 @@ def run_method(
     score = task.run(spec.policy, on_step=on_step)
     shape = (len(contours), trials)
     return MethodResult(
-        score.error_vertices.reshape(shape), score.error_mm2.reshape(shape), list(spec.pinches)
+        score.error_vertices.reshape(shape),
+        score.error_mm2.reshape(shape),
+        list(spec.pinches),
+        score.separated.reshape(shape),
+        score.dropped_fraction.reshape(shape),
     )
 
 
@@ -175,10 +197,11 @@ def evaluate_suite(
             the cutting order that is best at the method's own pinch point).
 
     Returns:
-        ``{"rows": [{"contour", "none_error_vertices", "none_error_mm2", "METHOD_error_vertices",
-        "METHOD_improvement_pct", "METHOD_ci95", "METHOD_pinch", ...}], "mean": {"METHOD_improvement_pct",
-        "METHOD_ci95"}, "trials": int}``. The mean row averages the per-contour improvements; its CI is
-        over contours, as in the paper's table.
+        ``{"score": "path"|"separated", "rows": [{"contour", "none_error_vertices", "none_error_mm2",
+        "METHOD_error_vertices", "METHOD_improvement_pct", "METHOD_ci95", "METHOD_pinch",
+        "METHOD_separated_fraction", "METHOD_dropped_fraction", ...}], "mean": {"METHOD_improvement_pct",
+        "METHOD_ci95"}, "trials": int}``. Errors are under ``config.score``. The mean row averages the
+        per-contour improvements; its CI is over contours, as in the paper's table.
     """
     config = (config or SimConfig()).validated()
     if not isinstance(trials, int) or trials < 1:
@@ -228,6 +251,8 @@ def evaluate_suite(
             row[f"{method}_ci95"] = ci95(improvement)
             row[f"{method}_pinch"] = None if pinch_k is None else [float(v) for v in pinch_k]
             row[f"{method}_trials_error_vertices"] = [float(e) for e in errors[method][k]]
+            row[f"{method}_separated_fraction"] = _mean_or_none(results[method].separated, k)
+            row[f"{method}_dropped_fraction"] = _mean_or_none(results[method].dropped, k)
         rows.append(row)
     mean = {}
     for method in order:
@@ -238,7 +263,15 @@ def evaluate_suite(
             float(np.nanmean(values)) if np.isfinite(values).any() else float("nan")
         )
         mean[f"{method}_ci95"] = ci95(values)
-    return {"rows": rows, "mean": mean, "trials": trials}
+    return {"score": config.score, "rows": rows, "mean": mean, "trials": trials}
+
+
+def _mean_or_none(values: np.ndarray | None, contour: int) -> float | None:
+    """Mean over a contour's trials (NaN trials ignored); None where not measured or all NaN."""
+    if values is None:
+        return None
+    row = np.asarray(values[contour], dtype=np.float64)
+    return float(np.nanmean(row)) if np.isfinite(row).any() else None
 
 
 def compare_policies(
@@ -256,9 +289,11 @@ def compare_policies(
     ``on_step`` maps a method's name to the step callback of its batch, as in :func:`evaluate_suite`.
 
     Returns:
-        ``{"contour": name, "results": {method: {"error_vertices", "error_mm2", "improvement_pct",
-        "ci95_pct", "trials_error_vertices", "pinch"}}}``: means over trials; ``improvement_pct`` is the
-        mean paired improvement over no tension (0 for ``none`` itself).
+        ``{"contour": name, "score": "path"|"separated", "results": {method: {"error_vertices",
+        "error_mm2", "improvement_pct", "ci95_pct", "trials_error_vertices", "separated_fraction",
+        "dropped_fraction", "pinch"}}}``: means over trials; ``improvement_pct`` is the mean paired
+        improvement over no tension (0 for ``none`` itself); ``separated_fraction`` the share of trials
+        whose piece came free, ``dropped_fraction`` the mean share of the cut path dropped.
     """
     report = evaluate_suite([contour], methods, trials, config, pinch, device, seed, on_step=on_step)
     row = report["rows"][0]
@@ -270,6 +305,8 @@ def compare_policies(
             "improvement_pct": row[f"{method}_improvement_pct"],
             "ci95_pct": row[f"{method}_ci95"],
             "trials_error_vertices": row[f"{method}_trials_error_vertices"],
+            "separated_fraction": row[f"{method}_separated_fraction"],
+            "dropped_fraction": row[f"{method}_dropped_fraction"],
             "pinch": row[f"{method}_pinch"],
         }
-    return {"contour": contour.name, "results": results}
+    return {"contour": contour.name, "score": report["score"], "results": results}

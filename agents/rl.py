@@ -285,7 +285,7 @@ def policy_errors(
     obs, _ = env.reset(seed=seed)
     if on_step is not None:
         on_step(env.task, None)
-    errors = errors_mm2 = None
+    final = None
     with torch.inference_mode():
         for _ in range(env.task.num_steps):
             obs_td = {"policy": torch.as_tensor(obs)}
@@ -296,12 +296,13 @@ def policy_errors(
             if on_step is not None:
                 on_step(env.task, env.scene.moves(action))
             if terminated or truncated:
-                errors, errors_mm2 = np.asarray(info["error_vertices"]), np.asarray(info["error_mm2"])
+                final = info
                 break
-    if errors is None:
+    if final is None or "error_vertices" not in final:
         raise RuntimeError(f"{scenario.contour}: the episode did not end within {env.task.num_steps} steps")
     pinch = None if scenario.candidates is not None else scenario.pinch_point()
-    return {"error_vertices": errors, "error_mm2": errors_mm2, "pinch": pinch}
+    keys = ("error_vertices", "error_mm2", "separated", "dropped_fraction")
+    return {**{k: np.asarray(final[k]) for k in keys}, "pinch": pinch}
 
 
 def _tensordict(groups: dict[str, torch.Tensor], batch: int):

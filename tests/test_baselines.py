@@ -21,7 +21,7 @@ def test_no_tension_has_no_grasp():
 def test_fixed_search_picks_the_best_feasible_candidate():
     contour = load_contour("fls-circle")
     best, points, errors = search_fixed_pinch(contour, CONFIG, candidates=6, seed=3)
-    assert len(points) == 7  # 6 random + the feasible centroid
+    assert len(points) == 6  # 6 random; the centroid lies under the cutting arm
     assert np.all(pinch_feasible(points, contour, CONFIG))
     assert errors[np.flatnonzero((points == best).all(axis=1))[0]] == errors.min()
     assert np.array_equal(FixedTension(pinch=(30.0, 40.0)).pinch_point(contour, CONFIG), [30.0, 40.0])
@@ -29,8 +29,12 @@ def test_fixed_search_picks_the_best_feasible_candidate():
 
 def test_feasibility_excludes_corners_contour_and_edges():
     contour = load_contour("fls-circle")
-    points = np.array([[5.0, 5.0], [50.0, 75.0], [98.0, 50.0], [50.0, 50.0], [90.0, 90.0]])
-    assert pinch_feasible(points, contour, CONFIG).tolist() == [False, False, False, True, False]
+    points = np.array([[5.0, 5.0], [50.0, 75.0], [98.0, 50.0], [50.0, 50.0], [90.0, 90.0], [50.0, 90.0]])
+    # The centroid lies under the cutting arm (the paper's cylinder); a short footprint frees it.
+    config = SimConfig()  # 25 x 25: grasp radius 6.7 mm, cut radius 4.2 mm
+    assert pinch_feasible(points, contour, config).tolist() == [False] * 5 + [True]
+    short = pinch_feasible(points, contour, config, arm_length_mm=15.0)
+    assert short.tolist() == [False, False, False, True, False, True]
 
 
 def test_analytic_moves_against_the_tracking_error():
@@ -82,7 +86,9 @@ def test_table_one_protocol_rows_and_mean():
 
 def test_analytic_pinches_the_centroid_unless_it_is_infeasible():
     circle, crescent = load_contour("fls-circle"), load_contour("crescent")  # crescent's: on the cut line
-    assert AnalyticTension().pinch_point(circle, CONFIG).tolist() == list(circle.centroid)
+    outside = AnalyticTension().pinch_point(circle, CONFIG)  # the disc lies under the cutting arm
+    assert pinch_feasible(outside, circle, CONFIG)[0] and not pinch_feasible(circle.centroid, circle, CONFIG)[0]
+    assert AnalyticTension(feasible=False).pinch_point(circle, CONFIG).tolist() == list(circle.centroid)
     moved = AnalyticTension().pinch_point(crescent, CONFIG)
     assert (
         pinch_feasible(moved, crescent, CONFIG)[0]

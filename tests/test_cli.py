@@ -15,6 +15,8 @@ from click.testing import CliRunner
 from warpcut.cli import main
 from warpcut.config import SimConfig
 from warpcut.contours import load_contour
+from warpcut.planning import feasible_centroid
+from warpcut.segmentation import segment_contour
 from warpcut.recording import read_summary
 
 
@@ -311,9 +313,15 @@ def test_evaluate_two_contours_two_trials_writes_table_json(tmp_path):
     assert report["planned"] is True
     plans = json.loads((tmp_path / "run" / "plans.json").read_text())
     assert report["analytic_pinch"] == "feasible"
-    for row in report["rows"]:  # fixed pinches where planned; analytic at the (here feasible) centroid
+    for row in report["rows"]:  # fixed pinches where planned; analytic at the centroid, or nearest to it
+        contour = load_contour(row["contour"])
         assert row["fixed_pinch"] == pytest.approx(plans[row["contour"]]["chosen"]["pinch"])
-        assert row["analytic_pinch"] == pytest.approx(list(load_contour(row["contour"]).centroid))
+        segments = segment_contour(contour)
+        assert row["analytic_pinch"] == pytest.approx(list(feasible_centroid(contour, SimConfig(), segments)))
+    # The paper's arm (the default) keeps the grasp off the disc: its centroid is not feasible.
+    assert report["rows"][0]["analytic_pinch"] != pytest.approx(list(load_contour("fls-circle").centroid))
+    assert report["score"] == "path"
+    assert report["rows"][0]["none_separated_fraction"] is not None
     assert [r["contour"] for r in report["rows"]] == ["fls-circle", "s-curve"]
     for row in report["rows"]:
         assert row["none_error_vertices"] > 0
@@ -542,3 +550,30 @@ def test_bench_times_the_captured_colours_update_on_cpu():
         SimConfig(resolution=7, settle_updates=2), 3, "cpu", 1, backend="colours", capture=True
     )
     assert np.isfinite(rate) and rate > 0
+
+
+def test_cli_defaults_are_the_library_defaults():
+    """One set of defaults: every command's protocol options show what the library uses."""
+    import inspect
+
+    from warpcut.config import ARM_LENGTH_MM, ARM_RADIUS_MM
+    from warpcut.planning import plan_cut
+
+    library = {
+        "noise": SimConfig().noise_std,
+        "score": SimConfig().score,
+        "arm_length": inspect.signature(plan_cut).parameters["arm_length_mm"].default,
+        "arm_radius": inspect.signature(plan_cut).parameters["arm_radius_mm"].default,
+    }
+    assert library["arm_length"] == ARM_LENGTH_MM == float("inf") and library["arm_radius"] == ARM_RADIUS_MM
+    assert library["noise"] > 0 and library["score"] == "path"
+    seen = set()
+    for name, command in main.commands.items():
+        for param in command.params:
+            if param.name in library:
+                assert param.default == library[param.name], (name, param.name)
+                seen.add((name, param.name))
+    for command in ("simulate", "train", "evaluate", "run"):
+        assert {(command, "noise"), (command, "score")} <= seen, command
+    for command in ("plan", "evaluate", "run"):
+        assert (command, "arm_length") in seen, command

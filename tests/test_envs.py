@@ -64,7 +64,9 @@ def test_vector_env_shapes_dtypes_and_discrete_moves(device):
     assert sorted(info) == sorted(STEP_INFO + [f"_{k}" for k in STEP_INFO])
     assert info["cut_deviation_mm"].shape == (4,) and info["_cut_deviation_mm"].all()
     deviation = np.nan_to_num(info["cut_deviation_mm"])
-    np.testing.assert_allclose(info["running_path_error_mm2"], deviation * 2 * vec.task.config.trajectory_spacing_mm)
+    np.testing.assert_allclose(
+        info["running_path_error_mm2"], deviation * 2 * vec.task.config.trajectory_spacing_mm
+    )
     moves = [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, 0, -1]]
     np.testing.assert_allclose(vec.task.sim.displacements(), moves, atol=1e-6)
     np.testing.assert_allclose(obs[:, 0], 1 / vec.task.num_steps)

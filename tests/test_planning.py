@@ -54,7 +54,11 @@ def test_infeasible_points_are_never_candidates():
     points = np.array(corners + on_contour + under + clear)
     with_arm = pinch_feasible(points, contour, GEOMETRY, segments)
     assert with_arm.tolist() == [False] * 5 + [True] * 2
-    assert pinch_feasible(points, contour, GEOMETRY).tolist() == [False] * 3 + [True] * 4
+    # Without segments the arm sweeps the whole contour: the same region however the cut is split.
+    assert pinch_feasible(points, contour, GEOMETRY).tolist() == with_arm.tolist()
+    short_arm = pinch_feasible(points, contour, GEOMETRY, arm_length_mm=15.0)
+    # A short footprint lets the grasp hold the disc; (90, 50) is still under it (15 mm from x = 75).
+    assert short_arm.tolist() == [False] * 3 + [True, False] + [True] * 2
     rules = pinch_rules(points, contour, GEOMETRY, segments)
     assert not rules["arm"][2:5].any() and rules["arm"][5:].all()
     assert rules["contour"][3:].all()  # the under-arm points fail only because of the arm
@@ -156,7 +160,9 @@ def test_analytic_pinch_is_the_centroid_only_where_the_gripper_can_be(small_plan
     assert pinch_feasible(point, contour, SIM, segments, **arm)[0]
     assert np.linalg.norm(point - contour.centroid) > 0
     circle = load_contour("fls-circle")
-    assert feasible_centroid(circle, GEOMETRY).tolist() == list(circle.centroid)
+    assert feasible_centroid(circle, GEOMETRY, arm_length_mm=15.0).tolist() == list(circle.centroid)
+    outside = feasible_centroid(circle, GEOMETRY)  # the paper's arm covers the disc: the grasp goes outside
+    assert np.linalg.norm(outside - circle.centroid) > 25.0 and pinch_feasible(outside, circle, GEOMETRY)[0]
     crescent = load_contour("crescent")
     assert pinch_rules(crescent.centroid, crescent, GEOMETRY)["contour"].tolist() == [False]
     moved = feasible_centroid(crescent, GEOMETRY)

@@ -102,7 +102,7 @@ def test_grasp_moves_the_pinched_disc(device):
 
 
 def test_cutting_removes_vertices_near_the_tip_only(device):
-    sim = Simulator(SimConfig(resolution=11, gravity=0.0), 1, device=device)
+    sim = Simulator(SimConfig(resolution=11, gravity=0.0, noise_std=0.0), 1, device=device)
     sim.reset()
     sim.set_tip(np.array([[50.0, 50.0, 0.0, 1.0]]))
     sim.update()
@@ -119,7 +119,7 @@ def test_cutting_removes_vertices_near_the_tip_only(device):
 
 
 def test_a_cut_height_limit_misses_material_far_from_the_tip(device):
-    sim = Simulator(SimConfig(resolution=11, gravity=0.0, cut_height_mm=8.0), 1, device=device)
+    sim = Simulator(SimConfig(resolution=11, gravity=0.0, noise_std=0.0, cut_height_mm=8.0), 1, device=device)
     sim.reset()
     sim.set_tip(np.array([[50.0, 50.0, 20.0, 1.0]]))  # 20 mm above the sheet: out of reach
     sim.update()

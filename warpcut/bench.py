@@ -101,10 +101,10 @@ def scoring_overhead_pct(num_envs: int, device: str, repeats: int) -> float:
 
 
 def numpy_updates_per_second(repeats: int) -> float:
-    """Updates per second of the NumPy reference (one sheet, default physics)."""
+    """Updates per second of the NumPy reference (one sheet, default physics without process noise)."""
     from warpcut.reference import ReferenceSheet
 
-    config = SimConfig()
+    config = SimConfig(noise_std=0.0)
     sim = Simulator(config, 1, device="cpu")
     sheet = ReferenceSheet(config, sim.settled_positions()[0])
     tip = np.array([50.0, 50.0, -15.0, 1.0], dtype=np.float32)

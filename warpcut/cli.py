@@ -17,7 +17,7 @@ from pathlib import Path
 
 import click
 
-from warpcut.config import FIXTURES, SimConfig
+from warpcut.config import ARM_LENGTH_MM, ARM_RADIUS_MM, FIXTURES, SCORES, SimConfig
 from warpcut.recorder_process import RecordingError
 
 POLICY_NAMES = ("none", "fixed", "analytic")
@@ -136,13 +136,42 @@ _seed_option = click.option(
 )
 
 
+DEFAULTS = SimConfig()
+"""The library's defaults, which the options below show and pass on (one set for library and CLI)."""
+
+_noise_option = click.option(
+    "--noise",
+    default=DEFAULTS.noise_std,
+    show_default=True,
+    type=click.FloatRange(min=0.0),
+    help="Process noise sigma (mm per update): seeded trials differ by their noise stream; 0: noise-free.",
+)
+_score_option = click.option(
+    "--score",
+    default=DEFAULTS.score,
+    show_default=True,
+    type=click.Choice(SCORES),
+    help="What tables and rewards use: path (the paper's: the region the scissors' path through the "
+    "material encloses) or separated (the material that came free). Both are reported.",
+)
+
+
+def _protocol_sim(config: SimConfig) -> dict:
+    """The protocol fields of ``config`` as a scenario's ``sim`` dict (stored with a trained run)."""
+    sim = {"noise_std": config.noise_std, "score": config.score}
+    if config.resolution != DEFAULTS.resolution:
+        sim["resolution"] = config.resolution
+    return sim
+
+
 _arm_length_option = click.option(
     "--arm-length",
-    default=15.0,
+    default=ARM_LENGTH_MM,
     show_default=True,
     type=click.FloatRange(min=0.0),
     help="Reach of the cutting arm's footprint from the scissor tip toward +x (mm), for pinch feasibility; "
-    "'inf' for the whole way. The shaft rises away from the sheet: only its first centimetres are near it.",
+    "inf (the paper's cylinder): the whole way, so the grasp never holds the piece being cut; a short "
+    "footprint (e.g. 15) lets it hold the piece (docs/learning.md).",
 )
 
 
@@ -245,13 +274,8 @@ def contours(json_path: Path | None) -> None:
     type=click.IntRange(min=1),
     help="Seeded trials per policy (they differ by process noise).",
 )
-@click.option(
-    "--noise",
-    default=0.0,
-    show_default=True,
-    type=click.FloatRange(min=0.0),
-    help="Process noise sigma (mm per update).",
-)
+@_noise_option
+@_score_option
 @click.option(
     "--resolution", default=25, show_default=True, type=click.IntRange(5, 100), help="Vertices per side."
 )
@@ -269,6 +293,7 @@ def simulate(
     pinch: str | None,
     trials: int,
     noise: float,
+    score: str,
     resolution: int,
     fixture: str,
     device: str | None,
@@ -287,7 +312,7 @@ def simulate(
     point = _parse_point(pinch, "--pinch")
     device = resolve_device(device)
     contour = load_contour(contour_name)
-    config = SimConfig(resolution=resolution, fixture=fixture, noise_std=noise).validated()
+    config = SimConfig(resolution=resolution, fixture=fixture, noise_std=noise, score=score).validated()
     out = json_path.parent if json_path else _run_dir(None, "simulate")
     cuts = None
     if not no_plots:
@@ -484,13 +509,8 @@ def _run_dir(out: Path | None, prefix: str) -> Path:
     type=click.IntRange(min=1),
     help="Env steps per env per PPO iteration.",
 )
-@click.option(
-    "--noise",
-    default=0.0,
-    show_default=True,
-    type=click.FloatRange(min=0.0),
-    help="Process noise sigma (mm per update) during training and evaluation.",
-)
+@_noise_option
+@_score_option
 @click.option(
     "--reward",
     default="dense",
@@ -569,6 +589,7 @@ def train(
     iterations: int,
     steps_per_env: int,
     noise: float,
+    score: str,
     reward: str,
     observe: str,
     action_type: str,
@@ -601,7 +622,7 @@ def train(
         scenario = Scenario(
             contour=contour_name,
             pinch=None if point is None else list(point),
-            sim={"noise_std": noise} if noise else {},
+            sim=_protocol_sim(SimConfig(noise_std=noise, score=score).validated()),
             action_type=action_type,
             dense_reward=reward == "dense",
             contour_features=observe == "contour",
@@ -688,13 +709,8 @@ EVALUATE_METHODS = ("none", "fixed", "analytic", "rl")
 @click.option(
     "--trials", default=10, show_default=True, type=click.IntRange(min=1), help="Trials per contour."
 )
-@click.option(
-    "--noise",
-    default=0.0,
-    show_default=True,
-    type=click.FloatRange(min=0.0),
-    help="Process noise sigma (mm per update); trials differ by their noise stream and fiducials.",
-)
+@_noise_option
+@_score_option
 @click.option(
     "--checkpoints",
     type=click.Path(exists=True, file_okay=False, path_type=Path),
@@ -756,6 +772,7 @@ def evaluate(
     methods: str,
     trials: int,
     noise: float,
+    score: str,
     checkpoints: Path | None,
     iterations: int,
     num_envs: int,
@@ -791,7 +808,7 @@ def evaluate(
     contours = [load_contour(s) for s in specs]
     by_name = dict(zip([c.name for c in contours], specs, strict=True))
     device = resolve_device(device)
-    config = SimConfig(noise_std=noise).validated()
+    config = SimConfig(noise_std=noise, score=score).validated()
     if record_envs is not None and record_envs > trials:
         click.echo(
             f"warning: --record {record_envs}: the first contour has only {trials} env(s) per method "
@@ -844,7 +861,7 @@ def evaluate(
                 checkpoints,
                 out,
                 trials,
-                noise,
+                _protocol_sim(config),
                 iterations,
                 num_envs,
                 device,
@@ -974,7 +991,7 @@ def _rl_results(
     checkpoints,
     out,
     trials,
-    noise,
+    sim,
     iterations,
     num_envs,
     device,
@@ -987,11 +1004,10 @@ def _rl_results(
     """Per contour, a trained run (from ``checkpoints`` or trained now, at the planned pinch and
     segments when ``plans`` are given, with its learning curve when ``plots``) rolled out for ``trials``;
     ``on_step(k)`` gives the step callback of contour ``k``'s rollout (or None)."""
-    import numpy as np
 
     from agents.rl import RECIPE, Scenario, recipe_config, rollout_errors, train_contour
 
-    errors, areas, pinches = [], [], []
+    rollouts = []
     for k, contour in enumerate(contours):
         if checkpoints is not None:
             run = checkpoints / contour.name
@@ -1013,7 +1029,7 @@ def _rl_results(
                 }
             scenario = Scenario(
                 contour=by_name[contour.name],
-                sim={"noise_std": noise} if noise else {},
+                sim=sim,
                 **RECIPE,
                 **planned,
             )
@@ -1026,11 +1042,8 @@ def _rl_results(
 
                 plot_learning_curve(summary["history"], summary["validation"], run, title=contour.name)
         hook = None if on_step is None else on_step(k)
-        result = rollout_errors(run, trials, seed=seed + 1, device=device, on_step=hook)
-        errors.append(result["error_vertices"])
-        areas.append(result["error_mm2"])
-        pinches.append(result["pinch"])
-    return result_type(np.array(errors), np.array(areas), pinches)
+        rollouts.append(rollout_errors(run, trials, seed=seed + 1, device=device, on_step=hook))
+    return result_type.from_rollouts(rollouts)
 
 
 def _markdown_table(report: dict, methods: list[str]) -> str:
@@ -1057,7 +1070,7 @@ def _markdown_table(report: dict, methods: list[str]) -> str:
 )
 @click.option(
     "--arm-radius",
-    default=4.0,
+    default=ARM_RADIUS_MM,
     show_default=True,
     type=click.FloatRange(min=0.0),
     help="Radius of the cutting arm (mm) whose sweep pinch points must avoid.",
@@ -1159,7 +1172,7 @@ def _train_run_candidates(
     listed: list[dict],
     settings: dict,
     num_envs: int | None,
-    resolution: int,
+    sim: dict,
     seed: int,
     device: str | None,
     out: Path,
@@ -1172,7 +1185,6 @@ def _train_run_candidates(
     from agents.rl import RECIPE, Scenario, recipe_config, train_contour
     from warpcut.plots import plot_learning_curve
 
-    sim = {"resolution": resolution} if resolution != 25 else {}
     cuts = [[s.tolist() for s in plan.ordered_segments(c["order"])] for c in listed]
     if shared:
         envs = num_envs or max(64, 8 * len(listed))
@@ -1301,6 +1313,8 @@ RUN_POLICIES = ("rl", "fixed", "analytic")
 @click.option(
     "--resolution", default=25, show_default=True, type=click.IntRange(5, 100), help="Vertices per side."
 )
+@_noise_option
+@_score_option
 @_arm_length_option
 @_analytic_pinch_option
 @_device_option
@@ -1330,6 +1344,8 @@ def run(
     trials: int | None,
     num_envs: int | None,
     resolution: int,
+    noise: float,
+    score: str,
     arm_length: float,
     analytic_pinch: str,
     device: str | None,
@@ -1357,7 +1373,7 @@ def run(
     settings.update({k: v for k, v in overrides.items() if v is not None})
     device = resolve_device(device)
     contour = load_contour(contour_name)
-    config = SimConfig(resolution=resolution).validated()
+    config = SimConfig(resolution=resolution, noise_std=noise, score=score).validated()
     out = _run_dir(out, f"run-{contour.name}")
     start = time.perf_counter()
 
@@ -1413,8 +1429,9 @@ def run(
         pinches["analytic"] = [np.asarray(listed[chosen]["pinch"])]
         method_segments["analytic"] = plan.ordered_segments(listed[chosen]["order"])
     else:
+        sim = _protocol_sim(config)
         rl_dir, chosen = _train_run_candidates(
-            contour_name, plan, listed, settings, num_envs, resolution, seed, device, out, shared_policy,
+            contour_name, plan, listed, settings, num_envs, sim, seed, device, out, shared_policy,
             plots=not no_plots,
         )  # fmt: skip
     best = listed[chosen]
@@ -1446,7 +1463,7 @@ def run(
                 device=device,
                 on_step=None if hooks is None else hooks("rl"),
             )
-            extra["rl"] = MethodResult(rl["error_vertices"][None], rl["error_mm2"][None], [rl["pinch"]])
+            extra["rl"] = MethodResult.from_rollouts([rl])
         report = evaluate_suite(
             [contour],
             methods,

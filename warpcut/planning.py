@@ -28,20 +28,13 @@ from dataclasses import dataclass, field
 import numpy as np
 import shapely
 
-from warpcut.config import SheetGrid, SimConfig
+from warpcut.config import ARM_LENGTH_MM, ARM_RADIUS_MM, SheetGrid, SimConfig
 from warpcut.contours import Contour
 from warpcut.segmentation import Segment, segment_contour, segment_orders
-from warpcut.task import CuttingTask
+from warpcut.task import CuttingTask, default_segments
 
 CORNER_MARGIN_MM = 15.0
 """Pinch points stay this far from a corner clip (mm): the clip and the gripper would collide."""
-
-ARM_RADIUS_MM = 4.0
-"""Radius of the cutting arm's shaft (mm). A da Vinci instrument shaft is about 8 mm across."""
-
-ARM_LENGTH_MM = math.inf
-"""How far the arm's footprint reaches from the scissor tip toward +x (mm): all the way by default, as if
-the arm lay on the sheet. Then nothing inside a closed contour is feasible (see :func:`under_arm`)."""
 
 ORDER_LIMIT = 6
 """Up to this many segments every order is simulated (K! of them); beyond it a heuristic list."""
@@ -112,7 +105,9 @@ def pinch_rules(
     Rules: ``edges`` (at least one grasp radius inside the sheet), ``corners`` (at least
     :data:`CORNER_MARGIN_MM` from a corner), ``fixture`` (more than a grasp radius from every fixture
     vertex), ``contour`` (the gripped disc never reaches the scissors' cut: at least grasp radius + cut
-    radius from the contour) and, when ``segments`` are given, ``arm`` (not :func:`under_arm`).
+    radius from the contour) and ``arm`` (not :func:`under_arm` while the scissors follow ``segments``;
+    default: the whole contour, :func:`warpcut.task.default_segments`, which the arm sweeps the same way
+    however it is split).
     """
     points = _points("points", points)
     w, h = config.width_mm, config.height_mm
@@ -125,8 +120,8 @@ def pinch_rules(
     rules["fixture"] = _min_distance(points, grid.material[grid.fixture_mask(config.fixture)]) > edge
     line = shapely.LinearRing(contour.points) if contour.closed else shapely.LineString(contour.points)
     rules["contour"] = shapely.distance(shapely.points(points), line) >= edge + config.cut_radius
-    if segments is not None:
-        rules["arm"] = ~under_arm(points, segments, arm_radius_mm, arm_length_mm)
+    path = segments if segments is not None else default_segments(contour)
+    rules["arm"] = ~under_arm(points, path, arm_radius_mm, arm_length_mm)
     return rules
 
 
@@ -142,8 +137,8 @@ def pinch_feasible(
 
     Feasible = every rule of :func:`pinch_rules` holds: on the sheet at least one grasp radius from its
     edges, at least :data:`CORNER_MARGIN_MM` from the corners, not on fixture vertices, far enough from the
-    contour that the gripped disc never reaches the scissors' cut (grasp radius + cut radius), and, when
-    ``segments`` (the cutting path) are given, not under the cutting arm of radius ``arm_radius_mm``.
+    contour that the gripped disc never reaches the scissors' cut (grasp radius + cut radius), and not under
+    the cutting arm of radius ``arm_radius_mm`` while it cuts ``segments`` (default: the whole contour).
 
     Returns:
         (M,) bool.

@@ -24,19 +24,20 @@ from warpcut.config import SheetGrid, SimConfig
 from warpcut.contours import Contour
 from warpcut.io import write_atomic
 from warpcut.planning import Plan, pinch_feasible
-from warpcut.scoring import Score, symmetric_difference
+from warpcut.scoring import Score
 from warpcut.task import CuttingTask
 
 FORMATS = ("png", "svg")
 
-# Region categories on the sheet: neither, intended and separated, intended only, separated only.
+# Separated-material categories on the sheet: neither, intended and separated, intended only, separated only.
 _REGION_LABELS = (
     "sheet",
-    "cut as intended",
-    "missed (intended, not separated)",
-    "excess (separated, not intended)",
+    "separated as intended",
+    "intended, not separated",
+    "separated, not intended",
 )
-_REGION_COLOURS = ("#e8e8e8", "#4daf4a", "#ff9f1c", "#e41a1c")
+_REGION_COLOURS = ("#eeeeee", "#b8e0b5", "#ffd8a8", "#f4a6a6")
+_PATH_COLOUR = "#1f4fd1"
 
 
 def save_figure(fig: Figure, out_dir: str | os.PathLike, name: str) -> list[Path]:
@@ -126,10 +127,10 @@ class FinalCuts:
         for env, contour in enumerate(task.contours):
             first.setdefault(contour.name, env)
             trials[contour.name] = trials.get(contour.name, 0) + 1
-        alive = task.sim.alive_mask()
+        scores = task.score()
         for name, env in first.items():
             contour = task.contours[env]
-            score = symmetric_difference(alive[env], contour.intended_region(), task.grid)
+            score = scores.select([env])
             pinch = task.pinch_points[env].copy() if task.sim.grasped[env] else None
             self.cuts.setdefault(name, {})[method] = FinalCut(contour, task.grid, score, pinch, trials[name])
 
@@ -166,8 +167,9 @@ class FinalCuts:
 
 
 def plot_regions(cuts: dict[str, FinalCut], out_dir: str | os.PathLike, name: str = "regions") -> list[Path]:
-    """One contour, per method the intended region over the region its cut separated, on the sheet at
-    rest.
+    """One contour, per method on the sheet at rest: the intended contour (black), the region its cut path
+    encloses (blue: the path score's Y, with the path's points) and, shaded, the material that came free
+    (the separated score). The title gives both errors, the protocol's score first.
 
     Args:
         cuts: Method name to its final cut of one contour (see :meth:`FinalCuts.of`).
@@ -209,17 +211,37 @@ def plot_regions(cuts: dict[str, FinalCut], out_dir: str | os.PathLike, name: st
         if cut.contour.closed:
             points = np.vstack([points, points[:1]])
         ax.plot(points[:, 0], points[:, 1], color="black", linewidth=1.0)
+        region = score.cut_regions[0]
+        if region is not None and not region.is_empty:
+            for polygon in getattr(region, "geoms", [region]):
+                if hasattr(polygon, "exterior"):
+                    ring = np.asarray(polygon.exterior.coords)
+                    ax.fill(ring[:, 0], ring[:, 1], facecolor=_PATH_COLOUR, alpha=0.12, edgecolor="none")
+                    ax.plot(ring[:, 0], ring[:, 1], color=_PATH_COLOUR, linewidth=1.0, linestyle="--")
+        path = score.cut_paths[0]
+        if len(path):
+            ax.plot(path[:, 0], path[:, 1], ".", color=_PATH_COLOUR, markersize=1.5)
         if cut.pinch is not None:
-            ax.plot(*cut.pinch, marker="x", color="blue", markersize=8, markeredgewidth=2)
-        ax.set_title(f"{method}: {score.error_vertices[0]:.0f} vertices ({score.error_mm2[0]:.0f} mm²)")
+            ax.plot(*cut.pinch, marker="x", color="magenta", markersize=8, markeredgewidth=2)
+        path_text = f"path {score.path_error_vertices[0]:.1f}"
+        separated_text = f"separated {score.separated_error_vertices[0]:.0f}"
+        first_text, second_text = (
+            (path_text, separated_text) if score.metric == "path" else (separated_text, path_text)
+        )
+        ax.set_title(f"{method}: {first_text}\n({second_text}) vertices", fontsize="medium")
         ax.set_xlabel("x (mm)")
         if k == 0:
             ax.set_ylabel("y (mm)")
         ax.set_aspect("equal")
     handles = [Patch(color=c, label=label) for c, label in zip(_REGION_COLOURS, _REGION_LABELS, strict=True)]
-    fig.legend(handles=handles, loc="outside lower center", ncol=2, fontsize="small", frameon=False)
+    handles += [
+        Line2D([], [], color="black", linewidth=1.0, label="intended contour"),
+        Line2D([], [], color=_PATH_COLOUR, linestyle="--", label="region the cut path encloses"),
+        Line2D([], [], color="magenta", marker="x", linestyle="none", label="pinch point"),
+    ]
+    fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize="small", frameon=False)
     trial = f", first of {first.trials} trials" if first.trials > 1 else ""
-    fig.suptitle(f"{first.contour.name}{trial}: intended contour (line) over the separated region")
+    fig.suptitle(f"{first.contour.name}{trial}: the cut path and the separated material")
     return save_figure(fig, out_dir, name)
 
 

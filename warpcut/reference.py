@@ -29,6 +29,10 @@ class ReferenceSheet:
         for name in ("damping", "dt", "gravity", "elasticity"):
             if np.size(getattr(self.config, name)) != 1:
                 raise ValueError(f"{name}: the reference simulates one sheet; give a single value")
+        if np.any(np.asarray(self.config.noise_std) != 0):
+            raise ValueError(
+                "noise_std: the reference is noise-free (Warp's random stream is its own); give 0"
+            )
         self.damping = np.float32(np.ravel(self.config.damping)[0])
         dt = np.float32(np.ravel(self.config.dt)[0])
         self.gravity_step = np.float32(np.ravel(self.config.gravity)[0]) * dt * dt

@@ -115,6 +115,30 @@ class Score:
     def intended(self) -> np.ndarray:
         return self.separation.intended
 
+    def select(self, envs: Sequence[int]) -> Score:
+        """The score of the envs ``envs`` only, in that order."""
+        envs = list(envs)
+        sep = self.separation
+        intended = sep.intended if sep.intended.ndim == 1 else sep.intended[envs]
+        return Score(
+            metric=self.metric,
+            error_vertices=self.error_vertices[envs],
+            error_mm2=self.error_mm2[envs],
+            path_error_mm2=self.path_error_mm2[envs],
+            path_error_vertices=self.path_error_vertices[envs],
+            dropped_fraction=self.dropped_fraction[envs],
+            cut_paths=[self.cut_paths[e] for e in envs],
+            cut_regions=[self.cut_regions[e] for e in envs],
+            separation=Separation(
+                sep.error_vertices[envs],
+                sep.error_mm2[envs],
+                sep.missed_vertices[envs],
+                sep.excess_vertices[envs],
+                sep.achieved[envs],
+                intended,
+            ),
+        )
+
     def info(self) -> dict[str, np.ndarray]:
         """The (B,) per-env figures by name (env ``info``, results files)."""
         return {

@@ -1,0 +1,113 @@
+"""The path score (the paper's): hand-checkable cases, end to end through the simulator where it can be."""
+
+import numpy as np
+import pytest
+import shapely
+
+from warpcut import SimConfig, Simulator
+from warpcut.contours import load_contour, validate
+from warpcut.kernels import PATH_DROPPED, PATH_IDLE, PATH_MAPPED
+from warpcut.scoring import order_cut_path, path_region
+from warpcut.task import CuttingTask, default_segments
+
+RIGID = SimConfig(gravity=0.0, noise_std=0.0)
+"""No gravity, no noise: the sheet never moves, so material and world coordinates coincide."""
+
+
+def circle(radius: float, centre=(50.0, 50.0), points: int = 720) -> np.ndarray:
+    t = np.linspace(0.0, 2 * np.pi, points, endpoint=False)
+    return np.column_stack([centre[0] + radius * np.cos(t), centre[1] + radius * np.sin(t)])
+
+
+def test_a_rigid_sheet_cut_exactly_on_the_contour_scores_under_one_vertex(device):
+    contour = load_contour("fls-circle")
+    score = CuttingTask(RIGID, contour, num_envs=2, device=device).run(None)
+    assert np.all(score.path_error_vertices < 1.0)
+    assert score.metric == "path" and np.array_equal(score.error_vertices, score.path_error_vertices)
+    assert np.all(score.separated)  # the disc came free too
+
+
+def test_a_path_displaced_by_d_scores_about_perimeter_times_d():
+    contour = validate("disc", True, circle(20.0))
+    for d in (0.5, 1.0, 2.0):
+        region = path_region(circle(20.0 + d), contour)
+        error = shapely.symmetric_difference(region, contour.intended_region()).area
+        assert error == pytest.approx(contour.length * d, rel=0.06), d
+
+
+def test_an_offset_cut_through_the_simulator_scores_perimeter_times_d(device):
+    contour = validate("disc", True, circle(20.0))
+    d = 2.0
+    wider = validate("wider", True, circle(20.0 + d))  # the scissors follow a circle 2 mm too wide
+    task = CuttingTask(RIGID, contour, segments=[default_segments(wider)], device=device)
+    score = task.run(None)
+    assert score.path_error_mm2[0] == pytest.approx(contour.length * d, rel=0.1)
+    assert score.dropped_fraction[0] < 0.05
+
+
+def test_an_open_contour_closes_on_the_intended_side(device):
+    contour = load_contour("arc-top")
+    exact = CuttingTask(RIGID, contour, device=device).run(None)
+    assert exact.path_error_vertices[0] < 1.0
+    # Shifted 2 mm toward the sheet's middle: about length x 2 mm, not the rest of the sheet.
+    shifted = contour.points - [0.0, 2.0]
+    region = path_region(shifted, contour)
+    error = shapely.symmetric_difference(region, contour.intended_region()).area
+    inside = contour.length - 2 * 2.0  # the ends run along the edges, not across
+    assert error == pytest.approx(inside * 2.0, rel=0.1)
+    assert error < 0.2 * contour.area_mm2
+
+
+def test_two_segments_score_as_the_single_loop(device):
+    contour = load_contour("fls-circle")
+    loop = default_segments(contour)[0]
+    half = len(loop) // 2
+    # Second half first, then the first half cut backwards: the path is still put in contour order.
+    two = [loop[half:], loop[: half + 1][::-1]]
+    score = CuttingTask(RIGID, [contour] * 2, segments=[[loop], two], device=device).run(None)
+    assert np.all(score.path_error_vertices < 1.0)
+    assert score.path_error_vertices[1] == pytest.approx(score.path_error_vertices[0], abs=0.5)
+
+
+def test_a_tip_over_a_hole_is_dropped_and_counted(device):
+    contour = load_contour("fls-circle")
+    loop = default_segments(contour)[0]
+    again = loop[:21]  # 20 mm of the loop cut a second time: the tip is over its own old cut
+    score = CuttingTask(RIGID, contour, segments=[[loop, again]], device=device).run(None)
+    cutting_updates = contour.length + 20.0  # 1 mm per update
+    assert score.dropped_fraction[0] == pytest.approx(20.0 / cutting_updates, abs=0.03)
+    assert score.path_error_vertices[0] < 1.0  # dropped points are left out, the loop still closes
+
+
+def test_a_tip_off_the_sheet_is_dropped_and_an_idle_one_marked(device):
+    sim = Simulator(RIGID.replace(resolution=9), 3, device=device)
+    sim.trace_path(2)
+    sim.reset()
+    sim.set_tip(np.array([[150.0, 50.0, 0.0, 1.0], [30.0, 40.0, 0.0, 1.0], [30.0, 40.0, 0.0, 0.0]]))
+    sim.update()
+    path = sim.path.numpy()[:, 0]
+    assert path[0, 2] == PATH_DROPPED
+    assert path[1, 2] == PATH_MAPPED and path[1, :2] == pytest.approx([30.0, 40.0], abs=1e-4)
+    assert path[2, 2] == PATH_IDLE
+
+
+def test_the_cut_path_is_bit_identical_across_backends():
+    contour = load_contour("kidney")
+    config = SimConfig(resolution=13, noise_std=0.05)
+    paths = []
+    for backend in ("simd", "fused", "colours"):
+        task = CuttingTask(config, contour, num_envs=3, pinch_points=[60.0, 20.0], backend=backend, seed=4)
+        task.run(lambda t: np.tile([[0.5, -1.0, 0.2]], (3, 1)))
+        paths.append(task.cut_path())
+    for other in paths[1:]:
+        np.testing.assert_array_equal(paths[0], other)
+
+
+def test_order_cut_path_sorts_by_arc_and_counts_drops():
+    path = np.array(
+        [[1.0, 1.0, PATH_MAPPED], [2.0, 2.0, PATH_DROPPED], [3.0, 3.0, PATH_MAPPED], [0.0, 0.0, PATH_IDLE]]
+    )
+    arc = np.array([5.0, 4.0, 1.0, np.nan])
+    points, dropped = order_cut_path(path, arc)
+    np.testing.assert_array_equal(points, [[3.0, 3.0], [1.0, 1.0]])
+    assert dropped == pytest.approx(1 / 3)
