@@ -87,7 +87,9 @@ def test_table_one_protocol_rows_and_mean():
 def test_analytic_pinches_the_centroid_unless_it_is_infeasible():
     circle, crescent = load_contour("fls-circle"), load_contour("crescent")  # crescent's: on the cut line
     outside = AnalyticTension().pinch_point(circle, CONFIG)  # the disc lies under the cutting arm
-    assert pinch_feasible(outside, circle, CONFIG)[0] and not pinch_feasible(circle.centroid, circle, CONFIG)[0]
+    assert (
+        pinch_feasible(outside, circle, CONFIG)[0] and not pinch_feasible(circle.centroid, circle, CONFIG)[0]
+    )
     assert AnalyticTension(feasible=False).pinch_point(circle, CONFIG).tolist() == list(circle.centroid)
     moved = AnalyticTension().pinch_point(crescent, CONFIG)
     assert (

@@ -16,8 +16,8 @@ from warpcut.cli import main
 from warpcut.config import SimConfig
 from warpcut.contours import load_contour
 from warpcut.planning import feasible_centroid
-from warpcut.segmentation import segment_contour
 from warpcut.recording import read_summary
+from warpcut.segmentation import segment_contour
 
 
 def invoke(args):

@@ -31,7 +31,16 @@ from warpcut.simulator import Simulator, colour_springs
 from warpcut.task import CuttingTask
 
 RESOLUTION = 9
-ENV_ENTITIES = ("sheet", "contour", "tip", "cut_path", "fiducials", "error_vertices")
+ENV_ENTITIES = (
+    "sheet",
+    "contour",
+    "tip",
+    "cut_path",
+    "path",
+    "fiducials",
+    "path_error_vertices",
+    "separated_error_vertices",
+)
 
 
 def invoke(args):
@@ -377,10 +386,18 @@ def test_the_recorded_error_is_the_score(tmp_path):
     )
     with Recorder(tmp_path / "r.rrd") as recorder:
         score = task.run(lambda t: np.array([[0.3, 0.2, 0.0]]), on_step=recorder.on_step("fixed"))
-    errors = read_columns(tmp_path / "r.rrd")[("/fixed/env_0/error_vertices", "Scalars:scalars")]
+    columns = read_columns(tmp_path / "r.rrd")
+    errors = columns[("/fixed/env_0/separated_error_vertices", "Scalars:scalars")]
     assert [s for s, _ in errors] == list(range(task.num_steps + 1))
-    assert errors[-1][1] == [score.error_vertices[0]]
+    assert errors[-1][1] == [score.separated_error_vertices[0]]
     assert errors[0][1] == [float(score.intended.sum())]  # uncut: nothing separated yet
+    path_errors = columns[("/fixed/env_0/path_error_vertices", "Scalars:scalars")]
+    assert [s for s, _ in path_errors] == list(range(task.num_steps + 1))
+    assert path_errors[-1][1][0] == pytest.approx(score.path_error_vertices[0])
+    area = task.contours[0].area_mm2 / task.grid.vertex_area_mm2
+    assert path_errors[0][1][0] == pytest.approx(area)  # nothing cut: the path encloses nothing
+    strips = columns[("/fixed/env_0/path", "LineStrips3D:strips")]
+    assert len(strips[-1][1][0]) == len(score.cut_paths[0])  # every mapped point, on the deformed sheet
 
 
 def test_process_thread_and_inline_recordings_hold_the_same(tmp_path):

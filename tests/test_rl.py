@@ -16,6 +16,8 @@ from agents.rl import (
     train_contour,
 )
 from agents.train import TrainConfig
+from warpcut.contours import load_contour
+from warpcut.planning import feasible_centroid
 
 
 @pytest.fixture(scope="module")
@@ -38,7 +40,9 @@ def run_dir(tmp_path_factory):
 def test_run_directory_records_the_scenario(run_dir):
     scenario = load_scenario(run_dir)
     assert scenario.contour == "fls-circle" and scenario.dense_reward and scenario.contour_features
-    assert scenario.pinch == pytest.approx([50.0, 50.0], abs=1e-3)  # the centroid is feasible
+    # The default pinch: the feasible point nearest the centroid (the disc lies under the cutting arm).
+    contour = load_contour("fls-circle")
+    assert scenario.pinch == pytest.approx(list(feasible_centroid(contour, scenario.sim_config())), abs=1e-3)
     evaluation = json.loads((run_dir / "evaluation.json").read_text())
     assert evaluation["trials"] == 3 and evaluation["none_error_vertices"] > 0
 

@@ -16,7 +16,12 @@ can be compared side by side in one viewer (the recording carries a blueprint th
   :data:`~warpcut.fiducials.NUM_FIDUCIALS` drawn for the recording as an env draws them (seeded by the env
   index);
 * ``action``: the tensioning action (mm) as three scalar series;
-* ``error_vertices``: the running symmetric difference between the intended and the separated region.
+* ``path``: the points the scissors went through, as the material carries them (the traced cut path,
+  :meth:`~warpcut.simulator.Simulator.trace_path`, drawn on the deformed sheet);
+* ``path_error_vertices``: the path score (:mod:`warpcut.scoring`) of the cut so far, as if the cut were
+  closed at that step (the last frame's is the episode's path score);
+* ``separated_error_vertices``: the running symmetric difference between the intended and the separated
+  region (the separated score).
 
 Frames are on the ``step`` timeline (0 after the reset, then one per env step) and on ``sim_time``
 (simulated seconds). Recording must not slow the stepping loop down, so the step callback only copies
@@ -288,6 +293,11 @@ class _Frame:
     """(n, 3) float64, None when no recorded env is grasped."""
     action: np.ndarray | None
     """(n, 3) float64, or None at the reset and for policies that return no moves."""
+    path_start: int = 0
+    """The first update of ``path``."""
+    path: np.ndarray | None = None
+    """(n, U, 3) float32: the traced cut path (material x, y, status) of updates ``path_start ..
+    path_start + U - 1``, those since the previous frame; None where the task does not trace it."""
 
 
 @dataclass
@@ -308,6 +318,9 @@ class _EnvSetup:
     """(K, 2) material points of the env's fiducials; None: the writer draws them."""
     shaft_radius_mm: float
     """The cutting arm's shaft radius, which hides the fiducials under it (mm)."""
+    arc: np.ndarray | None = None
+    """(T,) arc length along the contour of the point each update meant to cut (the path's order); None
+    where the task does not trace the cut path."""
     # Filled in by the writer (_Writer.start), then updated frame batch by frame batch:
     root: str = ""
     """The env's entity path, ``/{method}/env_{env}``."""
@@ -319,6 +332,8 @@ class _EnvSetup:
     disc_origin: np.ndarray | None = None
     last_alive: np.ndarray | None = None
     last_error: float = 0.0
+    path: np.ndarray | None = None
+    """(T, 3) the traced cut path so far, filled frame batch by frame batch."""
     fiducial_cells: tuple[np.ndarray, np.ndarray] | None = None
     """(1, K, 4) vertices and weights of the fiducials' cells (:func:`~warpcut.material.material_cells`)."""
 
@@ -348,6 +363,7 @@ class _Episode:
         self.envs = np.zeros(0, dtype=np.intp)
         self.read_state: Callable[..., np.ndarray] | None = None
         self.frames: list[_Frame] = []
+        self.path_start = 0
         self.grasped = False
         self.batch_frames, self.leads = self.sink.batching(None)
 
@@ -358,6 +374,10 @@ class _Episode:
         if step % self.recorder.every and not task.done:
             return
         envs = self.envs
+        path = None
+        update = min(task.update_index, task.horizon_updates)
+        if task.sim.path is not None:
+            path = np.ascontiguousarray(task.sim.path.numpy()[envs, self.path_start : update])
         self.frames.append(
             _Frame(
                 step,
@@ -365,8 +385,11 @@ class _Episode:
                 self.read_state(),
                 task.sim.displacement.numpy()[envs].astype(np.float64) if self.grasped else None,
                 None if action is None else np.asarray(action, dtype=np.float64).reshape(-1, 3)[envs],
+                self.path_start,
+                path,
             )
         )
+        self.path_start = update
         if len(self.frames) >= self.batch_frames or task.done:
             self.flush(final=task.done)
         elif (task.num_steps - step) // self.recorder.every in self.leads:
@@ -381,6 +404,8 @@ class _Episode:
         grid, config = task.grid, task.config
         self.envs = np.arange(min(self.recorder.envs, task.num_envs))
         self.read_state = task.sim.state_reader(self.envs)
+        self.path_start = 0
+        arcs = task.target_arcs() if task.sim.path is not None else None
         dt = np.asarray(task.sim.params["dt"], dtype=np.float64).reshape(-1)
         fiducials = task.fiducials if task.fiducials is not None and len(task.fiducials.material) else None
         envs = [
@@ -395,6 +420,7 @@ class _Episode:
                 step_s=float(dt[env % dt.size]) * config.updates_per_step,
                 fiducials=None if fiducials is None else fiducials.material[env].copy(),
                 shaft_radius_mm=SHAFT_RADIUS_MM if fiducials is None else fiducials.shaft_radius_mm,
+                arc=None if arcs is None else arcs[env].copy(),
             )
             for env in self.envs
         ]
@@ -485,7 +511,7 @@ class _ThreadSink:
 # actions (float64). The last frame of each group that a step callback hands over is flagged _GROUP_END:
 # the process scores a group (or, when it has fallen behind, several) at once.
 _FRAME_HEAD = struct.Struct("<Iqqb")
-_HAS_DISPLACEMENTS, _HAS_ACTION, _GROUP_END = 1, 2, 4
+_HAS_DISPLACEMENTS, _HAS_ACTION, _GROUP_END, _HAS_PATH = 1, 2, 4, 8
 
 
 class _ProcessSink:
@@ -526,6 +552,10 @@ class _ProcessSink:
             if frame.action is not None:
                 flags |= _HAS_ACTION
                 arrays.append(np.ascontiguousarray(frame.action, dtype=np.float64))
+            if frame.path is not None and frame.path.shape[1]:
+                flags |= _HAS_PATH
+                arrays.append(np.array([frame.path_start, frame.path.shape[1]], dtype=np.int64))
+                arrays.append(np.ascontiguousarray(frame.path, dtype=np.float32))
             size = _FRAME_HEAD.size + sum(a.nbytes for a in arrays)
             parts.append(_HEAD.pack(b"F", size) + _FRAME_HEAD.pack(key, frame.step, frame.update, flags))
             parts.extend(arrays)
@@ -753,7 +783,12 @@ def _read_frame(payload: bytes, shapes: dict[int, tuple[int, int]]) -> tuple[int
             offset += count * np.dtype(dtype).itemsize
         else:
             arrays.append(None)
-    return key, _Frame(step, update, *arrays), bool(flags & _GROUP_END)
+    path_start, path = 0, None
+    if flags & _HAS_PATH:
+        path_start, count = (int(v) for v in np.frombuffer(payload, np.int64, 2, offset))
+        offset += 16
+        path = np.frombuffer(payload, np.float32, n * count * 3, offset).reshape(n, count, 3)
+    return key, _Frame(step, update, *arrays, path_start, path), bool(flags & _GROUP_END)
 
 
 class _Writer:
@@ -823,7 +858,18 @@ class _Writer:
                 static=True,
             )
             stream.log(f"{setup.root}/action", rr.SeriesLines(names=["x", "y", "z"]), static=True)
-            stream.log(f"{setup.root}/error_vertices", rr.SeriesLines(names="error (vertices)"), static=True)
+            stream.log(
+                f"{setup.root}/separated_error_vertices",
+                rr.SeriesLines(names="separated error (vertices)"),
+                static=True,
+            )
+            if setup.arc is not None:
+                setup.path = np.zeros((len(setup.arc), 3), dtype=np.float32)
+                stream.log(
+                    f"{setup.root}/path_error_vertices",
+                    rr.SeriesLines(names="path error (vertices)"),
+                    static=True,
+                )
         self.episodes[key] = task_setup
         if self.background:
             self._send_blueprint()  # off the stepping thread; finish() sends it otherwise
@@ -850,6 +896,10 @@ class _Writer:
         acted = [f for f in frames if f.action is not None]
         action_steps = np.array([f.step for f in acted], dtype=np.int64)
         for k, setup in enumerate(task_setup.envs):
+            if setup.path is not None:
+                for f in frames:
+                    if f.path is not None:
+                        setup.path[f.path_start : f.path_start + f.path.shape[1]] = f.path[k]
             actions = np.array([f.action[k] for f in acted]).reshape(-1, 3)
             self._send_env(
                 task_setup,
@@ -937,7 +987,9 @@ class _Writer:
         else:
             errors = np.full(frames, setup.last_error)
         setup.last_error = float(errors[-1])
-        send("error_vertices", [_column("Scalars:scalars", _float64(errors))])
+        send("separated_error_vertices", [_column("Scalars:scalars", _float64(errors))])
+        if setup.path is not None:
+            self._send_path(setup, grid, updates, positions, send)
 
         # All frames' contours in one product: (K, V) @ (V, F * 3).
         by_vertex = np.moveaxis(positions, 0, 1).reshape(num_vertices, frames * 3)
@@ -997,6 +1049,25 @@ class _Writer:
                 at=action_steps,
             )
 
+    def _send_path(self, setup: _EnvSetup, grid: SheetGrid, updates: np.ndarray, positions, send) -> None:
+        """The cut path so far on the deformed sheet and its path score, frame by frame."""
+        from warpcut.scoring import order_cut_path, path_errors
+
+        horizon = len(setup.arc)
+        ends = np.minimum(updates, horizon)
+        errors, strips = [], []
+        for f, end in enumerate(ends):
+            points, _ = order_cut_path(setup.path[:end], setup.arc[:end])
+            errors.append(path_errors([points], [setup.contour], grid)[1][0])
+            mapped = setup.path[:end][setup.path[:end, 2] > 0.5, :2]  # in cutting order
+            if len(mapped):
+                cells, weights = material_cells(mapped[None], grid)
+                strips.append(interpolate(positions[f : f + 1], cells, weights)[0])
+            else:
+                strips.append(np.zeros((0, 3)))
+        send("path_error_vertices", [_column("Scalars:scalars", _float64(np.array(errors)))])
+        send("path", [_column("LineStrips3D:strips", _strips_ragged(strips), np.ones(len(strips)))])
+
 
 def _blueprint(roots: list[str]):
     """A 3D view per recorded env side by side, above the errors and the actions over time."""
@@ -1009,7 +1080,9 @@ def _blueprint(roots: list[str]):
             rrb.Grid(*[rrb.Spatial3DView(origin=r, name=r.strip("/").replace("/", " ")) for r in roots]),
             rrb.Horizontal(
                 rrb.TimeSeriesView(
-                    name="error (vertices)", origin="/", contents=[f"{r}/error_vertices" for r in roots]
+                    name="error (vertices)",
+                    origin="/",
+                    contents=[f"{r}/{e}_error_vertices" for r in roots for e in ("path", "separated")],
                 ),
                 rrb.TimeSeriesView(name="action (mm)", origin="/", contents=[f"{r}/action" for r in roots]),
             ),
@@ -1175,6 +1248,16 @@ def _strips(points: np.ndarray):
 
     frames, k = points.shape[:2]
     offsets = pa.array(np.arange(frames + 1, dtype=np.int32) * k)
+    return pa.ListArray.from_arrays(offsets, _vec3(points), type=_arrow_types()[1])
+
+
+def _strips_ragged(strips: list[np.ndarray]):
+    """F line strips of (K_f, 3) points each as an arrow array of F strips."""
+    import pyarrow as pa
+
+    lengths = [len(strip) for strip in strips]
+    offsets = pa.array(np.concatenate([[0], np.cumsum(lengths)]).astype(np.int32))
+    points = np.concatenate(strips) if strips else np.zeros((0, 3))
     return pa.ListArray.from_arrays(offsets, _vec3(points), type=_arrow_types()[1])
 
 

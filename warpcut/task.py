@@ -153,7 +153,7 @@ class CuttingTask:
             self._tips[env, :t] = trajectory.tip
             self._tips[env, t:, :3] = trajectory.tip[-1, :3]  # parked, not cutting, once done
             self._targets[env, :t] = trajectory.material
-        self._arc_mm = self._target_arcs()
+        self._arc_mm = self._compute_target_arcs()
         if trace_path:
             self.sim.trace_path(self.horizon_updates)
         elif config.score == "path":
@@ -214,9 +214,12 @@ class CuttingTask:
             trajectories.append(cache[key])
         return trajectories
 
-    def _target_arcs(self) -> np.ndarray:
+    def target_arcs(self) -> np.ndarray:
         """(B, horizon) arc length along each env's contour of the point each update meant to cut (NaN
-        while travelling or parked): the order in which the cut path is closed."""
+        while travelling or parked): the order in which the cut path is closed (read-only)."""
+        return self._arc_mm
+
+    def _compute_target_arcs(self) -> np.ndarray:
         arcs = np.full(self._targets.shape[:2], np.nan)
         cache: dict[tuple[int, int], np.ndarray] = {}
         for env, (contour, trajectory) in enumerate(zip(self.contours, self.trajectories, strict=True)):
