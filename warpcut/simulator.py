@@ -22,6 +22,7 @@ from warpcut.springs import SpringColour, colour_springs, spring_colours
 
 __all__ = [
     "Simulator",
+    "settled_figures",
     "SpringColour",
     "colour_springs",
     "default_device",
@@ -652,6 +653,22 @@ class Simulator:
     def displacements(self) -> np.ndarray:
         """(B, 3) grasp displacement from where it pinched (mm)."""
         return self.displacement.numpy().copy()
+
+
+def settled_figures(sim: Simulator) -> tuple[float, float, float]:
+    """The settled sheet of env 0 in the figures docs/physics.md compares: the sag at the centre vertex
+    (mm, below the rest plane) and the largest and mean relative stretch of the structural springs (%)."""
+    grid = sim.grid
+    p = sim.settled_positions()[0].reshape(grid.ny, grid.nx, 3)
+    hx, hy = grid.spacing_mm
+    stretch = np.concatenate(
+        [
+            (np.linalg.norm(p[:, 1:] - p[:, :-1], axis=-1) / hx - 1).ravel(),
+            (np.linalg.norm(p[1:] - p[:-1], axis=-1) / hy - 1).ravel(),
+        ]
+    )
+    centre = p[grid.ny // 2, grid.nx // 2]
+    return float(-centre[2]), float(100 * stretch.max()), float(100 * stretch.mean())
 
 
 def _fresh(like: wp.array) -> wp.array:

@@ -289,7 +289,12 @@ class CuttingTask:
             ``(mean_mm, count)``: (B,) mean distance over the mapped cutting updates (NaN where none) and
             (B,) how many there were.
         """
-        path = self.sim.path.numpy()[:, first_update:stop_update]
+        if self.sim.path is None:
+            raise RuntimeError("cut_deviation: the cut path is not traced (CuttingTask(trace_path=False))")
+        stop_update = min(stop_update, self.horizon_updates)
+        if stop_update <= first_update:
+            return np.full(self.num_envs, np.nan), np.zeros(self.num_envs, dtype=np.int64)
+        path = self.sim.path[:, first_update:stop_update].numpy()  # on a GPU only this slice is copied
         target = self._targets[:, first_update:stop_update]
         mapped = (path[..., 2] > 0.5) & np.all(np.isfinite(target), axis=-1)
         distance = np.linalg.norm(np.where(mapped[..., None], path[..., :2] - target, 0.0), axis=-1)
