@@ -250,6 +250,6 @@ def test_authors_preset_reproduces_their_settled_sheet():
     assert sag == pytest.approx(12.5, abs=1.0)
     assert stretch_max == pytest.approx(10.0, abs=1.5)
     assert stretch_mean == pytest.approx(2.3, abs=0.4)
-    # warpcut's own update (the full g dt^2 step) hangs the same rows much deeper: the preset's halving matters.
+    # warpcut's own update (the full g dt^2 step) hangs the same rows much deeper.
     sag_full, _, _ = settled_figures(Simulator(config.replace(gravity=SimConfig().gravity), 1))
     assert sag_full > sag + 4.0
