@@ -40,7 +40,8 @@ class Scenario:
         contour_features: Add the tip and the tracking error to the observation.
         segments: Material polylines cut in this order (a plan's ``ordered_segments()``); default: the
             whole contour as one segment.
-        dense_reward: Add the per-step tracking-error shaping of the env to the sparse final reward.
+        dense_reward: Add the env's per-step cut-deviation shaping (the path score's increment) to the
+            sparse final reward.
         action_type: ``discrete`` (paper: stay, +-x, +-y at 1 mm) or ``continuous`` (x-y moves up to
             1 mm per axis; a policy that outputs zero holds the grasp still, like fixed tensioning).
         allow_z: Let the grasp move along z too (``+-z``; lifting the sheet into the scissors' reach).
@@ -122,7 +123,7 @@ class Scenario:
 
 RECIPE = {"dense_reward": True, "contour_features": True, "allow_z": True}
 """warpcut's default learning recipe (Scenario fields; ``warpcut train``, ``evaluate`` and ``run`` use it):
-dense tracking-error shaping, contour-aware observations and x-y-z moves. Together with
+dense cut-deviation shaping, contour-aware observations and x-y-z moves. Together with
 ``TrainConfig.stay_prior`` (start at "hold still") and validation-based model selection; see
 docs/learning.md for the measurements behind each choice. The paper's setting is sparse reward,
 fiducials only, x-y moves and a uniform initial policy."""

@@ -516,8 +516,8 @@ def _run_dir(out: Path | None, prefix: str) -> Path:
     default="dense",
     show_default=True,
     type=click.Choice(["sparse", "dense"]),
-    help="sparse: -(final error / area) at the last step only (paper); dense: plus per-step tracking-error "
-    "shaping (learns in short runs, docs/learning.md).",
+    help="sparse: -(final error / area) at the last step only (paper); dense: plus per-step shaping by the "
+    "cut's deviation from the contour in material coordinates (learns in short runs, docs/learning.md).",
 )
 @click.option(
     "--observe",
