@@ -210,6 +210,8 @@ def test_bench_writes_the_documented_json(tmp_path):
     assert result["speedup_vs_numpy"] == pytest.approx(
         max(result["updates_per_s"].values()) / result["numpy_updates_per_s"]
     )
+    assert isinstance(result["scoring_overhead_pct"], float)  # may be negative at B = 2 (noise)
+    assert set(result["updates_per_s_noise_free"]) == {"4"} and result["updates_per_s_noise_free"]["4"] > 0
 
 
 def test_train_resume_export_and_evaluate_with_checkpoints(tmp_path):

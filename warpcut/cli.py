@@ -460,9 +460,12 @@ def bench(
         click.echo(
             f"{b:>6} {result['updates_per_s'][b]:>38,.0f} {result['updates_per_s_paper_sweeps'][b]:>28,.0f}"
         )
+    for b, rate in result["updates_per_s_noise_free"].items():
+        click.echo(f"default physics without process noise, B={b}: {rate:,.0f} updates/s")
     click.echo(
         f"fls-circle no-tension rollouts/s (B={result['rollout_envs']}): {result['rollouts_per_s']:,.1f} "
-        f"default physics, {result['rollouts_per_s_paper_sweeps']:,.1f} paper sweeps"
+        f"default physics, {result['rollouts_per_s_paper_sweeps']:,.1f} paper sweeps; the path score adds "
+        f"{result['scoring_overhead_pct']:.1f}%"
     )
     click.echo(
         f"NumPy reference updates/s: {result['numpy_updates_per_s']:,.1f}  "
