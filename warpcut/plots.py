@@ -228,7 +228,7 @@ def plot_regions(cuts: dict[str, FinalCut], out_dir: str | os.PathLike, name: st
         first_text, second_text = (
             (path_text, separated_text) if score.metric == "path" else (separated_text, path_text)
         )
-        ax.set_title(f"{method}: {first_text}\n({second_text}) vertices", fontsize="medium")
+        ax.set_title(f"{method}: {first_text} ({second_text}) vertices", fontsize="small")
         ax.set_xlabel("x (mm)")
         if k == 0:
             ax.set_ylabel("y (mm)")
@@ -241,7 +241,7 @@ def plot_regions(cuts: dict[str, FinalCut], out_dir: str | os.PathLike, name: st
     ]
     fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize="small", frameon=False)
     trial = f", first of {first.trials} trials" if first.trials > 1 else ""
-    fig.suptitle(f"{first.contour.name}{trial}: the cut path and the separated material")
+    fig.suptitle(f"{first.contour.name}{trial}: the cut path and the separated material", y=1.04)
     return save_figure(fig, out_dir, name)
 
 
