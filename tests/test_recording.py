@@ -397,7 +397,10 @@ def test_the_recorded_error_is_the_score(tmp_path):
     area = task.contours[0].area_mm2 / task.grid.vertex_area_mm2
     assert path_errors[0][1][0] == pytest.approx(area)  # nothing cut: the path encloses nothing
     strips = columns[("/fixed/env_0/path", "LineStrips3D:strips")]
-    assert len(strips[-1][1][0]) == len(score.cut_paths[0])  # every mapped point, on the deformed sheet
+    last = np.array(strips[-1][1][0])  # every mapped point, in material coordinates on the rest plane
+    np.testing.assert_allclose(np.sort(last[:, 0]), np.sort(score.cut_paths[0][:, 0]), atol=1e-4)
+    assert np.all(last[:, 2] == 0.0)
+    assert ("/fixed/env_0/material_contour", "LineStrips3D:strips") in columns
 
 
 def test_process_thread_and_inline_recordings_hold_the_same(tmp_path):

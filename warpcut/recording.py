@@ -16,8 +16,9 @@ can be compared side by side in one viewer (the recording carries a blueprint th
   :data:`~warpcut.fiducials.NUM_FIDUCIALS` drawn for the recording as an env draws them (seeded by the env
   index);
 * ``action``: the tensioning action (mm) as three scalar series;
-* ``path``: the points the scissors went through, as the material carries them (the traced cut path,
-  :meth:`~warpcut.simulator.Simulator.trace_path`, drawn on the deformed sheet);
+* ``path``: the points the scissors went through in material coordinates (the traced cut path,
+  :meth:`~warpcut.simulator.Simulator.trace_path`), drawn on the rest plane z = 0 above the sagging
+  sheet, where ``material_contour`` (static) draws the intended contour the same way;
 * ``path_error_vertices``: the path score (:mod:`warpcut.scoring`) of the cut so far, as if the cut were
   closed at that step (the last frame's is the episode's path score);
 * ``separated_error_vertices``: the running symmetric difference between the intended and the separated
@@ -364,6 +365,7 @@ class _Episode:
         self.read_state: Callable[..., np.ndarray] | None = None
         self.frames: list[_Frame] = []
         self.path_start = 0
+        self.read_path: Callable[[int, int], np.ndarray] | None = None
         self.grasped = False
         self.batch_frames, self.leads = self.sink.batching(None)
 
@@ -376,8 +378,8 @@ class _Episode:
         envs = self.envs
         path = None
         update = min(task.update_index, task.horizon_updates)
-        if task.sim.path is not None:
-            path = np.ascontiguousarray(task.sim.path.numpy()[envs, self.path_start : update])
+        if self.read_path is not None and update > self.path_start:
+            path = self.read_path(self.path_start, update)
         self.frames.append(
             _Frame(
                 step,
@@ -405,7 +407,9 @@ class _Episode:
         self.envs = np.arange(min(self.recorder.envs, task.num_envs))
         self.read_state = task.sim.state_reader(self.envs)
         self.path_start = 0
-        arcs = task.target_arcs() if task.sim.path is not None else None
+        traced = task.sim.path is not None
+        self.read_path = task.sim.path_reader(len(self.envs)) if traced else None
+        arcs = task.target_arcs() if traced else None
         dt = np.asarray(task.sim.params["dt"], dtype=np.float64).reshape(-1)
         fiducials = task.fiducials if task.fiducials is not None and len(task.fiducials.material) else None
         envs = [
@@ -865,6 +869,12 @@ class _Writer:
             )
             if setup.arc is not None:
                 setup.path = np.zeros((len(setup.arc), 3), dtype=np.float32)
+                ring = _polyline(setup.contour, spacing)
+                stream.log(
+                    f"{setup.root}/material_contour",
+                    rr.LineStrips3D([np.column_stack([ring, np.zeros(len(ring))])], colors=[[0, 0, 0]]),
+                    static=True,
+                )
                 stream.log(
                     f"{setup.root}/path_error_vertices",
                     rr.SeriesLines(names="path error (vertices)"),
@@ -989,7 +999,7 @@ class _Writer:
         setup.last_error = float(errors[-1])
         send("separated_error_vertices", [_column("Scalars:scalars", _float64(errors))])
         if setup.path is not None:
-            self._send_path(setup, grid, updates, positions, send)
+            self._send_path(setup, grid, updates, send)
 
         # All frames' contours in one product: (K, V) @ (V, F * 3).
         by_vertex = np.moveaxis(positions, 0, 1).reshape(num_vertices, frames * 3)
@@ -1049,23 +1059,19 @@ class _Writer:
                 at=action_steps,
             )
 
-    def _send_path(self, setup: _EnvSetup, grid: SheetGrid, updates: np.ndarray, positions, send) -> None:
-        """The cut path so far on the deformed sheet and its path score, frame by frame."""
+    def _send_path(self, setup: _EnvSetup, grid: SheetGrid, updates: np.ndarray, send) -> None:
+        """The cut path so far in material coordinates, drawn on the rest plane (z = 0, above the sagging
+        sheet), and its path score, frame by frame (one vectorised scoring of all frames)."""
         from warpcut.scoring import order_cut_path, path_errors
 
-        horizon = len(setup.arc)
-        ends = np.minimum(updates, horizon)
-        errors, strips = [], []
-        for f, end in enumerate(ends):
-            points, _ = order_cut_path(setup.path[:end], setup.arc[:end])
-            errors.append(path_errors([points], [setup.contour], grid)[1][0])
+        ends = np.minimum(updates, len(setup.arc))
+        ordered = [order_cut_path(setup.path[:end], setup.arc[:end])[0] for end in ends]
+        errors = path_errors(ordered, [setup.contour] * len(ends), grid)[1]
+        strips = []
+        for end in ends:
             mapped = setup.path[:end][setup.path[:end, 2] > 0.5, :2]  # in cutting order
-            if len(mapped):
-                cells, weights = material_cells(mapped[None], grid)
-                strips.append(interpolate(positions[f : f + 1], cells, weights)[0])
-            else:
-                strips.append(np.zeros((0, 3)))
-        send("path_error_vertices", [_column("Scalars:scalars", _float64(np.array(errors)))])
+            strips.append(np.column_stack([mapped, np.zeros(len(mapped))]))
+        send("path_error_vertices", [_column("Scalars:scalars", _float64(errors))])
         send("path", [_column("LineStrips3D:strips", _strips_ragged(strips), np.ones(len(strips)))])
 
 

@@ -308,6 +308,19 @@ class Simulator:
         reach_mm = self.config.max_displacement_mm + self.config.cut_radius
         return math.ceil(reach_mm / min(self.grid.spacing_mm))
 
+    def path_reader(self, count: int) -> Callable[[int, int], np.ndarray]:
+        """A function ``read(start, stop)`` returning a copy of :attr:`path` of the first ``count`` envs for
+        updates ``start .. stop - 1``, (count, stop - start, 3): what a recorder's step callback calls every
+        step. On the CPU it copies out of a NumPy view made here, once (~0.4 µs where a Warp slice costs
+        ~27 µs); elsewhere it copies only that slice to the host."""
+        if self.path is None:
+            raise ValueError("path_reader: the path is not traced; call trace_path(horizon) first")
+        path = self.path
+        if self._is_cpu:
+            view = path.numpy()[:count]
+            return lambda start, stop: view[:, start:stop].copy()
+        return lambda start, stop: np.array(path[:count, start:stop].numpy())
+
     def _map_args(self) -> list:
         hx, hy = self.grid.spacing_mm
         return [self.grid.nx, self.grid.ny, float(hx), float(hy), self.path_window, self.path_reach]
