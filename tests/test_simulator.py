@@ -253,3 +253,27 @@ def test_authors_preset_reproduces_their_settled_sheet():
     # warpcut's own update (the full g dt^2 step) hangs the same rows much deeper.
     sag_full, _, _ = settled_figures(Simulator(config.replace(gravity=SimConfig().gravity), 1))
     assert sag_full > sag + 4.0
+
+
+def test_process_noise_is_standard_normal_and_independent():
+    """The hash-based draws (warpcut.kernels.process_noise): mean 0, variance 1, no correlation between
+    axes, neighbouring streams or consecutive seeds; bounded (Irwin-Hall, four bytes) at about +-3.45."""
+    from warpcut._warp import wp
+    from warpcut.kernels import process_noise
+
+    @wp.kernel
+    def draw(seeds: wp.array(dtype=wp.int32), out: wp.array2d(dtype=wp.vec3)):
+        s, i = wp.tid()
+        out[s, i] = process_noise(seeds[s], i)
+
+    seeds = wp.array(np.array([7, 8, 123456], dtype=np.int32))
+    out = wp.zeros((3, 20000), dtype=wp.vec3)
+    wp.launch(draw, dim=(3, 20000), inputs=[seeds], outputs=[out])
+    x = out.numpy()  # (seed, stream, axis)
+    flat = x.reshape(-1)
+    assert abs(flat.mean()) < 0.01 and abs(flat.std() - 1.0) < 0.01
+    assert np.abs(flat).max() < 3.5
+    corr = np.corrcoef(
+        [x[0, :, 0], x[0, :, 1], x[0, :, 2], x[1, :, 0], np.roll(x[0, :, 0], 1), x[2, :, 2]]
+    )
+    assert np.abs(corr - np.eye(len(corr))).max() < 0.03

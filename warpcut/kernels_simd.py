@@ -26,7 +26,7 @@ avoids Warp's per-access index arithmetic (negative-index wrap, spills) and is ~
 Both are **bit-identical** to the fused kernel: every lane evaluates the fused kernel's float
 expressions in the same order (Warp compiles CPU kernels without FMA contraction), and each branch
 becomes a select whose discarded side never reaches the result (only the sign of an exact zero may
-differ). Process noise is supported and draws the fused kernel's stream (``rand_init(seed, env * n +
+differ). Process noise is supported and draws the fused kernel's stream (``process_noise(seed, env * n +
 v)``). Not differentiable; CPU only (``relax="native"`` is C++ for the CPU compiler).
 
 Use: keep a :class:`SimdState` for the batch (pack once per reset with :meth:`SimdState.load`, per update
@@ -49,6 +49,7 @@ from warpcut.kernels import (
     PIN_FREE,
     PIN_GRASP,
     locate_in_cell,
+    process_noise,
     search_window,
     usable,
 )
@@ -265,13 +266,10 @@ def simd_kernels(lanes: int = DEFAULT_LANES) -> SimpleNamespace:
                         env = blk * L + lane
                         sigma = p.sigma[lane]
                         if sigma > 0.0 and vt.free[lane] != 0.0 and vt.alive[lane] != 0.0 and env < num_envs:
-                            state = wp.rand_init(seed, env * n + v)
-                            rx = wp.randn(state)
-                            ry = wp.randn(state)
-                            rz = wp.randn(state)
-                            nx[lane] = nx[lane] + sigma * rx
-                            ny[lane] = ny[lane] + sigma * ry
-                            nz[lane] = nz[lane] + sigma * rz
+                            r = process_noise(seed, env * n + v)
+                            nx[lane] = nx[lane] + sigma * r[0]
+                            ny[lane] = ny[lane] + sigma * r[1]
+                            nz[lane] = nz[lane] + sigma * r[2]
                 prev[i].x = vt.x
                 prev[i].y = vt.y
                 prev[i].z = vt.z
