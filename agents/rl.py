@@ -257,19 +257,21 @@ def rollout_errors(
     device: str | None = None,
     scenario: Scenario | None = None,
     on_step: Callable[[CuttingTask, np.ndarray | None], None] | None = None,
+    paired_noise: tuple[int, int] | None = None,
 ) -> dict:
     """Run the trained policy (deterministic: argmax action) for ``trials`` seeded episodes at once.
 
     Trials differ by their fiducials and process-noise streams. Returns per-trial errors (vertices,
     mm^2) and the pinch point used. ``on_step(task, moves)`` is called after the reset (moves ``None``)
     and after every step, as in :meth:`warpcut.task.CuttingTask.run` (e.g. a recorder's callback).
+    ``paired_noise``: see :func:`policy_errors`.
     """
     scenario = scenario or load_scenario(run_dir)
     if scenario.candidates is not None:  # a shared policy: at the candidate its run chose
         scenario = scenario.at_candidate(chosen_candidate(run_dir))
     actor = load_policy(run_dir)
     env = scenario.vec_env(trials, device=device)
-    return policy_errors(actor, env, scenario, seed=seed, on_step=on_step)
+    return policy_errors(actor, env, scenario, seed=seed, on_step=on_step, paired_noise=paired_noise)
 
 
 def policy_errors(
@@ -278,12 +280,23 @@ def policy_errors(
     scenario: Scenario,
     seed: int,
     on_step: Callable[[CuttingTask, np.ndarray | None], None] | None = None,
+    paired_noise: tuple[int, int] | None = None,
 ) -> dict:
     """One deterministic episode of ``actor`` in every env of ``env`` (reset with ``seed``); see
     :func:`rollout_errors`. Steps the env's scene directly, so the sheet is not reset after the last step
-    (the vector env would reset it in the same call) and ``on_step`` sees the finished cut."""
+    (the vector env would reset it in the same call) and ``on_step`` sees the finished cut.
+
+    ``paired_noise = (noise_seed, first_env)``: draw the process noise that envs ``first_env, first_env +
+    1, ...`` of a :class:`~warpcut.task.CuttingTask` seeded ``noise_seed`` draw (e.g. the baselines'
+    trials of this contour in :func:`agents.evaluation.evaluate_suite`'s batch), so that trial k of the
+    policy and of each baseline see the same noise: paired trials. Default: the env's own noise.
+    """
     trials = env.num_envs
     obs, _ = env.reset(seed=seed)
+    if paired_noise is not None:
+        noise_seed, first_env = paired_noise
+        env.task.sim.first_noise_stream = int(first_env)
+        env.task.reset(seed=int(noise_seed))  # the same settled sheet, the baselines' noise seed
     if on_step is not None:
         on_step(env.task, None)
     final = None
@@ -332,7 +345,15 @@ def evaluate_run(
     contour = scenario.load_contour()
     start = time.perf_counter()
     hook = on_step or (lambda method: None)
-    rl = rollout_errors(run_dir, trials, seed=seed, device=device, scenario=scenario, on_step=hook("rl"))
+    rl = rollout_errors(
+        run_dir,
+        trials,
+        seed=seed,
+        device=device,
+        scenario=scenario,
+        on_step=hook("rl"),
+        paired_noise=(seed, 0),
+    )
     segments = None if scenario.segments is None else [[np.asarray(p) for p in scenario.segments]]
     none = run_method(
         [contour],

@@ -132,3 +132,32 @@ def test_ppo_learns_to_lift_the_parabola(tmp_path):
     assert initial["error"] > 0.8 * evaluation["none_error_vertices"]  # the untrained policy does not help
     assert evaluation["rl_error_vertices"] < 0.5 * evaluation["none_error_vertices"]
     assert result["summary"]["best"]["iterations"] > 0
+
+
+def test_a_still_policy_with_paired_noise_cuts_exactly_as_fixed_tension():
+    """Paired trials: a policy that always chooses "stay", rolled out with the noise of the baselines'
+    batch, reproduces fixed tension at its pinch bit for bit, trial by trial, for a contour that is not the
+    first of the batch too; with its env's own noise it does not."""
+    from agents.evaluation import MethodSpec, run_method
+    from agents.rl import Scenario, policy_errors
+    from warpcut import SimConfig
+
+    class Stay(torch.nn.Module):
+        def forward(self, obs):
+            return torch.zeros(obs.batch_size[0], 1)
+
+    scenario = Scenario(contour="circle-small", sim={"resolution": 13, "noise_std": 0.05})
+    contour, pinch = scenario.load_contour(), scenario.pinch_point()
+    trials, seed = 3, 4
+    fixed = run_method(
+        [load_contour("fls-circle"), contour],
+        MethodSpec([pinch, pinch], None),
+        trials,
+        SimConfig(resolution=13, noise_std=0.05),
+        "cpu",
+        seed,
+    ).errors[1]
+    paired = policy_errors(Stay(), scenario.vec_env(trials, "cpu"), scenario, 9, paired_noise=(seed, trials))
+    np.testing.assert_array_equal(paired["error_vertices"], fixed)
+    own = policy_errors(Stay(), scenario.vec_env(trials, "cpu"), scenario, 9)
+    assert not np.array_equal(own["error_vertices"], fixed)

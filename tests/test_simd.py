@@ -39,7 +39,9 @@ class SimdDriver:
 
     def update(self) -> None:
         self.state.load_controls(self.sim.displacement, self.sim.tip)
-        self.state.step(self.model, self.sim._noise_seed(), relax=self.relax)
+        self.state.step(
+            self.model, self.sim._noise_seed(), relax=self.relax, first_stream=self.sim.first_noise_stream
+        )
         self.sim.update_count += 1
 
     def store(self) -> None:
@@ -109,6 +111,7 @@ def fused_arguments(sim: Simulator, seed: int) -> list:
         p["elasticity"],
         int(sim.config.first_order_z),
         seed,
+        sim.first_noise_stream,
         sim.config.cut_radius,
         sim.config.cut_height,
         sim.pin,

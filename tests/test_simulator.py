@@ -273,7 +273,5 @@ def test_process_noise_is_standard_normal_and_independent():
     flat = x.reshape(-1)
     assert abs(flat.mean()) < 0.01 and abs(flat.std() - 1.0) < 0.01
     assert np.abs(flat).max() < 3.5
-    corr = np.corrcoef(
-        [x[0, :, 0], x[0, :, 1], x[0, :, 2], x[1, :, 0], np.roll(x[0, :, 0], 1), x[2, :, 2]]
-    )
+    corr = np.corrcoef([x[0, :, 0], x[0, :, 1], x[0, :, 2], x[1, :, 0], np.roll(x[0, :, 0], 1), x[2, :, 2]])
     assert np.abs(corr - np.eye(len(corr))).max() < 0.03

@@ -1045,7 +1045,12 @@ def _rl_results(
 
                 plot_learning_curve(summary["history"], summary["validation"], run, title=contour.name)
         hook = None if on_step is None else on_step(k)
-        rollouts.append(rollout_errors(run, trials, seed=seed + 1, device=device, on_step=hook))
+        # Trial t sees the noise of the baselines' trial t of this contour (env k * trials + t of their batch).
+        rollouts.append(
+            rollout_errors(
+                run, trials, seed=seed + 1, device=device, on_step=hook, paired_noise=(seed, k * trials)
+            )
+        )
     return result_type.from_rollouts(rollouts)
 
 
@@ -1465,6 +1470,7 @@ def run(
                 seed=seed + 1,
                 device=device,
                 on_step=None if hooks is None else hooks("rl"),
+                paired_noise=(seed, 0),  # the baselines' trials' noise (evaluate_suite below, same seed)
             )
             extra["rl"] = MethodResult.from_rollouts([rl])
         report = evaluate_suite(

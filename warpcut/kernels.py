@@ -70,6 +70,7 @@ def integrate_kernel(
     first_order_z: int,
     seed_base: wp.array(dtype=wp.int32),
     update_counter: wp.array(dtype=wp.int32),
+    first_stream: int,
     # Data in:
     x: wp.array(dtype=wp.vec3),
     x_prev: wp.array(dtype=wp.vec3),
@@ -84,7 +85,7 @@ def integrate_kernel(
 
     The noise seed of this update is ``(seed_base[0] + update_counter[0]) mod (2^31 - 1)``, read from
     device memory so that a captured graph draws a fresh stream at every replay and follows a new seed
-    (see ``count_update_kernel``).
+    (see ``count_update_kernel``). Env ``e`` draws noise stream ``first_stream + e``.
     """
     env, v = wp.tid()
     i = env * n + v
@@ -108,7 +109,7 @@ def integrate_kernel(
     sigma = noise_std[env % noise_std.shape[0]]
     if sigma > 0.0:
         seed = wp.int32((wp.int64(seed_base[0]) + wp.int64(update_counter[0])) % wp.int64(2147483647))
-        q = q + sigma * process_noise(seed, i)
+        q = q + sigma * process_noise(seed, i + first_stream * n)
     x_out[i] = q
 
 
@@ -259,6 +260,7 @@ def fused_update_kernel(
     elasticity: wp.array(dtype=float),
     first_order_z: int,
     seed: int,
+    first_stream: int,
     cut_radius: float,
     cut_height: float,
     # Data in:
@@ -301,7 +303,7 @@ def fused_update_kernel(
                 velocity = wp.vec3(velocity[0], velocity[1], 0.0)
             q = p + velocity - fall
             if sigma > 0.0:
-                q = q + sigma * process_noise(seed, i)
+                q = q + sigma * process_noise(seed, i + first_stream * n)
         x_prev[i] = p
         x[i] = q
     num_colours = colour_start.shape[0] - 1

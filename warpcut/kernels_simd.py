@@ -214,6 +214,7 @@ def simd_kernels(lanes: int = DEFAULT_LANES) -> SimpleNamespace:
             first_order_z: int,
             any_noise: int,
             seed: int,
+            first_stream: int,
             num_envs: int,
             cut_radius: float,
             cut_height: float,
@@ -266,7 +267,7 @@ def simd_kernels(lanes: int = DEFAULT_LANES) -> SimpleNamespace:
                         env = blk * L + lane
                         sigma = p.sigma[lane]
                         if sigma > 0.0 and vt.free[lane] != 0.0 and vt.alive[lane] != 0.0 and env < num_envs:
-                            r = process_noise(seed, env * n + v)
+                            r = process_noise(seed, env * n + v + first_stream * n)
                             nx[lane] = nx[lane] + sigma * r[0]
                             ny[lane] = ny[lane] + sigma * r[1]
                             nz[lane] = nz[lane] + sigma * r[2]
@@ -637,8 +638,10 @@ class SimdState:
         block_offset: int = 0,
         block_count: int | None = None,
         relax: str = "native",
+        first_stream: int = 0,
     ) -> None:
-        """One update of blocks ``[block_offset, block_offset + block_count)`` (default: to the end).
+        """One update of blocks ``[block_offset, block_offset + block_count)`` (default: to the end); env
+        ``e`` draws noise stream ``first_stream + e``.
 
         Disjoint block ranges may be stepped from different Python threads at once (``wp.launch``
         releases the GIL), as ``Simulator`` does with env slices.
@@ -656,6 +659,7 @@ class SimdState:
                 model.first_order_z,
                 self.any_noise,
                 int(seed),
+                int(first_stream),
                 self.num_envs,
                 model.cut_radius,
                 model.cut_height,
@@ -684,6 +688,7 @@ def simd_update(
     elasticity: wp.array,
     first_order_z: int,
     seed: int,
+    first_stream: int,
     cut_radius: float,
     cut_height: float,
     pin: wp.array,
@@ -708,5 +713,5 @@ def simd_update(
     model = SimdModel.from_arrays(
         n, iterations, spring_a, spring_b, spring_rest, colour_start, first_order_z, cut_radius, cut_height
     )
-    state.step(model, seed, relax=relax)
+    state.step(model, seed, relax=relax, first_stream=first_stream)
     state.store(x, x_prev, alive)

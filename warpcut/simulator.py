@@ -113,6 +113,7 @@ class Simulator:
         self._update_counter = wp.zeros(1, dtype=wp.int32, device=self.device)
         self._counter_synced = True
         self._graphs: dict[tuple, tuple] = {}
+        self._first_noise_stream = 0
         self.path: wp.array | None = None
         """(B, T) ``vec3`` while tracing (:meth:`trace_path`): per update, the tip in material coordinates and
         its status (``kernels.PATH_MAPPED``, ``PATH_DROPPED``, ``PATH_IDLE``)."""
@@ -172,6 +173,20 @@ class Simulator:
         self.threads = max(1, min(threads or cores, units)) if is_cpu else 1
         self._slices = [(len(c), int(c[0])) for c in np.array_split(np.arange(units), self.threads)]
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
+
+    @property
+    def first_noise_stream(self) -> int:
+        """The noise stream env 0 draws; env ``e`` draws stream ``first_noise_stream + e`` (default 0). A
+        batch that sets it to ``k`` sees the same noise as envs ``k, k + 1, ...`` of another batch with the
+        same seed: paired trials across batches laid out differently (``agents.rl.policy_errors``)."""
+        return self._first_noise_stream
+
+    @first_noise_stream.setter
+    def first_noise_stream(self, value: int) -> None:
+        if not isinstance(value, int | np.integer) or value < 0:
+            raise ValueError(f"first_noise_stream: must be a non-negative integer (got {value!r})")
+        self._first_noise_stream = int(value)
+        self._graphs.clear()  # captured updates hold the old value
 
     @property
     def seed(self) -> int:
@@ -418,7 +433,13 @@ class Simulator:
 
         def launch(part: tuple[int, int]) -> None:
             count, offset = part
-            state.step(self._simd_model, seed, block_offset=offset, block_count=count)
+            state.step(
+                self._simd_model,
+                seed,
+                block_offset=offset,
+                block_count=count,
+                first_stream=self.first_noise_stream,
+            )
             if tracing:
                 wp.launch(
                     state.kernels.map_tip,
@@ -471,6 +492,7 @@ class Simulator:
                     p["elasticity"],
                     int(self.config.first_order_z),
                     seed,
+                    self.first_noise_stream,
                     self.config.cut_radius,
                     self.config.cut_height,
                     self.pin,
@@ -543,6 +565,7 @@ class Simulator:
                 int(self.config.first_order_z),
                 self._seed_base,
                 self._update_counter,
+                self.first_noise_stream,
                 self.x,
                 self.x_prev,
                 self.alive,
