@@ -1045,7 +1045,7 @@ def _rl_results(
 
                 plot_learning_curve(summary["history"], summary["validation"], run, title=contour.name)
         hook = None if on_step is None else on_step(k)
-        # Trial t sees the noise of the baselines' trial t of this contour (env k * trials + t of their batch).
+        # Trial t sees the noise of the baselines' trial t of this contour (env k * trials + t there).
         rollouts.append(
             rollout_errors(
                 run, trials, seed=seed + 1, device=device, on_step=hook, paired_noise=(seed, k * trials)
