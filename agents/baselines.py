@@ -11,9 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from warpcut.config import AUTHORS_UNITS_PER_MM, SimConfig
 from warpcut.contours import Contour
 from warpcut.planning import feasible_centroid, sample_pinch_candidates
+from warpcut.sim.config import AUTHORS_UNITS_PER_MM, SimConfig
 from warpcut.task import CuttingTask
 
 

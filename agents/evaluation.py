@@ -10,9 +10,9 @@ import numpy as np
 from scipy import stats
 
 from agents.baselines import AnalyticTension, FixedTension, NoTension, search_fixed_pinches
-from warpcut.config import SimConfig
 from warpcut.contours import Contour
 from warpcut.scoring import improvement_pct
+from warpcut.sim.config import SimConfig
 from warpcut.task import CuttingTask, default_segments
 
 BASELINES = ("none", "fixed", "analytic")

@@ -21,10 +21,10 @@ from agents.train import TrainConfig, train
 from envs.pattern_cut import PatternCutOptions
 from envs.rsl import PatternCutRslEnv
 from envs.vector import PatternCutVecEnv
-from warpcut.config import SimConfig
 from warpcut.contours import Contour, load_contour
 from warpcut.io import write_json
 from warpcut.planning import nearest_feasible
+from warpcut.sim.config import SimConfig
 from warpcut.task import CuttingTask, default_segments
 
 

@@ -30,8 +30,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from warpcut.config import SimConfig
 from warpcut.fiducials import Fiducials, sample_fiducials
+from warpcut.sim.config import SimConfig
 
 __all__ = [
     "POSITION_LIMIT",

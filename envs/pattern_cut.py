@@ -44,10 +44,10 @@ import gymnasium as gym
 import numpy as np
 
 from envs.observations import Fiducials, normalise_positions, observation_bounds, sample_fiducials
-from warpcut.config import PerEnv, SimConfig
 from warpcut.contours import Contour, load_contour
 from warpcut.fiducials import NUM_FIDUCIALS, SHAFT_RADIUS_MM
 from warpcut.planning import nearest_feasible
+from warpcut.sim.config import PerEnv, SimConfig
 from warpcut.task import CuttingTask
 
 ContourSpec = str | os.PathLike | Contour
@@ -64,7 +64,7 @@ class PatternCutOptions:
     """A pattern-cutting scenario and how the policy sees and acts on it.
 
     Physical parameters take one value for all envs or a list with one value per env (see
-    :class:`~warpcut.config.SimConfig`); ``None`` keeps ``sim_config``'s value.
+    :class:`~warpcut.sim.config.SimConfig`); ``None`` keeps ``sim_config``'s value.
     """
 
     contour: ContourSpec | Sequence[ContourSpec] = "fls-circle"

@@ -46,10 +46,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from warpcut.config import SimConfig
 from warpcut.contours import load_contour
-from warpcut.recording import Recorder
+from warpcut.sim.config import SimConfig
 from warpcut.task import CuttingTask
+from warpcut.viz.recording import Recorder
 
 PHASES = (("plain", "process"), ("plain", "worker thread", "no thread"))
 BACKGROUND = {"process": "process", "worker thread": "thread", "no thread": False}

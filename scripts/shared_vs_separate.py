@@ -28,10 +28,10 @@ import torch
 
 from agents.export import load_policy
 from agents.rl import RECIPE, Scenario, chosen_candidate, policy_errors, recipe_config, train_contour
-from warpcut.config import SimConfig
 from warpcut.contours import load_contour
 from warpcut.io import write_json
 from warpcut.planning import plan_cut
+from warpcut.sim.config import SimConfig
 
 EPISODE_SEED = 100
 

@@ -1,4 +1,4 @@
-"""Env updates/s: the fused backend against the SIMD prototype (``warpcut/kernels_simd.py``).
+"""Env updates/s: the fused backend against the SIMD prototype (``warpcut/sim/kernels_simd.py``).
 
     python scripts/simd_bench.py                      # 25 x 25, B = 1024, median of 5, one thread
     python scripts/simd_bench.py --threads 2          # ...and both backends on two threads as well
@@ -25,7 +25,7 @@ wp.config.quiet = True
 
 def bench_setting(label: str, config, args) -> None:
     from warpcut import Simulator
-    from warpcut.kernels_simd import SimdModel, SimdState
+    from warpcut.sim.kernels_simd import SimdModel, SimdState
 
     b = args.batch
     rng = np.random.default_rng(0)

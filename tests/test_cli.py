@@ -13,11 +13,11 @@ import pytest
 from click.testing import CliRunner
 
 from warpcut.cli import main
-from warpcut.config import SimConfig
 from warpcut.contours import load_contour
 from warpcut.planning import feasible_centroid
-from warpcut.recording import read_summary
-from warpcut.segmentation import segment_contour
+from warpcut.planning.segmentation import segment_contour
+from warpcut.sim.config import SimConfig
+from warpcut.viz.recording import read_summary
 
 
 def invoke(args):
@@ -136,7 +136,9 @@ def test_bad_arguments_exit_2_with_one_line(args, message, capfd):
 def test_warp_starts_quietly_unless_asked():
     # Without NVIDIA's driver, Warp's C code prints a CUDA warning on every start; warpcut silences it
     # (and Warp's banner) unless WARPCUT_VERBOSE is set.
-    code = "import warpcut.simulator, warpcut._warp as w; w.wp.init(); print(w.wp.is_cuda_available())"
+    code = (
+        "import warpcut.sim.simulator, warpcut.sim._warp as w; w.wp.init(); print(w.wp.is_cuda_available())"
+    )
     env = {k: v for k, v in os.environ.items() if k != "WARPCUT_VERBOSE"}
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
     assert done.stderr == "", done.stderr
@@ -558,8 +560,8 @@ def test_cli_defaults_are_the_library_defaults():
     """One set of defaults: every command's protocol options show what the library uses."""
     import inspect
 
-    from warpcut.config import ARM_LENGTH_MM, ARM_RADIUS_MM
     from warpcut.planning import plan_cut
+    from warpcut.sim.config import ARM_LENGTH_MM, ARM_RADIUS_MM
 
     library = {
         "noise": SimConfig().noise_std,

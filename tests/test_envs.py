@@ -14,8 +14,8 @@ import envs
 from envs import ENV_ID, PatternCutEnv, PatternCutVecEnv
 from envs.observations import Fiducials
 from envs.rsl import FINAL_ERROR_KEY, PatternCutRslEnv
-from warpcut.config import SheetGrid, SimConfig
 from warpcut.contours import load_contour
+from warpcut.sim.config import SheetGrid, SimConfig
 
 SMALL = {"contour": "circle-small", "resolution": 9}
 """A 9 x 9 sheet and a 94 mm contour: 48 steps per episode."""

@@ -6,8 +6,8 @@ import shapely
 
 from warpcut import SimConfig, Simulator
 from warpcut.contours import load_contour, validate
-from warpcut.kernels import PATH_DROPPED, PATH_IDLE, PATH_MAPPED
 from warpcut.scoring import order_cut_path, path_region
+from warpcut.sim.kernels import PATH_DROPPED, PATH_IDLE, PATH_MAPPED
 from warpcut.task import CuttingTask, default_segments
 
 RIGID = SimConfig(gravity=0.0, noise_std=0.0)

@@ -19,7 +19,7 @@ from warpcut.planning import (
     search_orders,
     under_arm,
 )
-from warpcut.segmentation import segment_contour
+from warpcut.planning.segmentation import segment_contour
 from warpcut.task import CuttingTask
 
 GEOMETRY = SimConfig()  # feasibility only: no simulation, so the paper's 25 x 25 sheet costs nothing

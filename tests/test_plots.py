@@ -7,11 +7,17 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from warpcut.config import SimConfig
 from warpcut.contours import load_contour
 from warpcut.planning import Plan, pinch_feasible, plan_cut
-from warpcut.plots import FinalCuts, feasible_grid, plot_learning_curve, plot_pinch_candidates, plot_regions
+from warpcut.sim.config import SimConfig
 from warpcut.task import CuttingTask
+from warpcut.viz.plots import (
+    FinalCuts,
+    feasible_grid,
+    plot_learning_curve,
+    plot_pinch_candidates,
+    plot_regions,
+)
 
 SIM = SimConfig(resolution=13)
 

@@ -14,11 +14,13 @@ import pytest
 from click.testing import CliRunner
 
 from agents.evaluation import compare_policies
-from warpcut import recording
 from warpcut.cli import main
-from warpcut.config import SheetGrid, SimConfig
 from warpcut.contours import load_contour
-from warpcut.recording import (
+from warpcut.sim.config import SheetGrid, SimConfig
+from warpcut.sim.simulator import Simulator, colour_springs
+from warpcut.task import CuttingTask
+from warpcut.viz import recording
+from warpcut.viz.recording import (
     PROCESS_NICE,
     STRAIN_FULL_SCALE,
     Recorder,
@@ -27,8 +29,6 @@ from warpcut.recording import (
     read_summary,
     vertex_strain,
 )
-from warpcut.simulator import Simulator, colour_springs
-from warpcut.task import CuttingTask
 
 RESOLUTION = 9
 ENV_ENTITIES = (
@@ -498,9 +498,9 @@ def test_the_recorder_process_finishes_the_file_when_the_stepping_process_dies(t
     script = textwrap.dedent(
         f"""
         import os, sys
-        from warpcut.config import SimConfig
+        from warpcut.sim.config import SimConfig
         from warpcut.contours import load_contour
-        from warpcut.recording import Recorder
+        from warpcut.viz.recording import Recorder
         from warpcut.task import CuttingTask
 
         task = CuttingTask(SimConfig(resolution={RESOLUTION}), load_contour("circle-small"), device="cpu")
@@ -526,7 +526,7 @@ def test_a_stepping_process_that_dies_before_recording_leaves_an_earlier_file_al
     script = textwrap.dedent(
         """
         import os, sys
-        from warpcut.recording import Recorder
+        from warpcut.viz.recording import Recorder
 
         recorder = Recorder(sys.argv[1] + "/recording.rrd", background="process")
         recorder.on_step("none")  # made, never called
@@ -561,7 +561,7 @@ def test_columns_are_the_rerun_archetypes_columns():
     """The writer builds its columns from arrow arrays; they must be what rerun's archetypes build."""
     import rerun as rr
 
-    from warpcut.recording import (
+    from warpcut.viz.recording import (
         _CUTTING_RGB,
         _CUTTING_RGBA,
         _TRAVEL_RGB,
@@ -756,18 +756,18 @@ def test_a_started_recorder_process_is_taken_by_the_next_recorder(tmp_path):
 
 
 def test_the_cli_starts_the_recorder_process_before_importing_anything_slow():
-    # The CLI starts the recorder process first thing (warpcut.recorder_process): its start-up overlaps
+    # The CLI starts the recorder process first thing (warpcut.viz.process): its start-up overlaps
     # the command's only if starting it needs none of what the process itself imports.
-    code = "import json, sys, warpcut.recorder_process; print(json.dumps(sorted(sys.modules)))"
+    code = "import json, sys, warpcut.viz.process; print(json.dumps(sorted(sys.modules)))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     loaded = set(json.loads(out))
-    assert "warpcut.recorder_process" in loaded and "warpcut.recording" not in loaded
+    assert "warpcut.viz.process" in loaded and "warpcut.viz.recording" not in loaded
     assert not {m.split(".")[0] for m in loaded} & {"scipy", "rerun", "pyarrow", "shapely", "warp", "torch"}
 
 
 def test_the_recorder_process_and_the_cli_start_without_warp():
-    # Warp costs ~0.4 s to import: the recorder process (warpcut.recording) and the CLI's start-up, which
+    # Warp costs ~0.4 s to import: the recorder process (warpcut.viz.recording) and the CLI's start-up, which
     # starts that process, do without it until a simulator is made.
-    code = "import sys, warpcut.cli, warpcut.recording; print('warp' in sys.modules)"
+    code = "import sys, warpcut.cli, warpcut.viz.recording; print('warp' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "False"

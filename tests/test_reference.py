@@ -5,7 +5,7 @@ import pytest
 
 from warpcut import SimConfig
 from warpcut.contours import load_contour
-from warpcut.reference import ReferenceSheet
+from warpcut.sim.reference import ReferenceSheet
 from warpcut.task import CuttingTask
 
 POSITION_TOLERANCE_MM = 1e-2

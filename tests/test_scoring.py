@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 import shapely
 
-from warpcut.config import SheetGrid
 from warpcut.scoring import (
     Separation,
     achieved_mask,
@@ -15,6 +14,7 @@ from warpcut.scoring import (
     intended_mask,
     symmetric_difference,
 )
+from warpcut.sim.config import SheetGrid
 
 CENTER = np.array([50.0, 50.0])
 RADIUS = 25.0

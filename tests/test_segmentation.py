@@ -1,4 +1,4 @@
-"""Tests for warpcut.segmentation: splitting contours into wrist-feasible segments, and cutting orders."""
+"""Tests for warpcut.planning.segmentation: splitting contours into wrist-feasible segments, and cutting orders."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from warpcut.contours import builtin_contours, load_contour, validate
-from warpcut.segmentation import Segment, is_monotone, segment_contour, segment_orders
+from warpcut.planning.segmentation import Segment, is_monotone, segment_contour, segment_orders
 
 BUILTINS = builtin_contours()
 

@@ -1,4 +1,4 @@
-"""The SIMD prototype (``warpcut/kernels_simd.py``) against the fused backend.
+"""The SIMD prototype (``warpcut/sim/kernels_simd.py``) against the fused backend.
 
 The SIMD kernels evaluate the fused kernel's float expressions lane by lane in the same order, so the
 comparison is exact (bit for bit), which is stronger than the 1e-3 mm asked of a new backend.
@@ -9,8 +9,8 @@ import pytest
 import warp as wp
 
 from warpcut import SimConfig, Simulator
-from warpcut.kernels import fused_update_kernel
-from warpcut.kernels_simd import SimdModel, SimdState, simd_kernels, simd_update
+from warpcut.sim.kernels import fused_update_kernel
+from warpcut.sim.kernels_simd import SimdModel, SimdState, simd_kernels, simd_update
 
 PINCHES = np.array([[50.0, 50.0], [np.nan, np.nan], [30.0, 60.0], [60.0, 40.0], [45.0, 45.0]])
 

@@ -3,7 +3,7 @@ import pytest
 import warp as wp
 
 from warpcut import ConfigError, SheetGrid, SimConfig, Simulator
-from warpcut.simulator import colour_springs, spring_colours
+from warpcut.sim.simulator import colour_springs, spring_colours
 
 
 def structural_stretch(positions: np.ndarray, grid: SheetGrid) -> np.ndarray:
@@ -241,7 +241,7 @@ def test_simd_state_survives_a_switch_to_the_taped_path():
 def test_authors_preset_reproduces_their_settled_sheet():
     """Their released code, ported and run as released: rows pinned, 200 updates, centre sag 12.5 mm,
     largest structural stretch 10.0%, mean 2.3% (issue 14). Tolerance: 1 mm, 1.5 and 0.4 points."""
-    from warpcut.simulator import settled_figures
+    from warpcut.sim.simulator import settled_figures
 
     config = SimConfig.authors()
     assert config.settle_updates == 200 and config.updates_per_step == 1
@@ -256,10 +256,10 @@ def test_authors_preset_reproduces_their_settled_sheet():
 
 
 def test_process_noise_is_standard_normal_and_independent():
-    """The hash-based draws (warpcut.kernels.process_noise): mean 0, variance 1, no correlation between
+    """The hash-based draws (warpcut.sim.kernels.process_noise): mean 0, variance 1, no correlation between
     axes, neighbouring streams or consecutive seeds; bounded (Irwin-Hall, four bytes) at about +-3.45."""
-    from warpcut._warp import wp
-    from warpcut.kernels import process_noise
+    from warpcut.sim._warp import wp
+    from warpcut.sim.kernels import process_noise
 
     @wp.kernel
     def draw(seeds: wp.array(dtype=wp.int32), out: wp.array2d(dtype=wp.vec3)):

@@ -16,9 +16,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from warpcut._warp import wp
-from warpcut.config import SimConfig
-from warpcut.simulator import Simulator
+from warpcut.sim._warp import wp
+from warpcut.sim.config import SimConfig
+from warpcut.sim.simulator import Simulator
 
 BATCH_SIZES = (1, 64, 1024, 4096)
 PAPER_SWEEPS = SimConfig(springs=("structural",), iterations=5, noise_std=0.0)
@@ -105,7 +105,7 @@ def scoring_overhead_pct(num_envs: int, device: str, repeats: int) -> float:
 
 def numpy_updates_per_second(repeats: int) -> float:
     """Updates per second of the NumPy reference (one sheet, default physics without process noise)."""
-    from warpcut.reference import ReferenceSheet
+    from warpcut.sim.reference import ReferenceSheet
 
     config = SimConfig(noise_std=0.0)
     sim = Simulator(config, 1, device="cpu")

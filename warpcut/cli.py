@@ -17,8 +17,8 @@ from pathlib import Path
 
 import click
 
-from warpcut.config import ARM_LENGTH_MM, ARM_RADIUS_MM, FIXTURES, SCORES, SimConfig
-from warpcut.recorder_process import RecordingError
+from warpcut.sim.config import ARM_LENGTH_MM, ARM_RADIUS_MM, FIXTURES, SCORES, SimConfig
+from warpcut.viz.process import RecordingError
 
 POLICY_NAMES = ("none", "fixed", "analytic")
 
@@ -81,7 +81,7 @@ def _negative_record(kwargs: dict, args: tuple, exc: click.NoSuchOption) -> str 
 
 
 RECORD_COLOURS = ("strain", "height")
-"""``--colour-by`` choices: :data:`warpcut.recording.COLOUR_FIELDS` (not imported here: slow to load)."""
+"""``--colour-by`` choices: :data:`warpcut.viz.recording.COLOUR_FIELDS` (not imported here: slow to load)."""
 
 
 def _record_option(what: str):
@@ -114,7 +114,7 @@ def _record_option(what: str):
                     "--colour-by: colours a recording; add --record [N], or drop --colour-by"
                 )
             if kwargs["record_envs"] is not None:
-                from warpcut.recorder_process import start_recorder_process
+                from warpcut.viz.process import start_recorder_process
 
                 start_recorder_process()  # its start-up overlaps the command's own
             return command(**kwargs)
@@ -306,7 +306,7 @@ def simulate(
     """Cut a contour with each baseline tensioner and compare their errors."""
     from agents.evaluation import compare_policies
     from warpcut.contours import load_contour
-    from warpcut.simulator import resolve_device
+    from warpcut.sim.simulator import resolve_device
 
     names = _parse_policies(policies)
     point = _parse_point(pinch, "--pinch")
@@ -316,7 +316,7 @@ def simulate(
     out = json_path.parent if json_path else _run_dir(None, "simulate")
     cuts = None
     if not no_plots:
-        from warpcut.plots import FinalCuts
+        from warpcut.viz.plots import FinalCuts
 
         cuts = FinalCuts()
     start = time.perf_counter()
@@ -352,7 +352,7 @@ def simulate(
         write_json(json_path, report)
         click.echo(f"wrote {json_path}")
     if cuts is not None:
-        from warpcut.plots import plot_regions
+        from warpcut.viz.plots import plot_regions
 
         _echo_written(plot_regions(cuts.of(contour.name), out))
     _echo_recording(recorder)
@@ -364,7 +364,7 @@ def _recorder(out: Path, record_envs: int | None, colour_by: str):
 
     if record_envs is None:
         return contextlib.nullcontext()
-    from warpcut.recording import Recorder
+    from warpcut.viz.recording import Recorder
 
     return Recorder(out / "recording.rrd", envs=record_envs, colour_by=colour_by)
 
@@ -431,7 +431,7 @@ def bench(
 ) -> None:
     """Measure simulator throughput (medians over repeats, all in one run)."""
     from warpcut.bench import run_bench
-    from warpcut.simulator import resolve_device
+    from warpcut.sim.simulator import resolve_device
 
     try:
         sizes = tuple(int(v) for v in batch_sizes.split(","))
@@ -613,7 +613,7 @@ def train(
     from agents.rl import Scenario, load_scenario, train_contour
     from agents.train import TrainConfig
     from warpcut.contours import load_contour
-    from warpcut.simulator import resolve_device
+    from warpcut.sim.simulator import resolve_device
 
     device = resolve_device(device)
     point = _parse_point(pinch, "--pinch")
@@ -670,7 +670,7 @@ def train(
         f"± {e['rl_ci95']:.1f}"
     )
     if not no_plots:
-        from warpcut.plots import plot_learning_curve
+        from warpcut.viz.plots import plot_learning_curve
 
         _echo_written(plot_learning_curve(s["history"], s["validation"], out, title=scenario.contour))
     _echo_recording(recorder)
@@ -796,7 +796,7 @@ def evaluate(
     from agents.evaluation import MethodResult, evaluate_suite
     from warpcut.contours import builtin_names, load_contour
     from warpcut.io import write_atomic, write_json
-    from warpcut.simulator import resolve_device
+    from warpcut.sim.simulator import resolve_device
 
     names = [m.strip() for m in methods.split(",") if m.strip()]
     unknown = [m for m in names if m not in EVALUATE_METHODS]
@@ -845,7 +845,7 @@ def evaluate(
         pinches["analytic"] = analytic
     cuts = None
     if not no_plots:
-        from warpcut.plots import FinalCuts
+        from warpcut.viz.plots import FinalCuts
 
         cuts = FinalCuts()
     extra = {}
@@ -899,7 +899,7 @@ def evaluate(
     if markdown_path:
         write_atomic(markdown_path, table + "\n")
     if not no_plots:
-        from warpcut.plots import plot_improvements, plot_pinch_candidates
+        from warpcut.viz.plots import plot_improvements, plot_pinch_candidates
 
         _echo_written(plot_improvements(report, names, out))
         shown = ["none"] + [m for m in names if m != "none"]
@@ -929,7 +929,7 @@ def replay(path: Path, web: bool) -> None:
     Without a display (no DISPLAY or WAYLAND_DISPLAY) it prints how to view the file and what it holds;
     so it does, exiting with status 1, where the viewer ends at once (a display that cannot be reached).
     """
-    from warpcut.recording import read_summary
+    from warpcut.viz.recording import read_summary
 
     summary = read_summary(path)
     viewer = VIEWER
@@ -1041,7 +1041,7 @@ def _rl_results(
                 "summary"
             ]
             if plots:
-                from warpcut.plots import plot_learning_curve
+                from warpcut.viz.plots import plot_learning_curve
 
                 plot_learning_curve(summary["history"], summary["validation"], run, title=contour.name)
         hook = None if on_step is None else on_step(k)
@@ -1115,7 +1115,7 @@ def plan(
 
     from warpcut.contours import load_contour
     from warpcut.planning import plan_cut
-    from warpcut.simulator import resolve_device
+    from warpcut.sim.simulator import resolve_device
 
     device = resolve_device(device)
     contour = load_contour(contour_name)
@@ -1191,7 +1191,7 @@ def _train_run_candidates(
     candidate cut in its best order; records each candidate's validation error in ``listed`` and returns
     the run directory of the winner and its index (the first, i.e. the better fixed rank, among ties)."""
     from agents.rl import RECIPE, Scenario, recipe_config, train_contour
-    from warpcut.plots import plot_learning_curve
+    from warpcut.viz.plots import plot_learning_curve
 
     cuts = [[s.tolist() for s in plan.ordered_segments(c["order"])] for c in listed]
     if shared:
@@ -1374,7 +1374,7 @@ def run(
     from warpcut.contours import load_contour
     from warpcut.io import write_json
     from warpcut.planning import plan_cut
-    from warpcut.simulator import resolve_device
+    from warpcut.sim.simulator import resolve_device
 
     settings = dict(BUDGETS[budget])
     overrides = dict(candidates=candidates, rl_candidates=rl_candidates, iterations=iterations, trials=trials)
@@ -1458,7 +1458,7 @@ def run(
     click.echo(f"[3/3] evaluating {', '.join(methods)}: {settings['trials']} trials each", err=True)
     cuts = None
     if not no_plots:
-        from warpcut.plots import FinalCuts
+        from warpcut.viz.plots import FinalCuts
 
         cuts = FinalCuts()
     with _recorder(out, record_envs, colour_by) as recorder:
@@ -1509,7 +1509,7 @@ def run(
     if json_path:
         write_json(json_path, report)
     if cuts is not None:
-        from warpcut.plots import plot_improvements, plot_pinch_candidates, plot_regions
+        from warpcut.viz.plots import plot_improvements, plot_pinch_candidates, plot_regions
 
         _echo_written(plot_regions(cuts.of(contour.name, methods), out))
         _echo_written(plot_improvements(report, methods[1:], out))

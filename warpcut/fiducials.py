@@ -7,7 +7,7 @@ lost a vertex to the scissors, or when it lies under the cutting arm's shaft: a 
 ``{y = tip_y, z = tip_z}`` below the radius). A hidden fiducial reports its last visible position; at reset
 every fiducial reports its position on the settled sheet.
 
-The envs (:mod:`envs.observations`) observe them; recordings (:mod:`warpcut.recording`) show them, visible
+The envs (:mod:`envs.observations`) observe them; recordings (:mod:`warpcut.viz.recording`) show them, visible
 or hidden, with the same rule (:func:`visible`).
 """
 
@@ -18,9 +18,9 @@ from collections.abc import Sequence
 import numpy as np
 import shapely
 
-from warpcut.config import SheetGrid, SimConfig
 from warpcut.contours import Contour
-from warpcut.material import interpolate, material_cells
+from warpcut.sim.config import SheetGrid, SimConfig
+from warpcut.sim.material import interpolate, material_cells
 
 NUM_FIDUCIALS = 12
 """Fiducials per sheet (the paper's 12)."""

@@ -8,7 +8,7 @@ the sheet (:meth:`warpcut.contours.Contour.intended_region`).
 
 * **path** (the paper's, Section III-B, and the default): Y is the region enclosed by the *cut path*,
   where the scissors actually went through the material. The simulator maps the tip of every cutting
-  update into material coordinates (:meth:`warpcut.simulator.Simulator.trace_path`); the points are put
+  update into material coordinates (:meth:`warpcut.sim.simulator.Simulator.trace_path`); the points are put
   in contour order (by the arc length of the contour point each was meant to cut), gaps bridged with
   straight lines, and closed: as a ring for a closed contour, for an open one along the sheet's edges on
   the intended side. Self-intersections are repaired (``shapely.make_valid``). The error is the area of
@@ -31,7 +31,7 @@ import numpy as np
 import shapely
 from scipy import ndimage
 
-from warpcut.config import SCORES, SheetGrid
+from warpcut.sim.config import SCORES, SheetGrid
 
 Region = shapely.Polygon | shapely.MultiPolygon
 
@@ -322,7 +322,7 @@ def order_cut_path(path: np.ndarray, arc_mm: np.ndarray) -> tuple[np.ndarray, fl
     """One env's traced tips in contour order.
 
     Args:
-        path: (T, 3) per update ``(mx, my, status)`` from :attr:`warpcut.simulator.Simulator.path`: status
+        path: (T, 3) per update ``(mx, my, status)`` from :attr:`warpcut.sim.simulator.Simulator.path`: status
             1 mapped, 0 dropped, -1 not cutting.
         arc_mm: (T,) arc length along the contour of the point each update meant to cut (NaN while the
             scissors travel).
@@ -404,7 +404,7 @@ def score_cut(
 
     Args:
         metric: ``"path"`` or ``"separated"``: which one ``Score.error_*`` holds.
-        paths: (B, T, 3) traced tips (:attr:`warpcut.simulator.Simulator.path`), or None where the path
+        paths: (B, T, 3) traced tips (:attr:`warpcut.sim.simulator.Simulator.path`), or None where the path
             was not traced: the path fields are then NaN, and ``metric`` must be ``"separated"``.
         arc_mm: (B, T) arc length along each env's contour of the point each update meant to cut.
         alive: (B, V) bool alive masks after the cut.

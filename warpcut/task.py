@@ -15,11 +15,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 import shapely
 
-from warpcut.config import SheetGrid, SimConfig
 from warpcut.contours import Contour
-from warpcut.material import interpolate, material_cells, material_to_world
 from warpcut.scoring import Score, score_cut
-from warpcut.simulator import Simulator
+from warpcut.sim.config import SheetGrid, SimConfig
+from warpcut.sim.material import interpolate, material_cells, material_to_world
+from warpcut.sim.simulator import Simulator
 
 if TYPE_CHECKING:
     from warpcut.fiducials import Fiducials

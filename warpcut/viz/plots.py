@@ -20,11 +20,11 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, Rectangle
 
-from warpcut.config import SheetGrid, SimConfig
 from warpcut.contours import Contour
 from warpcut.io import write_atomic
 from warpcut.planning import Plan, pinch_feasible
 from warpcut.scoring import Score
+from warpcut.sim.config import SheetGrid, SimConfig
 from warpcut.task import CuttingTask
 
 FORMATS = ("png", "svg")

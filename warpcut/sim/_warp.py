@@ -1,6 +1,6 @@
 """Warp, imported with warpcut's settings: Warp prints a banner and a line per module load; keep the
 CLI's output to our own unless ``WARPCUT_VERBOSE`` is set. Every warpcut module that uses Warp imports
-it from here (``from warpcut._warp import wp``), so that ``import warpcut`` itself stays light: the
+it from here (``from warpcut.sim._warp import wp``), so that ``import warpcut`` itself stays light: the
 recorder process and the CLI's start-up do not pay for Warp.
 
 On a machine without NVIDIA's driver, Warp's native code prints "Warp CUDA warning: Could not find or

@@ -2,7 +2,7 @@
 
 :func:`plan_cut` runs it for one contour:
 
-1. split the contour into segments the cutting arm can cut (:func:`warpcut.segmentation.segment_contour`);
+1. split the contour into segments the cutting arm can cut (:func:`warpcut.planning.segmentation.segment_contour`);
 2. sample candidate pinch points uniformly from the feasible region, plus the contour's centroid when it is
    feasible (:func:`pinch_candidates`, Problem 2a);
 3. simulate every (candidate, cutting order) pair with fixed tension, all of them as one
@@ -28,9 +28,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import shapely
 
-from warpcut.config import ARM_LENGTH_MM, ARM_RADIUS_MM, SheetGrid, SimConfig
 from warpcut.contours import Contour
-from warpcut.segmentation import Segment, segment_contour, segment_orders
+from warpcut.planning.segmentation import Segment, segment_contour, segment_orders
+from warpcut.sim.config import ARM_LENGTH_MM, ARM_RADIUS_MM, SheetGrid, SimConfig
 from warpcut.task import CuttingTask, default_segments
 
 CORNER_MARGIN_MM = 15.0
@@ -58,7 +58,7 @@ def under_arm(
 
     Args:
         points: (M, 2) or (2,) material points (mm).
-        path: The scissors' path: one (P, 2) polyline, a :class:`~warpcut.segmentation.Segment`, or a
+        path: The scissors' path: one (P, 2) polyline, a :class:`~warpcut.planning.segmentation.Segment`, or a
             sequence of them (mm).
         radius_mm: The arm's radius (mm), >= 0.
         length_mm: How far the arm reaches from the tip toward +x (mm), >= 0; ``inf``: all the way.
@@ -265,7 +265,7 @@ def search_orders(
     All (candidate, order) pairs are simulated as one :class:`~warpcut.task.CuttingTask` batch with fixed
     tension (the grasp pinches and holds still: no actions) and without process noise, so the search is
     deterministic. Up to ``limit`` segments the orders are all K! permutations; beyond, the heuristic list
-    of :func:`~warpcut.segmentation.segment_orders`, with a warning.
+    of :func:`~warpcut.planning.segmentation.segment_orders`, with a warning.
 
     Args:
         candidates: (C, 2) pinch points (mm).
@@ -409,7 +409,7 @@ def plan_cut(
             added when feasible.
         seed: Seeds the candidate sampling and the simulator.
         device: Warp device for the search batch.
-        tolerance_mm: Segmentation tolerance (mm), > 0 (see :func:`~warpcut.segmentation.segment_contour`).
+        tolerance_mm: Segmentation tolerance (mm), > 0 (see :func:`~warpcut.planning.segmentation.segment_contour`).
         arm_radius_mm: Cutting arm radius (mm), >= 0 (see :func:`under_arm`).
         arm_length_mm: Reach of the arm's footprint from the scissor tip toward +x (mm), default all the
             way (see :func:`under_arm`).

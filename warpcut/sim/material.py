@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from warpcut.config import SheetGrid
+from warpcut.sim.config import SheetGrid
 
 
 def material_cells(points: np.ndarray, grid: SheetGrid) -> tuple[np.ndarray, np.ndarray]:

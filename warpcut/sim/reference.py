@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from warpcut.config import SheetGrid, SimConfig
-from warpcut.simulator import colour_springs
+from warpcut.sim.config import SheetGrid, SimConfig
+from warpcut.sim.simulator import colour_springs
 
 
 class ReferenceSheet:

@@ -9,7 +9,7 @@ A physical parameter array has length 1 (shared) or num_envs and is read as ``p[
 
 from __future__ import annotations
 
-from warpcut._warp import wp
+from warpcut.sim._warp import wp
 
 PIN_FREE = wp.constant(0)
 PIN_FIXTURE = wp.constant(1)

@@ -1,7 +1,7 @@
 """A batch of gauze sheets stepped by Warp kernels.
 
 One :class:`Simulator` holds ``num_envs`` independent sheets of the same resolution. Each env may have
-its own physical parameters (see :class:`~warpcut.config.SimConfig`), its own grasp (pinch point) and
+its own physical parameters (see :class:`~warpcut.sim.config.SimConfig`), its own grasp (pinch point) and
 its own scissor tip. One *update* is: integrate, relax every spring colour ``iterations`` times, cut.
 """
 
@@ -14,11 +14,11 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from warpcut import kernels
-from warpcut._warp import wp
-from warpcut.config import PHYSICAL_PARAMETERS, SheetGrid, SimConfig
-from warpcut.kernels_simd import SimdModel, SimdState
-from warpcut.springs import SpringColour, colour_springs, spring_colours
+from warpcut.sim import kernels
+from warpcut.sim._warp import wp
+from warpcut.sim.config import PHYSICAL_PARAMETERS, SheetGrid, SimConfig
+from warpcut.sim.kernels_simd import SimdModel, SimdState
+from warpcut.sim.springs import SpringColour, colour_springs, spring_colours
 
 __all__ = [
     "Simulator",
@@ -63,7 +63,7 @@ class Simulator:
         device: ``cpu``, ``cuda`` or ``cuda:N``; default: :func:`default_device`.
         seed: Seed of the process noise (the only randomness in the physics).
         backend: ``simd`` (the CPU fast path: one launch per update, one thread per block of 8 envs
-            stepped in lockstep in SIMD lanes, :mod:`warpcut.kernels_simd`), ``fused`` (one thread per
+            stepped in lockstep in SIMD lanes, :mod:`warpcut.sim.kernels_simd`), ``fused`` (one thread per
             env, scalar), ``colours`` (one launch per stage and spring colour, one thread per vertex: suits
             GPUs and is the differentiable path), or ``auto`` (simd on CPU, colours on CUDA). All give
             bit-identical results; ``update(tape_mode=True)`` always uses ``colours``.

@@ -17,7 +17,7 @@ can be compared side by side in one viewer (the recording carries a blueprint th
   index);
 * ``action``: the tensioning action (mm) as three scalar series;
 * ``path``: the points the scissors went through in material coordinates (the traced cut path,
-  :meth:`~warpcut.simulator.Simulator.trace_path`), drawn on the rest plane z = 0 above the sagging
+  :meth:`~warpcut.sim.simulator.Simulator.trace_path`), drawn on the rest plane z = 0 above the sagging
   sheet, where ``material_contour`` (static) draws the intended contour the same way;
 * ``path_error_vertices``: the path score (:mod:`warpcut.scoring`) of the cut so far, as if the cut were
   closed at that step (the last frame's is the episode's path score);
@@ -26,7 +26,7 @@ can be compared side by side in one viewer (the recording carries a blueprint th
 
 Frames are on the ``step`` timeline (0 after the reset, then one per env step) and on ``sim_time``
 (simulated seconds). Recording must not slow the stepping loop down, so the step callback only copies
-the recorded envs' state, and only theirs (:meth:`~warpcut.simulator.Simulator.read_state`, a few
+the recorded envs' state, and only theirs (:meth:`~warpcut.sim.simulator.Simulator.read_state`, a few
 microseconds); the frames are scored and turned into rerun columns (``send_columns``) in batches, all
 frames of a batch at once (one labelling for the errors, shifted grid slices for the strain, one sparse
 product for the contour), where ``background`` says:
@@ -37,7 +37,7 @@ product for the contour), where ``background`` says:
   use every core); the process scores the frames, builds the columns, runs rerun's encoding and writes
   the file, on another core and without holding the stepping process's GIL, at a lower priority
   (:data:`PROCESS_NICE`, once it has imported what it needs). The stepping process does not import rerun.
-  The process (:mod:`warpcut.recorder_process`) is started when the first :class:`Recorder` is created,
+  The process (:mod:`warpcut.viz.process`) is started when the first :class:`Recorder` is created,
   or earlier by :func:`start_recorder_process` (its start-up, ~0.7 s on an idle core, overlaps the
   caller's work), and is kept for the next one, so later recordings in the same Python process do not pay
   for it again.
@@ -82,12 +82,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy import ndimage
 
-from warpcut.config import SheetGrid, SimConfig
 from warpcut.contours import Contour
 from warpcut.fiducials import NUM_FIDUCIALS, SHAFT_RADIUS_MM, sample_fiducials, visible
 from warpcut.io import plain_file_mode
-from warpcut.material import interpolate, material_cells
-from warpcut.recorder_process import (  # noqa: F401 - PROCESS_NICE, CLOSE_TIMEOUT_S: documented here too
+from warpcut.scoring import achieved_mask, intended_mask
+from warpcut.sim.config import SheetGrid, SimConfig
+from warpcut.sim.material import interpolate, material_cells
+from warpcut.sim.springs import spring_colours
+from warpcut.viz.process import (  # noqa: F401 - PROCESS_NICE, CLOSE_TIMEOUT_S: documented here too
     _HEAD,
     CLOSE_TIMEOUT_S,
     PROCESS_NICE,
@@ -98,8 +100,6 @@ from warpcut.recorder_process import (  # noqa: F401 - PROCESS_NICE, CLOSE_TIMEO
     _pickled,
     start_recorder_process,
 )
-from warpcut.scoring import achieved_mask, intended_mask
-from warpcut.springs import spring_colours
 
 if TYPE_CHECKING:
     from warpcut.task import CuttingTask
@@ -289,7 +289,7 @@ class _Frame:
     update: int
     state: np.ndarray
     """(n, V, 4) float32: positions (mm) and alive (1.0, or 0.0 where cut), as
-    :meth:`~warpcut.simulator.Simulator.read_state` copies them."""
+    :meth:`~warpcut.sim.simulator.Simulator.read_state` copies them."""
     displacements: np.ndarray | None
     """(n, 3) float64, None when no recorded env is grasped."""
     action: np.ndarray | None
@@ -336,7 +336,7 @@ class _EnvSetup:
     path: np.ndarray | None = None
     """(T, 3) the traced cut path so far, filled frame batch by frame batch."""
     fiducial_cells: tuple[np.ndarray, np.ndarray] | None = None
-    """(1, K, 4) vertices and weights of the fiducials' cells (:func:`~warpcut.material.material_cells`)."""
+    """(1, K, 4) vertices and weights of the fiducials' cells (:func:`~warpcut.sim.material.material_cells`)."""
 
 
 @dataclass
@@ -352,7 +352,7 @@ class _TaskSetup:
 
 class _Episode:
     """The step callback of one method. In the stepping loop it only copies the recorded envs' state
-    (only theirs: :meth:`~warpcut.simulator.Simulator.read_state`) and hands it to the recorder's sink
+    (only theirs: :meth:`~warpcut.sim.simulator.Simulator.read_state`) and hands it to the recorder's sink
     (the recorder process, the worker thread or the writer itself) in batches of the sink's size."""
 
     def __init__(self, recorder: Recorder, method: str, key: int):
@@ -510,7 +510,7 @@ class _ThreadSink:
             self._worker = None
 
 
-# A frame travels to the recorder process as a b"F" message (:mod:`warpcut.recorder_process`): _FRAME_HEAD,
+# A frame travels to the recorder process as a b"F" message (:mod:`warpcut.viz.process`): _FRAME_HEAD,
 # then the recorded envs' state (float32: positions and alive), and if flagged their displacements and
 # actions (float64). The last frame of each group that a step callback hands over is flagged _GROUP_END:
 # the process scores a group (or, when it has fallen behind, several) at once.
@@ -1110,7 +1110,7 @@ def vertex_strain(
         positions: (F, V, 3) vertex positions (mm) of F frames of one sheet.
         alive: (F, V) bool; a spring is live while both its ends are alive.
         grid: The sheet's rest layout (V = ny * nx vertices).
-        springs: The spring families simulated (:attr:`~warpcut.config.SimConfig.springs`).
+        springs: The spring families simulated (:attr:`~warpcut.sim.config.SimConfig.springs`).
 
     Returns:
         (F, V) float32; 0 for a vertex without live springs.

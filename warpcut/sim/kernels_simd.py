@@ -1,6 +1,6 @@
 """Prototype CPU backend: the fused update with ``L`` envs per thread in SIMD lanes.
 
-:func:`warpcut.kernels.fused_update_kernel` steps one env per thread with scalar code. Here one thread
+:func:`warpcut.sim.kernels.fused_update_kernel` steps one env per thread with scalar code. Here one thread
 steps a *block* of ``L`` envs (8 by default) in lockstep: every value of the fused kernel becomes a
 ``vecL`` holding that value for the ``L`` envs, every ``if`` becomes a per-lane select, and Warp's
 ``vec_t`` operations (fixed-length loops) compile to packed AVX instructions (``vsqrtps``, ``vdivps``,
@@ -41,8 +41,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from warpcut._warp import wp
-from warpcut.kernels import (
+from warpcut.sim._warp import wp
+from warpcut.sim.kernels import (
     PATH_DROPPED,
     PATH_IDLE,
     PATH_MAPPED,
@@ -426,8 +426,8 @@ def simd_kernels(lanes: int = DEFAULT_LANES) -> SimpleNamespace:
         # Data out:
         path: wp.array2d(dtype=wp.vec3),
     ):
-        """:func:`warpcut.kernels.map_tip_kernel` for the ``L`` envs of a block: the same search and
-        arithmetic (:func:`warpcut.kernels.locate_in_cell`), reading the packed state."""
+        """:func:`warpcut.sim.kernels.map_tip_kernel` for the ``L`` envs of a block: the same search and
+        arithmetic (:func:`warpcut.sim.kernels.locate_in_cell`), reading the packed state."""
         blk = wp.tid() + block_offset
         n = nx * ny
         base = blk * n
@@ -532,7 +532,7 @@ class SimdModel:
         cut_height: float,
     ) -> "SimdModel":
         """From ``fused_update_kernel``'s arguments. The kernels read one rest length per colour (every
-        spring of a colour has the same length, as :func:`warpcut.simulator.colour_springs` builds them)."""
+        spring of a colour has the same length, as :func:`warpcut.sim.simulator.colour_springs` builds them)."""
         rest = spring_rest.numpy()
         starts = colour_start.numpy()
         for c in range(len(starts) - 1):

@@ -1,10 +1,10 @@
-"""The recorder process behind ``Recorder(background="process")`` (:mod:`warpcut.recording`): starting it,
+"""The recorder process behind ``Recorder(background="process")`` (:mod:`warpcut.viz.recording`): starting it,
 and the pipes to and from it.
 
 This module imports only the standard library, so that :func:`start_recorder_process` can start the
 process before its caller has imported anything slow (the CLI calls it first thing when ``--record`` is
 given): the process's own start-up (Python, numpy, scipy, shapely and rerun, ~0.7 s on an idle core) then
-overlaps the caller's. The process runs :func:`warpcut.recording._serve`.
+overlaps the caller's. The process runs :func:`warpcut.viz.recording._serve`.
 """
 
 from __future__ import annotations
@@ -31,12 +31,12 @@ process before it gives up, stops the process and raises :class:`RecordingError`
 
 class RecordingError(RuntimeError):
     """The recorder process failed, died or stopped answering; the message names the recording.
-    (:mod:`warpcut.recording` exports it.)"""
+    (:mod:`warpcut.viz.recording` exports it.)"""
 
 
 def start_recorder_process() -> bool:
     """Start a recorder process now, where recorders use one by default (``Recorder(background=None)``),
-    for the next :class:`~warpcut.recording.Recorder` of this Python process to take: its start-up
+    for the next :class:`~warpcut.viz.recording.Recorder` of this Python process to take: its start-up
     (~0.7 s on an idle core: Python, numpy, scipy, shapely and rerun) then overlaps the caller's own (the
     CLI calls it first thing when ``--record`` is given). Whether one is started (or an idle one is
     already waiting).
@@ -64,7 +64,7 @@ def _default_background() -> str | bool:
 
 # The pipe to the recorder process carries messages of a kind byte and a payload length, then the payload:
 # b"P", a pickled tuple (``open``, ``start``, ``close``; and every reply), or b"F", one frame in raw bytes
-# (warpcut.recording._FRAME_HEAD and what follows it).
+# (warpcut.viz.recording._FRAME_HEAD and what follows it).
 _HEAD = struct.Struct("<cI")
 
 
@@ -126,7 +126,7 @@ class _Child:
         except (ImportError, AttributeError, OSError):
             pass
         os.set_blocking(self.cmd, False)
-        source = str(Path(__file__).resolve().parents[1])
+        source = str(Path(__file__).resolve().parents[2])  # the directory holding the warpcut package
         kwargs = {"process_group": 0} if sys.version_info >= (3, 11) else {"start_new_session": True}
         try:
             self.process = subprocess.Popen(
@@ -241,7 +241,7 @@ import os, signal, sys
 signal.signal(signal.SIGINT, signal.SIG_IGN)
 sys.path[0] = {source!r}
 try:
-    from warpcut.recording import _import_writer, _serve
+    from warpcut.viz.recording import _import_writer, _serve
 
     _import_writer()
 except BaseException as exc:

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from warpcut.config import SheetGrid
+from warpcut.sim.config import SheetGrid
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,1 @@
+"""warpcut/viz"""
