@@ -18,6 +18,7 @@ from warpcut.contours import (
     load_contour,
     validate,
 )
+from warpcut.contours.polyline import arc_lengths, polyline_length, resample_polyline
 
 BUILTINS = builtin_contours()
 SQUARE = [[20.0, 20.0], [40.0, 20.0], [40.0, 40.0], [20.0, 40.0]]
@@ -184,6 +185,35 @@ def test_resample_circle_chords():
 def test_resample_rejects_a_bad_spacing():
     with pytest.raises(ContourError, match="spacing_mm must be a positive number"):
         BUILTINS["fls-circle"].resample(0.0)
+
+
+def test_arc_lengths_open_and_closed_in_any_dimension():
+    square = np.array(SQUARE)
+    np.testing.assert_array_equal(arc_lengths(square), [0.0, 20.0, 40.0, 60.0])
+    np.testing.assert_array_equal(arc_lengths(square, closed=True), [0.0, 20.0, 40.0, 60.0, 80.0])
+    assert polyline_length(square) == 60.0
+    world = np.array([[0.0, 0.0, 0.0], [3.0, 4.0, 0.0], [3.0, 4.0, 12.0]])
+    np.testing.assert_array_equal(arc_lengths(world), [0.0, 5.0, 17.0])
+    assert polyline_length(world) == 17.0
+
+
+def test_resample_polyline_open_closed_and_along_another_arc():
+    line = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 2.5]])
+    np.testing.assert_array_equal(resample_polyline(line, 1.0)[:, 2], [0.0, 1.0, 2.0, 2.5])
+    # Exactly divisible, up to round-off: no extra sample a hair before the end or the start.
+    assert 2.1 / 0.3 > 7
+    np.testing.assert_allclose(resample_polyline(np.array([[0.0], [2.1]]), 0.3)[:, 0], np.linspace(0, 2.1, 8))
+    ring = resample_polyline(np.array(SQUARE), 20.0, closed=True)
+    np.testing.assert_array_equal(ring, SQUARE)
+    # Sample a parallel polyline where the measured one is evenly spaced.
+    world = np.array([[0.0, 0.0], [1.0, 0.0], [4.0, 0.0]])
+    material = np.array([[0.0, 0.0], [2.0, 0.0], [4.0, 0.0]])
+    along = resample_polyline(material, 2.0, arc=arc_lengths(world))
+    np.testing.assert_allclose(along[:, 0], [0.0, 8 / 3, 4.0])
+    with pytest.raises(ValueError, match="arc: expected shape"):
+        resample_polyline(material, 2.0, closed=True, arc=arc_lengths(world))
+    with pytest.raises(ValueError, match="spacing"):
+        resample_polyline(material, 0.0)
 
 
 # --------------------------------------------------------------------------------------------- loaders

@@ -1,4 +1,5 @@
-"""Cut planning: arm footprint, pinch feasibility and candidates, the order search, the plan's JSON."""
+"""Cut planning: the arm model and its footprint, pinch feasibility and candidates, the default pinch, the
+order search, the plan's JSON."""
 
 import json
 import math
@@ -10,8 +11,10 @@ import pytest
 from warpcut import SimConfig
 from warpcut.contours import load_contour
 from warpcut.planning import (
+    ArmModel,
     Plan,
-    feasible_centroid,
+    default_pinch,
+    nearest_feasible,
     pinch_candidates,
     pinch_feasible,
     pinch_rules,
@@ -37,11 +40,44 @@ def small_plan() -> Plan:
 def test_under_arm_is_the_swept_ray_toward_plus_x():
     path = np.array([[60.0, 50.0], [40.0, 50.0]])  # cut toward -x
     points = np.array([[90.0, 50.0], [70.0, 53.9], [70.0, 54.1], [37.0, 50.0], [35.0, 50.0], [50.0, 20.0]])
-    assert under_arm(points, path, radius_mm=4.0).tolist() == [True, True, False, True, False, False]
-    short = under_arm(np.array([[90.0, 50.0], [44.0, 50.0]]), path, radius_mm=4.0, length_mm=5.0)
+    assert under_arm(points, path, ArmModel(radius_mm=4.0)).tolist() == [
+        True,
+        True,
+        False,
+        True,
+        False,
+        False,
+    ]
+    short = under_arm(np.array([[90.0, 50.0], [44.0, 50.0]]), path, ArmModel(radius_mm=4.0, length_mm=5.0))
     assert short.tolist() == [False, True]
-    with pytest.raises(ValueError, match="radius_mm"):
-        under_arm(points, path, radius_mm=-1.0)
+    with pytest.raises(ValueError, match="arm: expected an ArmModel"):
+        under_arm(points, path, 4.0)
+
+
+@pytest.mark.parametrize(
+    ("fields", "message"),
+    [
+        ({"radius_mm": -1}, r"arm\.radius_mm: must be finite and >= 0 mm \(got -1\)"),
+        ({"radius_mm": float("inf")}, r"arm\.radius_mm: must be finite"),
+        ({"radius_mm": float("nan")}, r"arm\.radius_mm"),
+        ({"radius_mm": "4"}, r"arm\.radius_mm"),
+        ({"length_mm": -0.5}, r"arm\.length_mm: must be >= 0 mm \(inf: all the way\) \(got -0\.5\)"),
+        ({"length_mm": float("nan")}, r"arm\.length_mm"),
+        ({"length_mm": True}, r"arm\.length_mm"),
+    ],
+)
+def test_arm_model_rejects_bad_fields(fields, message):
+    with pytest.raises(ValueError, match=message):
+        ArmModel(**fields)
+
+
+def test_arm_model_defaults_and_values():
+    from warpcut.sim.config import ARM_LENGTH_MM, ARM_RADIUS_MM
+
+    assert ArmModel() == ArmModel(ARM_RADIUS_MM, ARM_LENGTH_MM)
+    arm = ArmModel(radius_mm=3, length_mm=np.float32(15.0))
+    assert (arm.radius_mm, arm.length_mm) == (3.0, 15.0) and type(arm.length_mm) is float
+    assert ArmModel(0, 0) == ArmModel(0.0, 0.0) and math.isinf(ArmModel(length_mm=math.inf).length_mm)
 
 
 def test_infeasible_points_are_never_candidates():
@@ -56,7 +92,7 @@ def test_infeasible_points_are_never_candidates():
     assert with_arm.tolist() == [False] * 5 + [True] * 2
     # Without segments the arm sweeps the whole contour: the same region however the cut is split.
     assert pinch_feasible(points, contour, GEOMETRY).tolist() == with_arm.tolist()
-    short_arm = pinch_feasible(points, contour, GEOMETRY, arm_length_mm=15.0)
+    short_arm = pinch_feasible(points, contour, GEOMETRY, arm=ArmModel(length_mm=15.0))
     # A short footprint lets the grasp hold the disc; (90, 50) is still under it (15 mm from x = 75).
     assert short_arm.tolist() == [False] * 3 + [True, False] + [True] * 2
     rules = pinch_rules(points, contour, GEOMETRY, segments)
@@ -67,20 +103,24 @@ def test_infeasible_points_are_never_candidates():
     assert len(candidates) == 40  # the centroid is infeasible, so not added
     assert pinch_feasible(candidates, contour, GEOMETRY, segments).all()
     assert not under_arm(candidates, segments).any()
+    # The same draws without segments: the arm sweeps the whole contour however it is split.
+    whole = pinch_candidates(contour, GEOMETRY, num=40, rng=np.random.default_rng(0))
+    np.testing.assert_array_equal(whole, candidates)
 
 
 def test_empty_feasible_region_names_the_contour():
     contour = load_contour("circle-large")
-    with pytest.raises(ValueError, match="circle-large.*arm_radius_mm"):
-        pinch_candidates(contour, GEOMETRY, segment_contour(contour), arm_radius_mm=60.0)
+    with pytest.raises(ValueError, match="circle-large.*arm"):
+        pinch_candidates(contour, GEOMETRY, segment_contour(contour), arm=ArmModel(radius_mm=60.0))
+    with pytest.raises(ValueError, match="circle-large"):
+        default_pinch(contour, GEOMETRY, ArmModel(radius_mm=60.0))
 
 
 def test_plan_cut_rejects_bad_arguments():
     contour = load_contour("circle-offset")
     for kwargs, name in (
         ({"num_candidates": 0}, "num_candidates"),
-        ({"arm_radius_mm": -1.0}, "arm_radius_mm"),
-        ({"arm_length_mm": float("nan")}, "arm_length_mm"),
+        ({"arm": (4.0, 15.0)}, "arm: expected an ArmModel"),
         ({"tolerance_mm": 0.0}, "tolerance_mm"),
     ):
         with pytest.raises(ValueError, match=name):
@@ -154,16 +194,31 @@ def test_analytic_pinch_is_the_centroid_only_where_the_gripper_can_be(small_plan
     cutting arm (circle-offset's, with the plan's arm footprint) or on the cut line (crescent's)."""
     contour = small_plan.contour
     segments = small_plan.segments
-    arm = {"arm_radius_mm": small_plan.arm_radius_mm, "arm_length_mm": small_plan.arm_length_mm}
-    assert not pinch_feasible(contour.centroid, contour, SIM, segments, **arm)[0]
+    assert small_plan.arm == ArmModel()
+    assert not pinch_feasible(contour.centroid, contour, SIM, segments, small_plan.arm)[0]
     point = small_plan.analytic_pinch
-    assert pinch_feasible(point, contour, SIM, segments, **arm)[0]
+    assert pinch_feasible(point, contour, SIM, segments, small_plan.arm)[0]
     assert np.linalg.norm(point - contour.centroid) > 0
+    assert point.tolist() == default_pinch(contour, SIM, segments=segments).tolist()
+
+
+def test_default_pinch_is_the_centroid_or_the_nearest_feasible_point():
     circle = load_contour("fls-circle")
-    assert feasible_centroid(circle, GEOMETRY, arm_length_mm=15.0).tolist() == list(circle.centroid)
-    outside = feasible_centroid(circle, GEOMETRY)  # the paper's arm covers the disc: the grasp goes outside
+    short = ArmModel(length_mm=15.0)
+    assert default_pinch(circle, GEOMETRY, short).tolist() == list(circle.centroid)
+    outside = default_pinch(circle, GEOMETRY)  # the paper's arm covers the disc: the grasp goes outside
     assert np.linalg.norm(outside - circle.centroid) > 25.0 and pinch_feasible(outside, circle, GEOMETRY)[0]
+    assert outside.tolist() == nearest_feasible(circle.centroid, circle, GEOMETRY).tolist()
+    # Nearest on the 0.5 mm grid: no feasible grid point is closer to the centroid.
+    xs = np.arange(0.0, 100.0 + 1e-9, 0.5)
+    grid = np.stack(np.meshgrid(xs, xs), axis=-1).reshape(-1, 2)
+    closer = grid[np.linalg.norm(grid - circle.centroid, axis=1) < np.linalg.norm(outside - circle.centroid)]
+    assert not pinch_feasible(closer, circle, GEOMETRY).any()
+    # The arm sweeps the same footprint however the contour is split.
+    segments = segment_contour(circle)
+    assert default_pinch(circle, GEOMETRY, segments=segments).tolist() == outside.tolist()
     crescent = load_contour("crescent")
     assert pinch_rules(crescent.centroid, crescent, GEOMETRY)["contour"].tolist() == [False]
-    moved = feasible_centroid(crescent, GEOMETRY)
-    assert pinch_feasible(moved, crescent, GEOMETRY)[0]
+    moved = default_pinch(crescent, GEOMETRY, short)  # on the cut line even for a short arm
+    assert pinch_feasible(moved, crescent, GEOMETRY, arm=short)[0]
+    assert np.linalg.norm(moved - crescent.centroid) > 0

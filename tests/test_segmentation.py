@@ -1,4 +1,4 @@
-"""Tests for warpcut.planning.segmentation: splitting contours into wrist-feasible segments, and cutting orders."""
+"""Tests for warpcut.planning.segmentation: splitting contours into wrist-feasible segments, cut orders."""
 
 from __future__ import annotations
 

@@ -40,7 +40,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from warpcut.contours import Contour
+from warpcut.contours import Contour, arc_lengths, polyline_length
+
+ORDER_LIMIT = 6
+"""Up to this many segments every cutting order is listed (K! of them); beyond it a heuristic list."""
 
 PLATEAU_FRACTION = 0.5
 """An extreme's plateau holds the neighbouring points whose x is within this fraction of ``tolerance_mm``
@@ -71,7 +74,7 @@ class Segment:
     @property
     def length(self) -> float:
         """Length of the polyline (mm)."""
-        return _length(self.points)
+        return polyline_length(self.points)
 
 
 def is_monotone(points: np.ndarray, tolerance_mm: float) -> bool:
@@ -141,7 +144,7 @@ def segment_contour(contour: Contour, tolerance_mm: float = 1.0, min_length_mm: 
 
 
 def segment_orders(
-    num_segments: int, limit: int = 6, notches: np.ndarray | None = None
+    num_segments: int, limit: int = ORDER_LIMIT, notches: np.ndarray | None = None
 ) -> tuple[list[tuple[int, ...]], bool]:
     """Orders in which to cut ``num_segments`` segments, for the paper's search over cutting orders.
 
@@ -245,7 +248,7 @@ def _refine(
     # rise(x[a:b]) == rise(-x[b:a:-1]): a segment ending at a minimum, read backwards and negated, starts
     # at a maximum, so one measure serves both.
     worst = np.array([max(_rise(xr[t::-1]), _rise(xr[t:])) for t in range(len(run))])
-    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy[run], axis=0), axis=1))])
+    arc = arc_lengths(xy[run])
     best = np.flatnonzero(worst <= worst.min() + _TIE_MM)
     return int(run[best[np.argmin(np.abs(arc[best] - 0.5 * arc[-1]))]])
 
@@ -267,7 +270,7 @@ def _merge_short(xy: np.ndarray, breaks: list[int], closed: bool, tol: float, mi
     breaks = list(breaks)
     while True:
         arcs = _arcs(xy, breaks, closed)
-        lengths = [_length(arc) for arc in arcs]
+        lengths = [polyline_length(arc) for arc in arcs]
         merges = []
         for k in sorted(range(len(arcs)), key=lambda k: (lengths[k], k)):
             if lengths[k] >= min_length:
@@ -293,10 +296,6 @@ def _cutting_order(arc: np.ndarray) -> np.ndarray:
     if forward < backward or (forward == backward and arc[0, 0] >= arc[-1, 0]):
         return arc
     return arc[::-1]
-
-
-def _length(polyline: np.ndarray) -> float:
-    return float(np.linalg.norm(np.diff(polyline, axis=0), axis=1).sum())
 
 
 def _rise(x: np.ndarray) -> float:

@@ -1,0 +1,280 @@
+"""The contour type and its validation.
+
+Units are millimetres. Contours are given in material (rest) coordinates on the sheet, which lies in the
+x-y plane with its origin at the lower-left corner, x to the right and y up (default 100 x 100 mm). The
+scissors approach from +x.
+
+A contour is either *closed* (a simple loop on the sheet; the cut separates its inside) or *open* (a simple
+polyline that enters and leaves the sheet through its edges; the cut separates the smaller of the two
+pieces it splits the sheet into). Every contour, built-in or loaded, goes through :func:`validate`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+import shapely
+import shapely.ops
+from shapely.geometry import LinearRing, LineString, Polygon, box
+
+from warpcut.contours.polyline import arc_lengths, resample_polyline
+
+DEFAULT_SHEET_MM = (100.0, 100.0)
+EDGE_REACH_MM = 5.0
+"""An open contour's end within this distance of a sheet edge is extended straight onto that edge (mm)."""
+
+# Coordinates closer than this to an edge count as on it (mm): absorbs round-off such as
+# 100 + 35 * cos(pi / 2), far below anything that matters on a 4 mm simulation grid.
+_EDGE_TOL_MM = 1e-6
+
+
+class ContourError(ValueError):
+    """A contour is invalid or cannot be loaded; the message names the problem and how to fix it."""
+
+
+@dataclass(frozen=True, eq=False)
+class Contour:
+    """A validated cutting contour in material coordinates (mm).
+
+    Build it with :func:`validate`, :func:`~warpcut.contours.loaders.load_contour` or
+    :func:`~warpcut.contours.suite.builtin_contours`, which check and normalise the points; the
+    constructor itself checks nothing. Instances compare by identity (``points`` is an array).
+    """
+
+    name: str
+    closed: bool
+    points: np.ndarray
+    """(N, 2) float64, read-only (mm). Closed: the first point is not repeated at the end and the order is
+    counter-clockwise. Open: in the given order, both ends on sheet edges."""
+    sheet_size: tuple[float, float] = DEFAULT_SHEET_MM
+    """Sheet width (x) and height (y) in mm."""
+
+    @property
+    def length(self) -> float:
+        """Length of the polyline (mm), including the closing edge when closed."""
+        return float(arc_lengths(self.points, self.closed)[-1])
+
+    def resample(self, spacing_mm: float) -> np.ndarray:
+        """Points every ``spacing_mm`` of arc length along the polyline, starting at ``points[0]``.
+
+        Args:
+            spacing_mm: Arc length between consecutive points (mm), positive.
+
+        Returns:
+            (M, 2) float64 points (mm). Open: the last point is the end point, so the last step may be
+            shorter. Closed: the start is not repeated, so the step back to it may be shorter.
+        """
+        if not isinstance(spacing_mm, int | float | np.number) or not 0 < spacing_mm < math.inf:
+            raise ContourError(f"resample: spacing_mm must be a positive number of mm (got {spacing_mm!r})")
+        return resample_polyline(self.points, float(spacing_mm), self.closed)
+
+    def intended_region(self) -> Polygon:
+        """The material the cut should separate: the inside of a closed contour, or for an open one the
+        smaller (by area) of the two pieces it splits the sheet rectangle into."""
+        return self._region
+
+    @cached_property
+    def _region(self) -> Polygon:
+        if self.closed:
+            return Polygon(self.points)
+        return min(_split_sheet(self.points, self.sheet_size), key=lambda piece: piece.area)
+
+    @property
+    def centroid(self) -> np.ndarray:
+        """(2,) centroid of :meth:`intended_region` (mm)."""
+        return np.array(self._region.centroid.coords[0], dtype=np.float64)
+
+    @property
+    def area_mm2(self) -> float:
+        """Area of :meth:`intended_region` (mm^2)."""
+        return float(self._region.area)
+
+    def to_json(self) -> dict:
+        """The contour as the JSON object :func:`~warpcut.contours.loaders.load_contour` reads: ``name``,
+        ``closed`` and ``points``."""
+        return {"name": self.name, "closed": self.closed, "points": self.points.tolist()}
+
+
+def validate(
+    name: str,
+    closed: bool,
+    points: np.ndarray | Sequence[Sequence[float]],
+    sheet_size: tuple[float, float] = DEFAULT_SHEET_MM,
+) -> Contour:
+    """Check and normalise a contour; every loader goes through here.
+
+    Consecutive duplicate points are removed (and a closed contour's repeated start); a closed contour is
+    oriented counter-clockwise, keeping its start point; each end of an open contour lying within
+    :data:`EDGE_REACH_MM` of a sheet edge is extended straight onto the nearest edge.
+
+    Args:
+        name: Contour name, used in messages.
+        closed: True for a loop, False for a cut from edge to edge.
+        points: (N, 2) x, y coordinates (mm) in material coordinates.
+        sheet_size: Sheet width and height (mm).
+
+    Returns:
+        The validated :class:`Contour`.
+
+    Raises:
+        ContourError: naming the contour, the problem and the fix.
+    """
+    if not isinstance(name, str) or not name:
+        raise ContourError(f"contour name must be a non-empty string (got {name!r})")
+    width, height = check_sheet_size(sheet_size)
+    if not isinstance(closed, bool | np.bool_):
+        raise ContourError(f"contour {name!r}: 'closed' must be true or false (got {closed!r})")
+    closed = bool(closed)
+    pts = _as_points(name, points)
+
+    bad = np.flatnonzero(~np.isfinite(pts).all(axis=1))
+    if bad.size:
+        raise ContourError(
+            f"contour {name!r}: point {bad[0]} is {pts[bad[0]].tolist()}, which is not finite "
+            f"({bad.size} such point(s)); give finite x, y in mm"
+        )
+    pts = _drop_duplicates(_onto_sheet(name, pts, closed, width, height), closed)
+    if len(pts) < 3:
+        raise ContourError(
+            f"contour {name!r}: fewer than 3 distinct points ({len(pts)} after removing repeated points); "
+            "give at least 3 (sample curves densely, about every 1 mm)"
+        )
+    if closed:
+        if _signed_area(pts) < 0:
+            pts = np.concatenate([pts[:1], pts[:0:-1]])
+    else:
+        pts = _extend_to_edges(name, pts, width, height)
+    _check_simple(name, pts, closed)
+    if not closed:
+        pieces = _split_sheet(pts, (width, height))
+        if len(pieces) != 2:
+            raise ContourError(
+                f"contour {name!r}: an open contour must split the sheet into exactly two pieces, but it "
+                f"splits it into {len(pieces)}; let it touch the sheet's edges only at its two ends"
+            )
+    pts.setflags(write=False)
+    return Contour(name=name, closed=closed, points=pts, sheet_size=(width, height))
+
+
+def check_sheet_size(sheet_size: tuple[float, float]) -> tuple[float, float]:
+    """``(width, height)`` as floats (mm).
+
+    Raises:
+        ContourError: unless both are finite and positive.
+    """
+    try:
+        width, height = (float(v) for v in sheet_size)
+    except (TypeError, ValueError):
+        raise ContourError(f"sheet_size: give (width_mm, height_mm) (got {sheet_size!r})") from None
+    if not (math.isfinite(width) and math.isfinite(height) and width > 0 and height > 0):
+        raise ContourError(f"sheet_size: width and height must be positive (mm) (got {sheet_size!r})")
+    return width, height
+
+
+def _as_points(name: str, points) -> np.ndarray:
+    try:
+        raw = np.asarray(points)
+    except (TypeError, ValueError):  # ragged nested lists
+        raw = None
+    # The dtype check rejects strings and None, which float() would partly accept.
+    if raw is None or raw.dtype.kind not in "iuf" or raw.ndim != 2 or raw.shape[1] != 2:
+        shape = "ragged" if raw is None else f"shape {raw.shape}, dtype {raw.dtype}"
+        raise ContourError(
+            f"contour {name!r}: points must be an (N, 2) array of numbers [[x_mm, y_mm], ...] (got {shape})"
+        )
+    return raw.astype(np.float64)  # a copy: callers' arrays are never modified
+
+
+def _drop_duplicates(pts: np.ndarray, closed: bool) -> np.ndarray:
+    keep = np.ones(len(pts), dtype=bool)
+    keep[1:] = np.any(pts[1:] != pts[:-1], axis=1)
+    pts = pts[keep]
+    if closed:
+        while len(pts) > 1 and np.array_equal(pts[0], pts[-1]):
+            pts = pts[:-1]
+    return pts
+
+
+def _onto_sheet(name: str, pts: np.ndarray, closed: bool, width: float, height: float) -> np.ndarray:
+    """Clip round-off onto the sheet; a real excursion is an error."""
+    lo = np.zeros(2)
+    hi = np.array([width, height])
+    outside = np.maximum(lo - pts, pts - hi).max(axis=1)
+    worst = int(np.argmax(outside))
+    if outside[worst] > _EDGE_TOL_MM:
+        kind = "a closed contour must lie inside" if closed else "an open contour must stay on"
+        raise ContourError(
+            f"contour {name!r}: {kind} the sheet, but it leaves it by {outside[worst]:.3g} mm at point "
+            f"{worst} ({pts[worst, 0]:.6g}, {pts[worst, 1]:.6g}); "
+            f"move it into [0, {width:g}] x [0, {height:g}] mm"
+        )
+    return np.clip(pts, lo, hi)
+
+
+def _extend_to_edges(name: str, pts: np.ndarray, width: float, height: float) -> np.ndarray:
+    ends = []
+    for label, end in (("start", pts[0]), ("end", pts[-1])):
+        x, y = end
+        gaps = np.array([x, width - x, y, height - y])
+        edge = int(np.argmin(gaps))
+        on_edge = end.copy()
+        on_edge[edge // 2] = (0.0, width, 0.0, height)[edge]
+        if gaps[edge] > EDGE_REACH_MM:
+            raise ContourError(
+                f"contour {name!r}: an open contour must enter and leave the sheet through its edges, "
+                f"but its {label} ({x:.6g}, {y:.6g}) is {gaps[edge]:.3g} mm from the nearest edge; "
+                f"move it to within {EDGE_REACH_MM:g} mm of an edge, or close the contour"
+            )
+        ends.append((on_edge, gaps[edge] <= _EDGE_TOL_MM))
+    (start, start_on), (stop, stop_on) = ends
+    # An end already on the edge (up to round-off) is snapped there rather than doubled.
+    if start_on:
+        pts[0] = start
+    if stop_on:
+        pts[-1] = stop
+    head = [] if start_on else [start[None]]
+    tail = [] if stop_on else [stop[None]]
+    return np.concatenate([*head, pts, *tail])
+
+
+def _signed_area(pts: np.ndarray) -> float:
+    x, y = pts.T
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+def _check_simple(name: str, pts: np.ndarray, closed: bool) -> None:
+    line = LinearRing(pts) if closed else LineString(pts)
+    if line.is_simple:
+        return
+    where = _first_crossing(pts, closed)
+    at = f" near ({where[0]:.4g}, {where[1]:.4g})" if where is not None else ""
+    raise ContourError(
+        f"contour {name!r}: self-intersection{at}: the contour crosses or touches itself; "
+        "give a simple curve (no loops, figure-eights or doubled-back segments)"
+    )
+
+
+def _first_crossing(pts: np.ndarray, closed: bool) -> np.ndarray | None:
+    """A point where two segments meet other than at their shared vertex."""
+    ring = np.concatenate([pts, pts[:1]]) if closed else pts
+    segments = shapely.linestrings(np.stack([ring[:-1], ring[1:]], axis=1))
+    n = len(segments)
+    first, second = shapely.STRtree(segments).query(segments, predicate="intersects")
+    for i, j in zip(first, second, strict=True):
+        if i >= j:
+            continue
+        meeting = segments[i].intersection(segments[j])
+        neighbours = j == i + 1 or (closed and i == 0 and j == n - 1)
+        # Neighbours always share a vertex; only an overlap (doubling back) is a crossing.
+        if not neighbours or meeting.length > 0:
+            return np.array(meeting.representative_point().coords[0])
+    return None
+
+
+def _split_sheet(pts: np.ndarray, sheet_size: tuple[float, float]) -> list[Polygon]:
+    pieces = shapely.ops.split(box(0.0, 0.0, *sheet_size), LineString(pts))
+    return [piece for piece in pieces.geoms if piece.area > 0]

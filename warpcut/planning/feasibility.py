@@ -1,0 +1,234 @@
+"""Pinch feasibility: where the gripper may hold the sheet while the scissors cut a contour.
+
+Feasible pinch points (:func:`pinch_feasible`) keep the gripper clear of the sheet's edges, the corner clips,
+the fixture, the contour, and the cutting arm sweeping the cut (:func:`under_arm`, :class:`ArmModel`). All
+of it is judged on the rest sheet, in material coordinates (mm), ignoring how the sheet sags and moves
+during the cut.
+
+With the arm's footprint reaching all the way to +x (the default), the arm sweeps the whole inside of a
+closed contour, so no point inside it is feasible: the piece being cut out cannot be held. A finite
+:attr:`ArmModel.length_mm` models an arm that only collides near its tip.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+
+from warpcut.contours import Contour
+from warpcut.planning.segmentation import Segment
+from warpcut.sim.config import ARM_LENGTH_MM, ARM_RADIUS_MM, SheetGrid, SimConfig
+from warpcut.task import default_segments
+
+CORNER_MARGIN_MM = 15.0
+"""Pinch points stay this far from a corner clip (mm): the clip and the gripper would collide."""
+
+FEASIBLE_GRID_MM = 0.5
+"""Spacing of the grid of points :func:`nearest_feasible` searches (mm)."""
+
+ScissorPath = np.ndarray | Segment | Sequence[np.ndarray | Segment]
+"""The scissors' path: one (P, 2) polyline, a :class:`~warpcut.planning.segmentation.Segment`, or a sequence
+of them (material mm)."""
+
+
+@dataclass(frozen=True)
+class ArmModel:
+    """The cutting arm as the planner sees it from above.
+
+    The arm approaches from +x: a cylinder of radius :attr:`radius_mm` from the scissor tip toward +x,
+    reaching :attr:`length_mm` from the tip (``inf``: to the sheet's edge and beyond; a finite length models
+    the part of an arm coming down at an angle that is low enough to collide).
+
+    Raises:
+        ValueError: naming the field, for a negative or NaN value or an infinite radius.
+    """
+
+    radius_mm: float = ARM_RADIUS_MM
+    """Radius of the arm (mm), finite and >= 0."""
+    length_mm: float = ARM_LENGTH_MM
+    """How far the arm reaches from the tip toward +x (mm), >= 0; ``inf``: all the way."""
+
+    def __post_init__(self) -> None:
+        for name, allow_inf in (("radius_mm", False), ("length_mm", True)):
+            value = getattr(self, name)
+            number = isinstance(value, int | float | np.number) and not isinstance(value, bool)
+            if not number or math.isnan(value) or value < 0 or (math.isinf(value) and not allow_inf):
+                need = ">= 0 mm (inf: all the way)" if allow_inf else "finite and >= 0 mm"
+                raise ValueError(f"arm.{name}: must be {need} (got {value!r})")
+            object.__setattr__(self, name, float(value))
+
+
+def under_arm(points: np.ndarray, path: ScissorPath, arm: ArmModel = ArmModel()) -> np.ndarray:
+    """Which material points lie under the cutting arm at some time while the scissors follow ``path``.
+
+    Seen from above, the arm covers the points within ``arm.radius_mm`` of the stretch
+    ``tip -> tip + (arm.length_mm, 0)`` (the rounded end covers the blades ahead of the tip). Swept over the
+    path, it covers the points within ``arm.radius_mm`` of the union of those stretches: for each piece
+    ``a -> b`` of the path, the parallelogram ``a, b, b + (L, 0), a + (L, 0)``. Only the cutting is swept,
+    not the travel between segments, which depends on the order. Everything is in rest-sheet material
+    coordinates (mm).
+
+    Args:
+        points: (M, 2) or (2,) material points (mm).
+        path: The scissors' path (mm).
+        arm: The cutting arm.
+
+    Returns:
+        (M,) bool: True under the arm.
+
+    Raises:
+        ValueError: for an ``arm`` that is not an :class:`ArmModel` or an empty or malformed ``path``.
+    """
+    if not isinstance(arm, ArmModel):
+        raise ValueError(f"arm: expected an ArmModel, got {type(arm).__name__}")
+    pts = material_points("points", points)
+    lines = _polylines(path)
+    # An infinite arm stops just past every point asked about: the same answer, a finite polygon.
+    beyond = max(max(float(line[:, 0].max()) for line in lines), float(pts[:, 0].max(initial=0.0))) + 1.0
+    quads = []
+    for line in lines:
+        if len(line) == 1:
+            line = np.vstack([line, line])
+        a, b = line[:-1], line[1:]
+        far_a = np.column_stack([np.minimum(a[:, 0] + arm.length_mm, beyond), a[:, 1]])
+        far_b = np.column_stack([np.minimum(b[:, 0] + arm.length_mm, beyond), b[:, 1]])
+        quads.append(np.stack([a, b, far_b, far_a], axis=1))
+    quads = np.concatenate(quads)
+    hulls = shapely.convex_hull(
+        shapely.multipoints(quads.reshape(-1, 2), indices=np.repeat(np.arange(len(quads)), 4))
+    )  # a degenerate (horizontal) piece's hull is a line, which still counts
+    footprint = shapely.union_all(hulls)
+    shapely.prepare(footprint)
+    return shapely.dwithin(footprint, shapely.points(pts), arm.radius_mm)
+
+
+def pinch_rules(
+    points: np.ndarray,
+    contour: Contour,
+    config: SimConfig,
+    segments: ScissorPath | None = None,
+    arm: ArmModel = ArmModel(),
+) -> dict[str, np.ndarray]:
+    """Each feasibility rule for material points (M, 2) as a (M,) bool mask, True where it holds.
+
+    Rules: ``edges`` (at least one grasp radius inside the sheet), ``corners`` (at least
+    :data:`CORNER_MARGIN_MM` from a corner), ``fixture`` (more than a grasp radius from every fixture
+    vertex), ``contour`` (the gripped disc never reaches the scissors' cut: at least grasp radius + cut
+    radius from the contour) and ``arm`` (not :func:`under_arm` while the scissors follow ``segments``;
+    default: the whole contour, :func:`warpcut.task.default_segments`, which the arm sweeps the same way
+    however it is split).
+    """
+    points = material_points("points", points)
+    w, h = config.width_mm, config.height_mm
+    edge = config.grasp_radius
+    x, y = points[:, 0], points[:, 1]
+    rules = {"edges": (x >= edge) & (x <= w - edge) & (y >= edge) & (y <= h - edge)}
+    corners = np.array([[0.0, 0.0], [w, 0.0], [0.0, h], [w, h]])
+    rules["corners"] = _min_distance(points, corners) >= CORNER_MARGIN_MM
+    grid = SheetGrid.from_config(config)
+    rules["fixture"] = _min_distance(points, grid.material[grid.fixture_mask(config.fixture)]) > edge
+    line = shapely.LinearRing(contour.points) if contour.closed else shapely.LineString(contour.points)
+    rules["contour"] = shapely.distance(shapely.points(points), line) >= edge + config.cut_radius
+    path = segments if segments is not None else default_segments(contour)
+    rules["arm"] = ~under_arm(points, path, arm)
+    return rules
+
+
+def pinch_feasible(
+    points: np.ndarray,
+    contour: Contour,
+    config: SimConfig,
+    segments: ScissorPath | None = None,
+    arm: ArmModel = ArmModel(),
+) -> np.ndarray:
+    """Which material points (M, 2) (mm) are feasible pinch points for cutting ``contour``.
+
+    Feasible = every rule of :func:`pinch_rules` holds: on the sheet at least one grasp radius from its
+    edges, at least :data:`CORNER_MARGIN_MM` from the corners, not on fixture vertices, far enough from the
+    contour that the gripped disc never reaches the scissors' cut (grasp radius + cut radius), and not under
+    the cutting ``arm`` while it cuts ``segments`` (default: the whole contour).
+
+    Returns:
+        (M,) bool.
+    """
+    rules = pinch_rules(points, contour, config, segments, arm)
+    return np.logical_and.reduce(list(rules.values()))
+
+
+def nearest_feasible(
+    point: np.ndarray,
+    contour: Contour,
+    config: SimConfig,
+    segments: ScissorPath | None = None,
+    arm: ArmModel = ArmModel(),
+) -> np.ndarray:
+    """``point`` itself if it is feasible (:func:`pinch_feasible`), else the nearest feasible point of a
+    grid :data:`FEASIBLE_GRID_MM` apart over the sheet.
+
+    Raises:
+        ValueError: naming the contour when no point is feasible.
+    """
+    point = np.asarray(point, dtype=np.float64)
+    if pinch_feasible(point, contour, config, segments, arm)[0]:
+        return point
+    xs = np.arange(0.0, config.width_mm + 1e-9, FEASIBLE_GRID_MM)
+    ys = np.arange(0.0, config.height_mm + 1e-9, FEASIBLE_GRID_MM)
+    grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    grid = grid[pinch_feasible(grid, contour, config, segments, arm)]
+    if not len(grid):
+        raise ValueError(f"contour {contour.name!r}: no feasible pinch point on the sheet")
+    return grid[np.argmin(np.linalg.norm(grid - point, axis=1))]
+
+
+def default_pinch(
+    contour: Contour,
+    config: SimConfig,
+    arm: ArmModel = ArmModel(),
+    *,
+    segments: ScissorPath | None = None,
+) -> np.ndarray:
+    """The default pinch point: the contour's centroid, or the feasible point nearest to it
+    (:func:`nearest_feasible`) when the gripper cannot hold it there (under the cutting arm, on the cut
+    line, ...).
+
+    Args:
+        segments: The cut the arm sweeps (default: the whole contour, the same footprint however it is
+            split).
+
+    Raises:
+        ValueError: naming the contour when no point is feasible.
+    """
+    return nearest_feasible(contour.centroid, contour, config, segments, arm)
+
+
+def material_points(name: str, points: np.ndarray) -> np.ndarray:
+    """``points`` as an (M, 2) float array of material points; a single (2,) point becomes (1, 2).
+
+    Raises:
+        ValueError: naming the argument ``name`` for any other shape.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.shape == (2,):
+        pts = pts[None]
+    if pts.ndim != 2 or pts.shape[1] != 2:
+        raise ValueError(f"{name}: expected (M, 2) or (2,) material points (mm), got shape {pts.shape}")
+    return pts
+
+
+def _polylines(path: ScissorPath) -> list[np.ndarray]:
+    """``path`` as a list of (P, 2) float arrays."""
+    items = [path] if isinstance(path, Segment) or (isinstance(path, np.ndarray) and path.ndim == 2) else path
+    lines = [np.asarray(p.points if isinstance(p, Segment) else p, dtype=np.float64) for p in items]
+    if not lines or any(line.ndim != 2 or line.shape[1] != 2 or len(line) == 0 for line in lines):
+        raise ValueError("path: expected a (P, 2) polyline (mm), a Segment, or a non-empty list of them")
+    return lines
+
+
+def _min_distance(points: np.ndarray, others: np.ndarray) -> np.ndarray:
+    if not len(others):
+        return np.full(len(points), np.inf)
+    return np.min(np.linalg.norm(points[:, None] - others[None], axis=2), axis=1)
