@@ -4,7 +4,7 @@ Times, interleaved with runs without recording so that machine load hits all var
 wall time of
 
 * ``plain``: ``CuttingTask(...).run(None)`` (no step callback: recording off);
-* ``process``: the same run with ``Recorder(path, envs=1, background="process").on_step(...)`` as the
+* ``process``: the same run with ``Recorder(path, envs=1, background="process").step_callback(...)`` as the
   callback, the recorder's creation and ``close()`` (the finished ``.rrd`` file, written and renamed by
   the recorder process) included: the stepping loop copies the recorded env's state into a pipe, the
   recorder process scores it, sends it to rerun and writes the file (``Recorder``'s default on a machine
@@ -49,7 +49,7 @@ from pathlib import Path
 from warpcut.contours import load_contour
 from warpcut.sim.config import SimConfig
 from warpcut.task import CuttingTask
-from warpcut.viz.recording import Recorder
+from warpcut.viz.recorder import Recorder
 
 PHASES = (("plain", "process"), ("plain", "worker thread", "no thread"))
 BACKGROUND = {"process": "process", "worker thread": "thread", "no thread": False}
@@ -70,7 +70,7 @@ def time_variants(
         path = out_dir / f"r{next(counter)}.rrd"
         recorder = Recorder(path, envs=1, background=BACKGROUND[variant])
         try:
-            task.run(None, on_step=recorder.on_step("none"))
+            task.run(None, on_step=recorder.step_callback("none"))
         finally:
             closing = time.perf_counter()
             recorder.close()

@@ -8,7 +8,7 @@ import pytest
 from matplotlib.image import imread
 
 from warpcut.contours import load_contour
-from warpcut.planning import Plan, pinch_feasible, plan_cut
+from warpcut.planning import ArmModel, Plan, pinch_feasible, plan_cut
 from warpcut.sim.config import SimConfig
 from warpcut.task import CuttingTask
 from warpcut.viz.plots import (
@@ -79,9 +79,9 @@ def test_pinch_candidate_map_is_written(tmp_path, small_plan):
 
 def test_pinch_candidate_map_with_a_short_arm(tmp_path):
     plan = plan_cut(
-        load_contour("fls-circle"), SIM, num_candidates=2, seed=0, device="cpu", arm_length_mm=15.0
+        load_contour("fls-circle"), SIM, num_candidates=2, seed=0, device="cpu", arm=ArmModel(length_mm=15.0)
     )
-    assert not math.isinf(plan.arm_length_mm)
+    assert not math.isinf(plan.arm.length_mm)
     assert_figure(plot_pinch_candidates(plan, SIM, tmp_path, name="short"), tmp_path, "short")
 
 
@@ -96,8 +96,7 @@ def test_feasible_grid_agrees_with_planning(small_plan):
             small_plan.contour,
             SIM,
             small_plan.segments,
-            small_plan.arm_radius_mm,
-            small_plan.arm_length_mm,
+            small_plan.arm,
         )[0]
         assert feasible[j, i] == expected, (xs[i], ys[j])
     # Orientation: row j is y, column i is x. Corners are infeasible; every candidate was feasible.
@@ -126,7 +125,7 @@ def test_regions_of_a_two_contour_batch(tmp_path):
     scores = {}
     for method, pinches in (("none", None), ("fixed", np.array([c.centroid for c in envs]))):
         task = CuttingTask(config, envs, pinch_points=pinches, device="cpu", seed=3)
-        scores[method] = task.run(None, on_step=cuts.on_step(method))
+        scores[method] = task.run(None, on_step=cuts.step_callback(method))
     assert captured == ["none", "fixed"]  # once per batch, at the end
     assert list(cuts.cuts) == ["fls-circle", "s-curve"]
     for k, contour in enumerate(contours):

@@ -13,22 +13,18 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from agents.cli import main
 from agents.evaluation import compare_policies
-from warpcut.cli import main
 from warpcut.contours import load_contour
 from warpcut.sim.config import SheetGrid, SimConfig
-from warpcut.sim.simulator import Simulator, colour_springs
+from warpcut.sim.simulator import Simulator
+from warpcut.sim.springs import colour_springs
 from warpcut.task import CuttingTask
-from warpcut.viz import recording
-from warpcut.viz.recording import (
-    PROCESS_NICE,
-    STRAIN_FULL_SCALE,
-    Recorder,
-    RecordingError,
-    _ramp,
-    read_summary,
-    vertex_strain,
-)
+from warpcut.viz import process, rerun_writer
+from warpcut.viz.colours import COLOUR_FIELDS, STRAIN_FULL_SCALE, VISIBLE_RGBA, ramp_rgba, vertex_strain
+from warpcut.viz.process import PROCESS_NICE, RecordingError
+from warpcut.viz.readback import read_summary
+from warpcut.viz.recorder import Recorder
 
 RESOLUTION = 9
 ENV_ENTITIES = (
@@ -162,7 +158,9 @@ def test_recording_does_not_change_the_results(tmp_path):
     kwargs = dict(methods=["none", "analytic"], trials=2, config=config, device="cpu", seed=3)
     plain = compare_policies(contour, **kwargs)
     with Recorder(tmp_path / "r.rrd", envs=2) as recorder:
-        recorded = compare_policies(contour, **kwargs, on_step=recorder.on_step)
+        recorded = compare_policies(
+            contour, **kwargs, step_callbacks=lambda method, first: recorder.step_callback(method)
+        )
     assert json.dumps(recorded) == json.dumps(plain)
 
 
@@ -178,7 +176,7 @@ def test_interrupted_run_leaves_a_readable_recording(tmp_path, background):
 
     path = tmp_path / "recording.rrd"
     with pytest.raises(KeyboardInterrupt), Recorder(path, background=background) as recorder:
-        task.run(policy, on_step=recorder.on_step("fixed"))
+        task.run(policy, on_step=recorder.step_callback("fixed"))
     summary = read_summary(path)
     assert summary.frames == stop_at + 1 and summary.last_step == stop_at
     assert "/fixed/env_0/sheet" in summary.entity_paths
@@ -188,7 +186,7 @@ def test_interrupted_run_leaves_a_readable_recording(tmp_path, background):
 def test_every_kth_step_keeps_the_first_and_last(tmp_path):
     task = CuttingTask(SimConfig(resolution=RESOLUTION), load_contour("circle-small"), device="cpu")
     with Recorder(tmp_path / "r.rrd", every=4) as recorder:
-        task.run(None, on_step=recorder.on_step("none"))
+        task.run(None, on_step=recorder.step_callback("none"))
     summary = read_summary(tmp_path / "r.rrd")
     assert summary.frames == len(set(range(0, task.num_steps, 4)) | {task.num_steps})
     assert summary.last_step == task.num_steps
@@ -219,12 +217,12 @@ def test_replay_without_a_display_prints_how_and_a_summary(simulated, monkeypatc
     ],
 )
 def test_replay_says_when_the_viewer_cannot_open_a_window(simulated, monkeypatch, capfd, viewer, opened):
-    from warpcut import cli
+    from agents.cli import replay
 
     out, _ = simulated
     monkeypatch.setenv("DISPLAY", ":99")
-    monkeypatch.setattr(cli, "VIEWER", [sys.executable, "-c", f"import sys, time; {viewer}"])
-    monkeypatch.setattr(cli, "VIEWER_START_S", 1.0)
+    monkeypatch.setattr(replay, "VIEWER", [sys.executable, "-c", f"import sys, time; {viewer}"])
+    monkeypatch.setattr(replay, "VIEWER_START_S", 1.0)
     with pytest.raises(SystemExit) as exit_info:
         main.main(args=["replay", str(out / "recording.rrd")], prog_name="warpcut")
     captured = capfd.readouterr()
@@ -274,7 +272,7 @@ def read_columns(path) -> dict[tuple[str, str], list]:
     }
 
 
-@pytest.mark.parametrize("backend", ["simd", "fused", "colours"])
+@pytest.mark.parametrize("backend", ["simd", "colours"])
 def test_read_envs_reads_only_the_asked_envs_and_the_same_values(backend):
     sim = Simulator(SimConfig(resolution=RESOLUTION, noise_std=0.05), 11, device="cpu", backend=backend)
     sim.reset(np.full((11, 2), 50.0))
@@ -360,7 +358,7 @@ def test_vertex_colours_follow_the_chosen_field(tmp_path, colour_by):
         config, load_contour("circle-small"), device="cpu", pinch_points=np.array([50.0, 50.0])
     )
     with Recorder(tmp_path / "r.rrd", colour_by=colour_by) as recorder:
-        task.run(lambda t: np.array([[0.5, 0.0, 0.0]]), on_step=recorder.on_step("fixed"))
+        task.run(lambda t: np.array([[0.5, 0.0, 0.0]]), on_step=recorder.step_callback("fixed"))
     columns = read_columns(tmp_path / "r.rrd")
     colours = columns[("/fixed/env_0/sheet", "Mesh3D:vertex_colors")]
     positions = columns[("/fixed/env_0/sheet", "Mesh3D:vertex_positions")]
@@ -368,10 +366,10 @@ def test_vertex_colours_follow_the_chosen_field(tmp_path, colour_by):
     last = np.array(positions[-1][1], dtype=np.float32)[None]
     alive = task.sim.alive_mask()
     if colour_by == "strain":
-        expected = _ramp(vertex_strain(last, alive, task.grid, config.springs), 0.0, STRAIN_FULL_SCALE)
+        expected = ramp_rgba(vertex_strain(last, alive, task.grid, config.springs), 0.0, STRAIN_FULL_SCALE)
     else:
         first = np.array(positions[0][1])[:, 2]
-        expected = _ramp(last[..., 2], first.min(), max(first.max(), first.min() + 1.0))
+        expected = ramp_rgba(last[..., 2], first.min(), max(first.max(), first.min() + 1.0))
     assert np.array_equal(np.array(colours[-1][1], dtype=np.uint32), expected[0])
     (info,) = columns[("/fixed/env_0/info", "TextDocument:text")][0][1]
     assert f"vertex colours: {colour_by}" in info
@@ -385,7 +383,7 @@ def test_the_recorded_error_is_the_score(tmp_path):
         pinch_points=np.array([50.0, 50.0]),
     )
     with Recorder(tmp_path / "r.rrd") as recorder:
-        score = task.run(lambda t: np.array([[0.3, 0.2, 0.0]]), on_step=recorder.on_step("fixed"))
+        score = task.run(lambda t: np.array([[0.3, 0.2, 0.0]]), on_step=recorder.step_callback("fixed"))
     columns = read_columns(tmp_path / "r.rrd")
     errors = columns[("/fixed/env_0/separated_error_vertices", "Scalars:scalars")]
     assert [s for s, _ in errors] == list(range(task.num_steps + 1))
@@ -414,8 +412,8 @@ def test_process_thread_and_inline_recordings_hold_the_same(tmp_path):
     modes = ("process", "thread", False)
     for background in modes:
         with Recorder(tmp_path / f"{background}.rrd", envs=2, background=background) as recorder:
-            task.run(lambda t: np.full((3, 3), 0.2), on_step=recorder.on_step("fixed"))
-            task.run(None, on_step=recorder.on_step("none"))
+            task.run(lambda t: np.full((3, 3), 0.2), on_step=recorder.step_callback("fixed"))
+            task.run(None, on_step=recorder.step_callback("none"))
     inline = read_columns(tmp_path / "False.rrd")
     assert ("/fixed/env_1/grasp/displacement", "Arrows3D:vectors") in inline
     assert len(inline[("/none/env_0/sheet", "Mesh3D:vertex_positions")]) == task.num_steps + 1
@@ -430,7 +428,7 @@ def test_the_recorder_process_is_reused(tmp_path):
     for k in range(2):
         with Recorder(tmp_path / f"{k}.rrd", background="process") as recorder:
             pids.append(recorder._sink.child.process.pid)
-            task.run(None, on_step=recorder.on_step("none"))
+            task.run(None, on_step=recorder.step_callback("none"))
         assert read_summary(tmp_path / f"{k}.rrd").frames == task.num_steps + 1
     assert pids[0] == pids[1]
 
@@ -443,7 +441,7 @@ def test_a_failure_in_the_recorder_process_names_the_recording(tmp_path):
     with pytest.raises(RecordingError, match="IndexError: too many indices") as failure:
         with Recorder(path, background="process") as recorder:
             failed = recorder._sink.child.process
-            task.run(None, on_step=recorder.on_step("none"))
+            task.run(None, on_step=recorder.step_callback("none"))
     assert str(path) in str(failure.value) and "recorder process failed" in str(failure.value)
     assert read_summary(path).frames == 0
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.rrd"]
@@ -464,7 +462,7 @@ def test_a_dead_recorder_process_is_an_error_not_a_hang(tmp_path):
                     child.wait()
                 return None
 
-            task.run(policy, on_step=recorder.on_step("none"))
+            task.run(policy, on_step=recorder.step_callback("none"))
     assert str(path) in str(failure.value)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.rrd"]
 
@@ -473,7 +471,7 @@ def test_ctrl_c_reaches_only_the_stepping_process(tmp_path):
     task = CuttingTask(SimConfig(resolution=RESOLUTION), load_contour("fls-circle"), device="cpu")
     with Recorder(tmp_path / "warm.rrd", background="process") as recorder:
         child = recorder._sink.child.process  # started and ready
-        task.run(None, on_step=recorder.on_step("none"))
+        task.run(None, on_step=recorder.step_callback("none"))
     stop_at = 5
 
     def policy(task):
@@ -486,7 +484,7 @@ def test_ctrl_c_reaches_only_the_stepping_process(tmp_path):
     path = tmp_path / "recording.rrd"
     with pytest.raises(KeyboardInterrupt), Recorder(path, background="process") as recorder:
         assert recorder._sink.child.process is child
-        task.run(policy, on_step=recorder.on_step("fixed"))
+        task.run(policy, on_step=recorder.step_callback("fixed"))
     summary = read_summary(path)
     assert summary.frames == stop_at + 1 and summary.last_step == stop_at
     assert "/fixed/env_0/sheet" in summary.entity_paths
@@ -500,15 +498,15 @@ def test_the_recorder_process_finishes_the_file_when_the_stepping_process_dies(t
         import os, sys
         from warpcut.sim.config import SimConfig
         from warpcut.contours import load_contour
-        from warpcut.viz.recording import Recorder
+        from warpcut.viz.recorder import Recorder
         from warpcut.task import CuttingTask
 
         task = CuttingTask(SimConfig(resolution={RESOLUTION}), load_contour("circle-small"), device="cpu")
         with Recorder(sys.argv[1] + "/closed.rrd", background="process") as recorder:
-            task.run(None, on_step=recorder.on_step("none"))
+            task.run(None, on_step=recorder.step_callback("none"))
         assert "rerun" not in sys.modules, "the stepping process imported rerun"
         recorder = Recorder(sys.argv[1] + "/dead.rrd", background="process")
-        task.run(None, on_step=recorder.on_step("none"))
+        task.run(None, on_step=recorder.step_callback("none"))
         os._exit(3)  # dies without closing the recorder
         """
     )
@@ -526,10 +524,10 @@ def test_a_stepping_process_that_dies_before_recording_leaves_an_earlier_file_al
     script = textwrap.dedent(
         """
         import os, sys
-        from warpcut.viz.recording import Recorder
+        from warpcut.viz.recorder import Recorder
 
         recorder = Recorder(sys.argv[1] + "/recording.rrd", background="process")
-        recorder.on_step("none")  # made, never called
+        recorder.step_callback("none")  # made, never called
         os._exit(3)  # dies without closing the recorder
         """
     )
@@ -548,11 +546,11 @@ def test_a_failure_on_the_worker_surfaces_and_the_file_remains(tmp_path, monkeyp
     def fail(*args, **kwargs):
         raise RuntimeError("boom")
 
-    monkeypatch.setattr(recording._Writer, "_send_env", fail)
+    monkeypatch.setattr(rerun_writer.RerunWriter, "_send_env", fail)
     task = CuttingTask(SimConfig(resolution=RESOLUTION), load_contour("circle-small"), device="cpu")
     path = tmp_path / "r.rrd"
     with pytest.raises(RuntimeError, match="boom"), Recorder(path, background=background) as recorder:
-        task.run(None, on_step=recorder.on_step("none"))
+        task.run(None, on_step=recorder.step_callback("none"))
     assert read_summary(path).frames == 0
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.rrd"]
 
@@ -561,19 +559,16 @@ def test_columns_are_the_rerun_archetypes_columns():
     """The writer builds its columns from arrow arrays; they must be what rerun's archetypes build."""
     import rerun as rr
 
-    from warpcut.viz.recording import (
-        _CUTTING_RGB,
-        _CUTTING_RGBA,
-        _TRAVEL_RGB,
-        _TRAVEL_RGBA,
-        _column,
-        _cut_paths,
-        _cutting_runs,
-        _float64,
-        _strips,
-        _triangles,
-        _uint32,
-        _vec3,
+    from warpcut.viz.colours import CUTTING_RGB, CUTTING_RGBA, TRAVEL_RGB, TRAVEL_RGBA
+    from warpcut.viz.columns import (
+        column,
+        cut_path_strips,
+        cutting_runs,
+        float64_array,
+        strip_array,
+        triangle_array,
+        uint32_array,
+        vec3_array,
     )
 
     rng = np.random.default_rng(0)
@@ -583,8 +578,8 @@ def test_columns_are_the_rerun_archetypes_columns():
     scalars = rng.normal(size=(2, 3))
     cutting = np.array([True, False, True, False, False])
     tip = np.column_stack([rng.normal(size=(12, 3)), [0, 1, 1, 1, 0, 0, 1, 1, 1, 1, 0, 1]])
-    runs, updates = _cutting_runs(tip), np.array([0, 3, 5, 9, 12])
-    strips, counts = _cut_paths(tip, runs, updates)
+    runs, updates = cutting_runs(tip), np.array([0, 3, 5, 9, 12])
+    strips, counts = cut_path_strips(tip, runs, updates)
     cut_so_far = [
         [tip[a : min(b, u), :3] for a, b in runs if min(b, u) - a >= 2] for u in updates
     ]  # what the scissors have cut after each update (runs of two points at least)
@@ -594,53 +589,57 @@ def test_columns_are_the_rerun_archetypes_columns():
                 vertex_positions=points.reshape(-1, 3), vertex_colors=colours.ravel()
             ).partition([5, 5]),
             [
-                _column("Mesh3D:vertex_positions", _vec3(points), [5, 5]),
-                _column("Mesh3D:vertex_colors", _uint32(colours), [5, 5]),
+                column("Mesh3D:vertex_positions", vec3_array(points), [5, 5]),
+                column("Mesh3D:vertex_colors", uint32_array(colours), [5, 5]),
             ],
         ),
         (
             rr.Mesh3D.columns(triangle_indices=faces).partition([1, 2]),
-            [_column("Mesh3D:triangle_indices", _triangles(faces), [1, 2])],
+            [column("Mesh3D:triangle_indices", triangle_array(faces), [1, 2])],
         ),
-        (rr.Scalars.columns(scalars=scalars[:, 0]), [_column("Scalars:scalars", _float64(scalars[:, 0]))]),
+        (
+            rr.Scalars.columns(scalars=scalars[:, 0]),
+            [column("Scalars:scalars", float64_array(scalars[:, 0]))],
+        ),
         (
             rr.Scalars.columns(scalars=scalars).partition([3, 3]),
-            [_column("Scalars:scalars", _float64(scalars), [3, 3])],
+            [column("Scalars:scalars", float64_array(scalars), [3, 3])],
         ),
-        (rr.LineStrips3D.columns(strips=points), [_column("LineStrips3D:strips", _strips(points))]),
+        (rr.LineStrips3D.columns(strips=points), [column("LineStrips3D:strips", strip_array(points))]),
         (
             rr.LineStrips3D.columns(strips=[s for frame in cut_so_far for s in frame]).partition(
                 [len(frame) for frame in cut_so_far]
             ),
-            [_column("LineStrips3D:strips", strips, counts)],
+            [column("LineStrips3D:strips", strips, counts)],
         ),
         (
             rr.Points3D.columns(
-                positions=points[0], colors=np.where(cutting[:, None], _CUTTING_RGB, _TRAVEL_RGB)
+                positions=points[0], colors=np.where(cutting[:, None], CUTTING_RGB, TRAVEL_RGB)
             ),
             [
-                _column("Points3D:positions", _vec3(points[0])),
-                _column("Points3D:colors", _uint32(np.where(cutting, _CUTTING_RGBA, _TRAVEL_RGBA))),
+                column("Points3D:positions", vec3_array(points[0])),
+                column("Points3D:colors", uint32_array(np.where(cutting, CUTTING_RGBA, TRAVEL_RGBA))),
             ],
         ),
         (
             rr.Points3D.columns(positions=points.reshape(-1, 3)).partition([5, 5]),
-            [_column("Points3D:positions", _vec3(points), [5, 5])],
+            [column("Points3D:positions", vec3_array(points), [5, 5])],
         ),
         (
             rr.Arrows3D.columns(origins=points[0], vectors=points[1]),
-            [_column("Arrows3D:origins", _vec3(points[0])), _column("Arrows3D:vectors", _vec3(points[1]))],
+            [
+                column("Arrows3D:origins", vec3_array(points[0])),
+                column("Arrows3D:vectors", vec3_array(points[1])),
+            ],
         ),
     ]
     for theirs, ours in pairs:
         theirs = {c.component_descriptor().component: c for c in theirs}
         assert sorted(theirs) == sorted(c.component_descriptor().component for c in ours)
-        for column in ours:
-            reference = theirs[column.component_descriptor().component]
-            assert column.component_descriptor() == reference.component_descriptor()
-            assert column.as_arrow_array().equals(reference.as_arrow_array()), (
-                reference.component_descriptor()
-            )
+        for built in ours:
+            reference = theirs[built.component_descriptor().component]
+            assert built.component_descriptor() == reference.component_descriptor()
+            assert built.as_arrow_array().equals(reference.as_arrow_array()), reference.component_descriptor()
 
 
 def test_simulate_says_when_fewer_envs_ran_than_record_asks(tmp_path):
@@ -655,11 +654,9 @@ def test_simulate_says_when_fewer_envs_ran_than_record_asks(tmp_path):
 
 
 def test_cli_colour_choices_are_the_recorders():
-    from warpcut.cli import RECORD_COLOURS
-
-    assert RECORD_COLOURS == recording.COLOUR_FIELDS
     result = CliRunner().invoke(main, ["simulate", "--record", "--colour-by", "rainbow"])
-    assert result.exit_code == 2 and "'rainbow' is not one of 'strain', 'height'" in result.output
+    choices = ", ".join(repr(field) for field in COLOUR_FIELDS)
+    assert result.exit_code == 2 and f"'rainbow' is not one of {choices}" in result.output
     result = CliRunner().invoke(main, ["simulate", "--contour", "circle-small", "--colour-by", "height"])
     assert result.exit_code == 2 and "--colour-by: colours a recording; add --record" in result.output
 
@@ -674,7 +671,7 @@ def test_recorded_fiducials_are_where_the_env_tracks_them_and_hidden_when_it_can
     )
     world, seen = [], []
     with Recorder(tmp_path / "env.rrd", envs=2, background=False) as recorder:
-        callback = recorder.on_step("env")
+        callback = recorder.step_callback("env")
         scene.reset(np.random.default_rng(3), resample_fiducials=True)
         for step in range(scene.task.num_steps + 1):
             if step:
@@ -683,7 +680,7 @@ def test_recorded_fiducials_are_where_the_env_tracks_them_and_hidden_when_it_can
             world.append(scene.fiducials.world(scene.task.sim.positions()))
             seen.append(scene.fiducials.visible.copy())
     columns = read_columns(tmp_path / "env.rrd")
-    visible_rgba = int(recording._VISIBLE_RGBA)
+    visible_rgba = int(VISIBLE_RGBA)
     for env in (0, 1):
         positions = columns[(f"/env/env_{env}/fiducials", "Points3D:positions")]
         colours = columns[(f"/env/env_{env}/fiducials", "Points3D:colors")]
@@ -697,7 +694,7 @@ def test_recorded_fiducials_are_where_the_env_tracks_them_and_hidden_when_it_can
     # A task without an env's fiducials (a baseline): the recording draws them as an env would.
     task = CuttingTask(SimConfig(resolution=RESOLUTION), load_contour("fls-circle"), device="cpu")
     with Recorder(tmp_path / "task.rrd", background=False) as recorder:
-        task.run(None, on_step=recorder.on_step("none"))
+        task.run(None, on_step=recorder.step_callback("none"))
     first = read_columns(tmp_path / "task.rrd")[("/none/env_0/fiducials", "Points3D:positions")][0][1]
     expected = sample_fiducials(
         np.random.default_rng(0), 12, task.contours, np.full((1, 2), np.nan), task.config
@@ -717,11 +714,11 @@ def test_a_recorder_that_recorded_nothing_leaves_an_earlier_file_alone(tmp_path,
     task = CuttingTask(SimConfig(resolution=RESOLUTION), load_contour("circle-small"), device="cpu")
     path = tmp_path / "recording.rrd"
     with Recorder(path, background=background) as recorder:
-        task.run(None, on_step=recorder.on_step("none"))
+        task.run(None, on_step=recorder.step_callback("none"))
     assert recorder.written and recorder.close() == path
     before = path.read_bytes()
     with pytest.raises(KeyboardInterrupt), Recorder(path, background=background) as recorder:
-        recorder.on_step("rl")  # made, never called
+        recorder.step_callback("rl")  # made, never called
         raise KeyboardInterrupt
     assert not recorder.written and recorder.close() is None
     assert path.read_bytes() == before
@@ -732,20 +729,20 @@ def test_a_recorder_that_recorded_nothing_leaves_an_earlier_file_alone(tmp_path,
 
     task.sim.state_reader = interrupted
     with pytest.raises(KeyboardInterrupt), Recorder(path, background=background) as recorder:
-        task.run(None, on_step=recorder.on_step("rl"))
+        task.run(None, on_step=recorder.step_callback("rl"))
     assert not recorder.written and recorder.recorded_envs == {}
     assert path.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["recording.rrd"]  # no temporary file left
 
 
 def test_a_started_recorder_process_is_taken_by_the_next_recorder(tmp_path):
-    if recording._default_background() != "process":
+    if process.default_background() != "process":
         pytest.skip("recorders use no process here (not POSIX, or one core)")
-    assert recording.start_recorder_process()
-    waiting = [c for c in recording._Child._idle if c.process.poll() is None]
+    assert process.start_recorder_process()
+    waiting = [c for c in process.RecorderProcess._idle if c.process.poll() is None]
     assert waiting
-    assert recording.start_recorder_process()  # one is waiting already: no second one
-    assert [c for c in recording._Child._idle if c.process.poll() is None] == waiting
+    assert process.start_recorder_process()  # one is waiting already: no second one
+    assert [c for c in process.RecorderProcess._idle if c.process.poll() is None] == waiting
     recorder = Recorder(tmp_path / "r.rrd")
     assert recorder._sink.child is waiting[-1]
     assert recorder.close() is None  # nothing recorded: no file
@@ -761,13 +758,14 @@ def test_the_cli_starts_the_recorder_process_before_importing_anything_slow():
     code = "import json, sys, warpcut.viz.process; print(json.dumps(sorted(sys.modules)))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     loaded = set(json.loads(out))
-    assert "warpcut.viz.process" in loaded and "warpcut.viz.recording" not in loaded
+    assert "warpcut.viz.process" in loaded
+    assert not loaded & {"warpcut.viz.recorder", "warpcut.viz.transport", "warpcut.viz.rerun_writer"}
     assert not {m.split(".")[0] for m in loaded} & {"scipy", "rerun", "pyarrow", "shapely", "warp", "torch"}
 
 
 def test_the_recorder_process_and_the_cli_start_without_warp():
-    # Warp costs ~0.4 s to import: the recorder process (warpcut.viz.recording) and the CLI's start-up, which
-    # starts that process, do without it until a simulator is made.
-    code = "import sys, warpcut.cli, warpcut.viz.recording; print('warp' in sys.modules)"
+    # Warp is slow to import: the recorder process (warpcut.viz.process and the writer it serves with) and
+    # the CLI's start-up, which starts that process, do without it until a simulator is made.
+    code = "import sys, agents.cli, warpcut.viz.process, warpcut.viz.recorder; print('warp' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "False"

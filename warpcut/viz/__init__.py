@@ -1,1 +1,52 @@
-"""warpcut/viz"""
+"""Seeing what happened: rerun recordings of cutting episodes and the figures of a run.
+
+Recording (a step callback of :meth:`warpcut.task.CuttingTask.run` writes one ``.rrd`` file):
+
+* :mod:`~warpcut.viz.recorder`: :class:`Recorder`, the public facade, and the step callback it makes per
+  episode, which copies the recorded envs' state;
+* :mod:`~warpcut.viz.frames`: what the step callback copies (a frame per step, a setup per episode);
+* :mod:`~warpcut.viz.transport`: how the copies reach the writer (a recorder process, a worker thread or
+  the step callback itself) and a frame's wire format on the pipe to the process;
+* :mod:`~warpcut.viz.process`: the recorder process, its start-up (standard library only, so that the CLI
+  can start it before importing anything slow) and the server that runs in it;
+* :mod:`~warpcut.viz.rerun_writer`: the rerun encoding of a batch of frames, and the file;
+* :mod:`~warpcut.viz.columns`: rerun component columns built from numpy buffers;
+* :mod:`~warpcut.viz.colours`: vertex colours (strain, height) and the fixed colours;
+* :mod:`~warpcut.viz.readback`: what a recording holds, read back (``warpcut replay``).
+
+Figures: :mod:`~warpcut.viz.plots` (Table I, the cut regions, a learning curve, pinch candidates).
+
+The names below load their module on first use, so that ``import warpcut.viz`` imports neither rerun nor
+pyarrow nor matplotlib.
+"""
+
+from importlib import import_module
+
+_LAZY = {
+    "Recorder": "warpcut.viz.recorder",
+    "RecordingError": "warpcut.viz.process",
+    "start_recorder_process": "warpcut.viz.process",
+    "COLOUR_FIELDS": "warpcut.viz.colours",
+    "RecordingSummary": "warpcut.viz.readback",
+    "read_summary": "warpcut.viz.readback",
+    "FinalCut": "warpcut.viz.plots",
+    "FinalCuts": "warpcut.viz.plots",
+    "plot_improvements": "warpcut.viz.plots",
+    "plot_learning_curve": "warpcut.viz.plots",
+    "plot_pinch_candidates": "warpcut.viz.plots",
+    "plot_regions": "warpcut.viz.plots",
+}
+
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        value = getattr(import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))

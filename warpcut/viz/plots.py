@@ -111,14 +111,15 @@ class FinalCuts:
         self.cuts: dict[str, dict[str, FinalCut]] = {}
         """Contour name to method name to its final cut, contours and methods in the order first seen."""
 
-    def on_step(self, method: str):
-        """A callback for ``task.run(policy, on_step=...)`` that keeps ``method``'s cuts at the end."""
+    def step_callback(self, method: str):
+        """A new step callback, for ``task.run(policy, on_step=cuts.step_callback(method))``, that keeps
+        ``method``'s cuts at the end of the episode."""
 
-        def on_step(task: CuttingTask, action) -> None:
+        def callback(task: CuttingTask, action) -> None:
             if task.done:
                 self.capture(task, method)
 
-        return on_step
+        return callback
 
     def capture(self, task: CuttingTask, method: str) -> None:
         """Score the first env of each contour of ``task`` as it stands and keep it as ``method``'s cut."""
@@ -328,7 +329,7 @@ def feasible_grid(
     it: :func:`~warpcut.planning.pinch_feasible` with the plan's contour, segments and arm.
 
     Args:
-        plan: The plan (its contour, segments, ``arm_radius_mm`` and ``arm_length_mm``).
+        plan: The plan (its contour, segments and ``arm``).
         config: The simulation parameters the plan was made with (sheet size, grasp radius, fixture).
         step_mm: Grid spacing (mm), > 0.
 
@@ -341,9 +342,7 @@ def feasible_grid(
     xs = np.arange(0.0, config.width_mm + 1e-9, step_mm)
     ys = np.arange(0.0, config.height_mm + 1e-9, step_mm)
     points = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
-    feasible = pinch_feasible(
-        points, plan.contour, config, plan.segments, plan.arm_radius_mm, plan.arm_length_mm
-    )
+    feasible = pinch_feasible(points, plan.contour, config, plan.segments, plan.arm)
     return xs, ys, feasible.reshape(len(ys), len(xs))
 
 
@@ -446,10 +445,10 @@ def plot_pinch_candidates(
     ax.set_aspect("equal")
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")
-    length = "inf" if math.isinf(plan.arm_length_mm) else f"{plan.arm_length_mm:g} mm"
+    length = "inf" if math.isinf(plan.arm.length_mm) else f"{plan.arm.length_mm:g} mm"
     ax.set_title(
         f"{plan.contour.name}: {len(plan.candidates)} pinch candidate(s), "
-        f"arm radius {plan.arm_radius_mm:g} mm, length {length}"
+        f"arm radius {plan.arm.radius_mm:g} mm, length {length}"
     )
     fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize="small", frameon=False)
     return save_figure(fig, out_dir, name)

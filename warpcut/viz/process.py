@@ -1,10 +1,11 @@
-"""The recorder process behind ``Recorder(background="process")`` (:mod:`warpcut.viz.recording`): starting it,
-and the pipes to and from it.
+"""The recorder process behind ``Recorder(background="process")``: starting it and the pipes to and from it
+(the stepping process's side), and :func:`serve`, what runs in it.
 
-This module imports only the standard library, so that :func:`start_recorder_process` can start the
-process before its caller has imported anything slow (the CLI calls it first thing when ``--record`` is
-given): the process's own start-up (Python, numpy, scipy, shapely and rerun, ~0.7 s on an idle core) then
-overlaps the caller's. The process runs :func:`warpcut.viz.recording._serve`.
+At module level this imports only the standard library, so that :func:`start_recorder_process` can start
+the process before its caller has imported anything slow (the CLI calls it first thing when ``--record``
+is given): the process's own start-up (Python, numpy, scipy, shapely and rerun) then overlaps the
+caller's. The server's own imports (the writer, the frame wire format) are made in the process, which
+imports them while it starts (:func:`~warpcut.viz.rerun_writer.import_rerun`).
 """
 
 from __future__ import annotations
@@ -17,46 +18,56 @@ import subprocess
 import sys
 import threading
 import time
+import traceback
 from pathlib import Path
 
 PROCESS_NICE = 10
 """How much the recorder process lowers its scheduling priority (``nice``): where no core is free, the
 stepping loop keeps its core and the recording catches up while the stepping process waits (at the latest
-in :meth:`Recorder.close`, or when the pipe is full)."""
+in :meth:`~warpcut.viz.recorder.Recorder.close`, or when the pipe is full)."""
 
 CLOSE_TIMEOUT_S = 120.0
-"""How long :meth:`Recorder.close` (and a step callback whose pipe is full) waits for the recorder
-process before it gives up, stops the process and raises :class:`RecordingError`."""
+"""How long :meth:`~warpcut.viz.recorder.Recorder.close` (and a step callback whose pipe is full) waits for
+the recorder process before it gives up, stops the process and raises :class:`RecordingError`."""
 
 
 class RecordingError(RuntimeError):
-    """The recorder process failed, died or stopped answering; the message names the recording.
-    (:mod:`warpcut.viz.recording` exports it.)"""
+    """The recorder process failed, died or stopped answering; the message names the recording."""
 
 
 def start_recorder_process() -> bool:
     """Start a recorder process now, where recorders use one by default (``Recorder(background=None)``),
-    for the next :class:`~warpcut.viz.recording.Recorder` of this Python process to take: its start-up
-    (~0.7 s on an idle core: Python, numpy, scipy, shapely and rerun) then overlaps the caller's own (the
-    CLI calls it first thing when ``--record`` is given). Whether one is started (or an idle one is
-    already waiting).
+    for the next :class:`~warpcut.viz.recorder.Recorder` of this Python process to take: its start-up
+    (Python, numpy, scipy, shapely and rerun) then overlaps the caller's own (the CLI calls it first thing
+    when ``--record`` is given). Whether one is started (or an idle one is already waiting).
 
     Raises:
         RecordingError: The process could not be started.
     """
-    if _default_background() != "process":
+    if default_background() != "process":
         return False
-    with _Child._lock:
-        if any(child.owner == os.getpid() and child.process.poll() is None for child in _Child._idle):
+    with RecorderProcess._lock:
+        if any(
+            child.owner == os.getpid() and child.process.poll() is None for child in RecorderProcess._idle
+        ):
             return True
     try:
-        _Child().release()
+        RecorderProcess().release()
     except OSError as exc:
         raise RecordingError(f"could not start the recorder process ({exc})") from exc
     return True
 
 
-def _default_background() -> str | bool:
+def place_file(tmp: str | os.PathLike, path: str | os.PathLike, keep: bool) -> None:
+    """Move a recording's finished temporary file ``tmp`` to ``path`` (``keep``), or delete it (nothing was
+    recorded: a file already at ``path`` stays as it was)."""
+    if keep:
+        os.replace(tmp, path)
+    else:
+        os.unlink(tmp)
+
+
+def default_background() -> str | bool:
     """``Recorder(background=None)``: a recorder process on a POSIX machine with more than one core (a
     core the stepping loop may leave free), else the step callback itself."""
     return "process" if os.name == "posix" and (os.cpu_count() or 1) > 1 else False
@@ -64,16 +75,17 @@ def _default_background() -> str | bool:
 
 # The pipe to the recorder process carries messages of a kind byte and a payload length, then the payload:
 # b"P", a pickled tuple (``open``, ``start``, ``close``; and every reply), or b"F", one frame in raw bytes
-# (warpcut.viz.recording._FRAME_HEAD and what follows it).
-_HEAD = struct.Struct("<cI")
+# (:func:`warpcut.viz.transport.encode_frames`).
+MESSAGE_HEAD = struct.Struct("<cI")
 
 
-def _pickled(message: tuple) -> bytes:
+def pickled_message(message: tuple) -> bytes:
+    """``message`` as a b"P" message."""
     data = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
-    return _HEAD.pack(b"P", len(data)) + data
+    return MESSAGE_HEAD.pack(b"P", len(data)) + data
 
 
-class _Messages:
+class MessageReader:
     """The messages arriving on a pipe's reading end ``fd``."""
 
     def __init__(self, fd: int):
@@ -86,9 +98,9 @@ class _Messages:
         """The next message as ``(kind, payload)``; None at the end of the pipe, or when none arrived in
         time (``block=False``: none is waiting now; ``timeout``: seconds)."""
         while True:
-            if len(self.buffer) - self.start >= _HEAD.size:
-                kind, size = _HEAD.unpack_from(self.buffer, self.start)
-                begin = self.start + _HEAD.size
+            if len(self.buffer) - self.start >= MESSAGE_HEAD.size:
+                kind, size = MESSAGE_HEAD.unpack_from(self.buffer, self.start)
+                begin = self.start + MESSAGE_HEAD.size
                 if len(self.buffer) >= begin + size:
                     with memoryview(self.buffer) as view:
                         payload = bytes(view[begin : begin + size])
@@ -108,10 +120,10 @@ class _Messages:
             self.buffer += data
 
 
-class _Child:
-    """A recorder process (:func:`_serve`) and the two pipes to it; one recording at a time."""
+class RecorderProcess:
+    """A recorder process (:func:`serve`) and the two pipes to it; one recording at a time."""
 
-    _idle: list[_Child] = []
+    _idle: list[RecorderProcess] = []
     _lock = threading.Lock()
 
     def __init__(self):
@@ -148,12 +160,12 @@ class _Child:
         finally:
             os.close(cmd_read)
             os.close(reply_write)
-        self.replies = _Messages(reply_read)
+        self.replies = MessageReader(reply_read)
         self.owner = os.getpid()
         self._unsent = b""
 
     @classmethod
-    def acquire(cls) -> _Child:
+    def acquire(cls) -> RecorderProcess:
         """An idle recorder process of this Python process, or a new one."""
         with cls._lock:
             while cls._idle:
@@ -241,9 +253,10 @@ import os, signal, sys
 signal.signal(signal.SIGINT, signal.SIG_IGN)
 sys.path[0] = {source!r}
 try:
-    from warpcut.viz.recording import _import_writer, _serve
+    from warpcut.viz.process import serve
+    from warpcut.viz.rerun_writer import import_rerun
 
-    _import_writer()
+    import_rerun()
 except BaseException as exc:
     import pickle, struct, traceback
     data = pickle.dumps(("failed", type(exc).__name__, str(exc), traceback.format_exc()))
@@ -253,5 +266,110 @@ try:
     os.nice({nice})
 except OSError:
     pass
-_serve({cmd}, {reply})
+serve({cmd}, {reply})
 """
+
+
+def serve(cmd_fd: int, reply_fd: int) -> None:
+    """The recorder process: serve recordings one after the other until the pipe from the stepping
+    process ends (it closed us, or it died: the recording it held open is finished then)."""
+    messages = MessageReader(cmd_fd)
+
+    def reply(*message) -> None:
+        try:
+            os.write(reply_fd, pickled_message(message))
+        except OSError:  # the stepping process is gone; the file is finished anyway
+            pass
+
+    while (message := messages.next()) is not None:
+        command, *args = pickle.loads(message[1])
+        if command != "open":
+            reply("failed", "RuntimeError", f"protocol: expected 'open', got {command!r}", "")
+            return
+        if not _serve_recording(messages, reply, *args):
+            return
+
+
+def _serve_recording(
+    messages: MessageReader, reply, tmp: str, path: str, application_id: str, colour_by: str
+) -> bool:
+    """Write one recording from the messages; whether the stepping process closed it (else the pipe
+    ended). The frames are scored and sent a group at a time once no further message is waiting, so
+    that a process that has fallen behind (no core free) catches up in fewer, larger batches. The first
+    failure is reported at once; the frames after it are read and dropped."""
+    from warpcut.viz.rerun_writer import RerunWriter
+    from warpcut.viz.transport import FLUSH_FRAMES, decode_frame
+
+    failure: list = []
+    pending: dict[int, list] = {}
+    ready: set[int] = set()  # keys whose pending frames end with a whole group
+    shapes: dict[int, tuple[int, int]] = {}
+    writer: RerunWriter | None = None
+
+    def report(exc: Exception) -> None:
+        """Report ``exc`` to the stepping process, unless something failed already."""
+        if not failure:
+            failure[:] = [type(exc).__name__, str(exc), traceback.format_exc()]
+            reply("failed", *failure)
+
+    def send(key: int) -> None:
+        ready.discard(key)
+        frames = pending.pop(key, None)
+        if frames and not failure:
+            try:
+                writer.frames(key, frames)
+            except Exception as exc:  # noqa: BLE001 - reported to the stepping process
+                report(exc)
+
+    try:
+        writer = RerunWriter(Path(tmp), Path(path), application_id, colour_by, background=True)
+    except Exception as exc:  # noqa: BLE001 - reported to the stepping process
+        report(exc)
+    closed = False
+    while True:
+        message = messages.next(block=False)
+        if message is None and not messages.eof:
+            for key in list(ready):  # nothing else is waiting: send the whole groups
+                send(key)
+            message = messages.next()
+        if message is None:
+            break
+        kind, payload = message
+        try:
+            if kind == b"F":
+                key, frame, group_end = decode_frame(payload, shapes)
+                frames = pending.setdefault(key, [])
+                frames.append(frame)
+                if group_end:
+                    ready.add(key)
+                    if len(frames) >= FLUSH_FRAMES:
+                        send(key)
+                continue
+            command, *args = pickle.loads(payload)
+            if command == "close":
+                closed = True
+                (keep,) = args
+                break
+            if command != "start":
+                raise RuntimeError(f"protocol: unexpected message {command!r}")
+            for key in list(pending):
+                send(key)
+            key, method, setup = args
+            shapes[key] = (len(setup.envs), setup.grid.num_vertices)
+            if not failure:
+                writer.start(key, method, setup)
+        except Exception as exc:  # noqa: BLE001 - reported to the stepping process
+            report(exc)
+    for key in list(pending):
+        send(key)
+    if not closed:  # the stepping process died: keep what it recorded, if anything
+        keep = bool(shapes)
+    try:
+        if writer is not None:
+            writer.finish(complete=not failure, keep=keep)
+        else:
+            place_file(tmp, path, keep)
+    except Exception as exc:  # noqa: BLE001 - reported to the stepping process
+        report(exc)
+    reply("closed", time.process_time())
+    return closed
