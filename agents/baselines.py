@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from warpcut.contours import Contour
-from warpcut.planning import feasible_centroid, sample_pinch_candidates
+from warpcut.planning import default_pinch, pinch_candidates
 from warpcut.sim.config import AUTHORS_UNITS_PER_MM, SimConfig
 from warpcut.task import CuttingTask
 
@@ -68,7 +68,7 @@ class AnalyticTension:
         pinch: Override the centroid (mm).
         feasible: Without ``pinch``: when the centroid is not a feasible pinch point (e.g. on the cut line
             of a crescent), pinch at the feasible point nearest to it
-            (:func:`warpcut.planning.feasible_centroid`); False: the centroid wherever it is. A cut plan's
+            (:func:`warpcut.planning.default_pinch`); False: the centroid wherever it is. A cut plan's
             arm footprint is applied by the caller (:attr:`warpcut.planning.Plan.analytic_pinch`).
     """
 
@@ -83,7 +83,7 @@ class AnalyticTension:
         if self.pinch is not None:
             return np.asarray(self.pinch, dtype=np.float64)
         if self.feasible:
-            return feasible_centroid(contour, config)
+            return default_pinch(contour, config)
         return np.asarray(contour.centroid, dtype=np.float64)
 
     def __call__(self, task: CuttingTask) -> np.ndarray:
@@ -113,20 +113,10 @@ def search_fixed_pinches(
     Candidates are scored noise-free, so the search is deterministic for a seed.
     """
     rng = np.random.default_rng(seed)
-    points = [sample_pinch_candidates(c, config, candidates, rng) for c in contours]
+    points = [pinch_candidates(c, config, num=candidates, rng=rng) for c in contours]
     owners = [c for c, p in zip(contours, points, strict=True) for _ in range(len(p))]
     task = CuttingTask(
         config.replace(noise_std=0.0), owners, pinch_points=np.vstack(points), device=device, seed=seed
     )
     errors = np.split(task.run(None).error_vertices, np.cumsum([len(p) for p in points])[:-1])
     return [(p[int(np.argmin(e))], p, e) for p, e in zip(points, errors, strict=True)]
-
-
-POLICIES = {"none": NoTension, "fixed": FixedTension, "analytic": AnalyticTension}
-
-
-def make_policy(name: str, pinch: tuple[float, float] | None = None):
-    """A baseline tensioner by name; ``pinch`` overrides the pinch point of fixed and analytic."""
-    if name not in POLICIES:
-        raise ValueError(f"policy: unknown {name!r}; choose from {', '.join(POLICIES)}")
-    return POLICIES[name]() if name == "none" else POLICIES[name](pinch=pinch)

@@ -7,43 +7,32 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
-from agents.baselines import AnalyticTension, FixedTension, NoTension, search_fixed_pinches
+from agents.baselines import AnalyticTension, search_fixed_pinches
+from agents.methods import BASELINES, StepCallbacks, tensioner
 from warpcut.contours import Contour
-from warpcut.scoring import improvement_pct
+from warpcut.scoring import mean_ci95, paired_improvement
 from warpcut.sim.config import SimConfig
-from warpcut.task import CuttingTask, default_segments
-
-BASELINES = ("none", "fixed", "analytic")
-
-
-def ci95(values: np.ndarray) -> float:
-    """Half-width of the 95% confidence interval of the mean (Student t); 0 for fewer than 2 values."""
-    values = np.asarray(values, dtype=np.float64)
-    values = values[np.isfinite(values)]
-    if values.size < 2:
-        return 0.0
-    return float(stats.t.ppf(0.975, values.size - 1) * values.std(ddof=1) / np.sqrt(values.size))
-
-
-def paired_improvement(e_none: np.ndarray, e_method: np.ndarray) -> np.ndarray:
-    """Per-trial :func:`~warpcut.scoring.improvement_pct`; NaN where no tension scored 0 (undefined)."""
-    e_none, e_method = np.broadcast_arrays(
-        np.asarray(e_none, dtype=np.float64), np.asarray(e_method, np.float64)
-    )
-    out = np.full(e_none.shape, np.nan)
-    defined = e_none > 0
-    out[defined] = improvement_pct(e_none[defined], e_method[defined])
-    return out
+from warpcut.task import CuttingTask, StepCallback, default_segments
 
 
 @dataclass
-class MethodSpec:
-    """How one method is run: a pinch point per contour (None: no grasp) and a batched policy."""
+class Method:
+    """One method of an evaluation: its name (:data:`agents.methods.METHODS`) and where it departs from
+    its own choices.
 
-    pinches: list[np.ndarray | None]
-    policy: Callable | None
+    Attributes:
+        name: The method.
+        pinches: A pinch point per contour replacing the method's own (e.g. the planned pinch for fixed).
+        segments: Per contour, the polylines cut in order, replacing the suite's ``segments`` for this
+            method (e.g. the order that is best at the method's own pinch point); a None entry: the suite's.
+        result: The method's outcome, run elsewhere (e.g. ``rl`` through its env): taken as is.
+    """
+
+    name: str
+    pinches: Sequence[np.ndarray | None] | None = None
+    segments: Sequence[list[np.ndarray] | None] | None = None
+    result: MethodResult | None = None
 
 
 @dataclass
@@ -52,9 +41,9 @@ class MethodResult:
     the piece came free and the share of the cut path dropped; the pinch point used per contour (None: no
     grasp)."""
 
-    errors: np.ndarray
+    error_vertices: np.ndarray
     """(num_contours, trials) error in vertices (``config.score``: path or separated)."""
-    areas: np.ndarray
+    error_mm2: np.ndarray
     """(num_contours, trials) the same error in mm^2."""
     pinches: list[np.ndarray | None]
     separated: np.ndarray | None = None
@@ -74,63 +63,46 @@ class MethodResult:
         )
 
 
-def baseline_specs(
-    contours: Sequence[Contour],
-    methods: Sequence[str],
-    config: SimConfig,
-    pinch: tuple[float, float] | None,
-    device: str | None,
-    seed: int,
-    pinches: dict[str, list[np.ndarray]] | None = None,
-) -> dict[str, MethodSpec]:
-    """Pinch points and policies of the baseline tensioners (fixed: one batched random search, unless
-    ``pinches`` gives a method's pinch point per contour, e.g. from a cut plan)."""
-    specs: dict[str, MethodSpec] = {}
-    pinches = pinches or {}
-    for method in methods:
-        if method in pinches and method != "none":
-            points = [np.asarray(p, dtype=np.float64) for p in pinches[method]]
-            if len(points) != len(contours):
-                raise ValueError(f"pinches[{method!r}]: give one point per contour ({len(contours)})")
-            policy = AnalyticTension() if method == "analytic" else FixedTension()
-            specs[method] = MethodSpec(points, policy)
-        elif method == "none":
-            specs[method] = MethodSpec([None] * len(contours), NoTension())
-        elif method == "fixed":
-            points = (
-                [np.asarray(pinch, dtype=np.float64)] * len(contours)
-                if pinch is not None
-                else [
-                    best
-                    for best, _, _ in search_fixed_pinches(list(contours), config, device=device, seed=seed)
-                ]
-            )
-            specs[method] = MethodSpec(points, FixedTension())
-        elif method == "analytic":
-            policy = AnalyticTension(pinch=pinch)
-            specs[method] = MethodSpec([policy.pinch_point(c, config) for c in contours], policy)
-        else:
-            raise ValueError(f"methods: unknown {method!r}; baselines are {', '.join(BASELINES)}")
-    return specs
+def baseline_pinches(
+    contours: Sequence[Contour], method: str, config: SimConfig, device: str | None, seed: int
+) -> list[np.ndarray | None]:
+    """A baseline's own pinch point per contour: none has no grasp; fixed searches (one batched random
+    search over all contours, noise-free); analytic pinches the centroid, or the feasible point nearest it."""
+    if method == "none":
+        return [None] * len(contours)
+    if method == "fixed":
+        return [best for best, _, _ in search_fixed_pinches(list(contours), config, device=device, seed=seed)]
+    if method == "analytic":
+        return [AnalyticTension().pinch_point(c, config) for c in contours]
+    raise ValueError(f"methods: {method!r} is not a baseline; baselines are {', '.join(BASELINES)}")
 
 
 def run_method(
     contours: Sequence[Contour],
-    spec: MethodSpec,
+    pinches: Sequence[np.ndarray | None],
+    policy: Callable | None,
     trials: int,
     config: SimConfig,
     device: str | None,
     seed: int,
-    on_step: Callable[[CuttingTask, np.ndarray | None], None] | None = None,
+    on_step: StepCallback | None = None,
     segments: Sequence[list[np.ndarray] | None] | None = None,
 ) -> MethodResult:
-    """One method on every (contour, trial): one simulator batch for everything.
+    """A tensioner on every (contour, trial): one simulator batch for everything.
 
-    ``on_step`` is passed to :meth:`CuttingTask.run`; envs are ordered contour by contour, trials within.
-    ``segments`` gives, per contour, the polylines cut in order (None: the default single segment).
+    Args:
+        contours: The contours.
+        pinches: A pinch point per contour (None: no grasp).
+        policy: The batched tensioner (``policy(task) -> (B, 3) moves``; None: hold still).
+        trials: Trials per contour; envs are ordered contour by contour, trials within.
+        config: Simulation parameters.
+        device: Warp device.
+        seed: Seed of the process noise.
+        on_step: Passed to :meth:`CuttingTask.run`.
+        segments: Per contour, the polylines cut in order (None: the default single segment).
     """
-    envs = [(c, p) for c, p in zip(contours, spec.pinches, strict=True) for _ in range(trials)]
-    pinches = np.array([np.full(2, np.nan) if p is None else p for _, p in envs], dtype=np.float64)
+    envs = [(c, p) for c, p in zip(contours, pinches, strict=True) for _ in range(trials)]
+    points = np.array([np.full(2, np.nan) if p is None else p for _, p in envs], dtype=np.float64)
     per_env_segments = None
     if segments is not None:
         per_env_segments = [
@@ -139,19 +111,14 @@ def run_method(
             for _ in range(trials)
         ]
     task = CuttingTask(
-        config,
-        [c for c, _ in envs],
-        pinch_points=pinches,
-        segments=per_env_segments,
-        device=device,
-        seed=seed,
+        config, [c for c, _ in envs], pinch_points=points, segments=per_env_segments, device=device, seed=seed
     )
-    score = task.run(spec.policy, on_step=on_step)
+    score = task.run(policy, on_step=on_step)
     shape = (len(contours), trials)
     return MethodResult(
         score.error_vertices.reshape(shape),
         score.error_mm2.reshape(shape),
-        list(spec.pinches),
+        list(pinches),
         score.separated.reshape(shape),
         score.dropped_fraction.reshape(shape),
     )
@@ -159,18 +126,14 @@ def run_method(
 
 def evaluate_suite(
     contours: Sequence[Contour],
-    methods: Sequence[str] = BASELINES,
+    methods: Sequence[str | Method] = BASELINES,
     trials: int = 10,
     config: SimConfig | None = None,
-    pinch: tuple[float, float] | None = None,
     device: str | None = None,
     seed: int = 0,
-    extra: dict[str, MethodResult] | None = None,
-    progress: Callable[[str], None] = lambda _: None,
-    on_step: Callable[[str], Callable[[CuttingTask, np.ndarray | None], None] | None] | None = None,
     segments: Sequence[list[np.ndarray] | None] | None = None,
-    pinches: dict[str, list[np.ndarray]] | None = None,
-    method_segments: dict[str, list[list[np.ndarray] | None]] | None = None,
+    progress: Callable[[str], None] = lambda _: None,
+    step_callbacks: StepCallbacks | None = None,
 ) -> dict:
     """The Table I protocol: per contour the no-tension error and each method's improvement over it.
 
@@ -179,22 +142,17 @@ def evaluate_suite(
 
     Args:
         contours: The contours to evaluate.
-        methods: Method names; baselines are built here, others must be given in ``extra``.
+        methods: Method names or :class:`Method` specs; baselines are run here, others must carry their
+            ``result``. ``none`` is always run (the reference); listed, it is also a column.
         trials: Trials per contour and method.
         config: Simulation parameters.
-        pinch: Override the pinch point of fixed and analytic for every contour.
         device: Warp device.
         seed: Seed of the pinch search and the process noise.
-        extra: Results of further methods run elsewhere (e.g. ``rl`` through its env), by name.
-        progress: Called with a short description before each method runs.
-        on_step: Maps a method's name to the step callback of its batch (e.g. ``recorder.on_step``), for
-            the methods run here (not those in ``extra``).
         segments: Per contour, the polylines the scissors cut in order (a cut plan), for every method;
             None (or a None entry): the whole contour as one segment.
-        pinches: Per method, a pinch point per contour that replaces the method's own choice (e.g. the
-            planned pinch for ``fixed``).
-        method_segments: Per method, segments per contour that replace ``segments`` for that method (e.g.
-            the cutting order that is best at the method's own pinch point).
+        progress: Called with a short description before each method runs.
+        step_callbacks: ``step_callbacks(method, first_contour)`` gives the step callback of a batch run
+            here (all contours, so ``first_contour`` is 0), e.g. a recorder's; None: none.
 
     Returns:
         ``{"score": "path"|"separated", "rows": [{"contour", "none_error_vertices", "none_error_mm2",
@@ -209,61 +167,71 @@ def evaluate_suite(
     contours = list(contours)
     if not contours:
         raise ValueError("contours: give at least one contour")
-    extra = extra or {}
-    order = ["none"] + [m for m in methods if m != "none"]
-    method_segments = method_segments or {}
-    for name, value in [("segments", segments)] + [
-        (f"method_segments[{m!r}]", v) for m, v in method_segments.items()
-    ]:
+    specs = {m.name: m for m in (m if isinstance(m, Method) else Method(m) for m in methods)}
+    shown = list(specs)
+    specs.setdefault("none", Method("none"))
+    order = ["none"] + [m for m in specs if m != "none"]
+    for name, value in [("segments", segments)] + [(f"{m}.segments", s.segments) for m, s in specs.items()]:
         if value is not None and len(value) != len(contours):
             raise ValueError(f"{name}: give one list of polylines (or None) per contour ({len(contours)})")
-    specs = baseline_specs(
-        contours, [m for m in order if m not in extra], config, pinch, device, seed, pinches
-    )
-    results = dict(extra)
+    results = {}
     for method in order:
-        if method not in results:
-            progress(f"{method}: {len(contours)} contour(s) x {trials} trial(s)")
-            callback = on_step(method) if on_step is not None else None
-            cut = method_segments.get(method, segments)
-            results[method] = run_method(
-                contours, specs[method], trials, config, device, seed, callback, segments=cut
-            )
-    errors = {m: r.errors for m, r in results.items()}
-    areas = {m: r.areas for m, r in results.items()}
-    rows = []
-    for k, contour in enumerate(contours):
-        row = {
-            "contour": contour.name,
-            "none_error_vertices": float(errors["none"][k].mean()),
-            "none_error_mm2": float(areas["none"][k].mean()),
-        }
-        for method in order:
-            if method == "none" and "none" not in methods:
-                continue
-            pinch_k = results[method].pinches[k]
-            improvement = paired_improvement(errors["none"][k], errors[method][k])
-            row[f"{method}_error_vertices"] = float(errors[method][k].mean())
-            row[f"{method}_error_mm2"] = float(areas[method][k].mean())
-            row[f"{method}_improvement_pct"] = (
-                float(np.nanmean(improvement)) if np.isfinite(improvement).any() else float("nan")
-            )
-            row[f"{method}_ci95"] = ci95(improvement)
-            row[f"{method}_pinch"] = None if pinch_k is None else [float(v) for v in pinch_k]
-            row[f"{method}_trials_error_vertices"] = [float(e) for e in errors[method][k]]
-            row[f"{method}_separated_fraction"] = _mean_or_none(results[method].separated, k)
-            row[f"{method}_dropped_fraction"] = _mean_or_none(results[method].dropped, k)
-        rows.append(row)
+        spec = specs[method]
+        if spec.result is not None:
+            results[method] = spec.result
+            continue
+        if method not in BASELINES:
+            raise ValueError(f"methods: {method!r} is not a baseline; give its result (Method.result)")
+        pinches = spec.pinches
+        if pinches is None:
+            pinches = baseline_pinches(contours, method, config, device, seed)
+        elif len(pinches) != len(contours):
+            raise ValueError(f"{method}.pinches: give one point per contour ({len(contours)})")
+        pinches = [None if p is None else np.asarray(p, dtype=np.float64) for p in pinches]
+        cut = (
+            segments
+            if spec.segments is None
+            else [
+                s if s is not None else (None if segments is None else segments[k])
+                for k, s in enumerate(spec.segments)
+            ]
+        )
+        progress(f"{method}: {len(contours)} contour(s) x {trials} trial(s)")
+        callback = step_callbacks(method, 0) if step_callbacks is not None else None
+        results[method] = run_method(
+            contours, pinches, tensioner(method), trials, config, device, seed, callback, segments=cut
+        )
+    rows = [
+        _row(contour.name, k, results, [m for m in order if m in shown]) for k, contour in enumerate(contours)
+    ]
     mean = {}
     for method in order:
-        if method == "none" and "none" not in methods:
-            continue
-        values = np.array([r[f"{method}_improvement_pct"] for r in rows])
-        mean[f"{method}_improvement_pct"] = (
-            float(np.nanmean(values)) if np.isfinite(values).any() else float("nan")
-        )
-        mean[f"{method}_ci95"] = ci95(values)
+        if method in shown:
+            values = [r[f"{method}_improvement_pct"] for r in rows]
+            mean[f"{method}_improvement_pct"], mean[f"{method}_ci95"] = mean_ci95(values)
     return {"score": config.score, "rows": rows, "mean": mean, "trials": trials}
+
+
+def _row(name: str, k: int, results: dict[str, MethodResult], shown: list[str]) -> dict:
+    """Contour ``k``'s row of :func:`evaluate_suite`'s table."""
+    none = results["none"]
+    row = {
+        "contour": name,
+        "none_error_vertices": float(none.error_vertices[k].mean()),
+        "none_error_mm2": float(none.error_mm2[k].mean()),
+    }
+    for method in shown:
+        result = results[method]
+        pinch = result.pinches[k]
+        improvement = paired_improvement(none.error_vertices[k], result.error_vertices[k])
+        row[f"{method}_error_vertices"] = float(result.error_vertices[k].mean())
+        row[f"{method}_error_mm2"] = float(result.error_mm2[k].mean())
+        row[f"{method}_improvement_pct"], row[f"{method}_ci95"] = mean_ci95(improvement)
+        row[f"{method}_pinch"] = None if pinch is None else [float(v) for v in pinch]
+        row[f"{method}_trials_error_vertices"] = [float(e) for e in result.error_vertices[k]]
+        row[f"{method}_separated_fraction"] = _mean_or_none(result.separated, k)
+        row[f"{method}_dropped_fraction"] = _mean_or_none(result.dropped, k)
+    return row
 
 
 def _mean_or_none(values: np.ndarray | None, contour: int) -> float | None:
@@ -282,11 +250,12 @@ def compare_policies(
     pinch: tuple[float, float] | None = None,
     device: str | None = None,
     seed: int = 0,
-    on_step: Callable[[str], Callable[[CuttingTask, np.ndarray | None], None] | None] | None = None,
+    step_callbacks: StepCallbacks | None = None,
 ) -> dict:
     """One contour, the baseline tensioners: the ``warpcut simulate`` report.
 
-    ``on_step`` maps a method's name to the step callback of its batch, as in :func:`evaluate_suite`.
+    ``pinch`` replaces the pinch point of fixed and analytic; ``step_callbacks`` as in
+    :func:`evaluate_suite`.
 
     Returns:
         ``{"contour": name, "score": "path"|"separated", "results": {method: {"error_vertices",
@@ -295,7 +264,9 @@ def compare_policies(
         improvement over no tension (0 for ``none`` itself); ``separated_fraction`` the share of trials
         whose piece came free, ``dropped_fraction`` the mean share of the cut path dropped.
     """
-    report = evaluate_suite([contour], methods, trials, config, pinch, device, seed, on_step=on_step)
+    given = None if pinch is None else [np.asarray(pinch, dtype=np.float64)]
+    specs = [Method(m, pinches=given if m in ("fixed", "analytic") else None) for m in methods]
+    report = evaluate_suite([contour], specs, trials, config, device, seed, step_callbacks=step_callbacks)
     row = report["rows"][0]
     results = {}
     for method in methods:

@@ -1,205 +1,105 @@
 """Learned tensioners: train a PPO policy for one contour, and run a trained one in evaluations.
 
 A run directory (``warpcut train``) holds rsl-rl's ``config.json``, checkpoints and TensorBoard events
-(:func:`agents.train.train`), plus ``scenario.json`` (the env options the policy was trained on, so it
-can be rebuilt without guessing) and ``evaluation.json`` (the trained policy against no tension).
+(:func:`agents.train.train`), plus ``options.json`` (the :class:`~envs.options.PatternCutOptions` the
+policy was trained on, so its env can be rebuilt without guessing) and ``evaluation.json`` (the trained
+policy against no tension). Runs written before ``options.json`` existed hold ``scenario.json``, which
+:func:`load_options` still reads.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
-from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from agents.config import EVALUATION_TRIALS, VALIDATION_TRIALS, TrainConfig
+from agents.evaluation import run_method
 from agents.export import load_policy
-from agents.train import TrainConfig, train
-from envs.pattern_cut import PatternCutOptions
+from agents.methods import StepCallbacks
+from agents.train import train
+from envs.options import PatternCutOptions
 from envs.rsl import PatternCutRslEnv
 from envs.vector import PatternCutVecEnv
-from warpcut.contours import Contour, load_contour
 from warpcut.io import write_json
-from warpcut.planning import nearest_feasible
+from warpcut.scoring import mean_ci95, paired_improvement
 from warpcut.sim.config import SimConfig
-from warpcut.task import CuttingTask, default_segments
-
-
-@dataclass
-class Scenario:
-    """What a policy is trained and evaluated on (everything but the batch size and seed).
-
-    Attributes:
-        contour: Built-in name or path of the contour file.
-        pinch: Pinch point (mm, material); default: the centroid or the feasible point nearest to it.
-        sim: SimConfig fields that differ from the defaults (e.g. ``{"noise_std": 0.05}``).
-        num_fiducials: Fiducial points observed (paper: 12).
-        contour_features: Add the tip and the tracking error to the observation.
-        segments: Material polylines cut in this order (a plan's ``ordered_segments()``); default: the
-            whole contour as one segment.
-        dense_reward: Add the env's per-step cut-deviation shaping (the path score's increment) to the
-            sparse final reward.
-        action_type: ``discrete`` (paper: stay, +-x, +-y at 1 mm) or ``continuous`` (x-y moves up to
-            1 mm per axis; a policy that outputs zero holds the grasp still, like fixed tensioning).
-        allow_z: Let the grasp move along z too (``+-z``; lifting the sheet into the scissors' reach).
-        observe_pinch: Add the pinch point to the observation (a policy shared across pinch points).
-        candidates: Several pinch candidates for one shared policy, each ``{"pinch": [x, y], "segments":
-            polylines or None}`` (a plan's candidate with its best order): env ``i`` pinches candidate
-            ``i % K`` and cuts its segments; the pinch point is observed. ``pinch`` and ``segments`` must
-            then be None; :meth:`at_candidate` is the single-pinch scenario of one candidate.
-    """
-
-    contour: str
-    pinch: list[float] | None = None
-    sim: dict = field(default_factory=dict)
-    num_fiducials: int = 12
-    contour_features: bool = False
-    action_type: str = "discrete"
-    dense_reward: bool = False
-    segments: list[list[list[float]]] | None = None
-    allow_z: bool = False
-    observe_pinch: bool = False
-    candidates: list[dict] | None = None
-
-    def __post_init__(self):
-        if self.candidates is None:
-            return
-        if not self.candidates or any(not isinstance(c, dict) or "pinch" not in c for c in self.candidates):
-            raise ValueError('candidates: give a non-empty list of {"pinch": [x, y], "segments": ...}')
-        if self.pinch is not None or self.segments is not None:
-            raise ValueError("candidates: leave pinch and segments None; each candidate carries its own")
-        self.observe_pinch = True
-
-    def load_contour(self) -> Contour:
-        return load_contour(self.contour)
-
-    def sim_config(self) -> SimConfig:
-        return SimConfig(**self.sim).validated()
-
-    def pinch_point(self) -> np.ndarray:
-        if self.candidates is not None:
-            raise ValueError("pinch_point: a scenario with candidates has several; use at_candidate(k)")
-        if self.pinch is not None:
-            return np.asarray(self.pinch, dtype=np.float64)
-        contour = self.load_contour()
-        return nearest_feasible(contour.centroid, contour, self.sim_config())
-
-    def at_candidate(self, k: int) -> Scenario:
-        """The single-pinch scenario of candidate ``k`` (its pinch observed, as the shared policy expects)."""
-        if self.candidates is None:
-            raise ValueError("at_candidate: this scenario has no candidates")
-        if not 0 <= k < len(self.candidates):
-            raise ValueError(f"candidate: {k} is not in 0..{len(self.candidates) - 1}")
-        c = self.candidates[k]
-        fields = {**asdict(self), "candidates": None, "observe_pinch": True}
-        return Scenario(**{**fields, "pinch": [float(v) for v in c["pinch"]], "segments": c.get("segments")})
-
-    def vec_env(self, num_envs: int, device: str | None = None) -> PatternCutVecEnv:
-        if self.candidates is None:
-            pinch, segments = self.pinch_point(), self.segments
-        else:  # env i: candidate i % K
-            picks = [self.candidates[i % len(self.candidates)] for i in range(num_envs)]
-            pinch = np.array([c["pinch"] for c in picks], dtype=np.float64)
-            whole = [p.tolist() for p in default_segments(self.load_contour())]
-            segments = [c.get("segments") or whole for c in picks]
-        options = PatternCutOptions(
-            contour=self.load_contour(),
-            pinch_point=pinch,
-            sim_config=self.sim_config(),
-            device=device,
-            num_fiducials=self.num_fiducials,
-            contour_features=self.contour_features,
-            action_type=self.action_type,
-            allow_z=self.allow_z,
-            dense_reward=self.dense_reward,
-            segments=segments,
-            observe_pinch=self.observe_pinch,
-        )
-        return PatternCutVecEnv(num_envs, options)
-
-
-RECIPE = {"dense_reward": True, "contour_features": True, "allow_z": True}
-"""warpcut's default learning recipe (Scenario fields; ``warpcut train``, ``evaluate`` and ``run`` use it):
-dense cut-deviation shaping, contour-aware observations and x-y-z moves. Together with
-``TrainConfig.stay_prior`` (start at "hold still") and validation-based model selection; see
-docs/learning.md for the measurements behind each choice. The paper's setting is sparse reward,
-fiducials only, x-y moves and a uniform initial policy."""
-
-STAY_PRIOR = 0.9
-"""``TrainConfig.stay_prior`` of the recipe: the initial policy holds still with probability 0.9."""
-
-
-def recipe_config(**fields) -> TrainConfig:
-    """A :class:`TrainConfig` for the recipe: ``fields`` with the recipe's ``stay_prior``."""
-    return TrainConfig(**{"stay_prior": STAY_PRIOR, **fields})
-
+from warpcut.task import StepCallback
 
 VALIDATION_SEED_OFFSET = 7919
 """Validation episodes use seed ``cfg.seed + VALIDATION_SEED_OFFSET``: neither training's ``cfg.seed`` nor the
 evaluations' small seeds, so model selection never sees an evaluation episode."""
 
 
+OPTIONS_FILE = "options.json"
+"""The run directory's :class:`~envs.options.PatternCutOptions` (``to_dict()``), what its policy acts in."""
+
+LEGACY_SCENARIO_FILE = "scenario.json"
+"""What runs written before :data:`OPTIONS_FILE` hold instead (read by :func:`load_options`)."""
+
+
 def train_contour(
-    scenario: Scenario,
+    options: PatternCutOptions,
     out_dir: str | Path,
     cfg: TrainConfig,
     resume: str | Path | None = None,
-    eval_trials: int = 10,
+    eval_trials: int = EVALUATION_TRIALS,
     progress: bool = True,
-    device: str | None = None,
-    validation_trials: int = 16,
-    on_step: Callable[[str], Callable[[CuttingTask, np.ndarray | None], None] | None] | None = None,
+    validation_trials: int = VALIDATION_TRIALS,
+    step_callbacks: StepCallbacks | None = None,
 ) -> dict:
-    """Train a PPO tensioner for ``scenario`` into ``out_dir``, then evaluate it.
+    """Train a PPO tensioner for ``options`` into ``out_dir``, then evaluate it.
 
     With ``validation_trials > 0`` the deterministic policy is scored on that many held-out episodes
     (seed ``cfg.seed + VALIDATION_SEED_OFFSET``) before training and every ``cfg.validation_interval``
     iterations, and the best one is the run's policy (``best.pt``; see :func:`agents.train.train`).
 
     Args:
-        scenario: Contour, pinch point and simulation settings.
+        options: Contour, pinch point (None: the default, resolved and saved), segments, simulation
+            settings, observations and actions; ``options.device`` is the simulator's Warp device (not
+            saved: a run evaluates on any device).
         out_dir: Run directory.
-        cfg: PPO settings (``cfg.device`` is torch's device).
+        cfg: PPO settings (``cfg.torch_device`` is torch's device).
         resume: Run directory or checkpoint to continue from.
         eval_trials: Trials of the final evaluation against no tension.
         progress: Show the progress bar.
-        device: Warp device of the simulator.
         validation_trials: Held-out episodes per validation; 0 disables validation (the run's policy is
             then the last one).
-        on_step: Step-callback factory for the final evaluation (see :func:`evaluate_run`), e.g. a
-            recorder's ``on_step``.
+        step_callbacks: Step callbacks of the final evaluation's batches (see :func:`evaluate_run`).
 
     Returns:
         ``{"summary": training summary, "evaluation": evaluation of the run's policy}``.
     """
-    if cfg.discrete != (scenario.action_type == "discrete"):
+    if cfg.discrete != (options.action_type == "discrete"):
         raise ValueError(
-            f"cfg.discrete={cfg.discrete} does not match the scenario's {scenario.action_type} actions"
+            f"cfg.discrete={cfg.discrete} does not match the options' {options.action_type} actions"
         )
     out_dir = Path(out_dir)
-    shared = scenario.candidates is not None
+    shared = options.candidates is not None
     if shared and validation_trials < 1:
-        raise ValueError(
-            "validation_trials: a scenario with candidates needs validation to choose one (>= 1)"
-        )
+        raise ValueError("validation_trials: options with candidates need validation to choose one (>= 1)")
     out_dir.mkdir(parents=True, exist_ok=True)
     if not shared:
-        scenario = Scenario(**{**asdict(scenario), "pinch": [float(v) for v in scenario.pinch_point()]})
-    write_json(out_dir / "scenario.json", asdict(scenario))
-    env = PatternCutRslEnv(scenario.vec_env(cfg.num_envs, device=device), device=cfg.device, seed=cfg.seed)
+        pinch = options.per_env(1)[1][0]
+        options = dataclasses.replace(options, pinch_point=[float(v) for v in pinch])
+    write_json(out_dir / OPTIONS_FILE, dataclasses.replace(options, device=None).to_dict())
+    env = PatternCutRslEnv(PatternCutVecEnv(cfg.num_envs, options), device=cfg.torch_device, seed=cfg.seed)
     validate = None
     if validation_trials > 0:
-        candidates = len(scenario.candidates) if shared else 1
+        candidates = len(options.candidates) if shared else 1
         per_candidate = max(CANDIDATE_VALIDATION_MIN, -(-validation_trials // candidates)) if shared else None
-        validation_env = scenario.vec_env(per_candidate * candidates if shared else validation_trials, device)
+        validation_env = PatternCutVecEnv(
+            per_candidate * candidates if shared else validation_trials, options
+        )
 
         def candidate_errors(actor: torch.nn.Module) -> np.ndarray:
             """Mean validation error (vertices) per candidate (env i pinches candidate i % K)."""
             seed = cfg.seed + VALIDATION_SEED_OFFSET
-            errors = policy_errors(actor, validation_env, scenario, seed)["error_vertices"]
+            errors = policy_errors(actor, validation_env, seed)["error_vertices"]
             return errors.reshape(-1, candidates).mean(axis=0)
 
         def validate(actor: torch.nn.Module) -> float:
@@ -211,13 +111,15 @@ def train_contour(
         chosen = int(np.argmin(errors))  # the first (the better fixed rank, as ordered) among ties
         selection = {
             "chosen": chosen,
-            "pinch": [float(v) for v in scenario.candidates[chosen]["pinch"]],
+            "pinch": [float(v) for v in options.candidates[chosen]["pinch"]],
             "validation_error_vertices": [float(e) for e in errors],
             "validation_episodes_per_candidate": per_candidate,
         }
         write_json(out_dir / CANDIDATES_FILE, selection)
         summary["candidates"] = selection
-    evaluation = evaluate_run(out_dir, trials=eval_trials, seed=cfg.seed + 1, device=device, on_step=on_step)
+    evaluation = evaluate_run(
+        out_dir, trials=eval_trials, seed=cfg.seed + 1, device=options.device, step_callbacks=step_callbacks
+    )
     write_json(out_dir / "evaluation.json", evaluation)
     return {"summary": summary, "evaluation": evaluation}
 
@@ -241,13 +143,44 @@ def chosen_candidate(run_dir: str | Path) -> int:
     return int(json.loads(path.read_text())["chosen"])
 
 
-def load_scenario(run_dir: str | Path) -> Scenario:
-    path = Path(run_dir) / "scenario.json"
-    if not path.is_file():
+def is_run(run_dir: str | Path) -> bool:
+    """Whether ``run_dir`` holds a trained run's options (so :func:`load_options` can read it)."""
+    run_dir = Path(run_dir)
+    return (run_dir / OPTIONS_FILE).is_file() or (run_dir / LEGACY_SCENARIO_FILE).is_file()
+
+
+def load_options(run_dir: str | Path, device: str | None = None) -> PatternCutOptions:
+    """The options a run was trained on, for the Warp ``device``; a shared policy's run gives those of the
+    candidate it chose (as its evaluation uses)."""
+    run_dir = Path(run_dir)
+    if (run_dir / OPTIONS_FILE).is_file():
+        options = PatternCutOptions.from_dict(json.loads((run_dir / OPTIONS_FILE).read_text()))
+    elif (run_dir / LEGACY_SCENARIO_FILE).is_file():
+        options = _from_scenario(json.loads((run_dir / LEGACY_SCENARIO_FILE).read_text()))
+    else:
         raise FileNotFoundError(
-            f"{run_dir}: no scenario.json; give a run directory written by 'warpcut train'"
+            f"{run_dir}: no {OPTIONS_FILE}; give a run directory written by 'warpcut train'"
         )
-    return Scenario(**json.loads(path.read_text()))
+    return dataclasses.replace(options, device=device)
+
+
+def _from_scenario(scenario: dict) -> PatternCutOptions:
+    """The options of a run's legacy ``scenario.json`` (its fields, renamed)."""
+    fields = dict(scenario)
+    renamed = {
+        "contour": fields.pop("contour"),
+        "pinch_point": fields.pop("pinch", None),
+        "sim_config": SimConfig(**fields.pop("sim", {})),
+    }
+    return PatternCutOptions.from_dict({**fields, **renamed})
+
+
+def policy_options(run_dir: str | Path, device: str | None = None) -> PatternCutOptions:
+    """The options a run's policy is evaluated on: a shared policy's at the candidate its run chose."""
+    options = load_options(run_dir, device)
+    if options.candidates is not None:
+        options = options.at_candidate(chosen_candidate(run_dir))
+    return options
 
 
 def rollout_errors(
@@ -255,8 +188,7 @@ def rollout_errors(
     trials: int,
     seed: int = 0,
     device: str | None = None,
-    scenario: Scenario | None = None,
-    on_step: Callable[[CuttingTask, np.ndarray | None], None] | None = None,
+    on_step: StepCallback | None = None,
     paired_noise: tuple[int, int] | None = None,
 ) -> dict:
     """Run the trained policy (deterministic: argmax action) for ``trials`` seeded episodes at once.
@@ -266,20 +198,15 @@ def rollout_errors(
     and after every step, as in :meth:`warpcut.task.CuttingTask.run` (e.g. a recorder's callback).
     ``paired_noise``: see :func:`policy_errors`.
     """
-    scenario = scenario or load_scenario(run_dir)
-    if scenario.candidates is not None:  # a shared policy: at the candidate its run chose
-        scenario = scenario.at_candidate(chosen_candidate(run_dir))
-    actor = load_policy(run_dir)
-    env = scenario.vec_env(trials, device=device)
-    return policy_errors(actor, env, scenario, seed=seed, on_step=on_step, paired_noise=paired_noise)
+    env = PatternCutVecEnv(trials, policy_options(run_dir, device))
+    return policy_errors(load_policy(run_dir), env, seed=seed, on_step=on_step, paired_noise=paired_noise)
 
 
 def policy_errors(
     actor: torch.nn.Module,
     env: PatternCutVecEnv,
-    scenario: Scenario,
     seed: int,
-    on_step: Callable[[CuttingTask, np.ndarray | None], None] | None = None,
+    on_step: StepCallback | None = None,
     paired_noise: tuple[int, int] | None = None,
 ) -> dict:
     """One deterministic episode of ``actor`` in every env of ``env`` (reset with ``seed``); see
@@ -300,11 +227,12 @@ def policy_errors(
     if on_step is not None:
         on_step(env.task, None)
     final = None
+    discrete = env.options.action_type == "discrete"
     with torch.inference_mode():
         for _ in range(env.task.num_steps):
             obs_td = {"policy": torch.as_tensor(obs)}
             action = actor(_tensordict(obs_td, trials)).cpu().numpy().reshape(trials, -1)
-            if scenario.action_type == "discrete":
+            if discrete:
                 action = action[:, 0].astype(np.int64)
             obs, _, terminated, truncated, info = env.scene.step(action)
             if on_step is not None:
@@ -313,8 +241,9 @@ def policy_errors(
                 final = info
                 break
     if final is None or "error_vertices" not in final:
-        raise RuntimeError(f"{scenario.contour}: the episode did not end within {env.task.num_steps} steps")
-    pinch = None if scenario.candidates is not None else scenario.pinch_point()
+        name = env.task.contours[0].name
+        raise RuntimeError(f"{name}: the episode did not end within {env.task.num_steps} steps")
+    pinch = None if env.options.candidates is not None else env.task.pinch_points[0].copy()
     keys = ("error_vertices", "error_mm2", "separated", "dropped_fraction")
     return {**{k: np.asarray(final[k]) for k in keys}, "pinch": pinch}
 
@@ -327,55 +256,36 @@ def _tensordict(groups: dict[str, torch.Tensor], batch: int):
 
 def evaluate_run(
     run_dir: str | Path,
-    trials: int = 10,
+    trials: int = EVALUATION_TRIALS,
     seed: int = 1,
     device: str | None = None,
-    on_step: Callable[[str], Callable[[CuttingTask, np.ndarray | None], None] | None] | None = None,
+    step_callbacks: StepCallbacks | None = None,
 ) -> dict:
-    """The trained policy against no tension on its own scenario (paired by trial).
+    """The trained policy against no tension on its own options (paired by trial).
 
-    ``on_step`` maps a method's name (``"rl"``, ``"none"``) to the step callback of its batch, as in
-    :func:`agents.evaluation.evaluate_suite` (e.g. ``recorder.on_step``).
+    ``step_callbacks(method, 0)`` gives the step callback of the ``"rl"`` and ``"none"`` batches, as in
+    :func:`agents.evaluation.evaluate_suite` (e.g. a recorder's).
     """
-    from agents.evaluation import MethodSpec, ci95, paired_improvement, run_method
-
-    scenario = load_scenario(run_dir)
-    if scenario.candidates is not None:
-        scenario = scenario.at_candidate(chosen_candidate(run_dir))
-    contour = scenario.load_contour()
+    options = policy_options(run_dir, device)
+    contour = options.contours(1)[0]
     start = time.perf_counter()
-    hook = on_step or (lambda method: None)
+    callbacks = step_callbacks or (lambda method, first: None)
     rl = rollout_errors(
-        run_dir,
-        trials,
-        seed=seed,
-        device=device,
-        scenario=scenario,
-        on_step=hook("rl"),
-        paired_noise=(seed, 0),
+        run_dir, trials, seed=seed, device=device, on_step=callbacks("rl", 0), paired_noise=(seed, 0)
     )
-    segments = None if scenario.segments is None else [[np.asarray(p) for p in scenario.segments]]
+    segments = None if options.segments is None else [[np.asarray(p) for p in options.segments]]
     none = run_method(
-        [contour],
-        MethodSpec([None], None),
-        trials,
-        scenario.sim_config(),
-        device,
-        seed,
-        on_step=hook("none"),
-        segments=segments,
-    ).errors
-    improvement = paired_improvement(none[0], rl["error_vertices"])
+        [contour], [None], None, trials, options.config(), device, seed, callbacks("none", 0), segments
+    ).error_vertices
+    improvement_pct, ci95 = mean_ci95(paired_improvement(none[0], rl["error_vertices"]))
     return {
         "contour": contour.name,
         "trials": trials,
         "none_error_vertices": float(none[0].mean()),
         "rl_error_vertices": float(rl["error_vertices"].mean()),
         "rl_error_mm2": float(rl["error_mm2"].mean()),
-        "rl_improvement_pct": float(np.nanmean(improvement))
-        if np.isfinite(improvement).any()
-        else float("nan"),
-        "rl_ci95": ci95(improvement),
+        "rl_improvement_pct": improvement_pct,
+        "rl_ci95": ci95,
         "pinch": [float(v) for v in rl["pinch"]],
         "seconds": time.perf_counter() - start,
     }
@@ -386,7 +296,7 @@ def benchmark_training(device: str | None = None, num_envs: int = 64, iterations
     import tempfile
 
     cfg = TrainConfig(num_envs=num_envs, iterations=iterations, num_steps_per_env=32, save_interval=10**6)
-    scenario = Scenario(contour="fls-circle")
+    options = PatternCutOptions(contour="fls-circle", device=device)
     with tempfile.TemporaryDirectory() as out:
-        env = PatternCutRslEnv(scenario.vec_env(num_envs, device=device), device=cfg.device, seed=cfg.seed)
+        env = PatternCutRslEnv(PatternCutVecEnv(num_envs, options), device=cfg.torch_device, seed=cfg.seed)
         return float(train(env, cfg, out, progress=False)["steps_per_s"])

@@ -39,7 +39,7 @@ import random
 import statistics
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -50,133 +50,14 @@ from rsl_rl.env import VecEnv
 from rsl_rl.runners import OnPolicyRunner
 from rsl_rl.utils.logger import Logger
 
+from agents.config import TrainConfig
 from envs.rsl import FINAL_ERROR_KEY
 from warpcut.io import write_atomic, write_json
-
-"""``extras["log"]`` key of the finished episodes' final error; also its TensorBoard tag."""
 
 LATEST_CHECKPOINT = "latest.pt"
 """File name of the copy of the newest checkpoint in a run directory."""
 BEST_CHECKPOINT = "best.pt"
 """File name of the checkpoint with the lowest validation error in a run directory."""
-
-
-@dataclass
-class TrainConfig:
-    """PPO training settings; :meth:`to_rsl_rl` turns them into rsl-rl's nested config dict."""
-
-    num_envs: int = 64
-    """Parallel envs; must equal the env's ``num_envs`` (the caller builds the env with it)."""
-    iterations: int = 300
-    """Total learning iterations of the run, counting those done before a resume."""
-    seed: int = 0
-    """Seed of Python, NumPy, torch and the env (``env.seed``)."""
-    device: str = "cpu"
-    """Torch device of the policy and PPO update."""
-    discrete: bool = True
-    """Categorical actions (the paper's 1 mm moves) if True, else a Gaussian over continuous actions."""
-    actor_hidden_dims: list[int] = field(default_factory=lambda: [32, 32])
-    """Hidden layer widths of the policy MLP (paper: 2 x 32)."""
-    critic_hidden_dims: list[int] = field(default_factory=lambda: [64, 64])
-    """Hidden layer widths of the value MLP."""
-    activation: str = "tanh"
-    """Hidden activation of both MLPs (an rsl-rl name: elu, relu, tanh, ...)."""
-    obs_normalization: bool = True
-    """Normalize observations by running mean and std (part of the exported policy)."""
-    obs_groups: dict[str, list[str]] = field(
-        default_factory=lambda: {"actor": ["policy"], "critic": ["policy"]}
-    )
-    """Observation groups of the env that feed the actor and the critic."""
-    init_noise_std: float = 1.0
-    """Initial action standard deviation (continuous only), in the env's action units."""
-    num_steps_per_env: int = 32
-    """Env steps per env per iteration; an iteration collects ``num_envs * num_steps_per_env`` steps."""
-    num_learning_epochs: int = 5
-    """Passes over each rollout."""
-    num_mini_batches: int = 4
-    """Mini-batches per pass."""
-    learning_rate: float = 1e-3
-    """Adam step size (initial value when ``schedule`` is "adaptive")."""
-    schedule: str = "adaptive"
-    """"adaptive": scale the learning rate to keep the KL per update near ``desired_kl``; "fixed": don't."""
-    desired_kl: float = 0.01
-    """Target KL divergence between successive policies for the adaptive schedule."""
-    entropy_coef: float = 0.01
-    """Entropy bonus weight; keeps exploring while the sparse final reward is rarely informative."""
-    gamma: float = 0.99
-    """Discount per env step."""
-    lam: float = 0.95
-    """GAE lambda."""
-    clip_param: float = 0.2
-    """PPO ratio clip (also the value clip)."""
-    value_loss_coef: float = 1.0
-    """Value loss weight."""
-    max_grad_norm: float = 1.0
-    """Gradient norm clip."""
-    save_interval: int = 50
-    """Save a checkpoint every this many iterations (and at the end, and on Ctrl-C)."""
-    stay_prior: float = 0.0
-    """Discrete only: initial probability of action 0, the others sharing the rest; the initial
-    deterministic policy then takes action 0. For warpcut's env action 0 is "stay" (hold the grasp still,
-    what fixed tensioning does), so PPO learns moves on top of holding still (``agents.rl.STAY_PRIOR``).
-    0: start uniform over the actions (the paper's setting)."""
-    validation_interval: int = 10
-    """With a ``validate`` callback (see :func:`train`): score the deterministic policy every this many
-    iterations and keep the best in ``best.pt``."""
-
-    def to_rsl_rl(self, num_action_choices: int | None = None) -> dict:
-        """Return rsl-rl 5.5.1's ``OnPolicyRunner`` config.
-
-        Args:
-            num_action_choices: Options per discrete action (the env's ``num_action_choices``); required
-                when ``discrete``.
-        """
-        if self.discrete:
-            if num_action_choices is None:
-                raise ValueError("discrete training needs the env's num_action_choices")
-            distribution = {
-                "class_name": "agents.distributions:Categorical",
-                "num_choices": num_action_choices,
-            }
-            if self.stay_prior > 0:
-                distribution.update(init_choice=0, init_choice_prob=self.stay_prior)
-        else:
-            distribution = {
-                "class_name": "rsl_rl.modules:GaussianDistribution",
-                "init_std": self.init_noise_std,
-            }
-        model = {"class_name": "rsl_rl.models:MLPModel", "activation": self.activation}
-        return {
-            "num_steps_per_env": self.num_steps_per_env,
-            "save_interval": self.save_interval,
-            "obs_groups": {name: list(groups) for name, groups in self.obs_groups.items()},
-            "logger": "tensorboard",
-            "actor": {
-                **model,
-                "hidden_dims": list(self.actor_hidden_dims),
-                "obs_normalization": self.obs_normalization,
-                "distribution_cfg": distribution,
-            },
-            "critic": {
-                **model,
-                "hidden_dims": list(self.critic_hidden_dims),
-                "obs_normalization": self.obs_normalization,
-            },
-            "algorithm": {
-                "class_name": "rsl_rl.algorithms:PPO",
-                "num_learning_epochs": self.num_learning_epochs,
-                "num_mini_batches": self.num_mini_batches,
-                "learning_rate": self.learning_rate,
-                "schedule": self.schedule,
-                "desired_kl": self.desired_kl,
-                "entropy_coef": self.entropy_coef,
-                "gamma": self.gamma,
-                "lam": self.lam,
-                "clip_param": self.clip_param,
-                "value_loss_coef": self.value_loss_coef,
-                "max_grad_norm": self.max_grad_norm,
-            },
-        }
 
 
 def train(
@@ -218,7 +99,7 @@ def train(
     if hasattr(env, "seed"):
         env.seed(cfg.seed)
     num_action_choices = getattr(env, "num_action_choices", None) if cfg.discrete else None
-    runner = Runner(env, cfg.to_rsl_rl(num_action_choices), out_dir, cfg.device)
+    runner = Runner(env, cfg.to_rsl_rl(num_action_choices), out_dir, cfg.torch_device)
     if resume is not None:
         runner.load_checkpoint(latest_checkpoint(resume))
     obs = env.get_observations()
@@ -433,6 +314,14 @@ def policy_checkpoint(path: str | Path) -> Path:
     if path.is_dir() and (path / BEST_CHECKPOINT).is_file():
         return path / BEST_CHECKPOINT
     return latest_checkpoint(path)
+
+
+def torch_device_for(sim_device: str | None) -> str:
+    """The torch device for a policy trained on a simulator on the Warp device ``sim_device``: CUDA when
+    the simulator runs on CUDA and torch has CUDA, else the CPU (observations cross once per step)."""
+    if sim_device is not None and sim_device.startswith("cuda") and torch.cuda.is_available():
+        return "cuda"
+    return "cpu"
 
 
 def seed_everything(seed: int) -> None:

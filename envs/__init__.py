@@ -14,7 +14,9 @@ Keyword arguments are the fields of :class:`PatternCutOptions`. The rsl-rl adapt
 
 import gymnasium
 
-from envs.pattern_cut import PatternCut, PatternCutEnv, PatternCutOptions
+from envs.core import PatternCut
+from envs.options import PatternCutOptions
+from envs.pattern_cut import PatternCutEnv
 from envs.vector import PatternCutVecEnv
 
 ENV_ID = "warpcut/PatternCut-v0"

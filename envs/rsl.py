@@ -25,7 +25,7 @@ import torch
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
-from envs.pattern_cut import PatternCutOptions
+from envs.options import PatternCutOptions
 from envs.vector import PatternCutVecEnv
 
 FINAL_ERROR_KEY = "Episode/final_error"
@@ -46,7 +46,7 @@ class PatternCutRslEnv(VecEnv):
         num_action_choices: Number of discrete actions (5, or 7 with ``allow_z``); ``None`` for continuous.
         max_episode_length: Steps per episode (the same for every env).
         device: Torch device of observations, rewards, dones and extras.
-        cfg: The env's :class:`~envs.pattern_cut.PatternCutOptions` (``to_dict()`` for loggers).
+        cfg: The env's :class:`~envs.options.PatternCutOptions` (``to_dict()`` for loggers).
     """
 
     def __init__(self, env: PatternCutVecEnv, device: str | torch.device = "cpu", seed: int | None = 0):

@@ -6,7 +6,7 @@ episodes' first observations. Following the Gymnasium spec for same-step autores
 (https://farama.org/Vector-Autoreset-Mode), the ending step's observations and score are in
 ``info["final_obs"]`` (an object array of B observations) and ``info["final_info"]`` (a dict of (B,)
 arrays), each with its ``"_final_obs"`` / ``"_final_info"`` mask (all True). Every step's info also has
-the per-step ``cut_deviation_mm`` and ``running_path_error_mm2`` of :mod:`envs.pattern_cut` (of the
+the per-step ``cut_deviation_mm`` and ``running_path_error_mm2`` of :mod:`envs.core` (of the
 episode that the step ended, where it ended one), with their masks. Same-step rather than
 next-step because a next-step reset would spend a whole ``step`` call of B envs ignoring their actions
 after every episode, and because rsl-rl (:mod:`envs.rsl`) expects resets inside ``step``.
@@ -20,16 +20,18 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from envs.pattern_cut import PatternCut, PatternCutOptions, reject_reset_options
+from envs.core import PatternCut
+from envs.options import PatternCutOptions
+from envs.pattern_cut import reject_reset_options
 from warpcut.task import CuttingTask
 
 
 class PatternCutVecEnv(VectorEnv):
-    """B sheets cut at once (see :mod:`envs.pattern_cut` for observations, actions and rewards).
+    """B sheets cut at once (see :mod:`envs.core` for observations, actions and rewards).
 
     Args:
         num_envs: Batch size B.
-        options: The scenario; keyword arguments (any :class:`~envs.pattern_cut.PatternCutOptions` field)
+        options: The scenario; keyword arguments (any :class:`~envs.options.PatternCutOptions` field)
             replace its fields. Per-env lists (contours, physical parameters, pinch points) have length B.
 
     ``reset(seed=...)`` takes one int (not a list): it seeds the process noise and the fiducials of all

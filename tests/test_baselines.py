@@ -4,10 +4,11 @@ import numpy as np
 import pytest
 
 from agents.baselines import AnalyticTension, FixedTension, NoTension, search_fixed_pinch
-from agents.evaluation import ci95, compare_policies
+from agents.evaluation import compare_policies
 from warpcut import SimConfig
 from warpcut.contours import load_contour
-from warpcut.planning import pinch_feasible
+from warpcut.planning import ArmModel, pinch_feasible
+from warpcut.scoring import ci95
 from warpcut.task import CuttingTask
 
 CONFIG = SimConfig(resolution=13)
@@ -33,7 +34,7 @@ def test_feasibility_excludes_corners_contour_and_edges():
     # The centroid lies under the cutting arm (the paper's cylinder); a short footprint frees it.
     config = SimConfig()  # 25 x 25: grasp radius 6.7 mm, cut radius 4.2 mm
     assert pinch_feasible(points, contour, config).tolist() == [False] * 5 + [True]
-    short = pinch_feasible(points, contour, config, arm_length_mm=15.0)
+    short = pinch_feasible(points, contour, config, arm=ArmModel(length_mm=15.0))
     assert short.tolist() == [False, False, False, True, False, True]
 
 

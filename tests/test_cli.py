@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from warpcut.cli import main
+from agents.cli import main
 from warpcut.contours import load_contour
-from warpcut.planning import feasible_centroid
+from warpcut.planning import default_pinch
 from warpcut.planning.segmentation import segment_contour
 from warpcut.sim.config import SimConfig
-from warpcut.viz.recording import read_summary
+from warpcut.viz import read_summary
 
 
 def invoke(args):
@@ -225,7 +225,7 @@ def test_train_resume_export_and_evaluate_with_checkpoints(tmp_path):
     assert code == 0, stdout
     for name in (
         "config.json",
-        "scenario.json",
+        "options.json",
         "summary.json",
         "evaluation.json",
         "latest.pt",
@@ -321,7 +321,9 @@ def test_evaluate_two_contours_two_trials_writes_table_json(tmp_path):
         contour = load_contour(row["contour"])
         assert row["fixed_pinch"] == pytest.approx(plans[row["contour"]]["chosen"]["pinch"])
         segments = segment_contour(contour)
-        assert row["analytic_pinch"] == pytest.approx(list(feasible_centroid(contour, SimConfig(), segments)))
+        assert row["analytic_pinch"] == pytest.approx(
+            list(default_pinch(contour, SimConfig(), segments=segments))
+        )
     # The paper's arm (the default) keeps the grasp off the disc: its centroid is not feasible.
     assert report["rows"][0]["analytic_pinch"] != pytest.approx(list(load_contour("fls-circle").centroid))
     assert report["score"] == "path"
@@ -419,7 +421,7 @@ def test_train_continuous_actions(tmp_path):
         ]
     )
     assert code == 0, stdout
-    assert json.loads((run / "scenario.json").read_text())["action_type"] == "continuous"
+    assert json.loads((run / "options.json").read_text())["action_type"] == "continuous"
     assert json.loads((run / "config.json").read_text())["train"]["discrete"] is False
     assert "rl_error_vertices" in json.loads((run / "evaluation.json").read_text())
 
@@ -481,9 +483,7 @@ def test_run_end_to_end_on_a_tiny_budget(tmp_path, shared):
     assert code == 0, stdout
     runs = ["rl"] if shared else ["rl/candidate-0", "rl/candidate-1"]
     names = ["plan.json", "results.json", "regions.png", "improvement.png", "pinch_candidates.png"]
-    for name in names + [
-        f"{r}/{f}" for r in runs for f in ("best.pt", "scenario.json", "learning_curve.png")
-    ]:
+    for name in names + [f"{r}/{f}" for r in runs for f in ("best.pt", "options.json", "learning_curve.png")]:
         assert (out / name).is_file(), name
     if not shared:
         entities = read_summary(out / "recording.rrd").entity_paths
@@ -503,13 +503,13 @@ def test_run_end_to_end_on_a_tiny_budget(tmp_path, shared):
     chosen = listed[report["chosen_candidate"]]
     assert chosen["rl_validation_error_vertices"] == min(c["rl_validation_error_vertices"] for c in listed)
     assert row["rl_pinch"] == pytest.approx(chosen["pinch"])
-    scenario = json.loads((out / chosen["run"] / "scenario.json").read_text())
+    options = json.loads((out / chosen["run"] / "options.json").read_text())
     if shared:
-        assert len(scenario["candidates"]) == 2 and scenario["observe_pinch"]
+        assert len(options["candidates"]) == 2 and options["observe_pinch"]
         assert (out / "rl" / "candidates.json").is_file()
     else:
-        assert scenario["pinch"] == pytest.approx(chosen["pinch"]) and not scenario["observe_pinch"]
-        assert len(scenario["segments"]) == len(plan["segments"])
+        assert options["pinch_point"] == pytest.approx(chosen["pinch"]) and not options["observe_pinch"]
+        assert len(options["segments"]) == len(plan["segments"])
     assert {"none", "fixed", "analytic", "rl"} <= {line.split()[0] for line in stdout.splitlines() if line}
 
 
@@ -557,27 +557,54 @@ def test_bench_times_the_captured_colours_update_on_cpu():
 
 
 def test_cli_defaults_are_the_library_defaults():
-    """One set of defaults: every command's protocol options show what the library uses."""
+    """One set of defaults: every command's options show what the library uses (its presets)."""
     import inspect
 
-    from warpcut.planning import plan_cut
+    from agents.config import EVALUATION_CANDIDATES, EVALUATION_TRIALS, RECIPE, VALIDATION_TRIALS, TrainConfig
+    from agents.pipeline import evaluate_table
+    from agents.rl import train_contour
+    from warpcut.planning import ArmModel
     from warpcut.sim.config import ARM_LENGTH_MM, ARM_RADIUS_MM
 
+    train = TrainConfig()
     library = {
         "noise": SimConfig().noise_std,
         "score": SimConfig().score,
-        "arm_length": inspect.signature(plan_cut).parameters["arm_length_mm"].default,
-        "arm_radius": inspect.signature(plan_cut).parameters["arm_radius_mm"].default,
+        "resolution": SimConfig().resolution,
+        "fixture": SimConfig().fixture,
+        "arm_length": ArmModel().length_mm,
+        "arm_radius": ArmModel().radius_mm,
+        "num_envs": train.num_envs,
+        "steps_per_env": train.num_steps_per_env,
+        "stay_prior": train.stay_prior,
+        "reward": "dense" if RECIPE["dense_reward"] else "sparse",
+        "observe": "contour" if RECIPE["contour_features"] else "fiducials",
+        "action_type": RECIPE["action_type"],
+        "allow_z": RECIPE["allow_z"],
+        "validation_trials": inspect.signature(train_contour).parameters["validation_trials"].default,
+        "eval_trials": inspect.signature(train_contour).parameters["eval_trials"].default,
     }
+    evaluate = inspect.signature(evaluate_table).parameters
+    assert library["validation_trials"] == VALIDATION_TRIALS and library["eval_trials"] == EVALUATION_TRIALS
     assert library["arm_length"] == ARM_LENGTH_MM == float("inf") and library["arm_radius"] == ARM_RADIUS_MM
     assert library["noise"] > 0 and library["score"] == "path"
     seen = set()
     for name, command in main.commands.items():
+        expected = dict(library)
+        if name == "run":  # the budget's (agents.config.BUDGETS), unless overridden
+            del expected["num_envs"]
+        if name in ("train", "evaluate"):
+            expected["iterations"] = train.iterations
+        if name == "evaluate":
+            for key in ("trials", "candidates", "num_envs", "plan", "analytic_pinch", "iterations"):
+                expected[key] = evaluate[key].default
+            assert expected["candidates"] == EVALUATION_CANDIDATES
         for param in command.params:
-            if param.name in library:
-                assert param.default == library[param.name], (name, param.name)
+            if param.name in expected:
+                assert param.default == expected[param.name], (name, param.name)
                 seen.add((name, param.name))
     for command in ("simulate", "train", "evaluate", "run"):
         assert {(command, "noise"), (command, "score")} <= seen, command
+    assert {("train", "stay_prior"), ("train", "iterations"), ("evaluate", "trials")} <= seen
     for command in ("plan", "evaluate", "run"):
         assert (command, "arm_length") in seen, command

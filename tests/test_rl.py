@@ -6,29 +6,32 @@ import numpy as np
 import pytest
 import torch
 
+from agents.config import RECIPE, TrainConfig
 from agents.rl import (
-    RECIPE,
-    Scenario,
     chosen_candidate,
     evaluate_run,
-    load_scenario,
+    load_options,
     rollout_errors,
     train_contour,
 )
-from agents.train import TrainConfig
+from envs.options import PatternCutOptions
+from envs.vector import PatternCutVecEnv
 from warpcut.contours import load_contour
-from warpcut.planning import feasible_centroid
+from warpcut.planning import default_pinch
+from warpcut.sim.config import SimConfig
+
+SMALL = SimConfig(resolution=13)
 
 
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory):
     torch.set_num_threads(1)
     run = tmp_path_factory.mktemp("rl") / "fls-circle"
-    scenario = Scenario(
-        contour="fls-circle", sim={"resolution": 13}, dense_reward=True, contour_features=True
+    options = PatternCutOptions(
+        contour="fls-circle", sim_config=SMALL, dense_reward=True, contour_features=True
     )
     train_contour(
-        scenario,
+        options,
         run,
         TrainConfig(num_envs=8, iterations=2, num_steps_per_env=8),
         eval_trials=3,
@@ -37,14 +40,49 @@ def run_dir(tmp_path_factory):
     return run
 
 
-def test_run_directory_records_the_scenario(run_dir):
-    scenario = load_scenario(run_dir)
-    assert scenario.contour == "fls-circle" and scenario.dense_reward and scenario.contour_features
+def test_run_directory_records_the_options(run_dir):
+    options = load_options(run_dir)
+    assert options.contour == "fls-circle" and options.dense_reward and options.contour_features
+    assert options.sim_config == SMALL and options.device is None
     # The default pinch: the feasible point nearest the centroid (the disc lies under the cutting arm).
     contour = load_contour("fls-circle")
-    assert scenario.pinch == pytest.approx(list(feasible_centroid(contour, scenario.sim_config())), abs=1e-3)
+    assert options.pinch_point == pytest.approx(list(default_pinch(contour, options.config())), abs=1e-3)
     evaluation = json.loads((run_dir / "evaluation.json").read_text())
     assert evaluation["trials"] == 3 and evaluation["none_error_vertices"] > 0
+
+
+def test_options_round_trip_through_json():
+    contour = load_contour("wave-3")
+    options = PatternCutOptions(
+        contour=contour,  # a Contour object is stored by its points
+        pinch_point=np.array([40.0, 30.0]),
+        segments=[np.array([[90.0, 50.0], [10.0, 50.0]])],
+        sim_config=SimConfig(noise_std=0.05, resolution=13),
+        allow_z=True,
+    )
+    data = json.loads(json.dumps(options.to_dict(), allow_nan=False))
+    again = PatternCutOptions.from_dict(data)
+    assert again.contour.name == "wave-3" and np.array_equal(again.contour.points, contour.points)
+    assert again.sim_config == options.sim_config and again.allow_z and again.to_dict() == data
+    with pytest.raises(ValueError, match="options: unknown field"):
+        PatternCutOptions.from_dict({"contour": "fls-circle", "pinch": [1, 2]})
+
+
+def test_a_run_written_before_options_json_still_loads(run_dir, tmp_path):
+    """Runs trained before options.json hold scenario.json (its field names); they evaluate as before."""
+    legacy = tmp_path / "legacy"
+    legacy.mkdir()
+    scenario = {
+        "contour": "fls-circle", "pinch": [60.0, 20.0], "sim": {"resolution": 13, "noise_std": 0.0},
+        "num_fiducials": 12, "contour_features": True, "action_type": "discrete", "dense_reward": True,
+        "segments": None, "allow_z": False, "observe_pinch": False, "candidates": None,
+    }  # fmt: skip
+    (legacy / "scenario.json").write_text(json.dumps(scenario))
+    options = load_options(legacy)
+    assert options.pinch_point == [60.0, 20.0] and options.sim_config == SimConfig(
+        resolution=13, noise_std=0.0
+    )
+    assert options.contour_features and options.dense_reward and not options.allow_z
 
 
 def test_evaluation_is_reproducible_from_the_run_directory(run_dir):
@@ -56,12 +94,14 @@ def test_evaluation_is_reproducible_from_the_run_directory(run_dir):
 
 
 def test_mismatched_action_type_is_reported(tmp_path):
-    with pytest.raises(ValueError, match="does not match the scenario's continuous actions"):
+    with pytest.raises(ValueError, match="does not match the options' continuous actions"):
         train_contour(
-            Scenario(contour="fls-circle", action_type="continuous"), tmp_path, TrainConfig(num_envs=2)
+            PatternCutOptions(contour="fls-circle", action_type="continuous"),
+            tmp_path,
+            TrainConfig(num_envs=2),
         )
-    with pytest.raises(FileNotFoundError, match="no scenario.json"):
-        load_scenario(tmp_path / "nothing")
+    with pytest.raises(FileNotFoundError, match="no options.json"):
+        load_options(tmp_path / "nothing")
 
 
 CANDIDATES = [{"pinch": [50.0, 42.5], "segments": None}, {"pinch": [30.0, 40.0], "segments": None}]
@@ -71,15 +111,15 @@ def test_shared_policy_observes_its_pinch_and_picks_the_best_candidate(tmp_path)
     """One policy over two pinch candidates: env i pinches candidate i % 2 and observes that point; the run
     chooses the candidate whose validation error is lowest and evaluates there."""
     torch.set_num_threads(1)
-    scenario = Scenario(contour="fls-circle", sim={"resolution": 13}, candidates=CANDIDATES, **RECIPE)
-    assert scenario.observe_pinch
-    env = scenario.vec_env(4)
+    options = PatternCutOptions(contour="fls-circle", sim_config=SMALL, candidates=CANDIDATES, **RECIPE)
+    assert options.observe_pinch
+    env = PatternCutVecEnv(4, options)
     obs, _ = env.reset(seed=0)
     pinches = np.array([CANDIDATES[i % 2]["pinch"] for i in range(4)])
     assert env.task.pinch_points == pytest.approx(pinches)
     assert obs[:, -2:] == pytest.approx((pinches - 50.0) / 50.0)  # normalised material x, y
     result = train_contour(
-        scenario,
+        options,
         tmp_path,
         TrainConfig(num_envs=4, iterations=2, num_steps_per_env=4, stay_prior=0.9),
         eval_trials=2,
@@ -91,18 +131,17 @@ def test_shared_policy_observes_its_pinch_and_picks_the_best_candidate(tmp_path)
     assert len(errors) == 2 and selection["chosen"] == int(np.argmin(errors)) == chosen_candidate(tmp_path)
     assert selection["validation_episodes_per_candidate"] == 4  # at least CANDIDATE_VALIDATION_MIN each
     assert result["evaluation"]["pinch"] == pytest.approx(CANDIDATES[selection["chosen"]]["pinch"])
-    assert load_scenario(tmp_path).candidates == CANDIDATES
+    saved = json.loads((tmp_path / "options.json").read_text())
+    assert saved["candidates"] == CANDIDATES
 
 
-def test_shared_scenario_rejects_a_single_pinch():
-    with pytest.raises(ValueError, match="leave pinch and segments None"):
-        Scenario(contour="fls-circle", pinch=[50.0, 50.0], candidates=CANDIDATES)
+def test_shared_options_reject_a_single_pinch():
+    with pytest.raises(ValueError, match="leave pinch_point and segments None"):
+        PatternCutOptions(contour="fls-circle", pinch_point=[50.0, 50.0], candidates=CANDIDATES)
     with pytest.raises(ValueError, match="candidates: give a non-empty list"):
-        Scenario(contour="fls-circle", candidates=[])
-    with pytest.raises(ValueError, match="several; use at_candidate"):
-        Scenario(contour="fls-circle", candidates=CANDIDATES).pinch_point()
+        PatternCutOptions(contour="fls-circle", candidates=[])
     with pytest.raises(ValueError, match="candidate: 2 is not in 0..1"):
-        Scenario(contour="fls-circle", candidates=CANDIDATES).at_candidate(2)
+        PatternCutOptions(contour="fls-circle", candidates=CANDIDATES).at_candidate(2)
 
 
 @pytest.mark.slow
@@ -115,11 +154,11 @@ def test_ppo_learns_to_lift_the_parabola(tmp_path):
     is the one before the path score: an 8 mm cut-height limit, scored by separated material, no process
     noise, the grasp at the centroid (inside the piece: a short arm footprint)."""
     torch.set_num_threads(1)
-    old_protocol = {"cut_height_mm": 8.0, "score": "separated", "noise_std": 0.0}
+    old_protocol = SimConfig(cut_height_mm=8.0, score="separated", noise_std=0.0)
     centroid = [float(v) for v in load_contour("parabola").centroid]
-    scenario = Scenario(contour="parabola", pinch=centroid, sim=old_protocol, **RECIPE)
+    options = PatternCutOptions(contour="parabola", pinch_point=centroid, sim_config=old_protocol, **RECIPE)
     result = train_contour(
-        scenario,
+        options,
         tmp_path,
         TrainConfig(num_envs=64, iterations=30, stay_prior=0.0, save_interval=10**6),
         eval_trials=4,
@@ -138,26 +177,22 @@ def test_a_still_policy_with_paired_noise_cuts_exactly_as_fixed_tension():
     """Paired trials: a policy that always chooses "stay", rolled out with the noise of the baselines'
     batch, reproduces fixed tension at its pinch bit for bit, trial by trial, for a contour that is not the
     first of the batch too; with its env's own noise it does not."""
-    from agents.evaluation import MethodSpec, run_method
-    from agents.rl import Scenario, policy_errors
-    from warpcut import SimConfig
+    from agents.evaluation import run_method
+    from agents.rl import policy_errors
 
     class Stay(torch.nn.Module):
         def forward(self, obs):
             return torch.zeros(obs.batch_size[0], 1)
 
-    scenario = Scenario(contour="circle-small", sim={"resolution": 13, "noise_std": 0.05})
-    contour, pinch = scenario.load_contour(), scenario.pinch_point()
+    config = SimConfig(resolution=13, noise_std=0.05)
+    options = PatternCutOptions(contour="circle-small", sim_config=config, device="cpu")
+    contour = load_contour("circle-small")
+    pinch = default_pinch(contour, config)
     trials, seed = 3, 4
     fixed = run_method(
-        [load_contour("fls-circle"), contour],
-        MethodSpec([pinch, pinch], None),
-        trials,
-        SimConfig(resolution=13, noise_std=0.05),
-        "cpu",
-        seed,
-    ).errors[1]
-    paired = policy_errors(Stay(), scenario.vec_env(trials, "cpu"), scenario, 9, paired_noise=(seed, trials))
+        [load_contour("fls-circle"), contour], [pinch, pinch], None, trials, config, "cpu", seed
+    ).error_vertices[1]
+    paired = policy_errors(Stay(), PatternCutVecEnv(trials, options), 9, paired_noise=(seed, trials))
     np.testing.assert_array_equal(paired["error_vertices"], fixed)
-    own = policy_errors(Stay(), scenario.vec_env(trials, "cpu"), scenario, 9)
+    own = policy_errors(Stay(), PatternCutVecEnv(trials, options), 9)
     assert not np.array_equal(own["error_vertices"], fixed)

@@ -12,16 +12,20 @@ from onnx.reference import ReferenceEvaluator
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 from tensordict import TensorDict
 
+from agents.config import TrainConfig
 from agents.distributions import Categorical
 from agents.export import export_policy, load_policy
-from agents.train import BEST_CHECKPOINT, Runner, TrainConfig, policy_checkpoint, train
+from agents.train import BEST_CHECKPOINT, Runner, policy_checkpoint, train
 from agents.train import FINAL_ERROR_KEY as TRAIN_FINAL_ERROR_KEY
 
 NUM_ENVS = 32
 
 
 def tiny_config(**overrides) -> TrainConfig:
-    return TrainConfig(**{"num_envs": NUM_ENVS, "iterations": 3, "num_steps_per_env": 24, **overrides})
+    """Small PPO settings for the dummy env, from a uniform initial policy (``stay_prior=0``: the dummy
+    env's action 0 is not "stay")."""
+    defaults = {"num_envs": NUM_ENVS, "iterations": 3, "num_steps_per_env": 24, "stay_prior": 0.0}
+    return TrainConfig(**{**defaults, **overrides})
 
 
 def mean_final_error(env: ReachEnv, policy, episodes: int = 4) -> float:

@@ -299,6 +299,37 @@ def improvement_pct(e_none: np.ndarray | float, e_method: np.ndarray | float) ->
     return 100.0 * (e_none - e_method) / e_none
 
 
+def paired_improvement(e_none: np.ndarray, e_method: np.ndarray) -> np.ndarray:
+    """Per-trial :func:`improvement_pct` of paired trials; NaN where no tension scored 0 (undefined)."""
+    e_none, e_method = np.broadcast_arrays(
+        np.asarray(e_none, dtype=np.float64), np.asarray(e_method, np.float64)
+    )
+    out = np.full(e_none.shape, np.nan)
+    defined = e_none > 0
+    out[defined] = improvement_pct(e_none[defined], e_method[defined])
+    return out
+
+
+def ci95(values: np.ndarray) -> float:
+    """Half-width of the 95% confidence interval of the mean (Student t) of the finite ``values``; 0 for
+    fewer than 2 of them."""
+    from scipy import stats
+
+    values = np.asarray(values, dtype=np.float64)
+    values = values[np.isfinite(values)]
+    if values.size < 2:
+        return 0.0
+    return float(stats.t.ppf(0.975, values.size - 1) * values.std(ddof=1) / np.sqrt(values.size))
+
+
+def mean_ci95(values: np.ndarray) -> tuple[float, float]:
+    """``(mean, ci95)`` of the finite ``values`` (NaN trials, e.g. undefined improvements, are left out);
+    the mean is NaN when none is finite."""
+    values = np.asarray(values, dtype=np.float64)
+    mean = float(np.nanmean(values)) if np.isfinite(values).any() else float("nan")
+    return mean, ci95(values)
+
+
 def _batch_mask(mask: np.ndarray, name: str, grid: SheetGrid, batch: int | None = None) -> np.ndarray:
     """``mask`` as a (B, V) bool array, (1, V) for a 1-D mask; with ``batch`` given, B must be 1 or it."""
     mask = np.asarray(mask, dtype=bool)

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import shapely
 
-from warpcut.contours import Contour
+from warpcut.contours import Contour, arc_lengths, resample_polyline
 from warpcut.scoring import Score, score_cut
 from warpcut.sim.config import SheetGrid, SimConfig
 from warpcut.sim.material import interpolate, material_cells, material_to_world
@@ -32,6 +32,11 @@ __all__ = [
     "material_cells",
     "material_to_world",
 ]
+
+
+StepCallback = Callable[["CuttingTask", "np.ndarray | None"], None]
+"""``on_step(task, moves)``: called after a task's reset (moves None) and after every step with the (B, 3)
+grasp moves (mm), e.g. to record or plot a rollout."""
 
 
 def default_segments(contour: Contour) -> list[np.ndarray]:
@@ -72,13 +77,12 @@ class Trajectory:
             dense = _densify(segment, 0.25 * min(grid.spacing_mm))
             world = material_to_world(dense, settled, grid)
             if k > 0:
-                travel = _resample(np.stack([tips[-1][-1, :3], world[0]]), spacing_mm)[1:-1]
+                travel = resample_polyline(np.stack([tips[-1][-1, :3], world[0]]), spacing_mm)[1:-1]
                 tips.append(np.column_stack([travel, np.zeros(len(travel))]))
                 materials.append(np.full((len(travel), 2), np.nan))
-            arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(world, axis=0), axis=1))])
-            s = np.append(np.arange(0.0, arc[-1], spacing_mm), arc[-1])
-            tip = np.column_stack([np.interp(s, arc, world[:, d]) for d in range(3)])
-            mat = np.column_stack([np.interp(s, arc, dense[:, d]) for d in range(2)])
+            arc = arc_lengths(world)
+            tip = resample_polyline(world, spacing_mm, arc=arc)
+            mat = resample_polyline(dense, spacing_mm, arc=arc)
             tips.append(np.column_stack([tip, np.ones(len(tip))]))
             materials.append(mat)
         return cls(np.vstack(tips).astype(np.float32), np.vstack(materials))
@@ -90,12 +94,6 @@ def _densify(polyline: np.ndarray, max_step: float) -> np.ndarray:
         k = max(1, math.ceil(np.linalg.norm(b - a) / max_step))
         out.append(a + (b - a) * (np.arange(1, k + 1) / k)[:, None])
     return np.vstack(out)
-
-
-def _resample(polyline: np.ndarray, spacing: float) -> np.ndarray:
-    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(polyline, axis=0), axis=1))])
-    s = np.append(np.arange(0.0, arc[-1], spacing), arc[-1])
-    return np.column_stack([np.interp(s, arc, polyline[:, d]) for d in range(polyline.shape[1])])
 
 
 class CuttingTask:
@@ -310,7 +308,7 @@ class CuttingTask:
             self.config.score, self.cut_path(), self._arc_mm, self.sim.alive_mask(), self.contours, self.grid
         )
 
-    def run(self, policy, on_step: Callable[[CuttingTask, np.ndarray | None], None] | None = None) -> Score:
+    def run(self, policy, on_step: StepCallback | None = None) -> Score:
         """Reset, then step ``policy(task) -> (B, 3)`` (or ``None`` for no moves) to the end; score.
 
         Args:

@@ -1,0 +1,82 @@
+"""``warpcut bench``: simulator and training throughput."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from agents.cli import common
+
+
+@click.command("bench")
+@common.device_option
+@click.option(
+    "--repeats", default=3, show_default=True, type=click.IntRange(min=1), help="Timed repeats (median)."
+)
+@click.option(
+    "--batch-sizes", default="1,64,1024,4096", show_default=True, help="Comma-separated batch sizes."
+)
+@click.option(
+    "--rollout-envs",
+    default=256,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="Batch size of the fls-circle rollout measurement.",
+)
+@common.json_option
+def command(
+    device: str | None, repeats: int, batch_sizes: str, rollout_envs: int, json_path: Path | None
+) -> None:
+    """Measure simulator and PPO throughput (medians over repeats, all in one run)."""
+    from agents.rl import benchmark_training
+    from warpcut.bench import run_bench
+    from warpcut.sim.simulator import resolve_device
+
+    try:
+        sizes = tuple(int(v) for v in batch_sizes.split(","))
+    except ValueError:
+        raise click.BadParameter(
+            f"expected integers like 1,64,1024 (got {batch_sizes!r})", param_hint="--batch-sizes"
+        ) from None
+    if not sizes or min(sizes) < 1:
+        raise click.BadParameter("batch sizes must be positive", param_hint="--batch-sizes")
+    device = resolve_device(device)
+    result = run_bench(
+        device,
+        repeats=repeats,
+        batch_sizes=sizes,
+        rollout_envs=rollout_envs,
+        progress=lambda what: click.echo(f"  measuring {what} ...", err=True),
+        extra={"train_steps_per_s": lambda: benchmark_training(device)},
+    )
+    click.echo(f"device {result['device']} ({result['device_name']}), 25x25 sheet, median of {repeats}")
+    click.echo(
+        f"cold start (compile) {result['cold_start_s']:.2f} s, warm start {result['warm_start_s']:.2f} s"
+    )
+    click.echo(
+        f"{'batch':>6} {'updates/s (default: shear, 20 sweeps)':>38} {'updates/s (paper: 5 sweeps)':>28}"
+    )
+    for b in result["updates_per_s"]:
+        click.echo(
+            f"{b:>6} {result['updates_per_s'][b]:>38,.0f} {result['updates_per_s_paper_sweeps'][b]:>28,.0f}"
+        )
+    for b, rate in result["updates_per_s_noise_free"].items():
+        click.echo(f"default physics without process noise, B={b}: {rate:,.0f} updates/s")
+    click.echo(
+        f"fls-circle no-tension rollouts/s (B={result['rollout_envs']}): {result['rollouts_per_s']:,.1f} "
+        f"default physics, {result['rollouts_per_s_paper_sweeps']:,.1f} paper sweeps; the path score adds "
+        f"{result['scoring_overhead_pct']:.1f}%"
+    )
+    click.echo(
+        f"NumPy reference updates/s: {result['numpy_updates_per_s']:,.1f}  "
+        f"(Warp best / NumPy = {result['speedup_vs_numpy']:,.0f}x)"
+    )
+    if "sim_env_steps_per_s" in result:
+        click.echo(f"simulator env steps/s (64 envs): {result['sim_env_steps_per_s']:,.0f}")
+    click.echo(f"PPO training env steps/s (64 envs): {result['train_steps_per_s']:,.0f}")
+    if json_path:
+        from warpcut.io import write_json
+
+        write_json(json_path, result)
+        click.echo(f"wrote {json_path}")

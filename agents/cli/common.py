@@ -1,0 +1,301 @@
+"""What the commands share: the error handling, the common options and the output helpers."""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import os
+import re
+import sys
+import time
+from pathlib import Path
+
+import click
+
+from agents.config import ANALYTIC_PINCHES
+from warpcut.sim.config import ARM_LENGTH_MM, SCORES, SimConfig
+from warpcut.viz import COLOUR_FIELDS
+from warpcut.viz.process import RecordingError
+
+
+class CleanErrors(click.Group):
+    """Turn usage errors, the library's ValueErrors and files that cannot be read or written (an OSError
+    naming a path; with ``WARPCUT_VERBOSE`` set, its traceback instead) into one line on stderr and exit
+    status 2; a failed recording (:class:`RecordingError`) into one line and status 1
+    (with ``WARPCUT_VERBOSE`` set, also the recorder process's traceback)."""
+
+    def main(self, *args, **kwargs):
+        kwargs["standalone_mode"] = False
+        try:
+            result = super().main(*args, **kwargs)
+        except click.exceptions.Abort as exc:  # Ctrl-C; a pipeline's training names its checkpoint
+            where = getattr(exc.__cause__, "run_dir", None)
+            click.echo("interrupted" + (f": checkpoint saved in {where}" if where else ""), err=True)
+            sys.exit(130)
+        except click.ClickException as exc:
+            hint = (
+                f" (see 'warpcut {exc.ctx.command.name} --help')"
+                if getattr(exc, "ctx", None) and exc.ctx.command is not self
+                else ""
+            )
+            message = exc.format_message()
+            if isinstance(exc, click.NoSuchOption) and (value := _negative_record(kwargs, args, exc)):
+                # click reads "--record -1" (an option whose value is optional) as --record, then -1.
+                message = f"--record: N must be a positive integer (got {value})"
+            click.echo(f"error: {message}{hint}", err=True)
+            sys.exit(2)
+        except (ValueError, FileNotFoundError) as exc:
+            click.echo(f"error: {exc}", err=True)
+            sys.exit(2)
+        except OSError as exc:  # a file that cannot be read or written (a path named), unless debugging
+            if exc.filename is None or os.environ.get("WARPCUT_VERBOSE"):
+                raise
+            click.echo(f"error: {exc}", err=True)
+            sys.exit(2)
+        except RecordingError as exc:  # the file holds what was recorded until then
+            click.echo(f"error: {exc}", err=True)
+            for note in getattr(exc, "__notes__", ()) if os.environ.get("WARPCUT_VERBOSE") else ():
+                click.echo(note, err=True)
+            sys.exit(1)
+        sys.exit(result if isinstance(result, int) else 0)
+
+
+def _negative_record(kwargs: dict, args: tuple, exc: click.NoSuchOption) -> str | None:
+    """The negative number given to ``--record`` that click took for the unknown option ``exc`` names,
+    if that is what happened."""
+    given = list(kwargs.get("args") or (args[0] if args else sys.argv[1:]))
+    for k, token in enumerate(given):
+        if token == "--record" and k + 1 < len(given):
+            value = given[k + 1]
+        elif token.startswith("--record="):
+            value = token.split("=", 1)[1]
+        else:
+            continue
+        if re.fullmatch(r"-\d[\d.eE+-]*", value) and value.startswith(exc.option_name):
+            return value
+    return None
+
+
+def record_option(what: str):
+    """``--record [N]`` and ``--colour-by`` (passed to the command as ``record_envs`` and ``colour_by``)."""
+    record = click.option(
+        "--record",
+        "record_envs",
+        type=click.IntRange(min=1),
+        is_flag=False,
+        flag_value=1,
+        default=None,
+        metavar="[N]",
+        help=f"Write recording.rrd ({what}) of the first N envs (default 1) of each method; "
+        "view it with 'warpcut replay'.",
+    )
+    colour = click.option(
+        "--colour-by",
+        type=click.Choice(COLOUR_FIELDS),
+        default="strain",
+        show_default=True,
+        help="What the recorded sheet's vertex colours show: the stretch of its springs, or its height.",
+    )
+
+    def check(command):
+        @functools.wraps(command)
+        def checked(**kwargs):
+            source = click.get_current_context().get_parameter_source("colour_by")
+            if kwargs["record_envs"] is None and source == click.core.ParameterSource.COMMANDLINE:
+                raise click.UsageError(
+                    "--colour-by: colours a recording; add --record [N], or drop --colour-by"
+                )
+            if kwargs["record_envs"] is not None:
+                from warpcut.viz.process import start_recorder_process
+
+                start_recorder_process()  # its start-up overlaps the command's own
+            return command(**kwargs)
+
+        return checked
+
+    return lambda command: record(colour(check(command)))
+
+
+device_option = click.option(
+    "--device", default=None, help="Warp device: cpu or cuda (default: cuda if available, else cpu)."
+)
+seed_option = click.option(
+    "--seed",
+    default=0,
+    show_default=True,
+    type=click.IntRange(min=0),
+    help="Seed of everything random (noise, sampling, PPO); a non-negative integer.",
+)
+
+
+DEFAULTS = SimConfig()
+"""The library's defaults, which the options below show and pass on (one set for library and CLI)."""
+
+noise_option = click.option(
+    "--noise",
+    default=DEFAULTS.noise_std,
+    show_default=True,
+    type=click.FloatRange(min=0.0),
+    help="Process noise sigma (mm per update): seeded trials differ by their noise stream; 0: noise-free.",
+)
+score_option = click.option(
+    "--score",
+    default=DEFAULTS.score,
+    show_default=True,
+    type=click.Choice(SCORES),
+    help="What tables and rewards use: path (the paper's: the region the scissors' path through the "
+    "material encloses) or separated (the material that came free). Both are reported.",
+)
+
+
+arm_length_option = click.option(
+    "--arm-length",
+    default=ARM_LENGTH_MM,
+    show_default=True,
+    type=click.FloatRange(min=0.0),
+    help="Reach of the cutting arm's footprint from the scissor tip toward +x (mm), for pinch feasibility; "
+    "inf (the paper's cylinder): the whole way, so the grasp never holds the piece being cut; a short "
+    "footprint (e.g. 15) lets it hold the piece (docs/learning.md).",
+)
+
+
+analytic_pinch_option = click.option(
+    "--analytic-pinch",
+    default="feasible",
+    show_default=True,
+    type=click.Choice(ANALYTIC_PINCHES),
+    help="Where the analytic policy pinches: the centroid (the paper's choice) when it is feasible, else the "
+    "feasible point nearest to it (feasible); or the centroid even under the cutting arm or on the cut line "
+    "(centroid: a grasp the robot could not make).",
+)
+
+
+def plots_option(what: str):
+    return click.option("--no-plots", is_flag=True, help=f"Do not write the plots ({what}).")
+
+
+json_option = click.option(
+    "--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write results here."
+)
+contour_option = click.option(
+    "--contour", "contour_name", required=True, help="Built-in name or a .json/.svg contour file."
+)
+resolution_option = click.option(
+    "--resolution",
+    default=DEFAULTS.resolution,
+    show_default=True,
+    type=click.IntRange(5, 100),
+    help="Vertices per side.",
+)
+
+
+def parse_point(value: str | None, name: str) -> tuple[float, float] | None:
+    """``X,Y`` (mm) as a point; None stays None."""
+    if value is None:
+        return None
+    try:
+        x, y = (float(v) for v in value.split(","))
+    except ValueError:
+        raise click.BadParameter(f"expected X,Y in mm, e.g. 60,40 (got {value!r})", param_hint=name) from None
+    return x, y
+
+
+def parse_methods(value: str, option: str, allowed: tuple[str, ...]) -> list[str]:
+    """The comma-separated method names of ``option``; a usage error naming it for an unknown one."""
+    from agents.methods import parse_methods as parse
+
+    try:
+        return parse(value, option, allowed)
+    except ValueError as error:
+        raise click.BadParameter(str(error).split(": ", 1)[1], param_hint=option) from None
+
+
+def run_dir(out: Path | None, prefix: str) -> Path:
+    """``out`` or a fresh ``logs/PREFIX-YYYYmmdd-HHMMSS`` directory."""
+    if out is not None:
+        return out
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    path = Path("logs") / f"{prefix}-{stamp}"
+    suffix = 1
+    while path.exists():
+        path = Path("logs") / f"{prefix}-{stamp}-{suffix}"
+        suffix += 1
+    return path
+
+
+def recorder(out: Path, record_envs: int | None, colour_by: str):
+    """A :class:`~warpcut.viz.recorder.Recorder` of ``out/recording.rrd``, or a null context when not
+    recording."""
+    if record_envs is None:
+        return contextlib.nullcontext()
+    from warpcut.viz.recorder import Recorder
+
+    return Recorder(out / "recording.rrd", envs=record_envs, colour_by=colour_by)
+
+
+def step_callbacks(recorder, cuts):
+    """The pipelines' ``step_callbacks(method, first_contour)``: the recorder's (of the batches starting at
+    the first contour: it records the first envs) and the final-cut collector's; None when neither is on."""
+    if recorder is None and cuts is None:
+        return None
+
+    def for_batch(method: str, first_contour: int):
+        callbacks = [cuts.step_callback(method)] if cuts is not None else []
+        if recorder is not None and first_contour == 0:
+            callbacks.insert(0, recorder.step_callback(method))
+        if len(callbacks) == 1:
+            return callbacks[0]
+
+        def on_step(task, action) -> None:
+            for callback in callbacks:
+                callback(task, action)
+
+        return on_step
+
+    return for_batch
+
+
+def final_cuts(no_plots: bool):
+    """A collector of every method's final cut for the regions plot, unless plots are off."""
+    if no_plots:
+        return None
+    from warpcut.viz.plots import FinalCuts
+
+    return FinalCuts()
+
+
+def echo_recording(recorder) -> None:
+    """Say where the recording went (if anything was recorded), and which methods had fewer envs than
+    ``--record`` asked for."""
+    if recorder is None or not recorder.written:
+        return
+    fewer = {m: k for m, k in recorder.recorded_envs.items() if k < recorder.envs}
+    if fewer:
+        ran = ", ".join(f"{m}: {k}" for m, k in fewer.items())
+        click.echo(
+            f"warning: --record {recorder.envs}: fewer envs ran, all of them recorded ({ran})", err=True
+        )
+    echo_written([recorder.path])
+
+
+def echo_written(paths) -> None:
+    for path in paths:
+        click.echo(f"wrote {path}")
+
+
+def log(line: str) -> None:
+    """A pipeline's progress line, on stderr."""
+    click.echo(line, err=True)
+
+
+def plot_learning_curves(runs: dict[Path, str]) -> list[Path]:
+    """Each training run's learning curve (``learning_curve.png/svg`` in it), titled as given."""
+    import json
+
+    from warpcut.viz.plots import plot_learning_curve
+
+    written = []
+    for run, title in runs.items():
+        summary = json.loads((run / "summary.json").read_text())
+        written += plot_learning_curve(summary["history"], summary["validation"], run, title=title)
+    return written

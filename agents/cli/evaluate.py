@@ -1,0 +1,155 @@
+"""``warpcut evaluate``: the paper's Table I protocol (:func:`agents.pipeline.evaluate_table`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from agents.cli import common
+from agents.config import EVALUATION_CANDIDATES, EVALUATION_TRIALS, TrainConfig
+from agents.methods import METHODS
+from warpcut.sim.config import SimConfig
+
+
+@click.command("evaluate")
+@click.option(
+    "--contours",
+    "contour_args",
+    multiple=True,
+    default=("all",),
+    show_default=True,
+    help="'all' (the built-in suite), names or contour files; repeat or comma-separate.",
+)
+@click.option("--methods", default=",".join(METHODS), show_default=True, help="Comma-separated methods.")
+@click.option(
+    "--trials",
+    default=EVALUATION_TRIALS,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="Trials per contour.",
+)
+@common.noise_option
+@common.score_option
+@click.option(
+    "--checkpoints",
+    type=click.Path(exists=True, file_okay=False, path_type=Path),
+    default=None,
+    help="Directory of trained runs, one per contour (CHECKPOINTS/NAME, as 'warpcut train' writes); "
+    "without it the rl column trains a policy per contour.",
+)
+@click.option(
+    "--iterations",
+    default=TrainConfig.iterations,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="PPO iterations per contour when training.",
+)
+@click.option(
+    "--num-envs",
+    default=TrainConfig.num_envs,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="Envs when training.",
+)
+@common.device_option
+@common.seed_option
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Run directory (default: logs/evaluate-TIMESTAMP): results and trained policies.",
+)
+@common.json_option
+@click.option(
+    "--markdown",
+    "markdown_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Write the table as Markdown here.",
+)
+@click.option(
+    "--plan/--no-plan",
+    default=True,
+    show_default=True,
+    help="Cut every contour as planned (segments, order) and pinch fixed and rl at the planned point "
+    "(analytic at the centroid, as in the paper; see --analytic-pinch); --no-plan: one loop per contour, "
+    "fixed by random search, rl at the centroid (or the feasible point nearest to it).",
+)
+@click.option(
+    "--candidates",
+    default=EVALUATION_CANDIDATES,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="Pinch candidates per plan.",
+)
+@common.arm_length_option
+@common.analytic_pinch_option
+@common.record_option("in the run directory; of the first contour, at most --trials envs")
+@common.plots_option(
+    "improvement.png/svg, regions/CONTOUR.png/svg and plans/CONTOUR.png/svg in the run directory, and "
+    "policies/CONTOUR/learning_curve.png/svg when training"
+)
+def command(
+    contour_args: tuple[str, ...],
+    methods: str,
+    trials: int,
+    noise: float,
+    score: str,
+    checkpoints: Path | None,
+    iterations: int,
+    num_envs: int,
+    plan: bool,
+    candidates: int,
+    arm_length: float,
+    analytic_pinch: str,
+    device: str | None,
+    seed: int,
+    out: Path | None,
+    json_path: Path | None,
+    markdown_path: Path | None,
+    record_envs: int | None,
+    colour_by: str,
+    no_plots: bool,
+) -> None:
+    """The paper's Table I: per contour the no-tension error and each method's improvement (95% CI)."""
+    from agents.pipeline import evaluate_table
+    from warpcut.io import write_atomic, write_json
+    from warpcut.planning import ArmModel
+    from warpcut.sim.simulator import resolve_device
+
+    names = common.parse_methods(methods, "--methods", tuple(METHODS))
+    if record_envs is not None and record_envs > trials:
+        click.echo(
+            f"warning: --record {record_envs}: the first contour has only {trials} env(s) per method "
+            f"(--trials); recording {trials}",
+            err=True,
+        )
+        record_envs = trials
+    out = common.run_dir(out, "evaluate")
+    cuts = common.final_cuts(no_plots)
+    with common.recorder(out, record_envs, colour_by) as rec:
+        report = evaluate_table(
+            contour_args, out, methods=names, trials=trials, config=SimConfig(noise_std=noise, score=score),
+            checkpoints=checkpoints, iterations=iterations, num_envs=num_envs, plan=plan,
+            candidates=candidates,
+            arm=ArmModel(length_mm=arm_length), analytic_pinch=analytic_pinch, device=resolve_device(device),
+            seed=seed, log=common.log, step_callbacks=common.step_callbacks(rec, cuts),
+        )  # fmt: skip
+    table = report.markdown()
+    click.echo(table)
+    click.echo(f"({len(report.contours)} contours x {trials} trials in {report.seconds:.0f} s)")
+    if json_path:
+        write_json(json_path, report.to_json())
+    if markdown_path:
+        write_atomic(markdown_path, table + "\n")
+    if cuts is not None:
+        from warpcut.viz.plots import plot_improvements, plot_pinch_candidates
+
+        common.echo_written(plot_improvements(report.to_json(), names, out))
+        shown = ["none"] + [m for m in names if m != "none"]
+        common.echo_written(cuts.plot(out / "regions", shown, [c.name for c in report.contours]))
+        for p in report.plans or []:
+            common.echo_written(plot_pinch_candidates(p, report.config, out / "plans", name=p.contour.name))
+        common.plot_learning_curves({run: run.name for run in report.policy_runs})
+    common.echo_recording(rec)
+    click.echo(f"wrote {out}")

@@ -1,0 +1,23 @@
+"""``warpcut export``: a trained policy as TorchScript and ONNX."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+
+@click.command("export")
+@click.argument("run_dir", type=click.Path(exists=True, path_type=Path))
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Where to write policy.pt and policy.onnx (default: RUN_DIR/exported).",
+)
+def command(run_dir: Path, out: Path | None) -> None:
+    """Export a trained policy as TorchScript and ONNX (observation -> action index)."""
+    from agents.export import export_policy
+
+    for kind, path in export_policy(run_dir, out).items():
+        click.echo(f"{kind}: {path}")

@@ -1,0 +1,164 @@
+"""``warpcut run``: the main job (:func:`agents.pipeline.run_pipeline`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from agents.cli import common
+from agents.config import BUDGETS
+from agents.methods import SELECTORS
+from warpcut.sim.config import SimConfig
+
+
+@click.command("run")
+@click.option(
+    "--contour",
+    "contour_name",
+    default="fls-circle",
+    show_default=True,
+    help="Built-in name or a .json/.svg contour file.",
+)
+@click.option(
+    "--budget",
+    default="fast",
+    show_default=True,
+    type=click.Choice(list(BUDGETS)),
+    help="fast: 8 pinch candidates (plus the centroid when feasible), a PPO policy for each of the best 2, "
+    "60 PPO iterations each (a few minutes on 2 CPU cores); paper: 30 candidates, a policy for every one, "
+    "200 iterations each (hours).",
+)
+@click.option(
+    "--policy",
+    "run_policy",
+    default="rl",
+    show_default=True,
+    type=click.Choice(SELECTORS),
+    help="The tensioner that picks the pinch candidate (each candidate with its best order): rl (a PPO "
+    "policy per candidate, the one that validates best wins); fixed or analytic for quick plans without "
+    "training.",
+)
+@click.option(
+    "--shared-policy",
+    is_flag=True,
+    help="Train one PPO policy for all the RL candidates (it observes its pinch point) instead of one each: "
+    "about K times faster, but it lost to separate policies where they learn (docs/learning.md).",
+)
+@click.option(
+    "--candidates", type=click.IntRange(min=1), default=None, help="Override the budget's pinch candidates."
+)
+@click.option(
+    "--rl-candidates",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Override how many of the best candidates (ranked by fixed tension) get a PPO policy.",
+)
+@click.option(
+    "--iterations", type=click.IntRange(min=1), default=None, help="Override the budget's PPO iterations."
+)
+@click.option(
+    "--trials", type=click.IntRange(min=1), default=None, help="Override the budget's evaluation trials."
+)
+@click.option(
+    "--num-envs",
+    default=None,
+    type=click.IntRange(min=1),
+    help="PPO envs per policy (default: 64; with --shared-policy 64, or 8 per candidate when more).",
+)
+@common.resolution_option
+@common.noise_option
+@common.score_option
+@common.arm_length_option
+@common.analytic_pinch_option
+@common.device_option
+@common.seed_option
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Run directory (default: logs/run-CONTOUR-TIMESTAMP).",
+)
+@click.option(
+    "--json",
+    "json_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Also write the results here.",
+)
+@common.record_option("in the run directory")
+@common.plots_option("in the run directory")
+def command(
+    contour_name: str,
+    budget: str,
+    run_policy: str,
+    shared_policy: bool,
+    candidates: int | None,
+    rl_candidates: int | None,
+    iterations: int | None,
+    trials: int | None,
+    num_envs: int | None,
+    resolution: int,
+    noise: float,
+    score: str,
+    arm_length: float,
+    analytic_pinch: str,
+    device: str | None,
+    seed: int,
+    out: Path | None,
+    json_path: Path | None,
+    record_envs: int | None,
+    colour_by: str,
+    no_plots: bool,
+) -> None:
+    """The whole pipeline: plan the cut, pick the pinch candidate with a tensioner (RL: a policy per
+    candidate), compare none/fixed/analytic/RL."""
+    import numpy as np
+
+    from agents.pipeline import run_pipeline
+    from warpcut.contours import load_contour
+    from warpcut.io import write_json
+    from warpcut.planning import ArmModel
+    from warpcut.sim.simulator import resolve_device
+
+    out = common.run_dir(out, f"run-{load_contour(contour_name).name}")
+    cuts = common.final_cuts(no_plots)
+    with common.recorder(out, record_envs, colour_by) as rec:
+        report = run_pipeline(
+            contour_name, out, budget=budget, selector=run_policy, shared_policy=shared_policy,
+            candidates=candidates, rl_candidates=rl_candidates, iterations=iterations, trials=trials,
+            num_envs=num_envs, config=SimConfig(resolution=resolution, noise_std=noise, score=score),
+            arm=ArmModel(length_mm=arm_length), analytic_pinch=analytic_pinch, device=resolve_device(device),
+            seed=seed, log=common.log, step_callbacks=common.step_callbacks(rec, cuts),
+        )  # fmt: skip
+    name, pinch, row = report.contour.name, report.plan.chosen["pinch"], report.row
+    click.echo(
+        f"{name}: planned order {list(report.plan.order)}, pinch ({pinch[0]:.1f}, {pinch[1]:.1f}); "
+        f"{report.table['trials']} trials, {report.seconds:.0f} s"
+    )
+    click.echo(f"{'method':<10} {'error (vertices)':>16} {'improvement':>14} {'pinch (mm)':>16}")
+    for m in report.methods:
+        p = row[f"{m}_pinch"]
+        p_txt = "-" if p is None else f"({p[0]:.1f}, {p[1]:.1f})"
+        imp = row[f"{m}_improvement_pct"]
+        imp_txt = f"{imp:+.1f}% ±{row[f'{m}_ci95']:.1f}" if np.isfinite(imp) else "n/a"
+        click.echo(f"{m:<10} {row[f'{m}_error_vertices']:>16.1f} {imp_txt:>14} {p_txt:>16}")
+    if json_path:
+        write_json(json_path, report.to_json())
+    if cuts is not None:
+        from warpcut.viz.plots import plot_improvements, plot_pinch_candidates, plot_regions
+
+        common.plot_learning_curves({run: _policy_title(report, run, out) for run in report.policy_runs})
+        common.echo_written(plot_regions(cuts.of(name, report.methods), out))
+        common.echo_written(plot_improvements(report.to_json(), report.methods[1:], out))
+        common.echo_written(plot_pinch_candidates(report.plan, report.config, out))
+    common.echo_recording(rec)
+    click.echo(f"wrote {out}")
+
+
+def _policy_title(report, run: Path, out: Path) -> str:
+    """The learning curve's title of a policy the pipeline trained: its contour and pinch candidate(s)."""
+    served = [c for c in report.candidates if c.get("run") == str(run.relative_to(out))]
+    if len(served) == 1:
+        pinch = served[0]["pinch"]
+        return f"{report.contour.name}, pinch ({pinch[0]:.1f}, {pinch[1]:.1f})"
+    return f"{report.contour.name}, one policy for {len(served)} pinch candidates"

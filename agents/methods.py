@@ -1,0 +1,49 @@
+"""The tensioning methods warpcut compares, by name: the one registry the evaluation, the pipelines and
+the command line read."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from warpcut.task import StepCallback
+
+METHODS = {
+    "none": "no tensioning: only the corner clips hold the sheet",
+    "fixed": "pinch at the planned (or best searched) point and hold still",
+    "analytic": "pinch at the (feasible) centroid and move against the tracking error",
+    "rl": "a PPO policy trained for the contour (agents.rl)",
+}
+"""Every method, in the order tables show them, with what it does."""
+
+BASELINES = ("none", "fixed", "analytic")
+"""The methods that need no training (:mod:`agents.baselines`, :func:`tensioner`)."""
+
+SELECTORS = tuple(m for m in METHODS if m != "none")
+"""The methods that can choose a plan's pinch candidate (``warpcut run --policy``)."""
+
+StepCallbacks = Callable[[str, int], "StepCallback | None"]
+"""``step_callbacks(method, first_contour)``: the step callback of a batch that runs ``method`` on the
+contours from ``first_contour`` on (None: none), e.g. a recorder's."""
+
+
+def parse_methods(value: str, field: str, allowed: tuple[str, ...] = tuple(METHODS)) -> list[str]:
+    """The comma-separated method names in ``value``; ``ValueError`` naming ``field`` for an unknown one."""
+    names = [v.strip() for v in value.split(",") if v.strip()]
+    unknown = [n for n in names if n not in allowed]
+    if not names or unknown:
+        raise ValueError(
+            f"{field}: unknown {', '.join(unknown) or 'empty list'}; choose from {','.join(allowed)}"
+        )
+    return names
+
+
+def tensioner(name: str):
+    """A baseline's batched tensioner (:mod:`agents.baselines`) with its own defaults."""
+    from agents.baselines import AnalyticTension, FixedTension, NoTension
+
+    classes = {"none": NoTension, "fixed": FixedTension, "analytic": AnalyticTension}
+    if name not in classes:
+        raise ValueError(f"methods: {name!r} is not a baseline; baselines are {', '.join(BASELINES)}")
+    return classes[name]()

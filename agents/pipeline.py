@@ -1,0 +1,533 @@
+"""warpcut's two pipelines as library calls, with their presets; the ``run`` and ``evaluate`` commands are
+thin wrappers over them.
+
+* :func:`run_pipeline`: plan one contour (segments, order, pinch candidates scored with fixed tension), let
+  a tensioner choose the candidate (RL: a PPO policy per candidate, the one that validates best wins), then
+  compare none / fixed / analytic / RL over seeded trials.
+* :func:`evaluate_table`: the paper's Table I protocol over a suite of contours: per contour the
+  no-tension error and each method's paired improvement with its 95% CI, and the mean row.
+
+Both write their data (plans, results, trained policies) into a run directory and return a report; what
+to print, plot or record is the caller's.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from agents.baselines import AnalyticTension
+from agents.config import (
+    ANALYTIC_PINCHES,
+    BUDGETS,
+    EVALUATION_CANDIDATES,
+    EVALUATION_TRIALS,
+    RECIPE,
+    TrainConfig,
+)
+from agents.evaluation import Method, MethodResult, evaluate_suite, run_method
+from agents.methods import METHODS, SELECTORS, StepCallbacks
+from agents.rl import is_run, rollout_errors, train_contour
+from agents.train import torch_device_for
+from envs.options import PatternCutOptions
+from warpcut.contours import Contour, builtin_names, load_contour
+from warpcut.io import write_json
+from warpcut.planning import ArmModel, Plan, plan_cut
+from warpcut.sim.config import SimConfig
+
+
+class TrainingInterrupted(KeyboardInterrupt):
+    """Ctrl-C while a pipeline trained a policy: the checkpoint is saved in ``run_dir``."""
+
+    def __init__(self, run_dir: Path):
+        super().__init__(str(run_dir))
+        self.run_dir = run_dir
+
+
+def train_policy(
+    options: PatternCutOptions,
+    run_dir: Path,
+    *,
+    iterations: int,
+    num_envs: int,
+    seed: int,
+    eval_trials: int,
+    progress: bool,
+) -> dict:
+    """Train a recipe policy for ``options`` into ``run_dir`` (:func:`agents.rl.train_contour`); Ctrl-C
+    raises :class:`TrainingInterrupted` naming the run directory. Returns the training summary."""
+    cfg = TrainConfig(
+        num_envs=num_envs, iterations=iterations, seed=seed, torch_device=torch_device_for(options.device)
+    )
+    try:
+        return train_contour(options, run_dir, cfg, eval_trials=eval_trials, progress=progress)["summary"]
+    except KeyboardInterrupt as interrupt:
+        raise TrainingInterrupted(run_dir) from interrupt
+
+
+def analytic_pinches(mode: str, contours: Sequence[Contour], plans: Sequence[Plan] | None) -> list | None:
+    """Per contour, the analytic policy's pinch point for ``mode`` (:data:`ANALYTIC_PINCHES`); None: its own
+    default, the feasible centroid without an arm footprint."""
+    if mode not in ANALYTIC_PINCHES:
+        raise ValueError(f"analytic_pinch: choose one of {', '.join(ANALYTIC_PINCHES)} (got {mode!r})")
+    if mode == "centroid":
+        return [np.asarray(c.centroid, dtype=np.float64) for c in contours]
+    return None if plans is None else [p.analytic_pinch for p in plans]
+
+
+# --- run_pipeline ---------------------------------------------------------------------------------------
+
+
+@dataclass
+class RunReport:
+    """What :func:`run_pipeline` found; :meth:`to_json` is the run directory's ``results.json``."""
+
+    contour: Contour
+    config: SimConfig
+    plan: Plan
+    selector: str
+    """The tensioner that chose the pinch candidate."""
+    methods: list[str]
+    table: dict
+    """:func:`agents.evaluation.evaluate_suite`'s report for the contour (one row)."""
+    candidates: list[dict]
+    """The candidates the selector scored, best fixed-tension rank first, with each one's scores."""
+    chosen_candidate: int
+    budget: str
+    analytic_pinch: str
+    seconds: float
+    policy_runs: list[Path] = field(default_factory=list)
+    """The run directories of the policies trained (empty unless the selector is rl)."""
+
+    @property
+    def row(self) -> dict:
+        return self.table["rows"][0]
+
+    def to_json(self) -> dict:
+        return {
+            **self.table,
+            "plan": self.plan.to_json()["chosen"],
+            "policy": self.selector,
+            "candidates": self.candidates,
+            "chosen_candidate": self.chosen_candidate,
+            "budget": self.budget,
+            "analytic_pinch": self.analytic_pinch,
+            "seconds": self.seconds,
+        }
+
+
+def run_pipeline(
+    contour: str,
+    out: str | Path,
+    *,
+    budget: str = "fast",
+    selector: str = "rl",
+    shared_policy: bool = False,
+    candidates: int | None = None,
+    rl_candidates: int | None = None,
+    iterations: int | None = None,
+    trials: int | None = None,
+    num_envs: int | None = None,
+    config: SimConfig | None = None,
+    arm: ArmModel | None = None,
+    analytic_pinch: str = "feasible",
+    device: str | None = None,
+    seed: int = 0,
+    log: Callable[[str], None] = lambda _: None,
+    progress: bool = True,
+    step_callbacks: StepCallbacks | None = None,
+) -> RunReport:
+    """Plan ``contour``, choose the pinch candidate with ``selector``, evaluate every method.
+
+    Args:
+        contour: Built-in name or contour file.
+        out: Run directory: ``plan.json``, ``results.json`` and the policies (``rl/candidate-K/``, or
+            ``rl/`` for a shared policy).
+        budget: A :data:`BUDGETS` preset; ``candidates``, ``rl_candidates``, ``iterations`` and ``trials``
+            override its fields.
+        selector: ``rl`` (a PPO policy per candidate; the one that validates best wins), ``fixed`` (the
+            plan's choice) or ``analytic`` (each candidate scored with the analytic policy, noise-free).
+        shared_policy: With rl: one policy for all the candidates, observing its pinch point.
+        num_envs: PPO envs per policy (default 64; shared: 64, or 8 per candidate when more).
+        config: Simulation settings (default: ``SimConfig()``).
+        arm: The cutting arm's footprint for pinch feasibility (default: the paper's).
+        analytic_pinch: :data:`ANALYTIC_PINCHES`.
+        device: Warp device.
+        seed: Seed of everything random.
+        log: Called with each progress line.
+        progress: Show PPO's progress bars.
+        step_callbacks: Step callbacks of the evaluation's batches (:data:`agents.methods.StepCallbacks`).
+    """
+    if budget not in BUDGETS:
+        raise ValueError(f"budget: choose one of {', '.join(BUDGETS)} (got {budget!r})")
+    if selector not in SELECTORS:
+        raise ValueError(f"selector: choose one of {', '.join(SELECTORS)} (got {selector!r})")
+    settings = dict(BUDGETS[budget])
+    overrides = dict(candidates=candidates, rl_candidates=rl_candidates, iterations=iterations, trials=trials)
+    settings.update({k: v for k, v in overrides.items() if v is not None})
+    config = (config or SimConfig()).validated()
+    out = Path(out)
+    loaded = load_contour(contour)
+    start = time.perf_counter()
+
+    log(f"[1/3] planning {loaded.name}: {settings['candidates']} pinch candidates")
+    plan = plan_cut(
+        loaded, config, num_candidates=settings["candidates"], seed=seed, device=device, arm=arm or ArmModel()
+    )
+    write_json(out / "plan.json", plan.to_json())
+    pinch = plan.chosen["pinch"]
+    log(
+        f"      {len(plan.segments)} segment(s), order {list(plan.order)}, pinch "
+        f"({pinch[0]:.1f}, {pinch[1]:.1f}) with fixed tension: {plan.chosen['error_vertices']:.1f} vertices"
+    )
+    listed = _ranked_candidates(plan, settings["rl_candidates"] if selector == "rl" else None)
+    analytic = Method("analytic", pinches=analytic_pinches(analytic_pinch, [loaded], [plan]))
+    runs: list[Path] = []
+    rl_dir = None
+    if selector == "fixed":
+        chosen = 0  # the plan's choice: the best candidate by fixed tension
+        log("[2/3] --policy fixed: the plan's pinch and order")
+    elif selector == "analytic":
+        log(f"[2/3] scoring the analytic policy at {len(listed)} pinch candidate(s)")
+        chosen = _choose_by_analytic(loaded, plan, listed, config, device, seed)
+        best = listed[chosen]
+        analytic = Method(
+            "analytic", pinches=[np.asarray(best["pinch"])], segments=[plan.ordered_segments(best["order"])]
+        )
+    else:
+        train = dict(iterations=settings["iterations"], seed=seed, eval_trials=settings["trials"])
+        rl_dir, chosen, runs = _train_candidates(
+            contour, plan, listed, config, out, shared_policy, num_envs, device, train, log, progress
+        )
+    log(f"      chosen by {selector}: {_candidate_text(listed[chosen])}")
+
+    methods = ["none", "fixed", "analytic"] + (["rl"] if selector == "rl" else [])
+    log(f"[3/3] evaluating {', '.join(methods)}: {settings['trials']} trials each")
+    specs = [Method("none"), Method("fixed", pinches=[pinch]), analytic]
+    if rl_dir is not None:
+        rl = rollout_errors(
+            rl_dir,
+            settings["trials"],
+            seed=seed + 1,
+            device=device,
+            on_step=None if step_callbacks is None else step_callbacks("rl", 0),
+            paired_noise=(seed, 0),  # the baselines' trials' noise (evaluate_suite below, same seed)
+        )
+        specs.append(Method("rl", result=MethodResult.from_rollouts([rl])))
+    table = evaluate_suite(
+        [loaded],
+        specs,
+        trials=settings["trials"],
+        config=config,
+        device=device,
+        seed=seed,
+        segments=[plan.ordered_segments()],
+        step_callbacks=step_callbacks,
+    )
+    report = RunReport(
+        loaded, config, plan, selector, methods, table, listed, chosen, budget, analytic_pinch,
+        time.perf_counter() - start, runs,
+    )  # fmt: skip
+    write_json(out / "results.json", report.to_json())
+    return report
+
+
+def _ranked_candidates(plan: Plan, keep: int | None) -> list[dict]:
+    """The plan's candidates, best by fixed tension first (the first ``keep``; None: all)."""
+    ranked = sorted(range(len(plan.candidates)), key=lambda c: plan.candidates[c]["error_vertices"])
+    return [
+        {
+            "pinch": [float(v) for v in c["point"]],
+            "order": [int(k) for k in c["best_order"]],
+            "fixed_error_vertices": float(c["error_vertices"]),
+        }
+        for c in (plan.candidates[k] for k in ranked[:keep])
+    ]
+
+
+def _candidate_text(candidate: dict) -> str:
+    """A candidate's pinch, order and scores, as the progress lines show them."""
+    scores = ("fixed_error_vertices", "analytic_error_vertices", "rl_validation_error_vertices")
+    return (
+        f"pinch ({candidate['pinch'][0]:.1f}, {candidate['pinch'][1]:.1f}), order {candidate['order']}"
+        + "".join(f", {k.split('_')[0]} {candidate[k]:.1f}" for k in scores if k in candidate)
+        + " vertices"
+    )
+
+
+def _choose_by_analytic(
+    contour: Contour, plan: Plan, listed: list[dict], config: SimConfig, device: str | None, seed: int
+) -> int:
+    """Score the analytic policy at every candidate (noise-free, one batch); the index of the best."""
+    scores = run_method(
+        [contour] * len(listed),
+        [np.asarray(c["pinch"]) for c in listed],
+        AnalyticTension(),
+        1,
+        config.replace(noise_std=0.0),
+        device,
+        seed,
+        segments=[plan.ordered_segments(c["order"]) for c in listed],
+    ).error_vertices[:, 0]
+    for c, e in zip(listed, scores, strict=True):
+        c["analytic_error_vertices"] = float(e)
+    return int(np.argmin(scores))
+
+
+def _train_candidates(
+    contour: str,
+    plan: Plan,
+    listed: list[dict],
+    config: SimConfig,
+    out: Path,
+    shared: bool,
+    num_envs: int | None,
+    device: str | None,
+    train: dict,
+    log: Callable[[str], None],
+    progress: bool,
+) -> tuple[Path, int, list[Path]]:
+    """The rl selector: a PPO policy per candidate in ``listed`` (or one shared by all), each candidate cut
+    in its best order; records each candidate's validation error in ``listed``. Returns the winner's run
+    directory, its index (the first, i.e. the better fixed rank, among ties) and every run directory."""
+    cuts = [[s.tolist() for s in plan.ordered_segments(c["order"])] for c in listed]
+    common = dict(contour=contour, sim_config=config, device=device, **RECIPE)
+    if shared:
+        envs = num_envs or max(64, 8 * len(listed))
+        choices = [{"pinch": c["pinch"], "segments": s} for c, s in zip(listed, cuts, strict=True)]
+        jobs = [(out / "rl", PatternCutOptions(candidates=choices, **common))]
+        what = f"one RL policy shared by {len(listed)} pinch candidate(s) ({envs} envs"
+    else:
+        envs = num_envs or 64
+        jobs = [
+            (out / "rl" / f"candidate-{k}", PatternCutOptions(pinch_point=c["pinch"], segments=s, **common))
+            for k, (c, s) in enumerate(zip(listed, cuts, strict=True))
+        ]
+        what = f"an RL policy for each of the best {len(listed)} pinch candidate(s) ({envs} envs each"
+    log(f"[2/3] training {what}, {train['iterations']} PPO iterations)")
+    for k, (run_dir, options) in enumerate(jobs):
+        summary = train_policy(options, run_dir, num_envs=envs, progress=progress, **train)
+        if shared:
+            errors = summary["candidates"]["validation_error_vertices"]
+            for c, e in zip(listed, errors, strict=True):
+                c["rl_validation_error_vertices"], c["run"] = e, str(run_dir.relative_to(out))
+            return run_dir, int(summary["candidates"]["chosen"]), [run_dir]
+        listed[k]["rl_validation_error_vertices"] = summary["best"]["validation_error"]
+        listed[k]["rl_best_iteration"] = summary["best"]["iterations"]
+        listed[k]["run"] = str(run_dir.relative_to(out))
+        log(
+            f"      candidate ({listed[k]['pinch'][0]:.1f}, {listed[k]['pinch'][1]:.1f}): fixed "
+            f"{listed[k]['fixed_error_vertices']:.1f}, rl {summary['best']['validation_error']:.1f} vertices "
+            "(validation)"
+        )
+    chosen = min(range(len(listed)), key=lambda k: (listed[k]["rl_validation_error_vertices"], k))
+    return out / listed[chosen]["run"], chosen, [run_dir for run_dir, _ in jobs]
+
+
+# --- evaluate_table -------------------------------------------------------------------------------------
+
+
+def resolve_contours(specs: Sequence[str]) -> list[tuple[str, Contour]]:
+    """``(spec, contour)`` for each name or file in ``specs`` (comma-separated allowed); ``all``: the
+    built-in suite (after any other given)."""
+    names = [s.strip() for arg in specs for s in arg.split(",") if s.strip()]
+    if "all" in names:
+        names = [s for s in names if s != "all"] + [n for n in builtin_names() if n not in names]
+    if not names:
+        raise ValueError("contours: give at least one contour name or file, or 'all'")
+    return [(s, load_contour(s)) for s in names]
+
+
+@dataclass
+class TableReport:
+    """What :func:`evaluate_table` measured; :meth:`to_json` is the run directory's ``results.json``."""
+
+    contours: list[Contour]
+    methods: list[str]
+    config: SimConfig
+    table: dict
+    """:func:`agents.evaluation.evaluate_suite`'s report: ``rows``, ``mean``, ``score``, ``trials``."""
+    plans: list[Plan] | None
+    analytic_pinch: str
+    seconds: float
+    policy_runs: list[Path] = field(default_factory=list)
+    """The run directories of the policies trained here (empty with checkpoints, or without rl)."""
+
+    def to_json(self) -> dict:
+        return {
+            **self.table,
+            "planned": self.plans is not None,
+            "analytic_pinch": self.analytic_pinch,
+            "seconds": self.seconds,
+        }
+
+    def markdown(self) -> str:
+        """The table as Markdown: per contour the no-tension error and each method's improvement ± CI."""
+        shown = [m for m in self.methods if m != "none"]
+        head = "| contour | no tension (vertices) | " + " | ".join(f"{m} (%)" for m in shown) + " |"
+        lines = [head, "|---|---|" + "---|" * len(shown)]
+        for row in self.table["rows"]:
+            cells = [f"{row[f'{m}_improvement_pct']:+.1f} ± {row[f'{m}_ci95']:.1f}" for m in shown]
+            lines.append(
+                f"| {row['contour']} | {row['none_error_vertices']:.1f} | " + " | ".join(cells) + " |"
+            )
+        mean = self.table["mean"]
+        cells = [f"{mean[f'{m}_improvement_pct']:+.1f} ± {mean[f'{m}_ci95']:.1f}" for m in shown]
+        lines.append("| **mean** | | " + " | ".join(cells) + " |")
+        return "\n".join(lines)
+
+
+def evaluate_table(
+    contours: Sequence[str],
+    out: str | Path,
+    *,
+    methods: Sequence[str] = tuple(METHODS),
+    trials: int = EVALUATION_TRIALS,
+    config: SimConfig | None = None,
+    checkpoints: str | Path | None = None,
+    iterations: int = TrainConfig.iterations,
+    num_envs: int = TrainConfig.num_envs,
+    plan: bool = True,
+    candidates: int = EVALUATION_CANDIDATES,
+    arm: ArmModel | None = None,
+    analytic_pinch: str = "feasible",
+    device: str | None = None,
+    seed: int = 0,
+    log: Callable[[str], None] = lambda _: None,
+    step_callbacks: StepCallbacks | None = None,
+) -> TableReport:
+    """The paper's Table I protocol on ``contours``.
+
+    Every contour is cut as planned (``plan``: segments and order; fixed and rl pinch at the planned point,
+    analytic per ``analytic_pinch``), or without a plan as one loop (fixed by random search, rl and
+    analytic at the feasible centroid). The rl column is a policy per contour: ``checkpoints/NAME`` when
+    ``checkpoints`` is given (runs ``warpcut train`` wrote), else trained now with the recipe into
+    ``out/policies/NAME``. Its trials draw the baselines' noise (paired).
+
+    Args:
+        contours: Built-in names or contour files (``all``: the built-in suite).
+        out: Run directory: ``plans.json``, ``results.json``, ``policies/``.
+        methods: Names from :data:`agents.methods.METHODS`.
+        trials: Trials per contour and method.
+        config: Simulation settings (default ``SimConfig()``); plans are searched noise-free.
+        checkpoints: Directory of trained runs, one per contour.
+        iterations, num_envs: PPO iterations and envs per contour when training.
+        plan: Plan every cut (see above).
+        candidates: Pinch candidates per plan.
+        arm: The cutting arm's footprint for pinch feasibility (default: the paper's).
+        analytic_pinch: :data:`ANALYTIC_PINCHES`.
+        device: Warp device.
+        seed: Seed of everything random.
+        log: Called with each progress line.
+        step_callbacks: Step callbacks of the batches (``("rl", k)``: contour k's rollout).
+    """
+    unknown = [m for m in methods if m not in METHODS]
+    if not methods or unknown:
+        raise ValueError(
+            f"methods: unknown {', '.join(unknown) or 'empty list'}; choose from {','.join(METHODS)}"
+        )
+    config = (config or SimConfig()).validated()
+    out = Path(out)
+    named = resolve_contours(contours)
+    loaded = [c for _, c in named]
+    if checkpoints is not None and "rl" in methods:
+        for contour in loaded:
+            if not is_run(Path(checkpoints) / contour.name):
+                raise ValueError(
+                    f"checkpoints: no trained run for {contour.name!r} at {Path(checkpoints) / contour.name} "
+                    "(expected CHECKPOINTS/NAME/options.json from 'warpcut train --out')"
+                )
+    start = time.perf_counter()
+    plans = None
+    if plan:
+        plans = []
+        for contour in loaded:
+            log(f"  planning {contour.name} ({candidates} candidates)")
+            plans.append(
+                plan_cut(
+                    contour,
+                    config.replace(noise_std=0.0),
+                    num_candidates=candidates,
+                    seed=seed,
+                    device=device,
+                    arm=arm or ArmModel(),
+                )  # fmt: skip
+            )
+        write_json(out / "plans.json", {p.contour.name: p.to_json() for p in plans})
+    specs = [Method(m) for m in methods]
+    runs: list[Path] = []
+    for spec in specs:
+        if spec.name == "fixed" and plans is not None:
+            spec.pinches = [p.chosen["pinch"] for p in plans]
+        elif spec.name == "analytic":
+            spec.pinches = analytic_pinches(analytic_pinch, loaded, plans)
+        elif spec.name == "rl":
+            spec.result, runs = _rl_result(
+                named, plans, checkpoints, out, trials, config, iterations, num_envs, device, seed, log,
+                step_callbacks,
+            )  # fmt: skip
+    table = evaluate_suite(
+        loaded,
+        specs,
+        trials=trials,
+        config=config,
+        device=device,
+        seed=seed,
+        segments=None if plans is None else [p.ordered_segments() for p in plans],
+        progress=lambda what: log(f"  running {what}"),
+        step_callbacks=step_callbacks,
+    )
+    report = TableReport(
+        loaded, list(methods), config, table, plans, analytic_pinch, time.perf_counter() - start, runs
+    )
+    write_json(out / "results.json", report.to_json())
+    return report
+
+
+def _rl_result(
+    named: list[tuple[str, Contour]],
+    plans: list[Plan] | None,
+    checkpoints: str | Path | None,
+    out: Path,
+    trials: int,
+    config: SimConfig,
+    iterations: int,
+    num_envs: int,
+    device: str | None,
+    seed: int,
+    log: Callable[[str], None],
+    step_callbacks: StepCallbacks | None,
+) -> tuple[MethodResult, list[Path]]:
+    """The rl column: per contour a run (from ``checkpoints`` or trained now, at the planned pinch and
+    segments when planned) rolled out for ``trials``, paired with the baselines' noise."""
+    rollouts, runs = [], []
+    for k, (spec, contour) in enumerate(named):
+        if checkpoints is not None:
+            run = Path(checkpoints) / contour.name
+        else:
+            run = out / "policies" / contour.name
+            log(f"  training rl for {contour.name} ({iterations} iterations)")
+            planned = {}
+            if plans is not None:
+                planned = {
+                    "pinch_point": [float(v) for v in plans[k].chosen["pinch"]],
+                    "segments": [s.tolist() for s in plans[k].ordered_segments()],
+                }
+            options = PatternCutOptions(contour=spec, sim_config=config, device=device, **RECIPE, **planned)
+            train_policy(
+                options, run, iterations=iterations, num_envs=num_envs, seed=seed, eval_trials=trials,
+                progress=False,
+            )  # fmt: skip
+            runs.append(run)
+        callback = None if step_callbacks is None else step_callbacks("rl", k)
+        # Trial t sees the noise of the baselines' trial t of this contour (env k * trials + t there).
+        rollouts.append(
+            rollout_errors(
+                run, trials, seed=seed + 1, device=device, on_step=callback, paired_noise=(seed, k * trials)
+            )
+        )
+    return MethodResult.from_rollouts(rollouts), runs

@@ -1,0 +1,199 @@
+"""The env contract of pattern cutting with a tensioning arm (Thananjeyan et al., ICRA 2017).
+
+One arm cuts a contour open loop; the policy moves the other arm's grasp 1 mm at a time to keep the sheet
+in tension. :class:`PatternCut` is the batched engine (B sheets on one episode clock, NumPy in and out):
+what every env is. :class:`envs.pattern_cut.PatternCutEnv` is one sheet as a ``gymnasium.Env``,
+:class:`envs.vector.PatternCutVecEnv` the batch as a ``gymnasium.vector.VectorEnv``; both take the fields
+of :class:`envs.options.PatternCutOptions` as keyword arguments.
+
+Actions:
+    ``"discrete"`` (paper): ``Discrete(5)`` = stay, +x, -x, +y, -y, each ``max_step_mm`` (1 mm);
+    ``allow_z=True`` adds +z, -z (``Discrete(7)``). ``"continuous"``: ``Box(-1, 1, (2,))``, the x and y
+    move in units of ``max_step_mm`` (``(3,)`` with ``allow_z``); values outside [-1, 1] are clipped.
+    Any NaN or infinite (or, for discrete, non-integer or out-of-range) action raises ``ValueError``. The
+    simulator also caps the grasp's total displacement at ``max_displacement_mm``.
+
+Reward:
+    Sparse (paper): 0 before the last step; at it, ``-error_mm2 / contour.area_mm2``, the cut's error
+    (``sim_config.score``: the paper's path score by default, :mod:`warpcut.scoring`) relative to the
+    intended area. With ``dense_reward``, every step also adds ``-deviation / max_displacement_mm /
+    num_steps``, where ``deviation`` is the mean distance, in material coordinates, between where the
+    scissors cut during the step and where they meant to cut (:meth:`CuttingTask.cut_deviation`: the path
+    score's own increment; 0 while the tip travels), so an episode's shaping sums to about minus the mean
+    deviation in units of ``max_displacement_mm``.
+
+Episode:
+    Ends (``terminated``) once the scissors have followed the whole trajectory, ``num_steps`` steps. Every
+    step's ``info`` has ``cut_deviation_mm`` (that step's mean deviation, NaN while travelling) and
+    ``running_path_error_mm2`` (the deviations so far times the tip's advance: the area between the
+    intended and the cut path so far, about what the path score will charge). The last step's ``info``
+    also holds the score (:meth:`warpcut.scoring.Score.info`: ``error_vertices``, ``error_mm2``, the path
+    and separated errors, ``separated``, ``dropped_fraction``, ``missed_vertices``, ``excess_vertices``)
+    and ``relative_error`` (``error_mm2 / area_mm2``). With ``max_episode_steps`` below ``num_steps`` the
+    episode is instead cut short (``truncated``) with no score and no final reward.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+
+from envs.observations import Fiducials, normalise_positions, observation_bounds, sample_fiducials
+from envs.options import PatternCutOptions
+from warpcut.task import CuttingTask
+
+ACTION_TYPES = ("discrete", "continuous")
+DISCRETE_MOVES = np.array(
+    [[0, 0, 0], [1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.float32
+)
+"""Grasp move of each discrete action, in units of ``max_step_mm``: stay, +x, -x, +y, -y, +z, -z."""
+
+
+class PatternCut:
+    """B pattern-cutting scenes on one episode clock: NumPy observations, actions, rewards; no autoreset.
+
+    Args:
+        options: The scenario.
+        num_envs: Batch size B.
+
+    Attributes:
+        task: The underlying :class:`~warpcut.task.CuttingTask` (what the baseline tensioners drive).
+        fiducials: The tracked fiducial points.
+        observation_space: One env's observation space (layout: :mod:`envs.observations`).
+        action_space: One env's action space.
+        area_mm2: (B,) intended area of each env's contour (mm^2).
+        episode_steps: Steps per episode: the cut's ``num_steps``, or ``max_episode_steps`` if smaller.
+    """
+
+    def __init__(self, options: PatternCutOptions, num_envs: int):
+        if options.action_type not in ACTION_TYPES:
+            raise ValueError(f"action_type: choose one of {ACTION_TYPES} (got {options.action_type!r})")
+        if not isinstance(options.num_fiducials, int) or options.num_fiducials < 0:
+            raise ValueError(f"num_fiducials: must be a non-negative integer (got {options.num_fiducials!r})")
+        if not options.shaft_radius_mm >= 0:
+            raise ValueError(f"shaft_radius_mm: must be >= 0 mm (got {options.shaft_radius_mm!r})")
+        if options.max_episode_steps is not None and options.max_episode_steps < 1:
+            raise ValueError(f"max_episode_steps: must be >= 1 or None (got {options.max_episode_steps!r})")
+        self.options = options
+        self.num_envs = num_envs
+        config = options.config()
+        contours, pinch_points, segments = options.per_env(num_envs)
+        self.task = CuttingTask(
+            config, contours, num_envs, pinch_points=pinch_points, segments=segments, device=options.device
+        )
+        self.config = self.task.config
+        self.area_mm2 = np.array([c.area_mm2 for c in contours])
+        self.episode_steps = min(self.task.num_steps, options.max_episode_steps or self.task.num_steps)
+        self.fiducials = Fiducials(self.task.grid, options.shaft_radius_mm)
+        self.task.fiducials = self.fiducials  # what a recording of the task shows
+        low, high = observation_bounds(options.num_fiducials, options.contour_features, options.observe_pinch)
+        self.observation_space = gym.spaces.Box(low, high, dtype=np.float32)
+        num_axes = 3 if options.allow_z else 2
+        if options.action_type == "discrete":
+            self.action_space = gym.spaces.Discrete(1 + 2 * num_axes)
+        else:
+            self.action_space = gym.spaces.Box(-1.0, 1.0, (num_axes,), dtype=np.float32)
+        self._sampled = False
+        self._running_path_error = np.zeros(num_envs)
+
+    @property
+    def step_index(self) -> int:
+        """Steps taken in the current episode."""
+        return self.task.step_index
+
+    def reset(self, rng: np.random.Generator, resample_fiducials: bool) -> np.ndarray:
+        """Start an episode with process noise seeded from ``rng``; return (B, D) observations.
+
+        Args:
+            rng: Random source of the noise seed and of the fiducials.
+            resample_fiducials: Draw new fiducials (always done at the first reset).
+        """
+        seed = int(rng.integers(2**31 - 1))
+        if resample_fiducials or not self._sampled:
+            self.fiducials.material = sample_fiducials(
+                rng, self.options.num_fiducials, self.task.contours, self.task.pinch_points, self.config
+            )
+            self._sampled = True
+        self.task.reset(seed=seed)
+        self._running_path_error = np.zeros(self.num_envs)
+        self.fiducials.reset(self.task.sim.positions())
+        return self.observe()
+
+    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool, bool, dict[str, np.ndarray]]:
+        """Move the grasps, advance the scissors one step.
+
+        Args:
+            actions: (B,) action indices (discrete; integer-valued floats are accepted) or (B, A) moves in
+                units of ``max_step_mm`` (continuous).
+
+        Returns:
+            ``(observations (B, D) float32, rewards (B,) float64, terminated, truncated, info)``; ``info``
+            holds (B,) arrays: every step the cut's deviation, and at the last step of a completed cut the
+            score (module docstring).
+        """
+        if self.task.done or self.step_index >= self.episode_steps:
+            raise RuntimeError("step: the episode is over; call reset() first")
+        first_update = self.task.update_index
+        self.task.step(self.moves(actions))
+        terminated = self.task.done
+        truncated = not terminated and self.step_index >= self.episode_steps
+        rewards = np.zeros(self.num_envs)
+        deviation, count = self.task.cut_deviation(first_update, self.task.update_index)
+        moved = np.nan_to_num(deviation, nan=0.0)
+        self._running_path_error += moved * count * self.config.trajectory_spacing_mm
+        if self.options.dense_reward:
+            rewards -= moved / self.config.max_displacement_mm / self.task.num_steps
+        info = {"cut_deviation_mm": deviation, "running_path_error_mm2": self._running_path_error.copy()}
+        if terminated:
+            score = self.task.score()
+            relative = score.error_mm2 / self.area_mm2
+            rewards -= relative
+            info.update(score.info(), relative_error=relative)
+        return self.observe(), rewards, terminated, truncated, info
+
+    def moves(self, actions: np.ndarray) -> np.ndarray:
+        """(B, 3) grasp moves (mm) for a batch of actions; raise ``ValueError`` naming a bad action."""
+        actions = np.asarray(actions)
+        b = self.num_envs
+        if actions.dtype.kind not in "biuf":
+            raise ValueError(f"action: expected numbers, got {actions!r}")
+        finite = np.isfinite(actions)
+        if not finite.all():
+            env = int(np.argwhere(~finite)[0][0]) if actions.ndim else 0
+            raise ValueError(f"action: {actions.tolist()} is not finite (env {env}); give finite numbers")
+        if isinstance(self.action_space, gym.spaces.Discrete):
+            n = int(self.action_space.n)
+            if actions.shape != (b,):
+                raise ValueError(f"action: expected shape ({b},) of indices in [0, {n}), got {actions.shape}")
+            if np.any(actions != np.round(actions)) or np.any((actions < 0) | (actions >= n)):
+                raise ValueError(f"action: {actions.tolist()} must be integers in [0, {n})")
+            return DISCRETE_MOVES[actions.astype(np.int64)] * self.config.max_step_mm
+        num_axes = self.action_space.shape[0]
+        if actions.shape != (b, num_axes):
+            raise ValueError(f"action: expected shape ({b}, {num_axes}), got {actions.shape}")
+        moves = np.zeros((b, 3), dtype=np.float32)
+        moves[:, :num_axes] = np.clip(actions, -1.0, 1.0) * self.config.max_step_mm
+        return moves
+
+    def tracking_error(self) -> np.ndarray:
+        """(B, 3) ``target_world() - tip`` (mm) for the next update; NaN while travelling or done."""
+        return self.task.target_world() - self.task.tip_positions()[:, :3]
+
+    def observe(self) -> np.ndarray:
+        """(B, D) float32 observations of the current state (layout: :mod:`envs.observations`)."""
+        u = self.task.update_index
+        tip = self.task.tip_positions(max(u - 1, 0))  # where the scissors are now
+        fiducials = self.fiducials.track(self.task.sim.positions(), self.task.sim.alive_mask(), tip)
+        parts = [
+            np.full((self.num_envs, 1), self.step_index / self.task.num_steps),
+            self.task.sim.displacements() / self.config.max_displacement_mm,
+            normalise_positions(fiducials, self.config).reshape(self.num_envs, -1),
+        ]
+        if self.options.contour_features:
+            tracking = np.nan_to_num(self.tracking_error(), nan=0.0) / self.config.max_displacement_mm
+            parts += [normalise_positions(tip[:, :3], self.config), tip[:, 3:4], tracking]
+        if self.options.observe_pinch:
+            pinch = np.nan_to_num(self.task.pinch_points, nan=0.0)
+            parts.append(normalise_positions(np.pad(pinch, ((0, 0), (0, 1))), self.config)[:, :2])
+        obs = np.concatenate(parts, axis=1).astype(np.float32)
+        return np.clip(obs, self.observation_space.low, self.observation_space.high)
