@@ -12,10 +12,10 @@ import time
 
 import numpy as np
 
-from agents.evaluation import ci95
 from warpcut import SimConfig
 from warpcut.contours import builtin_contours
 from warpcut.planning import nearest_feasible
+from warpcut.scoring import ci95
 from warpcut.task import CuttingTask
 
 SIGMAS = (0.0, 0.01, 0.02, 0.03, 0.05)

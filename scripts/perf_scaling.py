@@ -35,9 +35,10 @@ def scaling(device: str, repeats: int) -> dict:
 def breakdown(device: str, repeats: int) -> list[tuple[str, float]]:
     """Per-update time at B=1024 split by stage, from runs that switch stages off one at a time."""
     b = 1024
+    sweeps = SimConfig().sweeps
     full = b / updates_per_second(SimConfig(), b, device, repeats)
-    one_sweep = b / updates_per_second(SimConfig(iterations=1), b, device, repeats)
-    per_sweep = (full - one_sweep) / 19
+    one_sweep = b / updates_per_second(SimConfig(sweeps=1), b, device, repeats)
+    per_sweep = (full - one_sweep) / (sweeps - 1)
     integrate_cut = one_sweep - per_sweep
     # Python-side cost of a task step at B=1: everything that is not the kernel.
     task = CuttingTask(SimConfig(), load_contour("fls-circle"), num_envs=1, device=device)
@@ -52,7 +53,7 @@ def breakdown(device: str, repeats: int) -> list[tuple[str, float]]:
     step_time = sorted(times[1:])[len(times[1:]) // 2]
     kernel_b1 = 1 / updates_per_second(SimConfig(), 1, device, repeats)
     return [
-        ("relaxation, 20 sweeps (B=1024, per update)", 20 * per_sweep),
+        (f"relaxation, {sweeps} sweeps (B=1024, per update)", sweeps * per_sweep),
         ("integrate + cut (B=1024, per update)", integrate_cut),
         ("whole update (B=1024)", full),
         ("kernel launch + update (B=1)", kernel_b1),

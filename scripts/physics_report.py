@@ -12,9 +12,9 @@ import time
 
 import numpy as np
 
-from agents.evaluation import ci95
 from warpcut import SimConfig, Simulator
 from warpcut.contours import builtin_contours
+from warpcut.scoring import ci95
 from warpcut.sim.simulator import settled_figures
 from warpcut.task import CuttingTask
 
@@ -29,7 +29,7 @@ def settle_table(device: str) -> None:
         ("default (corners)", SimConfig()),
         ("corners", SimConfig(springs=("structural", "shear", "bending"))),
         ("corners", SimConfig(springs=("structural",))),
-        ("corners", SimConfig(springs=("structural",), iterations=5)),
+        ("corners", SimConfig(springs=("structural",), sweeps=5)),
         ("authors preset (rows)", SimConfig.authors()),
     ]
     for label, config in settings:
@@ -43,7 +43,7 @@ def settle_table(device: str) -> None:
             sim.update()
         drift = abs(sim.positions()[0, centre, 2] - settled[centre, 2])
         print(
-            f"| {label} | {'+'.join(config.springs)} | {config.iterations} | {sag:.1f} | "
+            f"| {label} | {'+'.join(config.springs)} | {config.sweeps} | {sag:.1f} | "
             f"{stretch_mean:.1f} / {stretch_max:.0f} | {drift:.2f} |"
         )
 

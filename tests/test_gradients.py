@@ -37,7 +37,7 @@ def mean_height_after(sim: Simulator, displacement: wp.array, updates: int, tape
 
 
 def test_tape_gradient_matches_finite_differences(device):
-    sim = Simulator(SimConfig(resolution=11, iterations=10), 1, device=device)
+    sim = Simulator(SimConfig(resolution=11, sweeps=10), 1, device=device)
     base = np.array([2.0, -1.5, 3.0], dtype=np.float32)
     updates = 8
     displacement = wp.array([base], dtype=wp.vec3, device=device, requires_grad=True)

@@ -13,8 +13,10 @@ POSITION_TOLERANCE_MM = 1e-2
 relaxation carries it along: the largest gap measured over this cut is ~4e-3 mm on a 100 mm sheet."""
 
 
-@pytest.mark.parametrize("backend", ["simd", "fused", "colours"])
+@pytest.mark.parametrize("backend", ["simd", "colours"])
 def test_warp_matches_numpy_reference_through_a_full_cut(device, backend):
+    if backend == "simd" and device != "cpu":
+        pytest.skip("the simd backend runs on the CPU only")
     config = SimConfig(resolution=17, noise_std=0.0)
     contour = load_contour("fls-circle")
     task = CuttingTask(config, contour, pinch_points=contour.centroid, device=device, backend=backend)

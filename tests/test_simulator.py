@@ -3,7 +3,7 @@ import pytest
 import warp as wp
 
 from warpcut import ConfigError, SheetGrid, SimConfig, Simulator
-from warpcut.sim.simulator import colour_springs, spring_colours
+from warpcut.sim.springs import colour_springs, spring_colours
 
 
 def structural_stretch(positions: np.ndarray, grid: SheetGrid) -> np.ndarray:
@@ -137,7 +137,7 @@ def test_a_cut_height_limit_misses_material_far_from_the_tip(device):
         ({"elasticity": 2.0}, r"elasticity: must lie in \(0, 2\)"),
         ({"fixture": "edges"}, "fixture: choose one of"),
         ({"springs": ("shear",)}, "springs: choose from"),
-        ({"iterations": 0}, "iterations: must be an integer"),
+        ({"sweeps": 0}, "sweeps: must be an integer"),
         ({"gravity": [1.0, float("nan")]}, "gravity: must be finite"),
         ({"cut_height_mm": -1.0}, "cut_height_mm: must be a positive number .* None .*no limit"),
         ({"score": "area"}, "score: choose one of"),
@@ -159,14 +159,12 @@ def test_unknown_device_is_reported():
 
 
 def test_backends_are_bit_identical(device):
-    """simd (several blocks of 8 envs, over threads), fused and colours (launched one by one, or replayed
-    from captured graphs): the same bits, noise included, across a reset."""
+    """simd (several blocks of 8 envs, over threads) and colours (launched one by one, or replayed from
+    captured graphs): the same bits, noise included, across a reset."""
     config = SimConfig(resolution=13, noise_std=0.05)
     pinches = np.tile([[50.0, 50.0], [np.nan, np.nan], [30.0, 60.0]], (4, 1))[:11]
     cpu = wp.get_device(device).is_cpu
-    variants = (
-        [("simd", 1, False), ("simd", 2, False), ("fused", 1, False), ("fused", 2, False)] if cpu else []
-    )
+    variants = [("simd", 1, False), ("simd", 2, False)] if cpu else []
     results = []
     for backend, threads, capture in [*variants, ("colours", None, False), ("colours", None, True)]:
         sim = Simulator(config, 11, device=device, seed=3, backend=backend, threads=threads, capture=capture)

@@ -1,7 +1,8 @@
 """``warpcut bench``: throughput of the simulator, measured in one run so ratios are comparable.
 
 Every figure is the median over ``repeats`` timed repetitions, after a warm-up. The machines this runs
-on are shared and noisy: compare ratios measured in one run, not absolute figures across runs.
+on are shared and noisy: compare ratios measured in one run, not absolute figures across runs. What lies
+above the simulator (e.g. training) is measured by the caller's ``extra`` functions (:func:`run_bench`).
 """
 
 from __future__ import annotations
@@ -21,11 +22,13 @@ from warpcut.sim.config import SimConfig
 from warpcut.sim.simulator import Simulator
 
 BATCH_SIZES = (1, 64, 1024, 4096)
-PAPER_SWEEPS = SimConfig(springs=("structural",), iterations=5, noise_std=0.0)
+SIM_ENV_STEP_ENVS = 64
+"""Batch of the ``sim_env_steps_per_s`` measurement: the envs a training run steps by default."""
+PAPER_SWEEPS = SimConfig(springs=("structural",), sweeps=5, noise_std=0.0)
 """The issue's and the paper's unit of work: one update = integrate + 5 structural relaxation sweeps,
 without process noise (the authors' code had none)."""
 NOISE_FREE = SimConfig(noise_std=0.0)
-"""The default physics without its process noise: what the noise costs (Warp's RNG per vertex)."""
+"""The default physics without its process noise: what the noise costs (one hashed draw per vertex)."""
 
 
 def median_time(fn: Callable[[], None], repeats: int, sync: Callable[[], None]) -> float:
@@ -70,6 +73,26 @@ def rollouts_per_second(num_envs: int, device: str, repeats: int, config: SimCon
 
     task = CuttingTask(config or SimConfig(), load_contour("fls-circle"), num_envs=num_envs, device=device)
     return num_envs / median_time(lambda: task.run(None), repeats, lambda: wp.synchronize_device(device))
+
+
+def env_steps_per_second(num_envs: int, device: str, repeats: int) -> float:
+    """Env steps per second of a tensioned ``fls-circle`` cut (default physics, grasp at the centroid):
+    a step is one grasp move plus the scissors' ``updates_per_step`` updates, as a training env steps the
+    simulator (its observations and rewards not included). Timed: reset + every step."""
+    from warpcut.contours import load_contour
+    from warpcut.task import CuttingTask
+
+    contour = load_contour("fls-circle")
+    task = CuttingTask(SimConfig(), contour, num_envs=num_envs, pinch_points=contour.centroid, device=device)
+    action = np.tile([[0.5, 0.0, 0.5]], (num_envs, 1))
+
+    def rollout() -> None:
+        task.reset()
+        while not task.done:
+            task.step(action)
+
+    seconds = median_time(rollout, repeats, lambda: wp.synchronize_device(device))
+    return num_envs * task.num_steps / seconds
 
 
 def scoring_overhead_pct(num_envs: int, device: str, repeats: int) -> float:
@@ -139,21 +162,18 @@ def start_times(device: str) -> dict[str, float]:
     return out
 
 
-def train_steps_per_second(device: str) -> float:
-    """PPO environment steps per second during training (collection + update), 64 envs."""
-    from agents.rl import benchmark_training
-
-    return benchmark_training(device=device)
-
-
 def run_bench(
     device: str,
+    *,
     repeats: int = 3,
     batch_sizes: tuple[int, ...] = BATCH_SIZES,
     rollout_envs: int = 256,
     progress: Callable[[str], None] = lambda _: None,
+    extra: dict[str, Callable[[], float]] | None = None,
 ) -> dict:
-    """Measure everything ``warpcut bench`` reports. Returns the JSON-ready dict."""
+    """Measure the simulator as ``warpcut bench`` reports it, then each of ``extra``: ``result[key] =
+    fn()`` in order (what lies above the simulator, e.g. ``{"train_steps_per_s": ...}``). Returns the
+    JSON-ready dict."""
     result: dict = {
         "device": device,
         "device_name": str(wp.get_device(device).name),
@@ -186,12 +206,15 @@ def run_bench(
     result["rollout_envs"] = rollout_envs
     result["rollouts_per_s"] = rollouts_per_second(rollout_envs, device, repeats)
     result["rollouts_per_s_paper_sweeps"] = rollouts_per_second(rollout_envs, device, repeats, PAPER_SWEEPS)
+    progress(f"tensioned env steps at B={SIM_ENV_STEP_ENVS}")
+    result["sim_env_steps_per_s"] = env_steps_per_second(SIM_ENV_STEP_ENVS, device, repeats)
     progress(f"path-scoring overhead at B={rollout_envs}")
     result["scoring_overhead_pct"] = scoring_overhead_pct(rollout_envs, device, repeats)
     progress("NumPy reference")
     result["numpy_updates_per_s"] = numpy_updates_per_second(repeats)
     best = max(ups.values())
     result["speedup_vs_numpy"] = best / result["numpy_updates_per_s"]
-    progress("PPO training")
-    result["train_steps_per_s"] = train_steps_per_second(device)
+    for key, measure in (extra or {}).items():
+        progress(key)
+        result[key] = measure()
     return result

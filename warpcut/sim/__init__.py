@@ -1,1 +1,61 @@
-"""warpcut/sim"""
+"""The physics: a batch of spring-mass gauze sheets, cut by scissors and pulled by a grasp.
+
+Package map:
+
+- ``config``: :class:`SimConfig` (every parameter, validated; :class:`ConfigError`), :class:`SheetGrid`
+  (the rest layout of the vertices) and the constants (units, fixtures, scores, spring families, the
+  cutting arm's footprint). Plain NumPy.
+- ``springs``: the springs grouped into colours (sets that share no vertex), in sweep order. Plain NumPy.
+- ``material``: material points on the sheet, and their world positions by bilinear interpolation.
+  Plain NumPy.
+- ``simulator``: :class:`Simulator`, the batch on one device (settling, grasp, scissors, cut-path
+  tracing, read-back), and the device helpers.
+- ``kernels``: the ``colours`` backend's Warp kernels (one thread per vertex; GPUs, ``wp.Tape``) and the
+  functions every backend shares (process noise, locating the tip in the deformed mesh).
+- ``kernels_simd``: the ``simd`` backend (the default on CPU: blocks of 8 envs in SIMD lanes).
+- ``reference``: the NumPy implementation of one sheet, the oracle the tests compare against.
+- ``_warp``: Warp, imported quietly; every module that uses Warp imports it from there.
+
+Importing this package, or ``config``, ``springs`` and ``material``, does not load Warp:
+:class:`Simulator` is loaded on first use.
+"""
+
+from importlib import import_module
+
+from warpcut.sim.config import (
+    ARM_LENGTH_MM,
+    ARM_RADIUS_MM,
+    AUTHORS_CUT_RADIUS_MM,
+    AUTHORS_UNITS_PER_MM,
+    FIXTURES,
+    GRAVITY_MM_S2,
+    PHYSICAL_PARAMETERS,
+    SCORES,
+    SPRING_FAMILIES,
+    ConfigError,
+    SheetGrid,
+    SimConfig,
+)
+
+__all__ = [
+    "ARM_LENGTH_MM",
+    "ARM_RADIUS_MM",
+    "AUTHORS_CUT_RADIUS_MM",
+    "AUTHORS_UNITS_PER_MM",
+    "FIXTURES",
+    "GRAVITY_MM_S2",
+    "PHYSICAL_PARAMETERS",
+    "SCORES",
+    "SPRING_FAMILIES",
+    "ConfigError",
+    "SheetGrid",
+    "SimConfig",
+    "Simulator",
+]
+
+
+def __getattr__(name: str):
+    # Warp loads with the simulator, on first use: ``from warpcut.sim import SimConfig`` stays light.
+    if name == "Simulator":
+        return import_module("warpcut.sim.simulator").Simulator
+    raise AttributeError(f"module 'warpcut.sim' has no attribute {name!r}")

@@ -68,13 +68,14 @@ class SimConfig:
     """Fraction of a spring's length error corrected per relaxation sweep (paper tau = 1)."""
     noise_std: PerEnv = 0.03
     """Std. dev. of Gaussian process noise added to every free vertex per update (mm), paper sigma. The
-    default makes seeded trials real samples (the authors' trials differed by their relaxation order):
-    on the built-in suite it spreads the no-tension error by a median 3.5% between trials and moves its
-    mean by ~2% (docs/physics.md); 0 is the noise-free protocol. Settling is always noise-free."""
+    default makes seeded trials real samples (the authors' trials differed by their relaxation order; its
+    calibration: docs/physics.md, "Process noise"); 0 is the noise-free protocol. Settling is always
+    noise-free."""
 
-    iterations: int = 20
-    """Gauss-Seidel relaxation sweeps per update. The paper used 5 with structural springs and rows pinned;
-    clipped corners need shear springs and ~20 sweeps to hang like gauze (docs/physics.md)."""
+    sweeps: int = 20
+    """Gauss-Seidel relaxation sweeps per update, each relaxing every spring colour once. The paper used 5
+    with structural springs and rows pinned; clipped corners need shear springs and ~20 sweeps to hang like
+    gauze (docs/physics.md)."""
     springs: tuple[str, ...] = ("structural", "shear")
     """Spring families: ``structural`` (grid edges), ``shear`` (cell diagonals), ``bending`` (two apart)."""
     fixture: str = "corners"
@@ -140,15 +141,15 @@ class SimConfig:
         z moved without momentum, half the gravity step (their update applies ``g dt^2 / 2``, ours
         ``g dt^2``), a 2.08 mm cut radius (their 10 canvas units) and one update per trajectory point.
 
-        Their settled sheet (200 updates): centre sag 12.5 mm, largest structural stretch 10.0%, mean 2.3%;
-        this preset gives 12.3 mm, 9.6% and 2.2% (``tests/test_simulator.py``). One departure remains:
-        their cut removes only the cut vertex's own springs, so a cut vertex stays tied to its right and
-        upper neighbours and is dragged along; here it is removed with all its springs (docs/physics.md).
+        It hangs the sheet as their code does (docs/physics.md, ``SimConfig.authors()``; checked by
+        ``tests/test_simulator.py::test_authors_preset_reproduces_their_settled_sheet``). One departure
+        remains: their cut removes only the cut vertex's own springs, so a cut vertex stays tied to its right
+        and upper neighbours and is dragged along; here it is removed with all its springs.
         """
         base = dict(
             fixture="rows",
             springs=("structural",),
-            iterations=5,
+            sweeps=5,
             first_order_z=True,
             gravity=GRAVITY_MM_S2 / 2,
             cut_radius_mm=AUTHORS_CUT_RADIUS_MM,
@@ -192,8 +193,8 @@ class SimConfig:
         )
         _require(bool(np.all(np.asarray(self.noise_std) >= 0)), "noise_std", "must be >= 0 (mm)")
         _require(
-            isinstance(self.iterations, int) and 1 <= self.iterations <= 200,
-            "iterations",
+            isinstance(self.sweeps, int) and 1 <= self.sweeps <= 200,
+            "sweeps",
             "must be an integer in [1, 200]",
         )
         unknown = [s for s in self.springs if s not in SPRING_FAMILIES]

@@ -1,13 +1,13 @@
-"""Warp kernels of one simulator update: integrate, relax one spring colour, cut.
+"""Warp kernels of the ``colours`` backend (integrate, relax one spring colour, cut, move the grasps),
+and the functions every backend shares: the process noise and the mapping of the scissor tip into
+material coordinates (the cut path).
 
-All kernels live in this one module so they compile once (a cold compile costs seconds per module).
-Each kernel is launched over ``(num_envs, num_vertices)`` and starts with ``env, v = wp.tid()``; state
-is flattened env-major (``i = env * n + v``). Kernels are out-of-place (state in -> state out): the fast
-path ping-pongs two buffers, a differentiable rollout allocates fresh outputs under ``wp.Tape``.
+All of these live in this one module so they compile once (a cold compile costs seconds per module).
+Each per-vertex kernel is launched over ``(num_envs, num_vertices)`` and starts with ``env, v = wp.tid()``;
+state is flattened env-major (``i = env * n + v``). Kernels are out-of-place (state in -> state out): the
+fast path ping-pongs buffers, a differentiable rollout allocates fresh outputs under ``wp.Tape``.
 A physical parameter array has length 1 (shared) or num_envs and is read as ``p[env % p.shape[0]]``.
 """
-
-from __future__ import annotations
 
 from warpcut.sim._warp import wp
 
@@ -18,8 +18,7 @@ PIN_GRASP = wp.constant(2)
 
 # ---------------------------------------------------------------------------------------------- noise
 # Process noise is drawn from a counter-based integer hash, the same in every backend (bit for bit), and
-# several times cheaper than Warp's rand_init + randn (Box-Muller: logs and cosines per draw), which had
-# halved the default physics' throughput once noise became the default.
+# cheaper than Warp's rand_init + randn (Box-Muller: logs and cosines per draw; docs/performance.md).
 
 NOISE_SCALE = wp.constant(0.0067658750867932)
 """1 / std of the sum of four uniform bytes: sqrt(4 * (256^2 - 1) / 12) = 147.8006."""
@@ -243,121 +242,37 @@ def move_grasp_kernel(
     displacement_out[env] = u
 
 
-@wp.kernel
-def fused_update_kernel(
-    # Model:
-    n: int,
-    env_offset: int,
-    iterations: int,
-    spring_a: wp.array(dtype=wp.int32),
-    spring_b: wp.array(dtype=wp.int32),
-    spring_rest: wp.array(dtype=float),
-    colour_start: wp.array(dtype=wp.int32),
-    damping: wp.array(dtype=float),
-    dt: wp.array(dtype=float),
-    gravity: wp.array(dtype=float),
-    noise_std: wp.array(dtype=float),
-    elasticity: wp.array(dtype=float),
-    first_order_z: int,
-    seed: int,
-    first_stream: int,
-    cut_radius: float,
-    cut_height: float,
-    # Data in:
-    pin: wp.array(dtype=wp.int32),
-    anchor: wp.array(dtype=wp.vec3),
-    displacement: wp.array(dtype=wp.vec3),
-    tip: wp.array(dtype=wp.vec4),
-    # Data in/out:
-    x: wp.array(dtype=wp.vec3),
-    x_prev: wp.array(dtype=wp.vec3),
-    alive: wp.array(dtype=wp.int32),
-):
-    """A whole update of one env per thread, in place: the CPU fast path.
-
-    One launch advances every env by integrate + ``iterations`` sweeps + cut, keeping the env's state
-    hot in cache, instead of one launch per stage and colour. It visits the springs colour by colour in
-    the order of :func:`relax_colour_kernel` and evaluates the same expressions, so it reproduces the
-    out-of-place kernels bit for bit (``tests/test_simulator.py``); it is not differentiable.
-    """
-    env = wp.tid() + env_offset
-    base = env * n
-    h = dt[env % dt.shape[0]]
-    fall = wp.vec3(0.0, 0.0, gravity[env % gravity.shape[0]] * h * h)
-    keep = damping[env % damping.shape[0]]
-    sigma = noise_std[env % noise_std.shape[0]]
-    k = elasticity[env % elasticity.shape[0]]
-    u = displacement[env]
-    for v in range(n):
-        i = base + v
-        p = x[i]
-        q = p
-        kind = pin[i]
-        if kind == PIN_FIXTURE:
-            q = anchor[i]
-        elif kind == PIN_GRASP:
-            q = anchor[i] + u
-        elif alive[i] != 0:
-            velocity = (p - x_prev[i]) * keep
-            if first_order_z != 0:
-                velocity = wp.vec3(velocity[0], velocity[1], 0.0)
-            q = p + velocity - fall
-            if sigma > 0.0:
-                q = q + sigma * process_noise(seed, i + first_stream * n)
-        x_prev[i] = p
-        x[i] = q
-    num_colours = colour_start.shape[0] - 1
-    for _sweep in range(iterations):
-        for c in range(num_colours):
-            for s in range(colour_start[c], colour_start[c + 1]):
-                a = base + spring_a[s]
-                b = base + spring_b[s]
-                if alive[a] == 0 or alive[b] == 0:
-                    continue
-                free_a = pin[a] == PIN_FREE
-                free_b = pin[b] == PIN_FREE
-                pa = x[a]
-                pb = x[b]
-                d = pb - pa
-                length = wp.length(d)
-                if length < 1.0e-9:
-                    continue
-                rest = spring_rest[s]
-                if free_a:
-                    share = 0.5
-                    if not free_b:
-                        share = 1.0
-                    x[a] = pa + d * (k * share * (length - rest) / length)
-                if free_b:
-                    share = 0.5
-                    if not free_a:
-                        share = 1.0
-                    x[b] = pb + (pa - pb) * (k * share * (length - rest) / length)
-    t = tip[env]
-    if t[3] > 0.5:
-        for v in range(n):
-            i = base + v
-            if alive[i] != 0:
-                p = x[i]
-                dx = p[0] - t[0]
-                dy = p[1] - t[1]
-                if dx * dx + dy * dy <= cut_radius * cut_radius and wp.abs(p[2] - t[2]) <= cut_height:
-                    alive[i] = 0
-
-
 # ---------------------------------------------------------------------------------------------- path
 # Where the scissors went through the material: after every cutting update, the tip is located in the
-# deformed mesh (two triangles per grid cell) and mapped back to rest (material) coordinates. The flat
-# kernel below and the SIMD-layout kernel in ``kernels_simd`` share these functions, so both backends map
-# bit-identically; they differ only in how they fetch a vertex.
+# deformed mesh (two triangles per grid cell) and mapped back to rest (material) coordinates. The search,
+# :func:`tip_locator`, is written once; the flat kernel below and the SIMD-layout kernel in ``kernels_simd``
+# instantiate it with their own way of fetching a vertex, so both backends map bit-identically.
 
 PATH_MAPPED = wp.constant(1.0)
 PATH_DROPPED = wp.constant(0.0)
 PATH_IDLE = wp.constant(-1.0)
 
 
+@wp.struct
+class TipSearch:
+    """What the search for the tip knows of the sheet (:meth:`Simulator.trace_path`)."""
+
+    nx: int
+    """Vertices per row."""
+    ny: int
+    """Vertices per column."""
+    hx: float
+    """Rest spacing along x (mm)."""
+    hy: float
+    """Rest spacing along y (mm)."""
+    window: int
+    """Updates for which a cut vertex still carries the tip (:attr:`Simulator.path_window`)."""
+    reach: int
+    """Cells around the tip searched when the previous point does not lead to it (:attr:`path_reach`)."""
+
+
 @wp.func
-def triangle_weights(a: wp.vec3, b: wp.vec3, c: wp.vec3, tx: float, ty: float) -> wp.vec3:
+def triangle_weights(a: wp.vec4, b: wp.vec4, c: wp.vec4, tx: float, ty: float) -> wp.vec3:
     """Barycentric weights of ``(tx, ty)`` in triangle ``abc`` projected on x-y; a negative first weight
     when the point lies outside it or the triangle is degenerate."""
     e1x = b[0] - a[0]
@@ -379,11 +294,20 @@ def triangle_weights(a: wp.vec3, b: wp.vec3, c: wp.vec3, tx: float, ty: float) -
 
 
 @wp.func
+def usable(corner: wp.vec4, removed_at: int, update: int, window: int) -> int:
+    """Whether a vertex ``(x, y, z, alive)`` may carry the tip: alive, or cut within the last ``window``
+    updates (the tip always sits on freshly cut material; older cuts are holes)."""
+    if corner[3] != 0.0 or update - removed_at <= window:
+        return 1
+    return 0
+
+
+@wp.func
 def locate_in_cell(
-    p00: wp.vec3,
-    p10: wp.vec3,
-    p01: wp.vec3,
-    p11: wp.vec3,
+    p00: wp.vec4,
+    p10: wp.vec4,
+    p01: wp.vec4,
+    p11: wp.vec4,
     ok00: int,
     ok10: int,
     ok01: int,
@@ -415,33 +339,17 @@ def locate_in_cell(
 
 
 @wp.func
-def usable(alive: int, removed_at: int, update: int, window: int) -> int:
-    """Whether a vertex may carry the tip: alive, or cut within the last ``window`` updates (the tip
-    always sits on freshly cut material; older cuts are holes)."""
-    if alive != 0 or update - removed_at <= window:
-        return 1
-    return 0
-
-
-@wp.func
 def search_window(
-    attempt: int,
-    path: wp.array2d(dtype=wp.vec3),
-    env: int,
-    update: int,
-    tip: wp.vec4,
-    nx: int,
-    ny: int,
-    hx: float,
-    hy: float,
-    reach: int,
+    attempt: int, path: wp.array2d(dtype=wp.vec3), env: int, update: int, tip: wp.vec4, search: TipSearch
 ) -> wp.vec4i:
     """Cells ``(row_lo, row_hi, col_lo, col_hi)`` searched by attempt 0 (the cells around the previous
     update's material point, if it was mapped) and 1 (``reach`` cells around the tip's x-y taken as a
     material point); an empty range skips the attempt."""
+    nx = search.nx
+    ny = search.ny
     cx = tip[0]
     cy = tip[1]
-    r = reach
+    r = search.reach
     if attempt == 0:
         if update == 0:
             return wp.vec4i(1, 0, 1, 0)
@@ -451,21 +359,96 @@ def search_window(
         cx = previous[0]
         cy = previous[1]
         r = 1
-    c0 = wp.clamp(int(cx / hx), 0, nx - 2)
-    r0 = wp.clamp(int(cy / hy), 0, ny - 2)
+    c0 = wp.clamp(int(cx / search.hx), 0, nx - 2)
+    r0 = wp.clamp(int(cy / search.hy), 0, ny - 2)
     return wp.vec4i(wp.max(r0 - r, 0), wp.min(r0 + r, ny - 2), wp.max(c0 - r, 0), wp.min(c0 + r, nx - 2))
+
+
+def tip_locator(Sheet, Part, corner, name: str, module: str | None = None):  # noqa: N803 (Warp types)
+    """A ``wp.func`` ``locate_tip(sheet, part, base, env, update, tip, removed_at, path, search) -> vec3``:
+    where env ``env``'s tip of update ``update`` went through the material, as
+    :attr:`path` stores it, ``(mx, my, PATH_MAPPED)``, ``(0, 0, PATH_DROPPED)`` off the sheet or over a
+    hole, ``(0, 0, PATH_IDLE)`` while the scissors do not cut. The cells of :func:`search_window` are
+    searched in turn until one holds the tip.
+
+    One search for every state layout: ``corner(sheet, part, base + v) -> vec4`` fetches the env's vertex
+    ``v`` as ``(x, y, z, alive)`` (alive 1.0 or 0.0); ``Sheet`` and ``Part`` are the Warp types of its
+    first two arguments (env-major: the positions and the alive flags; SIMD blocks: the blocks and the
+    env's lane). ``removed_at`` is env-major (``env * n + v``). ``module``: the Warp module of the kernel
+    that calls it (default: this one; one that is already loaded would be reloaded).
+    """
+
+    @wp.func(name=name, module=module)
+    def locate_tip(
+        sheet: Sheet,
+        part: Part,
+        base: int,
+        env: int,
+        update: int,
+        tip: wp.vec4,
+        removed_at: wp.array(dtype=wp.int32),
+        path: wp.array2d(dtype=wp.vec3),
+        search: TipSearch,
+    ) -> wp.vec3:
+        nx = search.nx
+        hx = search.hx
+        hy = search.hy
+        window = search.window
+        flat = env * nx * search.ny
+        status = PATH_IDLE
+        best = wp.vec4(0.0, 0.0, 0.0, 0.0)
+        if tip[3] > 0.5:
+            status = PATH_DROPPED
+            for attempt in range(2):
+                cells = search_window(attempt, path, env, update, tip, search)
+                if cells[0] <= cells[1]:
+                    for r in range(cells[0], cells[1] + 1):
+                        for c in range(cells[2], cells[3] + 1):
+                            v = r * nx + c
+                            p00 = corner(sheet, part, base + v)
+                            p10 = corner(sheet, part, base + v + 1)
+                            p01 = corner(sheet, part, base + v + nx)
+                            p11 = corner(sheet, part, base + v + nx + 1)
+                            best = locate_in_cell(
+                                p00,
+                                p10,
+                                p01,
+                                p11,
+                                usable(p00, removed_at[flat + v], update, window),
+                                usable(p10, removed_at[flat + v + 1], update, window),
+                                usable(p01, removed_at[flat + v + nx], update, window),
+                                usable(p11, removed_at[flat + v + nx + 1], update, window),
+                                float(c) * hx,
+                                float(r) * hy,
+                                hx,
+                                hy,
+                                tip,
+                                best,
+                            )
+                    if best[3] != 0.0:
+                        status = PATH_MAPPED
+                        break
+        return wp.vec3(best[1], best[2], status)
+
+    return locate_tip
+
+
+@wp.func
+def flat_corner(x: wp.array(dtype=wp.vec3), alive: wp.array(dtype=wp.int32), i: int) -> wp.vec4:
+    """Vertex ``i`` of the env-major state as ``(x, y, z, alive)``."""
+    p = x[i]
+    return wp.vec4(p[0], p[1], p[2], wp.where(alive[i] != 0, 1.0, 0.0))
+
+
+locate_tip_flat = tip_locator(
+    wp.array(dtype=wp.vec3), wp.array(dtype=wp.int32), flat_corner, "locate_tip_flat"
+)
 
 
 @wp.kernel
 def map_tip_kernel(
     # Model:
-    nx: int,
-    ny: int,
-    hx: float,
-    hy: float,
-    window: int,
-    reach: int,
-    env_offset: int,
+    search: TipSearch,
     update: int,
     # Data in:
     x: wp.array(dtype=wp.vec3),
@@ -476,44 +459,12 @@ def map_tip_kernel(
     # Data out:
     path: wp.array2d(dtype=wp.vec3),
 ):
-    """Map each env's tip of update ``update`` to material coordinates: ``path[env, update] = (mx, my,
-    PATH_MAPPED)``, ``(0, 0, PATH_DROPPED)`` off the sheet or over a hole, ``(0, 0, PATH_IDLE)`` while the
-    scissors do not cut. First records when vertices were cut (``removed_at``). The cells of
-    :func:`search_window` are searched in turn until one holds the tip."""
-    env = wp.tid() + env_offset
-    n = nx * ny
+    """Map each env's tip of update ``update`` to material coordinates into ``path[env, update]``
+    (:func:`tip_locator`), after recording when vertices were cut (``removed_at``)."""
+    env = wp.tid()
+    n = search.nx * search.ny
     base = env * n
     for v in range(n):
         if alive[base + v] == 0 and removed_at[base + v] < 0:
             removed_at[base + v] = update
-    t = tip[env]
-    status = PATH_IDLE
-    best = wp.vec4(0.0, 0.0, 0.0, 0.0)
-    if t[3] > 0.5:
-        status = PATH_DROPPED
-        for attempt in range(2):
-            cells = search_window(attempt, path, env, update, t, nx, ny, hx, hy, reach)
-            if cells[0] <= cells[1]:
-                for r in range(cells[0], cells[1] + 1):
-                    for c in range(cells[2], cells[3] + 1):
-                        i = base + r * nx + c
-                        best = locate_in_cell(
-                            x[i],
-                            x[i + 1],
-                            x[i + nx],
-                            x[i + nx + 1],
-                            usable(alive[i], removed_at[i], update, window),
-                            usable(alive[i + 1], removed_at[i + 1], update, window),
-                            usable(alive[i + nx], removed_at[i + nx], update, window),
-                            usable(alive[i + nx + 1], removed_at[i + nx + 1], update, window),
-                            float(c) * hx,
-                            float(r) * hy,
-                            hx,
-                            hy,
-                            t,
-                            best,
-                        )
-                if best[3] != 0.0:
-                    status = PATH_MAPPED
-                    break
-    path[env, update] = wp.vec3(best[1], best[2], status)
+    path[env, update] = locate_tip_flat(x, alive, base, env, update, tip[env], removed_at, path, search)

@@ -1,38 +1,31 @@
-"""Prototype CPU backend: the fused update with ``L`` envs per thread in SIMD lanes.
+"""The ``simd`` backend (the default on CPU): one thread steps a *block* of ``L`` envs (8 by default) in
+lockstep, in SIMD lanes.
 
-:func:`warpcut.sim.kernels.fused_update_kernel` steps one env per thread with scalar code. Here one thread
-steps a *block* of ``L`` envs (8 by default) in lockstep: every value of the fused kernel becomes a
-``vecL`` holding that value for the ``L`` envs, every ``if`` becomes a per-lane select, and Warp's
-``vec_t`` operations (fixed-length loops) compile to packed AVX instructions (``vsqrtps``, ``vdivps``,
-``vmulps`` on ``ymm`` registers with Warp's default ``-march=native``).
+Every value of an update becomes a ``vecL`` holding that value for the ``L`` envs, every ``if`` becomes a
+per-lane select, and Warp's ``vec_t`` operations (fixed-length loops) compile to packed AVX instructions
+(``vsqrtps``, ``vdivps``, ``vmulps`` on ``ymm`` registers with Warp's default ``-march=native``). The
+relaxation loop is a ``wp.func_native`` C++ snippet with clang vector types, which avoids Warp's
+per-access index arithmetic (negative-index wrap, spills).
 
 Layout (structure of arrays, env innermost, "AoSoA"): env ``e`` is lane ``e % L`` of block ``e // L``;
 a batch of ``B`` envs takes ``ceil(B / L)`` blocks, the padding lanes hold a copy of the last env and
 their results are discarded. Per block and vertex ``i = block * n + v``:
 
-- ``vert[i]``   (:class:`Vert`, hot in the relaxation): ``x, y, z``, ``alive`` (1/0), ``free`` (1 where
+- ``vert[i]``   (``Vert``, hot in the relaxation): ``x, y, z``, ``alive`` (1/0), ``free`` (1 where
   the vertex is not pinned), 5 x ``vecL`` = 160 bytes for ``L = 8``;
 - ``prev[i]``   previous positions, ``anchor[i]`` anchors and a ``grasp`` mask (integration only).
 
-Per block, ``lane_params[block]`` (:class:`Lanes`) holds the per-env parameters, grasp displacement
-and scissor tip.
+Per block, ``lane_params[block]`` (``Lanes``) holds the per-env parameters, grasp displacement and
+scissor tip.
 
-Two relaxation loops compute the same thing: ``relax="warp"`` is plain Warp (auto-vectorized), and
-``relax="native"`` is the same loop as a ``wp.func_native`` C++ snippet with clang vector types, which
-avoids Warp's per-access index arithmetic (negative-index wrap, spills) and is ~10% faster
-(``scripts/simd_bench.py``: 25 x 25, B = 1024, one thread, default physics: fused 1.9k env updates/s,
-``warp`` 17.6k, ``native`` 19.4k; paper sweeps: 14.2k, 110k, 120k).
+**Bit-identical** to the ``colours`` kernels of :mod:`warpcut.sim.kernels`: every lane evaluates their
+float expressions in the same order, spring colour by spring colour (Warp compiles CPU kernels without
+FMA contraction), and each branch becomes a select whose discarded side never reaches the result (only
+the sign of an exact zero may differ). Process noise draws the same stream (``process_noise(seed,
+env * n + v)``). Not differentiable; CPU only (the relaxation is C++ for the CPU compiler).
 
-Both are **bit-identical** to the fused kernel: every lane evaluates the fused kernel's float
-expressions in the same order (Warp compiles CPU kernels without FMA contraction), and each branch
-becomes a select whose discarded side never reaches the result (only the sign of an exact zero may
-differ). Process noise is supported and draws the fused kernel's stream (``process_noise(seed, env * n +
-v)``). Not differentiable; CPU only (``relax="native"`` is C++ for the CPU compiler).
-
-Use: keep a :class:`SimdState` for the batch (pack once per reset with :meth:`SimdState.load`, per update
-:meth:`SimdState.load_controls` + :meth:`SimdState.step`, unpack on read-back with
-:meth:`SimdState.store`), or call :func:`simd_update` with the arguments of ``fused_update_kernel``
-(packs and unpacks every call). ``scripts/simd_bench.py`` measures it.
+Use: keep a :class:`SimdState` for the batch: pack once per reset (:meth:`SimdState.load`), per update
+:meth:`SimdState.load_controls` + :meth:`SimdState.step`, unpack on read-back (:meth:`SimdState.store`).
 """
 
 import functools
@@ -42,37 +35,28 @@ from types import SimpleNamespace
 import numpy as np
 
 from warpcut.sim._warp import wp
-from warpcut.sim.kernels import (
-    PATH_DROPPED,
-    PATH_IDLE,
-    PATH_MAPPED,
-    PIN_FREE,
-    PIN_GRASP,
-    locate_in_cell,
-    process_noise,
-    search_window,
-    usable,
-)
+from warpcut.sim.config import SheetGrid, SimConfig
+from warpcut.sim.kernels import PIN_FREE, PIN_GRASP, TipSearch, process_noise, tip_locator
+from warpcut.sim.springs import colour_springs
 
 DEFAULT_LANES = 8
-RELAX_MODES = ("warp", "native")
 
-_NATIVE_RELAX = """
+_RELAX_SOURCE = """
     typedef float vf __attribute__((ext_vector_type(LANES), aligned(4)));
     typedef int vi __attribute__((ext_vector_type(LANES), aligned(4)));
     struct V { vf x, y, z, alive, free; };
     static_assert(sizeof(V) == 5 * LANES * sizeof(float), "Vert layout");
     V* block = (V*)vert.data + base;
     const int* pair = (const int*)pairs.data;
-    const float* rest_of = (const float*)spring_rest.data;
+    const float* rest_of = (const float*)colour_rest.data;
     const int* start = (const int*)colour_start.data;
     const int num_colours = colour_start.shape[0] - 1;
     vf k;
     for (int lane = 0; lane < LANES; ++lane) k[lane] = stiff.c[lane];
     const vf one = 1.0f, half = 0.5f, zero = 0.0f, tiny = 1.0e-9f;
-    for (int sweep = 0; sweep < iterations; ++sweep) {
+    for (int sweep = 0; sweep < sweeps; ++sweep) {
         for (int c = 0; c < num_colours; ++c) {
-            const float rest = rest_of[start[c]];
+            const float rest = rest_of[c];
             const int end = start[c + 1];
             for (int s = start[c]; s < end; ++s) {
                 V* pa = block + pair[2 * s];
@@ -105,9 +89,19 @@ def simd_kernels(lanes: int = DEFAULT_LANES) -> SimpleNamespace:
     """Types and kernels for ``lanes`` envs per block, in their own Warp module (compiled on first use)."""
     if lanes not in (2, 4, 8, 16, 32):
         raise ValueError(f"lanes: choose a power of two from 2 to 32 (got {lanes!r}); 8 fills AVX registers")
-    L = lanes
-    vecL = wp.types.vector(length=L, dtype=wp.float32)
-    module = f"warpcut.kernels_simd_L{L}"
+    types = _lane_types(lanes)
+    module = f"warpcut.kernels_simd_L{lanes}"
+    return SimpleNamespace(
+        **vars(types),
+        update=_update_kernel(types, module),
+        **_packing_kernels(types, module),
+        map_tip=_map_tip_kernel(types, module),
+    )
+
+
+def _lane_types(lanes: int) -> SimpleNamespace:
+    """The per-block records of ``lanes`` envs: ``Vert``, ``Prev``, ``Anchor`` and ``Lanes`` (module doc)."""
+    vecL = wp.types.vector(length=lanes, dtype=wp.float32)  # noqa: N806 (a type)
 
     @wp.struct
     class Vert:
@@ -144,160 +138,121 @@ def simd_kernels(lanes: int = DEFAULT_LANES) -> SimpleNamespace:
         tz: vecL
         cutting: vecL
 
-    @wp.func
-    def relax_warp(
+    return SimpleNamespace(lanes=lanes, vec=vecL, Vert=Vert, Prev=Prev, Anchor=Anchor, Lanes=Lanes)
+
+
+def _update_kernel(types: SimpleNamespace, module: str) -> wp.Kernel:
+    """The kernel of one update (integrate, relax, cut) of ``L`` envs per thread, in place."""
+    L, vecL = types.lanes, types.vec  # noqa: N806 (a constant and a type, as the kernel reads them)
+    Vert, Prev, Anchor, Lanes = types.Vert, types.Prev, types.Anchor, types.Lanes  # noqa: N806
+
+    @wp.func_native(_RELAX_SOURCE.replace("LANES", str(L)))
+    def relax(
         vert: wp.array(dtype=Vert),
         pairs: wp.array(dtype=wp.vec2i),
-        spring_rest: wp.array(dtype=float),
+        colour_rest: wp.array(dtype=float),
         colour_start: wp.array(dtype=wp.int32),
-        iterations: int,
+        sweeps: int,
         base: int,
         stiff: vecL,
     ):
-        """``iterations`` Gauss-Seidel sweeps of one block, colour by colour, ``L`` envs per spring."""
-        one = vecL()
-        half = vecL()
-        for lane in range(L):
-            one[lane] = 1.0
-            half[lane] = 0.5
-        num_colours = colour_start.shape[0] - 1
-        for _sweep in range(iterations):
-            for c in range(num_colours):
-                rest = spring_rest[colour_start[c]]
-                for s in range(colour_start[c], colour_start[c + 1]):
-                    ab = pairs[s]
-                    a = base + ab[0]
-                    b = base + ab[1]
-                    va = vert[a]
-                    vb = vert[b]
-                    dx = vb.x - va.x
-                    dy = vb.y - va.y
-                    dz = vb.z - va.z
-                    len2 = wp.cw_mul(dx, dx) + wp.cw_mul(dy, dy) + wp.cw_mul(dz, dz)
-                    fa = va.free
-                    fb = vb.free
-                    live = wp.cw_mul(va.alive, vb.alive)
-                    # 0.5 when both ends move, 1 when the other end is pinned (as in the fused kernel)
-                    share = one - wp.cw_mul(half, wp.cw_mul(fa, fb))
-                    scale = vecL()
-                    for lane in range(L):
-                        length = wp.sqrt(len2[lane])
-                        ok = live[lane] != 0.0 and length >= 1.0e-9
-                        scale[lane] = wp.where(ok, stiff[lane] * share[lane] * (length - rest) / length, 0.0)
-                    sa = wp.cw_mul(scale, fa)
-                    sb = wp.cw_mul(scale, fb)
-                    vert[a].x = va.x + wp.cw_mul(dx, sa)
-                    vert[a].y = va.y + wp.cw_mul(dy, sa)
-                    vert[a].z = va.z + wp.cw_mul(dz, sa)
-                    vert[b].x = vb.x + wp.cw_mul(va.x - vb.x, sb)
-                    vert[b].y = vb.y + wp.cw_mul(va.y - vb.y, sb)
-                    vert[b].z = vb.z + wp.cw_mul(va.z - vb.z, sb)
+        """``sweeps`` Gauss-Seidel sweeps of one block, colour by colour, ``L`` envs per spring."""
 
-    @wp.func_native(_NATIVE_RELAX.replace("LANES", str(L)))
-    def relax_native(
-        vert: wp.array(dtype=Vert),
+    @wp.kernel(enable_backward=False, module=module)
+    def update_kernel(
+        # Model:
+        n: int,
+        block_offset: int,
+        sweeps: int,
+        first_order_z: int,
+        any_noise: int,
+        seed: int,
+        first_stream: int,
+        num_envs: int,
+        cut_radius: float,
+        cut_height: float,
         pairs: wp.array(dtype=wp.vec2i),
-        spring_rest: wp.array(dtype=float),
+        colour_rest: wp.array(dtype=float),
         colour_start: wp.array(dtype=wp.int32),
-        iterations: int,
-        base: int,
-        stiff: vecL,
-    ): ...
-
-    def make_update(relax, name):
-        @wp.kernel(enable_backward=False, module=module, name=name)
-        def update_kernel(
-            # Model:
-            n: int,
-            block_offset: int,
-            iterations: int,
-            first_order_z: int,
-            any_noise: int,
-            seed: int,
-            first_stream: int,
-            num_envs: int,
-            cut_radius: float,
-            cut_height: float,
-            pairs: wp.array(dtype=wp.vec2i),
-            spring_rest: wp.array(dtype=float),
-            colour_start: wp.array(dtype=wp.int32),
-            lane_params: wp.array(dtype=Lanes),
-            anchor: wp.array(dtype=Anchor),
-            # Data in/out:
-            vert: wp.array(dtype=Vert),
-            prev: wp.array(dtype=Prev),
-        ):
-            """One update (integrate, relax, cut) of ``L`` envs per thread, in place."""
-            blk = wp.tid() + block_offset
-            base = blk * n
-            p = lane_params[blk]
-            # ---- integrate: the fused kernel's expressions per lane, its branches as selects
-            for v in range(n):
-                i = base + v
-                vt = vert[i]
-                an = anchor[i]
-                pv = prev[i]
-                vx = wp.cw_mul(vt.x - pv.x, p.keep)
-                vy = wp.cw_mul(vt.y - pv.y, p.keep)
-                vz = wp.cw_mul(vt.z - pv.z, p.keep)
-                if first_order_z != 0:
-                    vz = vecL()
-                qx = vt.x + vx
-                qy = vt.y + vy
-                qz = (vt.z + vz) - p.fall
-                gx = an.x + p.ux
-                gy = an.y + p.uy
-                gz = an.z + p.uz
-                nx = vecL()
-                ny = vecL()
-                nz = vecL()
+        lane_params: wp.array(dtype=Lanes),
+        anchor: wp.array(dtype=Anchor),
+        # Data in/out:
+        vert: wp.array(dtype=Vert),
+        prev: wp.array(dtype=Prev),
+    ):
+        blk = wp.tid() + block_offset
+        base = blk * n
+        p = lane_params[blk]
+        # ---- integrate: integrate_kernel's expressions per lane, its branches as selects
+        for v in range(n):
+            i = base + v
+            vt = vert[i]
+            an = anchor[i]
+            pv = prev[i]
+            vx = wp.cw_mul(vt.x - pv.x, p.keep)
+            vy = wp.cw_mul(vt.y - pv.y, p.keep)
+            vz = wp.cw_mul(vt.z - pv.z, p.keep)
+            if first_order_z != 0:
+                vz = vecL()
+            qx = vt.x + vx
+            qy = vt.y + vy
+            qz = (vt.z + vz) - p.fall
+            gx = an.x + p.ux
+            gy = an.y + p.uy
+            gz = an.z + p.uz
+            nx = vecL()
+            ny = vecL()
+            nz = vecL()
+            for lane in range(L):
+                free = vt.free[lane] != 0.0
+                moving = free and vt.alive[lane] != 0.0
+                grasped = an.grasp[lane] != 0.0
+                # fixture: anchor; grasp: anchor + u; free and alive: Verlet; free and cut: frozen
+                px = wp.where(grasped, gx[lane], an.x[lane])
+                py = wp.where(grasped, gy[lane], an.y[lane])
+                pz = wp.where(grasped, gz[lane], an.z[lane])
+                nx[lane] = wp.where(moving, qx[lane], wp.where(free, vt.x[lane], px))
+                ny[lane] = wp.where(moving, qy[lane], wp.where(free, vt.y[lane], py))
+                nz[lane] = wp.where(moving, qz[lane], wp.where(free, vt.z[lane], pz))
+            if any_noise != 0:
                 for lane in range(L):
-                    free = vt.free[lane] != 0.0
-                    moving = free and vt.alive[lane] != 0.0
-                    grasped = an.grasp[lane] != 0.0
-                    # fixture: anchor; grasp: anchor + u; free and alive: Verlet; free and cut: frozen
-                    px = wp.where(grasped, gx[lane], an.x[lane])
-                    py = wp.where(grasped, gy[lane], an.y[lane])
-                    pz = wp.where(grasped, gz[lane], an.z[lane])
-                    nx[lane] = wp.where(moving, qx[lane], wp.where(free, vt.x[lane], px))
-                    ny[lane] = wp.where(moving, qy[lane], wp.where(free, vt.y[lane], py))
-                    nz[lane] = wp.where(moving, qz[lane], wp.where(free, vt.z[lane], pz))
-                if any_noise != 0:
-                    for lane in range(L):
-                        env = blk * L + lane
-                        sigma = p.sigma[lane]
-                        if sigma > 0.0 and vt.free[lane] != 0.0 and vt.alive[lane] != 0.0 and env < num_envs:
-                            r = process_noise(seed, env * n + v + first_stream * n)
-                            nx[lane] = nx[lane] + sigma * r[0]
-                            ny[lane] = ny[lane] + sigma * r[1]
-                            nz[lane] = nz[lane] + sigma * r[2]
-                prev[i].x = vt.x
-                prev[i].y = vt.y
-                prev[i].z = vt.z
-                vert[i].x = nx
-                vert[i].y = ny
-                vert[i].z = nz
-            # ---- relax
-            relax(vert, pairs, spring_rest, colour_start, iterations, base, p.stiff)
-            # ---- cut
-            r2 = cut_radius * cut_radius
-            for v in range(n):
-                i = base + v
-                vt = vert[i]
-                ex = vt.x - p.tx
-                ey = vt.y - p.ty
-                d2 = wp.cw_mul(ex, ex) + wp.cw_mul(ey, ey)
-                ez = vt.z - p.tz
-                alive = vecL()
-                for lane in range(L):
-                    hit = p.cutting[lane] > 0.5 and d2[lane] <= r2 and wp.abs(ez[lane]) <= cut_height
-                    alive[lane] = wp.where(hit, 0.0, vt.alive[lane])
-                vert[i].alive = alive
+                    env = blk * L + lane
+                    sigma = p.sigma[lane]
+                    if sigma > 0.0 and vt.free[lane] != 0.0 and vt.alive[lane] != 0.0 and env < num_envs:
+                        r = process_noise(seed, env * n + v + first_stream * n)
+                        nx[lane] = nx[lane] + sigma * r[0]
+                        ny[lane] = ny[lane] + sigma * r[1]
+                        nz[lane] = nz[lane] + sigma * r[2]
+            prev[i].x = vt.x
+            prev[i].y = vt.y
+            prev[i].z = vt.z
+            vert[i].x = nx
+            vert[i].y = ny
+            vert[i].z = nz
+        # ---- relax
+        relax(vert, pairs, colour_rest, colour_start, sweeps, base, p.stiff)
+        # ---- cut
+        r2 = cut_radius * cut_radius
+        for v in range(n):
+            i = base + v
+            vt = vert[i]
+            ex = vt.x - p.tx
+            ey = vt.y - p.ty
+            d2 = wp.cw_mul(ex, ex) + wp.cw_mul(ey, ey)
+            ez = vt.z - p.tz
+            alive = vecL()
+            for lane in range(L):
+                hit = p.cutting[lane] > 0.5 and d2[lane] <= r2 and wp.abs(ez[lane]) <= cut_height
+                alive[lane] = wp.where(hit, 0.0, vt.alive[lane])
+            vert[i].alive = alive
 
-        return update_kernel
+    return update_kernel
 
-    update_warp = make_update(relax_warp, "simd_update_warp")
-    update_native = make_update(relax_native, "simd_update_native")
+
+def _packing_kernels(types: SimpleNamespace, module: str) -> dict[str, wp.Kernel]:
+    """Kernels that copy state, parameters and controls between the env-major arrays and the blocks."""
+    L = types.lanes  # noqa: N806 (a constant, as the kernels read it)
+    Vert, Prev, Anchor, Lanes = types.Vert, types.Prev, types.Anchor, types.Lanes  # noqa: N806
 
     @wp.kernel(enable_backward=False, module=module)
     def pack_kernel(
@@ -349,6 +304,7 @@ def simd_kernels(lanes: int = DEFAULT_LANES) -> SimpleNamespace:
         x_prev: wp.array(dtype=wp.vec3),
         alive: wp.array(dtype=wp.int32),
     ):
+        """Blocks back into env-major ``vec3`` state; padding lanes dropped."""
         blk, v = wp.tid()
         i = blk * n + v
         vt = vert[i]
@@ -371,7 +327,7 @@ def simd_kernels(lanes: int = DEFAULT_LANES) -> SimpleNamespace:
         elasticity: wp.array(dtype=float),
         lane_params: wp.array(dtype=Lanes),
     ):
-        """Per-env parameters into lanes, with the fused kernel's expressions (``g * h * h``)."""
+        """Per-env parameters into lanes, with integrate_kernel's expressions (``g * h * h``)."""
         blk = wp.tid()
         for lane in range(L):
             env = wp.min(blk * L + lane, num_envs - 1)
@@ -402,19 +358,30 @@ def simd_kernels(lanes: int = DEFAULT_LANES) -> SimpleNamespace:
             lane_params[blk].tz[lane] = t[2]
             lane_params[blk].cutting[lane] = t[3]
 
+    return {
+        "pack": pack_kernel,
+        "unpack": unpack_kernel,
+        "pack_params": pack_params_kernel,
+        "pack_controls": pack_controls_kernel,
+    }
+
+
+def _map_tip_kernel(types: SimpleNamespace, module: str) -> wp.Kernel:
+    """:func:`warpcut.sim.kernels.map_tip_kernel` for the ``L`` envs of a block, reading the packed state:
+    the same search (:func:`warpcut.sim.kernels.tip_locator`), so the same bits."""
+    L, Vert = types.lanes, types.Vert  # noqa: N806 (a constant and a type, as the kernel reads them)
+
     @wp.func
-    def lane_vertex(vert: wp.array(dtype=Vert), i: int, lane: int) -> wp.vec4:
+    def lane_corner(vert: wp.array(dtype=Vert), lane: int, i: int) -> wp.vec4:
+        """Vertex ``i`` of the blocks, in lane ``lane``, as ``(x, y, z, alive)``."""
         return wp.vec4(vert[i].x[lane], vert[i].y[lane], vert[i].z[lane], vert[i].alive[lane])
+
+    locate_tip = tip_locator(wp.array(dtype=Vert), int, lane_corner, f"locate_tip_L{L}", module)
 
     @wp.kernel(enable_backward=False, module=module)
     def map_tip_kernel(
         # Model:
-        nx: int,
-        ny: int,
-        hx: float,
-        hy: float,
-        window: int,
-        reach: int,
+        search: TipSearch,
         block_offset: int,
         num_envs: int,
         update: int,
@@ -426,10 +393,8 @@ def simd_kernels(lanes: int = DEFAULT_LANES) -> SimpleNamespace:
         # Data out:
         path: wp.array2d(dtype=wp.vec3),
     ):
-        """:func:`warpcut.sim.kernels.map_tip_kernel` for the ``L`` envs of a block: the same search and
-        arithmetic (:func:`warpcut.sim.kernels.locate_in_cell`), reading the packed state."""
         blk = wp.tid() + block_offset
-        n = nx * ny
+        n = search.nx * search.ny
         base = blk * n
         for v in range(n):
             alive = vert[base + v].alive
@@ -441,118 +406,47 @@ def simd_kernels(lanes: int = DEFAULT_LANES) -> SimpleNamespace:
         for lane in range(L):
             env = blk * L + lane
             if env < num_envs:
-                flat = env * n
-                t = tip[env]
-                status = PATH_IDLE
-                best = wp.vec4(0.0, 0.0, 0.0, 0.0)
-                if t[3] > 0.5:
-                    status = PATH_DROPPED
-                    for attempt in range(2):
-                        window_cells = search_window(attempt, path, env, update, t, nx, ny, hx, hy, reach)
-                        if window_cells[0] <= window_cells[1]:
-                            for r in range(window_cells[0], window_cells[1] + 1):
-                                for c in range(window_cells[2], window_cells[3] + 1):
-                                    v = r * nx + c
-                                    i = base + v
-                                    j = flat + v
-                                    a = lane_vertex(vert, i, lane)
-                                    b = lane_vertex(vert, i + 1, lane)
-                                    d = lane_vertex(vert, i + nx, lane)
-                                    e = lane_vertex(vert, i + nx + 1, lane)
-                                    best = locate_in_cell(
-                                        wp.vec3(a[0], a[1], a[2]),
-                                        wp.vec3(b[0], b[1], b[2]),
-                                        wp.vec3(d[0], d[1], d[2]),
-                                        wp.vec3(e[0], e[1], e[2]),
-                                        usable(wp.where(a[3] != 0.0, 1, 0), removed_at[j], update, window),
-                                        usable(
-                                            wp.where(b[3] != 0.0, 1, 0), removed_at[j + 1], update, window
-                                        ),
-                                        usable(
-                                            wp.where(d[3] != 0.0, 1, 0), removed_at[j + nx], update, window
-                                        ),
-                                        usable(
-                                            wp.where(e[3] != 0.0, 1, 0),
-                                            removed_at[j + nx + 1],
-                                            update,
-                                            window,
-                                        ),
-                                        float(c) * hx,
-                                        float(r) * hy,
-                                        hx,
-                                        hy,
-                                        t,
-                                        best,
-                                    )
-                            if best[3] != 0.0:
-                                status = PATH_MAPPED
-                                break
-                path[env, update] = wp.vec3(best[1], best[2], status)
+                path[env, update] = locate_tip(
+                    vert, lane, base, env, update, tip[env], removed_at, path, search
+                )
 
-    return SimpleNamespace(
-        lanes=L,
-        vec=vecL,
-        Vert=Vert,
-        Prev=Prev,
-        Anchor=Anchor,
-        Lanes=Lanes,
-        update={"warp": update_warp, "native": update_native},
-        pack=pack_kernel,
-        unpack=unpack_kernel,
-        pack_params=pack_params_kernel,
-        pack_controls=pack_controls_kernel,
-        map_tip=map_tip_kernel,
-    )
+    return map_tip_kernel
 
 
 @dataclass
 class SimdModel:
-    """What every env shares: the spring lists (as given to the fused kernel) and the constants."""
+    """What every env shares: the springs in sweep order and the constants of an update."""
 
     n: int
-    iterations: int
-    pairs: wp.array  # (num_springs,) vec2i: (spring_a, spring_b), in sweep order
-    spring_rest: wp.array
+    sweeps: int
+    pairs: wp.array
+    """(num_springs,) ``vec2i``: each spring's two vertices, colour after colour."""
+    colour_rest: wp.array
+    """(num_colours,) rest length of each colour's springs (mm)."""
     colour_start: wp.array
+    """(num_colours + 1,) where each colour's springs start in ``pairs``."""
     first_order_z: int
     cut_radius: float
     cut_height: float
 
     @classmethod
-    def from_arrays(
-        cls,
-        n: int,
-        iterations: int,
-        spring_a: wp.array,
-        spring_b: wp.array,
-        spring_rest: wp.array,
-        colour_start: wp.array,
-        first_order_z: int,
-        cut_radius: float,
-        cut_height: float,
-    ) -> "SimdModel":
-        """From ``fused_update_kernel``'s arguments. The kernels read one rest length per colour (every
-        spring of a colour has the same length, as :func:`warpcut.sim.simulator.colour_springs` builds them)."""
-        rest = spring_rest.numpy()
-        starts = colour_start.numpy()
-        for c in range(len(starts) - 1):
-            part = rest[starts[c] : starts[c + 1]]
-            if part.size and np.any(part != part[0]):
-                raise ValueError(
-                    f"spring_rest: colour {c} mixes rest lengths; the SIMD kernels need one per colour"
-                )
-        if not (spring_rest.is_contiguous and colour_start.is_contiguous):
-            raise ValueError("spring_rest, colour_start: the native relaxation needs contiguous arrays")
-        pairs = np.stack([spring_a.numpy(), spring_b.numpy()], axis=1).astype(np.int32)
+    def from_config(cls, config: SimConfig, grid: SheetGrid, device: str) -> "SimdModel":
+        springs = colour_springs(grid, config.springs)
+        pairs = np.stack(
+            [np.concatenate([a for a, _, _ in springs]), np.concatenate([b for _, b, _ in springs])], axis=1
+        )
+        starts = np.concatenate([[0], np.cumsum([len(a) for a, _, _ in springs])])
         return cls(
-            n=int(n),
-            iterations=int(iterations),
-            pairs=wp.array(pairs, dtype=wp.vec2i, device=spring_a.device),
-            spring_rest=spring_rest,
-            colour_start=colour_start,
-            first_order_z=int(first_order_z),
-            cut_radius=float(cut_radius),
-            cut_height=float(cut_height),
+            n=grid.num_vertices,
+            sweeps=config.sweeps,
+            pairs=wp.array(pairs.astype(np.int32), dtype=wp.vec2i, device=device),
+            colour_rest=wp.array(
+                np.array([rest for _, _, rest in springs], dtype=np.float32), dtype=float, device=device
+            ),
+            colour_start=wp.array(starts.astype(np.int32), dtype=wp.int32, device=device),
+            first_order_z=int(config.first_order_z),
+            cut_radius=float(config.cut_radius),
+            cut_height=float(config.cut_height),
         )
 
 
@@ -561,7 +455,7 @@ class SimdState:
 
     Pack once per reset (:meth:`load`, :meth:`load_params`), per update :meth:`load_controls` (grasp
     displacement, tip: B x 7 floats) and :meth:`step`; unpack on read-back (:meth:`store`). Each pack or
-    unpack is one pass over the batch's state (pack ~6 ms, unpack ~4 ms at B = 1024, 25 x 25).
+    unpack is one pass over the batch's state.
     """
 
     def __init__(self, num_envs: int, n: int, lanes: int = DEFAULT_LANES, device: str = "cpu"):
@@ -583,7 +477,7 @@ class SimdState:
         self._lanes_view: np.ndarray | None = None
 
     def load(self, x: wp.array, x_prev: wp.array, alive: wp.array, pin: wp.array, anchor: wp.array) -> None:
-        """Env-major state (``B * n`` entries each, as the fused kernel takes it) into blocks."""
+        """Env-major state (``B * n`` entries each, as the simulator holds it) into blocks."""
         wp.launch(
             self.kernels.pack,
             dim=(self.blocks, self.n),
@@ -613,9 +507,9 @@ class SimdState:
     def lane_views(self, envs: list[int]) -> list[np.ndarray]:
         """Per env of ``envs`` (valid indices), a zero-copy (n, 4) float32 view of its x, y, z and alive
         (1.0 or 0.0) lanes in the packed blocks (CPU memory; valid as long as this state): copying one out
-        reads that env and nothing else of the batch, one strided copy (~10 µs for a 25 x 25 sheet)."""
+        reads that env and nothing else of the batch, one strided copy."""
         if self._lanes_view is None:
-            # (blocks, n, fields, lanes) over ``struct V`` (x, y, z, alive, free); numpy() costs ~70 us.
+            # (blocks, n, fields, lanes) over ``struct V`` (x, y, z, alive, free), made once.
             packed = self.vert.numpy()
             if packed.dtype.names[:4] != ("x", "y", "z", "alive") or packed.dtype.itemsize != 20 * self.lanes:
                 raise RuntimeError(f"lane_views: unexpected vertex layout {packed.dtype}")
@@ -637,7 +531,6 @@ class SimdState:
         seed: int,
         block_offset: int = 0,
         block_count: int | None = None,
-        relax: str = "native",
         first_stream: int = 0,
     ) -> None:
         """One update of blocks ``[block_offset, block_offset + block_count)`` (default: to the end); env
@@ -646,16 +539,14 @@ class SimdState:
         Disjoint block ranges may be stepped from different Python threads at once (``wp.launch``
         releases the GIL), as ``Simulator`` does with env slices.
         """
-        if relax not in RELAX_MODES:
-            raise ValueError(f"relax: choose one of {RELAX_MODES} (got {relax!r})")
         count = self.blocks - block_offset if block_count is None else block_count
         wp.launch(
-            self.kernels.update[relax],
+            self.kernels.update,
             dim=count,
             inputs=[
                 model.n,
                 block_offset,
-                model.iterations,
+                model.sweeps,
                 model.first_order_z,
                 self.any_noise,
                 int(seed),
@@ -664,7 +555,7 @@ class SimdState:
                 model.cut_radius,
                 model.cut_height,
                 model.pairs,
-                model.spring_rest,
+                model.colour_rest,
                 model.colour_start,
                 self.lane_params,
                 self.anchor,
@@ -672,46 +563,3 @@ class SimdState:
             outputs=[self.vert, self.prev],
             device=self.device,
         )
-
-
-def simd_update(
-    n: int,
-    iterations: int,
-    spring_a: wp.array,
-    spring_b: wp.array,
-    spring_rest: wp.array,
-    colour_start: wp.array,
-    damping: wp.array,
-    dt: wp.array,
-    gravity: wp.array,
-    noise_std: wp.array,
-    elasticity: wp.array,
-    first_order_z: int,
-    seed: int,
-    first_stream: int,
-    cut_radius: float,
-    cut_height: float,
-    pin: wp.array,
-    anchor: wp.array,
-    displacement: wp.array,
-    tip: wp.array,
-    x: wp.array,
-    x_prev: wp.array,
-    alive: wp.array,
-    lanes: int = DEFAULT_LANES,
-    relax: str = "native",
-) -> None:
-    """One update of the whole batch, in place, from the arguments of ``fused_update_kernel`` (without
-    ``env_offset``: the whole batch). Packs, steps and unpacks on every call: ~10 ms at B = 1024, 25 x 25,
-    i.e. ~15-20% on top of a default-physics update (~4x the update with the paper sweeps); keep a
-    :class:`SimdState` instead when stepping repeatedly."""
-    num_envs = x.shape[0] // n
-    state = SimdState(num_envs, n, lanes, str(x.device))
-    state.load(x, x_prev, alive, pin, anchor)
-    state.load_params(damping, dt, gravity, noise_std, elasticity)
-    state.load_controls(displacement, tip)
-    model = SimdModel.from_arrays(
-        n, iterations, spring_a, spring_b, spring_rest, colour_start, first_order_z, cut_radius, cut_height
-    )
-    state.step(model, seed, relax=relax, first_stream=first_stream)
-    state.store(x, x_prev, alive)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from warpcut.sim.config import SheetGrid, SimConfig
-from warpcut.sim.simulator import colour_springs
+from warpcut.sim.springs import colour_springs
 
 
 class ReferenceSheet:
@@ -72,7 +72,7 @@ class ReferenceSheet:
         new[self.grasp] = self.anchor[self.grasp] + self.displacement
         self.x_prev, self.x = self.x, new
         movable = self.alive & ~self.fixed & ~self.grasp
-        for _ in range(self.config.iterations):
+        for _ in range(self.config.sweeps):
             for starts, ends, rest in self.springs:
                 self._relax(starts, ends, rest, movable)
         if tip is not None and tip[3] > 0.5:

@@ -2,7 +2,7 @@
 
 One :class:`Simulator` holds ``num_envs`` independent sheets of the same resolution. Each env may have
 its own physical parameters (see :class:`~warpcut.sim.config.SimConfig`), its own grasp (pinch point) and
-its own scissor tip. One *update* is: integrate, relax every spring colour ``iterations`` times, cut.
+its own scissor tip. One *update* is: integrate, relax every spring colour ``sweeps`` times, cut.
 """
 
 from __future__ import annotations
@@ -18,20 +18,11 @@ from warpcut.sim import kernels
 from warpcut.sim._warp import wp
 from warpcut.sim.config import PHYSICAL_PARAMETERS, SheetGrid, SimConfig
 from warpcut.sim.kernels_simd import SimdModel, SimdState
-from warpcut.sim.springs import SpringColour, colour_springs, spring_colours
+from warpcut.sim.springs import spring_colours
 
-__all__ = [
-    "Simulator",
-    "settled_figures",
-    "SpringColour",
-    "colour_springs",
-    "default_device",
-    "resolve_device",
-    "spring_colours",
-]
+__all__ = ["Simulator", "default_device", "resolve_device", "settled_figures"]
 
-
-BACKENDS = ("auto", "simd", "fused", "colours")
+BACKENDS = ("auto", "simd", "colours")
 
 
 def default_device() -> str:
@@ -62,14 +53,15 @@ class Simulator:
         num_envs: Batch size B.
         device: ``cpu``, ``cuda`` or ``cuda:N``; default: :func:`default_device`.
         seed: Seed of the process noise (the only randomness in the physics).
-        backend: ``simd`` (the CPU fast path: one launch per update, one thread per block of 8 envs
-            stepped in lockstep in SIMD lanes, :mod:`warpcut.sim.kernels_simd`), ``fused`` (one thread per
-            env, scalar), ``colours`` (one launch per stage and spring colour, one thread per vertex: suits
-            GPUs and is the differentiable path), or ``auto`` (simd on CPU, colours on CUDA). All give
-            bit-identical results; ``update(tape_mode=True)`` always uses ``colours``.
-        threads: CPU threads that step disjoint slices of the batch (simd: of its blocks); default: the
-            number of cores, at most the number of slices. ``wp.launch`` releases the GIL.
-        capture: Record the ``colours`` update (its ~2 + iterations x colours launches) once into a Warp
+        backend: ``simd`` (CPU only: one launch per update, one thread per block of 8 envs stepped in
+            lockstep in SIMD lanes, :mod:`warpcut.sim.kernels_simd`), ``colours`` (one launch per stage and
+            spring colour, one thread per vertex: suits GPUs and is the differentiable path), or ``auto``
+            (simd on CPU, colours on CUDA). Both give bit-identical results; ``update(tape_mode=True)``
+            always uses ``colours``.
+        threads: CPU threads that step disjoint slices of the batch's blocks (``simd``; ``colours`` runs
+            on one); default: the number of cores, at most the number of blocks. ``wp.launch`` releases
+            the GIL.
+        capture: Record the ``colours`` update (its ~2 + sweeps x colours launches) once into a Warp
             graph (``wp.ScopedCapture``) and replay it, which removes the per-launch overhead; a graph is
             kept per arrangement of the ping-pong buffers (at most 6). Default: on for ``colours`` on CUDA,
             off elsewhere. Works on CPU too (same results bit for bit). Updates with ``tape_mode``, or
@@ -118,6 +110,7 @@ class Simulator:
         """(B, T) ``vec3`` while tracing (:meth:`trace_path`): per update, the tip in material coordinates and
         its status (``kernels.PATH_MAPPED``, ``PATH_DROPPED``, ``PATH_IDLE``)."""
         self._removed_at: wp.array | None = None
+        self._search: kernels.TipSearch | None = None
         self.grasped = np.zeros(num_envs, dtype=bool)
         self.x, self.x_prev, self._spare = self._buffers
         self.alive = self._alive[0]
@@ -125,42 +118,16 @@ class Simulator:
             raise ValueError(f"backend: choose one of {BACKENDS} (got {backend!r})")
         is_cpu = self._is_cpu = wp.get_device(self.device).is_cpu
         self.backend = ("simd" if is_cpu else "colours") if backend == "auto" else backend
-        if self.backend in ("simd", "fused") and not is_cpu:
-            raise ValueError(
-                f"backend: {self.backend!r} runs on the CPU only; use 'colours' on {self.device}"
-            )
-        springs = colour_springs(self.grid, self.config.springs)
-        counts = [len(a) for a, _, _ in springs]
-        self._spring_a = wp.array(
-            np.concatenate([a for a, _, _ in springs]).astype(np.int32), device=self.device
-        )
-        self._spring_b = wp.array(
-            np.concatenate([b for _, b, _ in springs]).astype(np.int32), device=self.device
-        )
-        self._spring_rest = wp.array(
-            np.repeat([r for _, _, r in springs], counts).astype(np.float32), dtype=float, device=self.device
-        )
-        self._colour_start = wp.array(
-            np.concatenate([[0], np.cumsum(counts)]).astype(np.int32), device=self.device
-        )
+        if self.backend == "simd" and not is_cpu:
+            raise ValueError(f"backend: 'simd' runs on the CPU only; use 'colours' on {self.device}")
         self._simd: SimdState | None = None
         # Which copy of the state is current: the env-major arrays (``x``...) and/or the SIMD blocks.
         self._flat_current, self._packed_current = True, False
-        units = num_envs
+        blocks = 1
         if self.backend == "simd":
             self._simd = SimdState(num_envs, self.grid.num_vertices, device=self.device)
-            self._simd_model = SimdModel.from_arrays(
-                self.grid.num_vertices,
-                self.config.iterations,
-                self._spring_a,
-                self._spring_b,
-                self._spring_rest,
-                self._colour_start,
-                int(self.config.first_order_z),
-                self.config.cut_radius,
-                self.config.cut_height,
-            )
-            units = self._simd.blocks
+            self._simd_model = SimdModel.from_config(self.config, self.grid, self.device)
+            blocks = self._simd.blocks
         if capture is None:
             capture = self.backend == "colours" and not is_cpu
         if capture and self.backend != "colours":
@@ -170,8 +137,8 @@ class Simulator:
             )
         self.capture = bool(capture)
         cores = os.cpu_count() or 1
-        self.threads = max(1, min(threads or cores, units)) if is_cpu else 1
-        self._slices = [(len(c), int(c[0])) for c in np.array_split(np.arange(units), self.threads)]
+        self.threads = max(1, min(threads or cores, blocks))
+        self._slices = [(len(c), int(c[0])) for c in np.array_split(np.arange(blocks), self.threads)]
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
 
     @property
@@ -294,9 +261,10 @@ class Simulator:
         projected on x-y) and its material position interpolated barycentrically. A triangle may carry the
         tip while each of its vertices is alive or was cut within the last :attr:`path_window` updates: the
         tip always sits on freshly cut material, older cuts are holes. Where several layers lie under the
-        tip, the one nearest it in height is taken. A tip over no such triangle (off the sheet, over a
-        hole) is dropped. Cells near the tip's x-y read as a material point (:attr:`path_reach` cells) are
-        searched first, the whole sheet only if none holds it. Updates with ``tape_mode`` are not traced.
+        tip, the one nearest it in height is taken. The cells around the previous update's material point
+        are searched first, then :attr:`path_reach` cells around the tip's x-y read as a material point; a
+        tip over no such triangle there (off the sheet, over a hole) is dropped. Updates with ``tape_mode``
+        are not traced.
         """
         if horizon is None:
             self.path = self._removed_at = None
@@ -304,6 +272,7 @@ class Simulator:
         if not isinstance(horizon, int) or horizon < 1:
             raise ValueError(f"horizon: must be a positive number of updates (got {horizon!r})")
         b, n = self.num_envs, self.grid.num_vertices
+        self._search = self._tip_search()
         self.path = wp.full(
             (b, horizon), wp.vec3(0.0, 0.0, kernels.PATH_IDLE), dtype=wp.vec3, device=self.device
         )
@@ -326,8 +295,8 @@ class Simulator:
     def path_reader(self, count: int) -> Callable[[int, int], np.ndarray]:
         """A function ``read(start, stop)`` returning a copy of :attr:`path` of the first ``count`` envs for
         updates ``start .. stop - 1``, (count, stop - start, 3): what a recorder's step callback calls every
-        step. On the CPU it copies out of a NumPy view made here, once (~0.4 µs where a Warp slice costs
-        ~27 µs); elsewhere it copies only that slice to the host."""
+        step. On the CPU it copies out of a NumPy view made here, once (much cheaper than a Warp slice per
+        call); elsewhere it copies only that slice to the host."""
         if self.path is None:
             raise ValueError("path_reader: the path is not traced; call trace_path(horizon) first")
         path = self.path
@@ -336,18 +305,21 @@ class Simulator:
             return lambda start, stop: view[:, start:stop].copy()
         return lambda start, stop: np.array(path[:count, start:stop].numpy())
 
-    def _map_args(self) -> list:
-        hx, hy = self.grid.spacing_mm
-        return [self.grid.nx, self.grid.ny, float(hx), float(hy), self.path_window, self.path_reach]
+    def _tip_search(self) -> kernels.TipSearch:
+        """What the tip search needs to know of the sheet (made once per :meth:`trace_path`)."""
+        search = kernels.TipSearch()
+        search.nx, search.ny = self.grid.nx, self.grid.ny
+        search.hx, search.hy = (float(h) for h in self.grid.spacing_mm)
+        search.window, search.reach = self.path_window, self.path_reach
+        return search
 
-    def _map_flat(self, count: int, offset: int) -> None:
-        """Trace the tips of envs ``offset .. offset + count`` from the env-major state."""
+    def _map_flat(self) -> None:
+        """Trace every env's tip from the env-major state."""
         wp.launch(
             kernels.map_tip_kernel,
-            dim=count,
+            dim=self.num_envs,
             inputs=[
-                *self._map_args(),
-                offset,
+                self._search,
                 self.update_count,
                 self.x,
                 self.alive,
@@ -393,7 +365,7 @@ class Simulator:
         self.tip.assign(np.asarray(tip, dtype=np.float32).reshape(self.num_envs, 4))
 
     def update(self, tape_mode: bool = False) -> None:
-        """One update of every env: integrate, ``iterations`` relaxation sweeps, cut at the tip.
+        """One update of every env: integrate, ``sweeps`` relaxation sweeps, cut at the tip.
 
         Args:
             tape_mode: Allocate fresh output arrays for every kernel so that the whole history stays
@@ -404,19 +376,15 @@ class Simulator:
             self._counter_synced = False
         else:
             self._sync_flat()
-            if self.backend == "fused" and not tape_mode:
-                self._update_fused()
-                self._counter_synced = False
+            if not self._counter_synced:
+                self._update_counter.assign(np.array([self.update_count], dtype=np.int32))
+                self._counter_synced = True
+            if self.capture and not tape_mode and self._own_arrays():
+                self._update_captured()
             else:
-                if not self._counter_synced:
-                    self._update_counter.assign(np.array([self.update_count], dtype=np.int32))
-                    self._counter_synced = True
-                if self.capture and not tape_mode and self._own_arrays():
-                    self._update_captured()
-                else:
-                    self._update_colours(tape_mode)
-                if self._tracing() and not tape_mode:
-                    self._map_flat(self.num_envs, 0)
+                self._update_colours(tape_mode)
+            if self._tracing() and not tape_mode:
+                self._map_flat()
             self._packed_current = False
         self.update_count += 1
 
@@ -445,7 +413,7 @@ class Simulator:
                     state.kernels.map_tip,
                     dim=count,
                     inputs=[
-                        *self._map_args(),
+                        self._search,
                         offset,
                         self.num_envs,
                         self.update_count,
@@ -467,50 +435,6 @@ class Simulator:
         if not self._flat_current:
             self._simd.store(self.x, self.x_prev, self.alive)
             self._flat_current = True
-
-    def _update_fused(self) -> None:
-        p = self._wp_params
-        seed = self._noise_seed()
-
-        def launch(part: tuple[int, int]) -> None:
-            count, offset = part
-            wp.launch(
-                kernels.fused_update_kernel,
-                dim=count,
-                inputs=[
-                    self.grid.num_vertices,
-                    offset,
-                    self.config.iterations,
-                    self._spring_a,
-                    self._spring_b,
-                    self._spring_rest,
-                    self._colour_start,
-                    p["damping"],
-                    p["dt"],
-                    p["gravity"],
-                    p["noise_std"],
-                    p["elasticity"],
-                    int(self.config.first_order_z),
-                    seed,
-                    self.first_noise_stream,
-                    self.config.cut_radius,
-                    self.config.cut_height,
-                    self.pin,
-                    self.anchor,
-                    self.displacement,
-                    self.tip,
-                ],
-                outputs=[self.x, self.x_prev, self.alive],
-                device=self.device,
-            )
-            if tracing:
-                self._map_flat(count, offset)
-
-        tracing = self._tracing()
-        if self._pool is None:
-            launch(self._slices[0])
-        else:
-            list(self._pool.map(launch, self._slices))
 
     def _noise_seed(self) -> int:
         # A distinct stream per update; kept in int32 range for the kernel argument. The colours path
@@ -578,7 +502,7 @@ class Simulator:
         )
         new_prev, work = self.x, out
         spare = None if tape_mode else self.x_prev
-        for _ in range(self.config.iterations):
+        for _ in range(self.config.sweeps):
             for colour in self.colours:
                 dest = _fresh(work) if tape_mode else spare
                 wp.launch(
@@ -651,9 +575,9 @@ class Simulator:
 
     def state_reader(self, envs: np.ndarray | list[int]) -> Callable[..., np.ndarray]:
         """A function ``read(out=None)`` that does what ``read_state(envs, out)`` does, with the checks and
-        lookups done once, here: what a recorder's step callback calls every step (~10 µs for one 25 x 25
-        env where :meth:`read_state` costs ~40 µs: in the stepping loop, the simulation's kernels have
-        evicted Python's own working set, and every call it makes is slow)."""
+        lookups done once, here: what a recorder's step callback calls every step (in the stepping loop the
+        simulation's kernels have evicted Python's own working set, and every call it makes is slow;
+        docs/performance.md §5)."""
         envs = np.asarray(envs, dtype=np.intp).reshape(-1)
         if envs.size and (envs.min() < 0 or envs.max() >= self.num_envs):
             raise ValueError(f"envs: indices must lie in [0, {self.num_envs}) (got {envs.tolist()})")
