@@ -108,7 +108,7 @@ class CuttingTask:
         segments: Per env, the material polylines cut in order; default :func:`default_segments`.
         device: Warp device.
         seed: Process-noise seed.
-        backend: Simulator backend (``auto``, ``fused`` or ``colours``; see :class:`Simulator`).
+        backend: Simulator backend (``auto``, ``simd`` or ``colours``; see :class:`Simulator`).
         threads: CPU threads stepping the batch (default: all cores).
         trace_path: Trace the cut path (:meth:`Simulator.trace_path`) for the path score; without it
             :meth:`score` has only the separated-material score (its path fields are NaN), a little faster.

@@ -11,19 +11,11 @@ from agents.cli import common
 
 @click.command("bench")
 @common.device_option
-@click.option(
-    "--repeats", default=3, show_default=True, type=click.IntRange(min=1), help="Timed repeats (median)."
-)
+@common.count_option("repeats", 3, "Timed repeats (median).")
 @click.option(
     "--batch-sizes", default="1,64,1024,4096", show_default=True, help="Comma-separated batch sizes."
 )
-@click.option(
-    "--rollout-envs",
-    default=256,
-    show_default=True,
-    type=click.IntRange(min=1),
-    help="Batch size of the fls-circle rollout measurement.",
-)
+@common.count_option("rollout-envs", 256, "Batch size of the fls-circle rollout measurement.")
 @common.json_option
 def command(
     device: str | None, repeats: int, batch_sizes: str, rollout_envs: int, json_path: Path | None
@@ -72,8 +64,7 @@ def command(
         f"NumPy reference updates/s: {result['numpy_updates_per_s']:,.1f}  "
         f"(Warp best / NumPy = {result['speedup_vs_numpy']:,.0f}x)"
     )
-    if "sim_env_steps_per_s" in result:
-        click.echo(f"simulator env steps/s (64 envs): {result['sim_env_steps_per_s']:,.0f}")
+    click.echo(f"simulator env steps/s (64 envs, tensioned fls-circle): {result['sim_env_steps_per_s']:,.0f}")
     click.echo(f"PPO training env steps/s (64 envs): {result['train_steps_per_s']:,.0f}")
     if json_path:
         from warpcut.io import write_json

@@ -177,6 +177,25 @@ def plots_option(what: str):
 json_option = click.option(
     "--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write results here."
 )
+
+
+def out_option(default: str):
+    """``--out DIR``, the run directory (``default`` says where it goes without it)."""
+    return click.option(
+        "--out",
+        type=click.Path(file_okay=False, path_type=Path),
+        default=None,
+        help=f"Run directory (default: {default}).",
+    )
+
+
+def count_option(name: str, default: int | None, help: str):
+    """A positive integer option ``--NAME`` (shows its default when it has one)."""
+    return click.option(
+        f"--{name}", default=default, show_default=default is not None, type=click.IntRange(min=1), help=help
+    )
+
+
 contour_option = click.option(
     "--contour", "contour_name", required=True, help="Built-in name or a .json/.svg contour file."
 )

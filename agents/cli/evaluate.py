@@ -22,13 +22,7 @@ from warpcut.sim.config import SimConfig
     help="'all' (the built-in suite), names or contour files; repeat or comma-separate.",
 )
 @click.option("--methods", default=",".join(METHODS), show_default=True, help="Comma-separated methods.")
-@click.option(
-    "--trials",
-    default=EVALUATION_TRIALS,
-    show_default=True,
-    type=click.IntRange(min=1),
-    help="Trials per contour.",
-)
+@common.count_option("trials", EVALUATION_TRIALS, "Trials per contour.")
 @common.noise_option
 @common.score_option
 @click.option(
@@ -38,28 +32,11 @@ from warpcut.sim.config import SimConfig
     help="Directory of trained runs, one per contour (CHECKPOINTS/NAME, as 'warpcut train' writes); "
     "without it the rl column trains a policy per contour.",
 )
-@click.option(
-    "--iterations",
-    default=TrainConfig.iterations,
-    show_default=True,
-    type=click.IntRange(min=1),
-    help="PPO iterations per contour when training.",
-)
-@click.option(
-    "--num-envs",
-    default=TrainConfig.num_envs,
-    show_default=True,
-    type=click.IntRange(min=1),
-    help="Envs when training.",
-)
+@common.count_option("iterations", TrainConfig.iterations, "PPO iterations per contour when training.")
+@common.count_option("num-envs", TrainConfig.num_envs, "Envs when training.")
 @common.device_option
 @common.seed_option
-@click.option(
-    "--out",
-    type=click.Path(file_okay=False, path_type=Path),
-    default=None,
-    help="Run directory (default: logs/evaluate-TIMESTAMP): results and trained policies.",
-)
+@common.out_option("logs/evaluate-TIMESTAMP; results and trained policies")
 @common.json_option
 @click.option(
     "--markdown",
@@ -75,13 +52,7 @@ from warpcut.sim.config import SimConfig
     "(analytic at the centroid, as in the paper; see --analytic-pinch); --no-plan: one loop per contour, "
     "fixed by random search, rl at the centroid (or the feasible point nearest to it).",
 )
-@click.option(
-    "--candidates",
-    default=EVALUATION_CANDIDATES,
-    show_default=True,
-    type=click.IntRange(min=1),
-    help="Pinch candidates per plan.",
-)
+@common.count_option("candidates", EVALUATION_CANDIDATES, "Pinch candidates per plan.")
 @common.arm_length_option
 @common.analytic_pinch_option
 @common.record_option("in the run directory; of the first contour, at most --trials envs")

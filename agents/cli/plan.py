@@ -14,12 +14,10 @@ from warpcut.sim.config import ARM_RADIUS_MM, SimConfig
 
 @click.command("plan")
 @common.contour_option
-@click.option(
-    "--candidates",
-    default=EVALUATION_CANDIDATES,
-    show_default=True,
-    type=click.IntRange(min=1),
-    help="Pinch points sampled from the feasible region (paper: 30; the centroid is added if feasible).",
+@common.count_option(
+    "candidates",
+    EVALUATION_CANDIDATES,
+    "Pinch points sampled from the feasible region (paper: 30; the centroid is added if feasible).",
 )
 @click.option(
     "--arm-radius",

@@ -45,26 +45,18 @@ from warpcut.sim.config import SimConfig
     help="Train one PPO policy for all the RL candidates (it observes its pinch point) instead of one each: "
     "about K times faster, but it lost to separate policies where they learn (docs/learning.md).",
 )
-@click.option(
-    "--candidates", type=click.IntRange(min=1), default=None, help="Override the budget's pinch candidates."
+@common.count_option("candidates", None, "Override the budget's pinch candidates.")
+@common.count_option(
+    "rl-candidates",
+    None,
+    "Override how many of the best candidates (ranked by fixed tension) get a PPO policy.",
 )
-@click.option(
-    "--rl-candidates",
-    type=click.IntRange(min=1),
-    default=None,
-    help="Override how many of the best candidates (ranked by fixed tension) get a PPO policy.",
-)
-@click.option(
-    "--iterations", type=click.IntRange(min=1), default=None, help="Override the budget's PPO iterations."
-)
-@click.option(
-    "--trials", type=click.IntRange(min=1), default=None, help="Override the budget's evaluation trials."
-)
-@click.option(
-    "--num-envs",
-    default=None,
-    type=click.IntRange(min=1),
-    help="PPO envs per policy (default: 64; with --shared-policy 64, or 8 per candidate when more).",
+@common.count_option("iterations", None, "Override the budget's PPO iterations.")
+@common.count_option("trials", None, "Override the budget's evaluation trials.")
+@common.count_option(
+    "num-envs",
+    None,
+    "PPO envs per policy (default: 64; with --shared-policy 64, or 8 per candidate when more).",
 )
 @common.resolution_option
 @common.noise_option
@@ -73,18 +65,8 @@ from warpcut.sim.config import SimConfig
 @common.analytic_pinch_option
 @common.device_option
 @common.seed_option
-@click.option(
-    "--out",
-    type=click.Path(file_okay=False, path_type=Path),
-    default=None,
-    help="Run directory (default: logs/run-CONTOUR-TIMESTAMP).",
-)
-@click.option(
-    "--json",
-    "json_path",
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="Also write the results here.",
-)
+@common.out_option("logs/run-CONTOUR-TIMESTAMP")
+@common.json_option
 @common.record_option("in the run directory")
 @common.plots_option("in the run directory")
 def command(

@@ -10,6 +10,7 @@ import click
 from agents.cli.common import (
     DEFAULTS,
     contour_option,
+    count_option,
     device_option,
     echo_recording,
     echo_written,
@@ -37,13 +38,7 @@ from warpcut.sim.config import FIXTURES, SimConfig
     "--policy", "policies", default=",".join(BASELINES), show_default=True, help="Comma-separated tensioners."
 )
 @click.option("--pinch", default=None, help="Pinch point X,Y (mm, material) for fixed and analytic.")
-@click.option(
-    "--trials",
-    default=1,
-    show_default=True,
-    type=click.IntRange(min=1),
-    help="Seeded trials per policy (they differ by process noise).",
-)
+@count_option("trials", 1, "Seeded trials per policy (they differ by process noise).")
 @noise_option
 @score_option
 @resolution_option

@@ -20,23 +20,11 @@ TRAIN = TrainConfig()
 @click.option(
     "--pinch", default=None, help="Pinch point X,Y (mm); default: centroid or nearest feasible point."
 )
-@click.option(
-    "--num-envs", default=TRAIN.num_envs, show_default=True, type=click.IntRange(min=1), help="Parallel envs."
+@common.count_option("num-envs", TRAIN.num_envs, "Parallel envs.")
+@common.count_option(
+    "iterations", TRAIN.iterations, "PPO iterations in total (a resumed run continues up to this count)."
 )
-@click.option(
-    "--iterations",
-    default=TRAIN.iterations,
-    show_default=True,
-    type=click.IntRange(min=1),
-    help="PPO iterations in total (a resumed run continues up to this count).",
-)
-@click.option(
-    "--steps-per-env",
-    default=TRAIN.num_steps_per_env,
-    show_default=True,
-    type=click.IntRange(min=1),
-    help="Env steps per env per PPO iteration.",
-)
+@common.count_option("steps-per-env", TRAIN.num_steps_per_env, "Env steps per env per PPO iteration.")
 @common.noise_option
 @common.score_option
 @click.option(
@@ -86,21 +74,10 @@ TRAIN = TrainConfig()
     help="Held-out episodes scoring the policy every 10 iterations; the best is kept (best.pt). 0: off, "
     "the last policy is the run's.",
 )
-@click.option(
-    "--eval-trials",
-    default=EVALUATION_TRIALS,
-    show_default=True,
-    type=click.IntRange(min=1),
-    help="Trials of the final evaluation against no tension.",
-)
+@common.count_option("eval-trials", EVALUATION_TRIALS, "Trials of the final evaluation against no tension.")
 @common.device_option
 @common.seed_option
-@click.option(
-    "--out",
-    type=click.Path(file_okay=False, path_type=Path),
-    default=None,
-    help="Run directory (default: logs/train-CONTOUR-TIMESTAMP).",
-)
+@common.out_option("logs/train-CONTOUR-TIMESTAMP")
 @click.option(
     "--resume",
     type=click.Path(exists=True, path_type=Path),

@@ -1,0 +1,116 @@
+"""The house rules, checked: imports point down (warpcut <- envs <- agents), modules and functions stay a
+readable size, ``import warpcut`` stays light, and the README's command table says what ``--help`` says."""
+
+import ast
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("warpcut", "envs", "agents")
+MAX_FILE_LINES = 800
+MAX_FUNCTION_LINES = 120
+
+
+def sources(package: str) -> list[Path]:
+    return sorted((ROOT / package).rglob("*.py"))
+
+
+def imported_modules(path: Path) -> set[str]:
+    """Every module ``path`` imports, at any depth (including imports inside functions)."""
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names.add(node.module)
+    return names
+
+
+@pytest.mark.parametrize(("package", "above"), [("warpcut", ("envs", "agents")), ("envs", ("agents",))])
+def test_imports_point_down(package, above):
+    upward = {
+        f"{path.relative_to(ROOT)}: {name}"
+        for path in sources(package)
+        for name in imported_modules(path)
+        if name.split(".")[0] in above
+    }
+    assert not upward, f"{package} must not import {above}: {sorted(upward)}"
+
+
+def test_the_physics_package_never_imports_the_learning_stack():
+    heavy = ("torch", "gymnasium", "rsl_rl", "tensordict")
+    found = {
+        f"{path.relative_to(ROOT)}: {name}"
+        for path in sources("warpcut")
+        for name in imported_modules(path)
+        if name.split(".")[0] in heavy
+    }
+    assert not found, sorted(found)
+
+
+def test_import_warpcut_loads_no_learning_stack():
+    """``import warpcut`` and every name it exports (some load lazily) leave torch, gymnasium and rsl-rl
+    unloaded."""
+    code = (
+        "import sys, warpcut\n"
+        "for name in warpcut.__all__: getattr(warpcut, name)\n"
+        "print(sorted(m for m in ('torch', 'gymnasium', 'rsl_rl') if m in sys.modules))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert done.stdout.strip() == "[]", done.stdout + done.stderr
+
+
+def test_the_public_face_names_what_a_script_needs():
+    import warpcut
+
+    for name in ("SimConfig", "Simulator", "CuttingTask", "Contour", "load_contour", "plan_cut", "Score"):
+        assert name in warpcut.__all__ and getattr(warpcut, name) is not None
+    assert warpcut.ci95([1.0, 2.0, 3.0]) > 0
+    assert warpcut.paired_improvement([10.0], [5.0]).tolist() == [50.0]
+
+
+def test_modules_and_functions_stay_readable():
+    long_files, long_functions = [], []
+    for package in PACKAGES:
+        for path in sources(package):
+            text = path.read_text()
+            if text.count("\n") > MAX_FILE_LINES:
+                long_files.append(f"{path.relative_to(ROOT)}: {text.count(chr(10))} lines")
+            for node in ast.walk(ast.parse(text)):
+                if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                    length = node.end_lineno - node.lineno + 1
+                    if length > MAX_FUNCTION_LINES:
+                        long_functions.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name}: {length}")
+    assert not long_files, long_files
+    assert not long_functions, long_functions
+
+
+def readme_commands() -> dict[str, set[str]]:
+    """Per command in the README's command table, the options its first cell names."""
+    rows = {}
+    for line in (ROOT / "README.md").read_text().splitlines():
+        match = re.match(r"\| `warpcut (\w+)(.*?)` \|", line)
+        if match:
+            rows[match.group(1)] = set(re.findall(r"--[a-z][a-z0-9-]*", match.group(2)))
+    return rows
+
+
+def test_the_readme_command_table_matches_help():
+    """Every command is in the table, and its row names exactly the options ``--help`` lists."""
+    from agents.cli import main
+
+    rows = readme_commands()
+    assert set(rows) == set(main.commands), "README command table vs warpcut's commands"
+    for name, command in main.commands.items():
+        options = {
+            opt
+            for param in command.params
+            for opt in (*param.opts, *param.secondary_opts)
+            if opt.startswith("--") and opt != "--help"
+        }
+        only_help, only_readme = sorted(options - rows[name]), sorted(rows[name] - options)
+        assert rows[name] == options, f"{name}: in --help only {only_help}, in README only {only_readme}"
