@@ -13,7 +13,7 @@ import numpy as np
 
 from warpcut import SimConfig
 from warpcut.contours import builtin_contours
-from warpcut.planning import nearest_feasible
+from warpcut.planning import default_pinch
 from warpcut.task import CuttingTask
 
 MOVES = {
@@ -33,7 +33,7 @@ def main(device: str | None) -> None:
     suite = builtin_contours()
     contours, pinches, actions = [], [], []
     for contour in suite.values():
-        pinch = nearest_feasible(contour.centroid, contour, config)
+        pinch = default_pinch(contour, config)
         for move in MOVES.values():
             contours.append(contour)
             pinches.append([np.nan, np.nan] if move is None else pinch)

@@ -14,7 +14,7 @@ import numpy as np
 
 from warpcut import SimConfig
 from warpcut.contours import builtin_contours
-from warpcut.planning import nearest_feasible
+from warpcut.planning import default_pinch
 from warpcut.scoring import ci95
 from warpcut.task import CuttingTask
 
@@ -30,7 +30,7 @@ def main(device: str) -> None:
         config = SimConfig(noise_std=sigma)
         start = time.perf_counter()
         none = CuttingTask(config, envs, device=device).run(None).path_error_vertices.reshape(shape)
-        pinch = np.array([nearest_feasible(c.centroid, c, config) for c in envs])
+        pinch = np.array([default_pinch(c, config) for c in envs])
         fixed = CuttingTask(config, envs, pinch_points=pinch, device=device).run(None)
         fixed = fixed.path_error_vertices.reshape(shape)
         improvement = 100 * (none - fixed) / none

@@ -3,9 +3,10 @@
 
 For each contour: plan the cut (``--candidates`` pinch candidates plus the centroid when feasible), then
 
-* ``shared``: one policy over every candidate (``Scenario(candidates=...)``, as ``warpcut run`` trains it);
-* ``separate``: one policy per candidate (``Scenario(pinch=..., segments=...)``), each with the same PPO
-  budget as the shared one,
+* ``shared``: one policy over every candidate (``PatternCutOptions(candidates=...)``, as ``warpcut run``
+  trains it);
+* ``separate``: one policy per candidate (``PatternCutOptions(pinch_point=..., segments=...)``), each with
+  the same PPO budget as the shared one,
 
 and score every (approach, candidate) on the same held-out episodes (seed 100, neither training's nor
 validation's), deterministic policies, each candidate cut in its best order. Prints per contour the error
@@ -26,19 +27,22 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from agents.config import RECIPE, TrainConfig
 from agents.export import load_policy
-from agents.rl import RECIPE, Scenario, chosen_candidate, policy_errors, recipe_config, train_contour
+from agents.rl import chosen_candidate, policy_errors, train_contour
+from envs.options import PatternCutOptions
+from envs.vector import PatternCutVecEnv
 from warpcut.contours import load_contour
 from warpcut.io import write_json
-from warpcut.planning import plan_cut
+from warpcut.planning import ArmModel, plan_cut
 from warpcut.sim.config import SimConfig
 
 EPISODE_SEED = 100
 
 
-def score(actor: torch.nn.Module, scenario: Scenario, episodes: int) -> float:
-    env = scenario.vec_env(episodes, device="cpu")
-    return float(np.mean(policy_errors(actor, env, scenario, EPISODE_SEED)["error_vertices"]))
+def score(actor: torch.nn.Module, options: PatternCutOptions, episodes: int) -> float:
+    env = PatternCutVecEnv(episodes, options)
+    return float(np.mean(policy_errors(actor, env, EPISODE_SEED)["error_vertices"]))
 
 
 def compare(
@@ -52,7 +56,9 @@ def compare(
     separate: bool = True,
 ) -> dict:
     contour = load_contour(name)
-    plan = plan_cut(contour, SimConfig(), num_candidates=candidates, seed=0, device="cpu", arm_length_mm=15.0)
+    plan = plan_cut(
+        contour, SimConfig(), num_candidates=candidates, seed=0, device="cpu", arm=ArmModel(length_mm=15.0)
+    )
     ranked = sorted(plan.candidates, key=lambda c: c["error_vertices"])[: top or len(plan.candidates)]
     listed = [
         {
@@ -63,12 +69,12 @@ def compare(
     ]
     k = len(listed)
     fixed = [float(c["error_vertices"]) for c in ranked]
-    shared = Scenario(contour=name, candidates=listed, **RECIPE)
+    shared = PatternCutOptions(contour=name, candidates=listed, device="cpu", **RECIPE)
     start = time.perf_counter()
     train_contour(
         shared,
         out / "shared",
-        recipe_config(num_envs=max(64, envs_per_candidate * k), iterations=iterations),
+        TrainConfig(num_envs=max(64, envs_per_candidate * k), iterations=iterations),
         progress=False,
     )
     shared_s = time.perf_counter() - start
@@ -77,10 +83,12 @@ def compare(
     shared_choice = chosen_candidate(out / "shared")
     separate_errors, separate_val, separate_s = [], [], 0.0
     for c, cand in enumerate(listed if separate else []):
-        single = Scenario(contour=name, pinch=cand["pinch"], segments=cand["segments"], **RECIPE)
+        single = PatternCutOptions(
+            contour=name, pinch_point=cand["pinch"], segments=cand["segments"], device="cpu", **RECIPE
+        )
         start = time.perf_counter()
         result = train_contour(
-            single, out / f"separate-{c}", recipe_config(num_envs=64, iterations=iterations), progress=False
+            single, out / f"separate-{c}", TrainConfig(num_envs=64, iterations=iterations), progress=False
         )
         separate_s += time.perf_counter() - start
         separate_val.append(result["summary"]["best"]["validation_error"])
