@@ -12,6 +12,9 @@ from warpcut.scoring import (
     achieved_mask,
     improvement_pct,
     intended_mask,
+    mean_ci95,
+    paired_improvement,
+    separation,
     symmetric_difference,
 )
 from warpcut.sim.config import SheetGrid
@@ -185,6 +188,29 @@ def test_batch_with_one_region_per_env_matches_single_envs():
         assert single.intended.shape == (grid.num_vertices,)
         assert score.error_vertices[env] == single.error_vertices[0]
     assert score.error_vertices[1] == intended_mask(regions[1], grid).sum()
+
+
+def test_separation_scores_premade_masks_as_symmetric_difference_does():
+    """Many frames of one cut against one intended mask (what recordings score), uncut frames included."""
+    grid = grid_of(25)
+    uncut = np.ones(grid.num_vertices, dtype=bool)
+    half = circle_cut(grid) | (grid.material[:, 0] < 50.0)  # the circle cut half way: still one piece
+    frames = np.stack([uncut, half, circle_cut(grid)])
+    intended = intended_mask(disc(), grid)
+    made = separation(frames, intended, grid)
+    again = symmetric_difference(frames, disc(), grid)
+    np.testing.assert_array_equal(made.error_vertices, again.error_vertices)
+    np.testing.assert_array_equal(made.achieved, again.achieved)
+    assert made.error_vertices[0] == made.error_vertices[1] == intended.sum()  # nothing came free yet
+    assert made.error_vertices[2] < 0.2 * intended.sum()
+
+
+def test_paired_improvement_and_its_mean_leave_undefined_trials_out():
+    improvement = paired_improvement([10.0, 0.0, 20.0], [5.0, 1.0, 10.0])
+    assert improvement[0] == 50.0 and np.isnan(improvement[1]) and improvement[2] == 50.0
+    mean, ci = mean_ci95(improvement)
+    assert mean == 50.0 and ci == 0.0
+    assert np.isnan(mean_ci95([np.nan, np.nan])[0])
 
 
 def test_improvement_pct():

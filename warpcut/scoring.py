@@ -211,6 +211,8 @@ def achieved_mask(alive: np.ndarray, intended: np.ndarray, grid: SheetGrid) -> n
         if not env_alive.any():
             continue
         pieces, count = ndimage.label(env_alive.reshape(grid.ny, grid.nx))
+        if count == 1:  # the sheet is still one piece: nothing separated
+            continue
         pieces = pieces.ravel()
         size = np.bincount(pieces, minlength=count + 1)[1:]
         size_outside = np.bincount(pieces[env_outside], minlength=count + 1)[1:]
@@ -261,6 +263,15 @@ def symmetric_difference(
             if id(region) not in masks:
                 masks[id(region)] = intended_mask(region, grid)
         intended = np.stack([masks[id(region)] for region in regions])
+    return separation(alive, intended, grid)
+
+
+def separation(alive: np.ndarray, intended: np.ndarray, grid: SheetGrid) -> Separation:
+    """:func:`symmetric_difference` against intended vertex masks already made (:func:`intended_mask`):
+    ``intended`` (ny * nx,) shared by all envs or (B, ny * nx), e.g. to score many frames of one cut."""
+    alive = _batch_mask(alive, "alive", grid)
+    _batch_mask(intended, "intended", grid, alive.shape[0])
+    intended = np.asarray(intended, dtype=bool)
     achieved = achieved_mask(alive, intended, grid)
     missed = (intended & ~achieved).sum(axis=1).astype(np.float64)
     excess = (achieved & ~intended).sum(axis=1).astype(np.float64)

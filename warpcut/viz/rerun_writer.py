@@ -14,11 +14,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy import ndimage
 
 from warpcut.contours import Contour
 from warpcut.fiducials import NUM_FIDUCIALS, sample_fiducials, visible
-from warpcut.scoring import Region, intended_mask, order_cut_path, path_errors, symmetric_difference
+from warpcut.scoring import intended_mask, order_cut_path, path_errors, separation
 from warpcut.sim.config import SheetGrid, SimConfig
 from warpcut.sim.material import interpolate, material_cells
 from warpcut.viz.colours import (
@@ -71,10 +70,8 @@ class _EnvDrawing:
     """The env's entity path, ``/{method}/env_{env}``."""
     contour_matrix: object
     """(K, V) scipy.sparse bilinear weights of the contour's K points on the sheet's vertices."""
-    region: Region
-    """The intended region (material coordinates)."""
-    intended_vertices: float
-    """Vertices in the intended region: the separated error while nothing is separated."""
+    intended: np.ndarray
+    """(V,) bool: the vertices in the intended region (:func:`warpcut.scoring.intended_mask`)."""
     cut_runs: np.ndarray
     """:func:`~warpcut.viz.columns.cutting_runs` of the scissor trajectory."""
     fiducials: np.ndarray
@@ -189,8 +186,7 @@ class RerunWriter:
             setup=setup,
             root=root,
             contour_matrix=contour_matrix,
-            region=region,
-            intended_vertices=float(intended_mask(region, grid).sum()),
+            intended=intended_mask(region, grid),
             cut_runs=runs,
             fiducials=fiducials,
             fiducial_cells=material_cells(fiducials[None], grid),
@@ -316,7 +312,7 @@ class RerunWriter:
                 at=batch.steps[changed],
             )
             # Unchanged frames carry the last error forward.
-            scored = separated_error_vertices(alive[changed], env.region, env.intended_vertices, task.grid)
+            scored = separation(alive[changed], env.intended, task.grid).error_vertices
             errors = np.concatenate([[env.last_error], scored])[np.cumsum(changed)]
         else:
             errors = np.full(frames, env.last_error)
@@ -390,30 +386,6 @@ def _send_grasp_and_action(env: _EnvDrawing, batch: _EnvBatch, send: Send) -> No
             [column("Scalars:scalars", float64_array(batch.actions), np.full(len(batch.actions), 3))],
             at=batch.action_steps,
         )
-
-
-def separated_error_vertices(
-    alive: np.ndarray, region: Region, intended_vertices: float, grid: SheetGrid
-) -> np.ndarray:
-    """(F,) :func:`~warpcut.scoring.symmetric_difference`'s ``error_vertices`` of F alive masks (F, V)
-    against ``region``. One labelling of all frames finds those in which the sheet is still one piece:
-    nothing is separated there, so the error is the ``intended_vertices``; only the others are scored."""
-    frames = len(alive)
-    labels, _ = ndimage.label(alive.reshape(frames, grid.ny, grid.nx), structure=_FRAME_CROSS)
-    # Each label lies within one frame (the structure does not join frames): count the labels per frame.
-    label_frame = np.zeros(labels.max() + 1, dtype=np.intp)
-    label_frame[labels.reshape(frames, -1)] = np.arange(frames)[:, None]
-    pieces = np.bincount(label_frame[1:], minlength=frames)
-    errors = np.full(frames, intended_vertices)
-    split = pieces > 1
-    if split.any():
-        errors[split] = symmetric_difference(alive[split], region, grid).error_vertices
-    return errors
-
-
-# 4-connectivity within a frame, none across frames (as scoring.achieved_mask labels one frame).
-_FRAME_CROSS = np.zeros((3, 3, 3), dtype=bool)
-_FRAME_CROSS[1] = ndimage.generate_binary_structure(2, 1)
 
 
 def grid_triangles(grid: SheetGrid) -> np.ndarray:
