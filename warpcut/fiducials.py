@@ -7,8 +7,8 @@ lost a vertex to the scissors, or when it lies under the cutting arm's shaft: a 
 ``{y = tip_y, z = tip_z}`` below the radius). A hidden fiducial reports its last visible position; at reset
 every fiducial reports its position on the settled sheet.
 
-The envs (:mod:`envs.observations`) observe them; recordings (:mod:`warpcut.viz.recording`) show them, visible
-or hidden, with the same rule (:func:`visible`).
+The envs (:mod:`envs.observations`) observe them; recordings (:mod:`warpcut.viz.rerun_writer`) show them,
+visible or hidden, with the same rule (:func:`visible`).
 """
 
 from __future__ import annotations

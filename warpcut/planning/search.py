@@ -40,7 +40,7 @@ def pinch_candidates(
     segments: ScissorPath | None = None,
     num: int = 30,
     rng: np.random.Generator | None = None,
-    arm: ArmModel = ArmModel(),  # noqa: B008 (frozen)
+    arm: ArmModel = ArmModel(),
 ) -> np.ndarray:
     """The paper's candidate pinch points (Problem 2a): the contour's centroid first when it is feasible,
     then ``num`` points drawn uniformly (rejection sampling) from the feasible region, where the gripper
@@ -227,7 +227,7 @@ def plan_cut(
     seed: int = 0,
     device: str | None = None,
     tolerance_mm: float = 1.0,
-    arm: ArmModel = ArmModel(),  # noqa: B008 (frozen)
+    arm: ArmModel = ArmModel(),
 ) -> Plan:
     """Plan the cut of ``contour``: segments, pinch candidates, and the best (pinch point, order) pair.
 
