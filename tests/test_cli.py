@@ -563,7 +563,7 @@ def test_cli_defaults_are_the_library_defaults():
     from agents.config import EVALUATION_CANDIDATES, EVALUATION_TRIALS, RECIPE, VALIDATION_TRIALS, TrainConfig
     from agents.pipeline import evaluate_table
     from agents.rl import train_contour
-    from warpcut.planning import ArmModel
+    from warpcut.planning import ArmModel, plan_cut
     from warpcut.sim.config import ARM_LENGTH_MM, ARM_RADIUS_MM
 
     train = TrainConfig()
@@ -595,6 +595,10 @@ def test_cli_defaults_are_the_library_defaults():
             del expected["num_envs"]
         if name in ("train", "evaluate"):
             expected["iterations"] = train.iterations
+        if name == "plan":
+            planning = inspect.signature(plan_cut).parameters
+            expected["tolerance"] = planning["tolerance_mm"].default
+            expected["candidates"] = planning["num_candidates"].default
         if name == "evaluate":
             for key in ("trials", "candidates", "num_envs", "plan", "analytic_pinch", "iterations"):
                 expected[key] = evaluate[key].default
@@ -605,6 +609,11 @@ def test_cli_defaults_are_the_library_defaults():
                 seen.add((name, param.name))
     for command in ("simulate", "train", "evaluate", "run"):
         assert {(command, "noise"), (command, "score")} <= seen, command
-    assert {("train", "stay_prior"), ("train", "iterations"), ("evaluate", "trials")} <= seen
+    assert {
+        ("train", "stay_prior"),
+        ("train", "iterations"),
+        ("evaluate", "trials"),
+        ("plan", "tolerance"),
+    } <= seen
     for command in ("plan", "evaluate", "run"):
         assert (command, "arm_length") in seen, command

@@ -114,3 +114,12 @@ def test_the_readme_command_table_matches_help():
         }
         only_help, only_readme = sorted(options - rows[name]), sorted(rows[name] - options)
         assert rows[name] == options, f"{name}: in --help only {only_help}, in README only {only_readme}"
+
+
+def test_python_dash_m_warpcut_runs_the_command_line():
+    """``python -m warpcut`` reaches the CLI in agents/ through the installed entry point."""
+    done = subprocess.run(
+        [sys.executable, "-m", "warpcut", "contours"], capture_output=True, text=True, cwd=ROOT, timeout=120
+    )
+    assert done.returncode == 0, done.stderr
+    assert "fls-circle" in done.stdout

@@ -9,7 +9,7 @@ import click
 
 from agents.cli import common
 from agents.config import EVALUATION_CANDIDATES
-from warpcut.sim.config import ARM_RADIUS_MM, SimConfig
+from warpcut.sim.config import ARM_RADIUS_MM, SEGMENT_TOLERANCE_MM, SimConfig
 
 
 @click.command("plan")
@@ -29,7 +29,7 @@ from warpcut.sim.config import ARM_RADIUS_MM, SimConfig
 @common.arm_length_option
 @click.option(
     "--tolerance",
-    default=1.0,
+    default=SEGMENT_TOLERANCE_MM,
     show_default=True,
     type=click.FloatRange(min=0.0, min_open=True),
     help="Segmentation tolerance (mm): x reversals smaller than this are ignored.",

@@ -30,7 +30,7 @@ from warpcut.planning.feasibility import (
     pinch_rules,
 )
 from warpcut.planning.segmentation import ORDER_LIMIT, Segment, segment_contour, segment_orders
-from warpcut.sim.config import SimConfig
+from warpcut.sim.config import SEGMENT_TOLERANCE_MM, SimConfig
 from warpcut.task import CuttingTask
 
 
@@ -226,7 +226,7 @@ def plan_cut(
     num_candidates: int = 30,
     seed: int = 0,
     device: str | None = None,
-    tolerance_mm: float = 1.0,
+    tolerance_mm: float = SEGMENT_TOLERANCE_MM,
     arm: ArmModel = ArmModel(),
 ) -> Plan:
     """Plan the cut of ``contour``: segments, pinch candidates, and the best (pinch point, order) pair.

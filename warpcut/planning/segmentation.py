@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from warpcut.contours import Contour, arc_lengths, polyline_length
+from warpcut.sim.config import SEGMENT_TOLERANCE_MM
 
 ORDER_LIMIT = 6
 """Up to this many segments every cutting order is listed (K! of them); beyond it a heuristic list."""
@@ -95,7 +96,9 @@ def is_monotone(points: np.ndarray, tolerance_mm: float) -> bool:
     return _rise(pts[:, 0]) <= tol
 
 
-def segment_contour(contour: Contour, tolerance_mm: float = 1.0, min_length_mm: float = 2.0) -> list[Segment]:
+def segment_contour(
+    contour: Contour, tolerance_mm: float = SEGMENT_TOLERANCE_MM, min_length_mm: float = 2.0
+) -> list[Segment]:
     """Split a contour into segments the arm can cut, each monotone within ``tolerance_mm``, from a notch
     (local maximum of x) to a termination (local minimum of x).
 

@@ -34,6 +34,9 @@ ARM_LENGTH_MM = math.inf
 the paper's model, a cylinder along the whole sheet, by default. Then nothing inside a closed contour is
 feasible: the grasp holds the sheet around the piece, never the piece (:func:`warpcut.planning.under_arm`).
 A short footprint (e.g. 15 mm) lets the gripper hold the piece being cut (docs/learning.md)."""
+SEGMENT_TOLERANCE_MM = 1.0
+"""Default segmentation tolerance (mm): x reversals of a contour smaller than this are ignored
+(:func:`warpcut.planning.segment_contour`)."""
 
 Scalar = float | int
 PerEnv = Scalar | Sequence[Scalar] | np.ndarray
