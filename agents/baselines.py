@@ -13,7 +13,7 @@ import numpy as np
 
 from warpcut.contours import Contour
 from warpcut.planning import default_pinch, pinch_candidates
-from warpcut.sim.config import AUTHORS_UNITS_PER_MM, SimConfig
+from warpcut.sim.config import AUTHORS_UNITS_PER_MM, PINCH_CANDIDATES, SimConfig
 from warpcut.task import CuttingTask
 
 
@@ -43,7 +43,7 @@ class FixedTension:
     """
 
     pinch: tuple[float, float] | None = None
-    candidates: int = 30
+    candidates: int = PINCH_CANDIDATES
     name: str = "fixed"
 
     def pinch_point(
@@ -94,7 +94,11 @@ class AnalyticTension:
 
 
 def search_fixed_pinch(
-    contour: Contour, config: SimConfig, candidates: int = 30, device: str | None = None, seed: int = 0
+    contour: Contour,
+    config: SimConfig,
+    candidates: int = PINCH_CANDIDATES,
+    device: str | None = None,
+    seed: int = 0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Random search for the best fixed pinch point, every candidate in one simulator batch.
 
@@ -106,7 +110,11 @@ def search_fixed_pinch(
 
 
 def search_fixed_pinches(
-    contours: list[Contour], config: SimConfig, candidates: int = 30, device: str | None = None, seed: int = 0
+    contours: list[Contour],
+    config: SimConfig,
+    candidates: int = PINCH_CANDIDATES,
+    device: str | None = None,
+    seed: int = 0,
 ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """:func:`search_fixed_pinch` for several contours at once: all their candidates form one batch.
 

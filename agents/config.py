@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from warpcut.sim.config import PINCH_CANDIDATES
+
 
 @dataclass
 class TrainConfig:
@@ -17,7 +19,9 @@ class TrainConfig:
     seed: int = 0
     """Seed of Python, NumPy, torch and the env (``env.seed``)."""
     torch_device: str = "cpu"
-    """Torch device of the policy and the PPO update (the simulator's Warp device is the env's own)."""
+    """Torch device of the policy and the PPO update; the simulator's Warp device is the env's own
+    (``PatternCutOptions.device``). The CPU by default, wherever the simulator runs: the policy is a 2 x 32
+    MLP and its observations arrive as NumPy arrays each step."""
     discrete: bool = True
     """Categorical actions (the paper's 1 mm moves) if True, else a Gaussian over continuous actions."""
     actor_hidden_dims: list[int] = field(default_factory=lambda: [32, 32])
@@ -135,15 +139,8 @@ RECIPE = {"dense_reward": True, "contour_features": True, "allow_z": True, "acti
 shaping, contour-aware observations and x-y-z moves; with :class:`~agents.train.TrainConfig`'s defaults
 (the initial policy holds still with probability ``stay_prior``) and validation-based model selection.
 ``warpcut train``, ``evaluate`` and ``run`` use it; docs/learning.md has the measurements behind each
-choice. The paper's setting is :data:`PAPER_SETTING` with ``stay_prior=0`` and no validation."""
-
-PAPER_SETTING = {
-    "dense_reward": False,
-    "contour_features": False,
-    "allow_z": False,
-    "action_type": "discrete",
-}
-"""The paper's env setting: sparse reward, fiducials only, x-y moves (the env's own defaults)."""
+choice. The paper's setting is the env's defaults (sparse reward, fiducials only, x-y moves) with
+``stay_prior=0`` and no validation."""
 
 BUDGETS = {
     # candidates for the pinch search, of which the best rl_candidates (by fixed tension; None: all, as in
@@ -153,9 +150,18 @@ BUDGETS = {
 }
 """``run_pipeline``'s budgets (``warpcut run --budget``)."""
 
+DEFAULT_CONTOUR = "fls-circle"
+"""The contour ``warpcut run`` cuts unless told otherwise: the FLS pattern-cutting circle."""
+
+DEFAULT_BUDGET = "fast"
+"""The budget of ``run_pipeline`` (``warpcut run``): a few minutes on 2 CPU cores."""
+
+DEFAULT_SELECTOR = "rl"
+"""The tensioner that chooses ``run_pipeline``'s pinch candidate."""
+
 ANALYTIC_PINCHES = ("feasible", "centroid")
 """Where the analytic policy pinches: the centroid when it is feasible, else the feasible point nearest it
-(feasible); or the centroid wherever it is (centroid: the paper's literal choice)."""
+(feasible, the default); or the centroid wherever it is (centroid: the paper's literal choice)."""
 
-EVALUATION_CANDIDATES = 30
+EVALUATION_CANDIDATES = PINCH_CANDIDATES
 """Pinch candidates per plan in :func:`evaluate_table` (the paper's 30)."""

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from agents.baselines import AnalyticTension, search_fixed_pinches
+from agents.config import EVALUATION_TRIALS
 from agents.methods import BASELINES, StepCallbacks, tensioner
 from warpcut.contours import Contour
 from warpcut.scoring import mean_ci95, paired_improvement
@@ -53,7 +54,7 @@ class MethodResult:
 
     @classmethod
     def from_rollouts(cls, rollouts: Sequence[dict]) -> MethodResult:
-        """From one :func:`agents.rl.policy_errors` dict per contour."""
+        """From one rollout dict per contour (:func:`agents.rl.rollout_errors`)."""
         return cls(
             np.array([r["error_vertices"] for r in rollouts]),
             np.array([r["error_mm2"] for r in rollouts]),
@@ -127,7 +128,7 @@ def run_method(
 def evaluate_suite(
     contours: Sequence[Contour],
     methods: Sequence[str | Method] = BASELINES,
-    trials: int = 10,
+    trials: int = EVALUATION_TRIALS,
     config: SimConfig | None = None,
     device: str | None = None,
     seed: int = 0,

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import contextlib
 import io
-import json
 import logging
 import os
 import warnings
@@ -25,7 +24,7 @@ from rsl_rl.utils import resolve_class
 from tensordict import TensorDict
 
 from agents.train import policy_checkpoint
-from warpcut.io import write_atomic
+from warpcut.io import read_json, write_atomic
 
 ONNX_OPSET = 18
 """ONNX opset of ``policy.onnx`` (rsl-rl's choice)."""
@@ -43,7 +42,7 @@ def load_policy(source: str | Path) -> MLPModel:
         The actor; ``actor(obs_tensordict)`` returns deterministic actions.
     """
     checkpoint = policy_checkpoint(source)
-    config = json.loads((checkpoint.parent / "config.json").read_text())
+    config = read_json(checkpoint.parent / "config.json")
     env, rsl_cfg = config["env"], config["rsl_rl"]
     obs = TensorDict(
         {group: torch.zeros(1, *shape) for group, shape in env["obs_shapes"].items()}, batch_size=[1]

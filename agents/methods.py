@@ -3,7 +3,7 @@ the command line read."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
@@ -28,15 +28,19 @@ StepCallbacks = Callable[[str, int], "StepCallback | None"]
 contours from ``first_contour`` on (None: none), e.g. a recorder's."""
 
 
-def parse_methods(value: str, field: str, allowed: tuple[str, ...] = tuple(METHODS)) -> list[str]:
-    """The comma-separated method names in ``value``; ``ValueError`` naming ``field`` for an unknown one."""
-    names = [v.strip() for v in value.split(",") if v.strip()]
+def check_methods(names: Sequence[str], field: str, allowed: tuple[str, ...] = tuple(METHODS)) -> list[str]:
+    """``names`` as a list, if non-empty and each is in ``allowed``; else ``ValueError`` naming ``field``."""
     unknown = [n for n in names if n not in allowed]
     if not names or unknown:
         raise ValueError(
             f"{field}: unknown {', '.join(unknown) or 'empty list'}; choose from {','.join(allowed)}"
         )
-    return names
+    return list(names)
+
+
+def parse_methods(value: str, field: str, allowed: tuple[str, ...] = tuple(METHODS)) -> list[str]:
+    """The comma-separated method names in ``value`` (:func:`check_methods`)."""
+    return check_methods([v.strip() for v in value.split(",") if v.strip()], field, allowed)
 
 
 def tensioner(name: str):

@@ -24,15 +24,16 @@ from agents.baselines import AnalyticTension
 from agents.config import (
     ANALYTIC_PINCHES,
     BUDGETS,
+    DEFAULT_BUDGET,
+    DEFAULT_SELECTOR,
     EVALUATION_CANDIDATES,
     EVALUATION_TRIALS,
     RECIPE,
     TrainConfig,
 )
 from agents.evaluation import Method, MethodResult, evaluate_suite, run_method
-from agents.methods import METHODS, SELECTORS, StepCallbacks
+from agents.methods import METHODS, SELECTORS, StepCallbacks, check_methods
 from agents.rl import is_run, rollout_errors, train_contour
-from agents.train import torch_device_for
 from envs.options import PatternCutOptions
 from warpcut.contours import Contour, builtin_names, load_contour
 from warpcut.io import write_json
@@ -60,9 +61,7 @@ def train_policy(
 ) -> dict:
     """Train a recipe policy for ``options`` into ``run_dir`` (:func:`agents.rl.train_contour`); Ctrl-C
     raises :class:`TrainingInterrupted` naming the run directory. Returns the training summary."""
-    cfg = TrainConfig(
-        num_envs=num_envs, iterations=iterations, seed=seed, torch_device=torch_device_for(options.device)
-    )
+    cfg = TrainConfig(num_envs=num_envs, iterations=iterations, seed=seed)
     try:
         return train_contour(options, run_dir, cfg, eval_trials=eval_trials, progress=progress)["summary"]
     except KeyboardInterrupt as interrupt:
@@ -124,8 +123,8 @@ def run_pipeline(
     contour: str,
     out: str | Path,
     *,
-    budget: str = "fast",
-    selector: str = "rl",
+    budget: str = DEFAULT_BUDGET,
+    selector: str = DEFAULT_SELECTOR,
     shared_policy: bool = False,
     candidates: int | None = None,
     rl_candidates: int | None = None,
@@ -134,7 +133,7 @@ def run_pipeline(
     num_envs: int | None = None,
     config: SimConfig | None = None,
     arm: ArmModel | None = None,
-    analytic_pinch: str = "feasible",
+    analytic_pinch: str = ANALYTIC_PINCHES[0],
     device: str | None = None,
     seed: int = 0,
     log: Callable[[str], None] = lambda _: None,
@@ -297,12 +296,12 @@ def _train_candidates(
     cuts = [[s.tolist() for s in plan.ordered_segments(c["order"])] for c in listed]
     common = dict(contour=contour, sim_config=config, device=device, **RECIPE)
     if shared:
-        envs = num_envs or max(64, 8 * len(listed))
+        envs = num_envs or max(TrainConfig.num_envs, 8 * len(listed))
         choices = [{"pinch": c["pinch"], "segments": s} for c, s in zip(listed, cuts, strict=True)]
         jobs = [(out / "rl", PatternCutOptions(candidates=choices, **common))]
         what = f"one RL policy shared by {len(listed)} pinch candidate(s) ({envs} envs"
     else:
-        envs = num_envs or 64
+        envs = num_envs or TrainConfig.num_envs
         jobs = [
             (out / "rl" / f"candidate-{k}", PatternCutOptions(pinch_point=c["pinch"], segments=s, **common))
             for k, (c, s) in enumerate(zip(listed, cuts, strict=True))
@@ -331,9 +330,10 @@ def _train_candidates(
 # --- evaluate_table -------------------------------------------------------------------------------------
 
 
-def resolve_contours(specs: Sequence[str]) -> list[tuple[str, Contour]]:
-    """``(spec, contour)`` for each name or file in ``specs`` (comma-separated allowed); ``all``: the
-    built-in suite (after any other given)."""
+def resolve_contours(specs: str | Sequence[str]) -> list[tuple[str, Contour]]:
+    """``(spec, contour)`` for each name or file in ``specs`` (one string or several, comma-separated
+    allowed); ``all``: the built-in suite (after any other given)."""
+    specs = [specs] if isinstance(specs, str) else specs
     names = [s.strip() for arg in specs for s in arg.split(",") if s.strip()]
     if "all" in names:
         names = [s for s in names if s != "all"] + [n for n in builtin_names() if n not in names]
@@ -382,7 +382,7 @@ class TableReport:
 
 
 def evaluate_table(
-    contours: Sequence[str],
+    contours: str | Sequence[str],
     out: str | Path,
     *,
     methods: Sequence[str] = tuple(METHODS),
@@ -394,7 +394,7 @@ def evaluate_table(
     plan: bool = True,
     candidates: int = EVALUATION_CANDIDATES,
     arm: ArmModel | None = None,
-    analytic_pinch: str = "feasible",
+    analytic_pinch: str = ANALYTIC_PINCHES[0],
     device: str | None = None,
     seed: int = 0,
     log: Callable[[str], None] = lambda _: None,
@@ -425,11 +425,7 @@ def evaluate_table(
         log: Called with each progress line.
         step_callbacks: Step callbacks of the batches (``("rl", k)``: contour k's rollout).
     """
-    unknown = [m for m in methods if m not in METHODS]
-    if not methods or unknown:
-        raise ValueError(
-            f"methods: unknown {', '.join(unknown) or 'empty list'}; choose from {','.join(METHODS)}"
-        )
+    methods = check_methods(methods, "methods")
     config = (config or SimConfig()).validated()
     out = Path(out)
     named = resolve_contours(contours)
@@ -482,7 +478,7 @@ def evaluate_table(
         step_callbacks=step_callbacks,
     )
     report = TableReport(
-        loaded, list(methods), config, table, plans, analytic_pinch, time.perf_counter() - start, runs
+        loaded, methods, config, table, plans, analytic_pinch, time.perf_counter() - start, runs
     )
     write_json(out / "results.json", report.to_json())
     return report

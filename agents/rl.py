@@ -10,7 +10,6 @@ policy against no tension). Runs written before ``options.json`` existed hold ``
 from __future__ import annotations
 
 import dataclasses
-import json
 import time
 from pathlib import Path
 
@@ -18,15 +17,14 @@ import numpy as np
 import torch
 
 from agents.config import EVALUATION_TRIALS, VALIDATION_TRIALS, TrainConfig
-from agents.evaluation import run_method
+from agents.evaluation import Method, MethodResult, evaluate_suite
 from agents.export import load_policy
 from agents.methods import StepCallbacks
 from agents.train import train
 from envs.options import PatternCutOptions
 from envs.rsl import PatternCutRslEnv
 from envs.vector import PatternCutVecEnv
-from warpcut.io import write_json
-from warpcut.scoring import mean_ci95, paired_improvement
+from warpcut.io import read_json, write_json
 from warpcut.sim.config import SimConfig
 from warpcut.task import StepCallback
 
@@ -87,7 +85,7 @@ def train_contour(
         pinch = options.per_env(1)[1][0]
         options = dataclasses.replace(options, pinch_point=[float(v) for v in pinch])
     write_json(out_dir / OPTIONS_FILE, dataclasses.replace(options, device=None).to_dict())
-    env = PatternCutRslEnv(PatternCutVecEnv(cfg.num_envs, options), device=cfg.torch_device, seed=cfg.seed)
+    env = training_env(options, cfg)
     validate = None
     if validation_trials > 0:
         candidates = len(options.candidates) if shared else 1
@@ -124,6 +122,12 @@ def train_contour(
     return {"summary": summary, "evaluation": evaluation}
 
 
+def training_env(options: PatternCutOptions, cfg: TrainConfig) -> PatternCutRslEnv:
+    """The rsl-rl env PPO trains in: ``cfg.num_envs`` envs of ``options``, seeded with ``cfg.seed``."""
+    env = PatternCutVecEnv(cfg.num_envs, options)
+    return PatternCutRslEnv(env, torch_device=cfg.torch_device, seed=cfg.seed)
+
+
 CANDIDATES_FILE = "candidates.json"
 """In the run directory of a policy shared across pinch candidates: the chosen candidate (``chosen``, its
 ``pinch``) and every candidate's validation error with the run's policy."""
@@ -140,7 +144,7 @@ def chosen_candidate(run_dir: str | Path) -> int:
         raise FileNotFoundError(
             f"{run_dir}: no {CANDIDATES_FILE}; the shared policy's training did not finish"
         )
-    return int(json.loads(path.read_text())["chosen"])
+    return int(read_json(path)["chosen"])
 
 
 def is_run(run_dir: str | Path) -> bool:
@@ -154,9 +158,9 @@ def load_options(run_dir: str | Path, device: str | None = None) -> PatternCutOp
     candidate it chose (as its evaluation uses)."""
     run_dir = Path(run_dir)
     if (run_dir / OPTIONS_FILE).is_file():
-        options = PatternCutOptions.from_dict(json.loads((run_dir / OPTIONS_FILE).read_text()))
+        options = PatternCutOptions.from_dict(read_json(run_dir / OPTIONS_FILE))
     elif (run_dir / LEGACY_SCENARIO_FILE).is_file():
-        options = _from_scenario(json.loads((run_dir / LEGACY_SCENARIO_FILE).read_text()))
+        options = _from_scenario(read_json(run_dir / LEGACY_SCENARIO_FILE))
     else:
         raise FileNotFoundError(
             f"{run_dir}: no {OPTIONS_FILE}; give a run directory written by 'warpcut train'"
@@ -274,19 +278,26 @@ def evaluate_run(
         run_dir, trials, seed=seed, device=device, on_step=callbacks("rl", 0), paired_noise=(seed, 0)
     )
     segments = None if options.segments is None else [[np.asarray(p) for p in options.segments]]
-    none = run_method(
-        [contour], [None], None, trials, options.config(), device, seed, callbacks("none", 0), segments
-    ).error_vertices
-    improvement_pct, ci95 = mean_ci95(paired_improvement(none[0], rl["error_vertices"]))
+    table = evaluate_suite(
+        [contour],
+        [Method("rl", result=MethodResult.from_rollouts([rl]))],
+        trials,
+        options.config(),
+        device,
+        seed,
+        segments=segments,
+        step_callbacks=callbacks,
+    )
+    row = table["rows"][0]
     return {
         "contour": contour.name,
         "trials": trials,
-        "none_error_vertices": float(none[0].mean()),
-        "rl_error_vertices": float(rl["error_vertices"].mean()),
-        "rl_error_mm2": float(rl["error_mm2"].mean()),
-        "rl_improvement_pct": improvement_pct,
-        "rl_ci95": ci95,
-        "pinch": [float(v) for v in rl["pinch"]],
+        "none_error_vertices": row["none_error_vertices"],
+        "rl_error_vertices": row["rl_error_vertices"],
+        "rl_error_mm2": row["rl_error_mm2"],
+        "rl_improvement_pct": row["rl_improvement_pct"],
+        "rl_ci95": row["rl_ci95"],
+        "pinch": row["rl_pinch"],
         "seconds": time.perf_counter() - start,
     }
 
@@ -298,5 +309,4 @@ def benchmark_training(device: str | None = None, num_envs: int = 64, iterations
     cfg = TrainConfig(num_envs=num_envs, iterations=iterations, num_steps_per_env=32, save_interval=10**6)
     options = PatternCutOptions(contour="fls-circle", device=device)
     with tempfile.TemporaryDirectory() as out:
-        env = PatternCutRslEnv(PatternCutVecEnv(num_envs, options), device=cfg.torch_device, seed=cfg.seed)
-        return float(train(env, cfg, out, progress=False)["steps_per_s"])
+        return float(train(training_env(options, cfg), cfg, out, progress=False)["steps_per_s"])

@@ -316,14 +316,6 @@ def policy_checkpoint(path: str | Path) -> Path:
     return latest_checkpoint(path)
 
 
-def torch_device_for(sim_device: str | None) -> str:
-    """The torch device for a policy trained on a simulator on the Warp device ``sim_device``: CUDA when
-    the simulator runs on CUDA and torch has CUDA, else the CPU (observations cross once per step)."""
-    if sim_device is not None and sim_device.startswith("cuda") and torch.cuda.is_available():
-        return "cuda"
-    return "cpu"
-
-
 def seed_everything(seed: int) -> None:
     """Seed Python's, NumPy's and torch's global generators."""
     random.seed(seed)

@@ -35,6 +35,8 @@ Episode:
 
 from __future__ import annotations
 
+from typing import Any
+
 import gymnasium as gym
 import numpy as np
 
@@ -197,3 +199,9 @@ class PatternCut:
             parts.append(normalise_positions(np.pad(pinch, ((0, 0), (0, 1))), self.config)[:, :2])
         obs = np.concatenate(parts, axis=1).astype(np.float32)
         return np.clip(obs, self.observation_space.low, self.observation_space.high)
+
+
+def reject_reset_options(options: dict[str, Any] | None) -> None:
+    """Raise ``ValueError`` for non-empty reset ``options``: these envs take none."""
+    if options:
+        raise ValueError(f"reset: unknown options {sorted(options)}; the pattern-cutting envs take none")

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from warpcut.contours import Contour, load_contour, validate
+from warpcut.contours import Contour, contour_from_json, load_contour
 from warpcut.fiducials import NUM_FIDUCIALS, SHAFT_RADIUS_MM
 from warpcut.planning import default_pinch
 from warpcut.sim.config import PerEnv, SimConfig
@@ -183,18 +183,20 @@ class PatternCutOptions:
                 f"options: unknown field(s) {', '.join(unknown)}; known: {', '.join(sorted(names))}"
             )
         fields = dict(data)
-
-        def contour(spec):
-            return validate(spec["name"], spec["closed"], spec["points"]) if isinstance(spec, dict) else spec
-
-        if "contour" in fields:
-            c = fields["contour"]
-            fields["contour"] = [contour(s) for s in c] if isinstance(c, list) else contour(c)
         if "sim_config" in fields:
             sim = fields["sim_config"]
             if isinstance(sim, dict):  # JSON lists back to the tuples SimConfig holds
                 sim = SimConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in sim.items()})
             fields["sim_config"] = sim
+        sim = fields.get("sim_config", SimConfig())
+        sheet = (sim.width_mm, sim.height_mm)
+
+        def contour(spec):
+            return contour_from_json(spec, "options: contour", sheet) if isinstance(spec, dict) else spec
+
+        if "contour" in fields:
+            c = fields["contour"]
+            fields["contour"] = [contour(s) for s in c] if isinstance(c, list) else contour(c)
         return cls(**fields)
 
 

@@ -8,7 +8,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from envs.core import PatternCut
+from envs.core import PatternCut, reject_reset_options
 from envs.options import PatternCutOptions
 from warpcut.task import CuttingTask
 
@@ -53,9 +53,3 @@ class PatternCutEnv(gym.Env):
         """Move the grasp by ``action`` and advance the scissors one step (:mod:`envs.core`)."""
         obs, rewards, terminated, truncated, info = self.scene.step(np.asarray(action)[None])
         return obs[0], float(rewards[0]), terminated, truncated, {k: float(v[0]) for k, v in info.items()}
-
-
-def reject_reset_options(options: dict[str, Any] | None) -> None:
-    """Raise ``ValueError`` for non-empty reset ``options``: these envs take none."""
-    if options:
-        raise ValueError(f"reset: unknown options {sorted(options)}; the pattern-cutting envs take none")

@@ -37,7 +37,8 @@ class PatternCutRslEnv(VecEnv):
 
     Args:
         env: The batched env (any action type); it is reset here.
-        device: Torch device of the returned tensors (the simulator's Warp device is ``env.options.device``).
+        torch_device: Torch device of the returned tensors (the simulator's Warp device is
+            ``env.options.device``).
         seed: Seed of the first reset.
 
     Attributes:
@@ -45,13 +46,13 @@ class PatternCutRslEnv(VecEnv):
         num_actions: 1 for discrete actions (one index per env), else the action dimension.
         num_action_choices: Number of discrete actions (5, or 7 with ``allow_z``); ``None`` for continuous.
         max_episode_length: Steps per episode (the same for every env).
-        device: Torch device of observations, rewards, dones and extras.
+        device: Torch device of observations, rewards, dones and extras (rsl-rl's name for it).
         cfg: The env's :class:`~envs.options.PatternCutOptions` (``to_dict()`` for loggers).
     """
 
-    def __init__(self, env: PatternCutVecEnv, device: str | torch.device = "cpu", seed: int | None = 0):
+    def __init__(self, env: PatternCutVecEnv, torch_device: str | torch.device = "cpu", seed: int | None = 0):
         self.env = env
-        self.device = torch.device(device)
+        self.device = torch.device(torch_device)
         self.cfg: PatternCutOptions = env.options
         self.num_envs = env.num_envs
         space = env.single_action_space

@@ -20,9 +20,8 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from envs.core import PatternCut
+from envs.core import PatternCut, reject_reset_options
 from envs.options import PatternCutOptions
-from envs.pattern_cut import reject_reset_options
 from warpcut.task import CuttingTask
 
 

@@ -617,3 +617,8 @@ def test_cli_defaults_are_the_library_defaults():
     } <= seen
     for command in ("plan", "evaluate", "run"):
         assert (command, "arm_length") in seen, command
+
+
+def test_no_command_prints_the_help():
+    code, stdout, _ = invoke([])
+    assert code == 0 and stdout.startswith("Usage: ") and "evaluate" in stdout

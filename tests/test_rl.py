@@ -196,3 +196,14 @@ def test_a_still_policy_with_paired_noise_cuts_exactly_as_fixed_tension():
     np.testing.assert_array_equal(paired["error_vertices"], fixed)
     own = policy_errors(Stay(), PatternCutVecEnv(trials, options), 9)
     assert not np.array_equal(own["error_vertices"], fixed)
+
+
+def test_a_damaged_run_file_is_named_in_the_error(run_dir, tmp_path):
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    (broken / "options.json").write_text('{"contour": "fls-circle", ')
+    with pytest.raises(ValueError, match=r"broken/options.json: not a valid JSON file"):
+        load_options(broken)
+    (broken / "options.json").write_text('{"contour": {"name": "x", "points": [[1, 2], [3, 4], [5, 1]]}}')
+    with pytest.raises(ValueError, match="options: contour: field 'closed' is required"):
+        load_options(broken)

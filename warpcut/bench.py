@@ -17,11 +17,14 @@ from collections.abc import Callable
 
 import numpy as np
 
-from warpcut.sim._warp import wp
 from warpcut.sim.config import SimConfig
-from warpcut.sim.simulator import Simulator
 
 BATCH_SIZES = (1, 64, 1024, 4096)
+"""Batch sizes of the update-rate measurements."""
+REPEATS = 3
+"""Timed repeats of each measurement (the median is reported)."""
+ROLLOUT_ENVS = 256
+"""Batch of the fls-circle rollout measurements."""
 SIM_ENV_STEP_ENVS = 64
 """Batch of the ``sim_env_steps_per_s`` measurement: the envs a training run steps by default."""
 PAPER_SWEEPS = SimConfig(springs=("structural",), sweeps=5, noise_std=0.0)
@@ -49,6 +52,9 @@ def updates_per_second(
 ) -> float:
     """Env updates per second (``num_envs`` x updates / s) with cutting active somewhere on the sheet.
     ``sim_options`` go to :class:`Simulator` (e.g. ``capture=False``); default: its own choices."""
+    from warpcut.sim._warp import wp
+    from warpcut.sim.simulator import Simulator
+
     sim = Simulator(config, num_envs, device=device, **sim_options)
     sim.reset()
     sim.set_tip(np.tile([[50.0, 50.0, -15.0, 1.0]], (num_envs, 1)))
@@ -69,6 +75,7 @@ def rollouts_per_second(num_envs: int, device: str, repeats: int, config: SimCon
     (amortised), the timed part is reset + every step + scoring (the path score included: traced every
     update). ``config``: default physics if None."""
     from warpcut.contours import load_contour
+    from warpcut.sim._warp import wp
     from warpcut.task import CuttingTask
 
     task = CuttingTask(config or SimConfig(), load_contour("fls-circle"), num_envs=num_envs, device=device)
@@ -80,6 +87,7 @@ def env_steps_per_second(num_envs: int, device: str, repeats: int) -> float:
     a step is one grasp move plus the scissors' ``updates_per_step`` updates, as a training env steps the
     simulator (its observations and rewards not included). Timed: reset + every step."""
     from warpcut.contours import load_contour
+    from warpcut.sim._warp import wp
     from warpcut.task import CuttingTask
 
     contour = load_contour("fls-circle")
@@ -101,6 +109,7 @@ def scoring_overhead_pct(num_envs: int, device: str, repeats: int) -> float:
     only by separated material. The two are timed alternately, ``2 * repeats + 1`` times each; the ratio of
     their medians."""
     from warpcut.contours import load_contour
+    from warpcut.sim._warp import wp
     from warpcut.task import CuttingTask
 
     contour = load_contour("fls-circle")
@@ -129,6 +138,7 @@ def scoring_overhead_pct(num_envs: int, device: str, repeats: int) -> float:
 def numpy_updates_per_second(repeats: int) -> float:
     """Updates per second of the NumPy reference (one sheet, default physics without process noise)."""
     from warpcut.sim.reference import ReferenceSheet
+    from warpcut.sim.simulator import Simulator
 
     config = SimConfig(noise_std=0.0)
     sim = Simulator(config, 1, device="cpu")
@@ -165,15 +175,18 @@ def start_times(device: str) -> dict[str, float]:
 def run_bench(
     device: str,
     *,
-    repeats: int = 3,
+    repeats: int = REPEATS,
     batch_sizes: tuple[int, ...] = BATCH_SIZES,
-    rollout_envs: int = 256,
+    rollout_envs: int = ROLLOUT_ENVS,
     progress: Callable[[str], None] = lambda _: None,
     extra: dict[str, Callable[[], float]] | None = None,
 ) -> dict:
     """Measure the simulator as ``warpcut bench`` reports it, then each of ``extra``: ``result[key] =
     fn()`` in order (what lies above the simulator, e.g. ``{"train_steps_per_s": ...}``). Returns the
     JSON-ready dict."""
+    from warpcut.sim._warp import wp
+    from warpcut.sim.simulator import Simulator
+
     result: dict = {
         "device": device,
         "device_name": str(wp.get_device(device).name),

@@ -7,22 +7,25 @@ from pathlib import Path
 import click
 
 from agents.cli import common
+from warpcut import bench
 
 
 @click.command("bench")
 @common.device_option
-@common.count_option("repeats", 3, "Timed repeats (median).")
+@common.count_option("repeats", bench.REPEATS, "Timed repeats (median).")
 @click.option(
-    "--batch-sizes", default="1,64,1024,4096", show_default=True, help="Comma-separated batch sizes."
+    "--batch-sizes",
+    default=",".join(map(str, bench.BATCH_SIZES)),
+    show_default=True,
+    help="Comma-separated batch sizes.",
 )
-@common.count_option("rollout-envs", 256, "Batch size of the fls-circle rollout measurement.")
+@common.count_option("rollout-envs", bench.ROLLOUT_ENVS, "Batch size of the fls-circle rollout measurement.")
 @common.json_option
 def command(
     device: str | None, repeats: int, batch_sizes: str, rollout_envs: int, json_path: Path | None
 ) -> None:
     """Measure simulator and PPO throughput (medians over repeats, all in one run)."""
     from agents.rl import benchmark_training
-    from warpcut.bench import run_bench
     from warpcut.sim.simulator import resolve_device
 
     try:
@@ -34,7 +37,7 @@ def command(
     if not sizes or min(sizes) < 1:
         raise click.BadParameter("batch sizes must be positive", param_hint="--batch-sizes")
     device = resolve_device(device)
-    result = run_bench(
+    result = bench.run_bench(
         device,
         repeats=repeats,
         batch_sizes=sizes,

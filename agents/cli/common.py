@@ -32,6 +32,9 @@ class CleanErrors(click.Group):
             where = getattr(exc.__cause__, "run_dir", None)
             click.echo("interrupted" + (f": checkpoint saved in {where}" if where else ""), err=True)
             sys.exit(130)
+        except click.exceptions.NoArgsIsHelpError as exc:  # no command given: the help, as --help shows it
+            click.echo(exc.ctx.get_help())
+            sys.exit(0)
         except click.ClickException as exc:
             hint = (
                 f" (see 'warpcut {exc.ctx.command.name} --help')"
@@ -161,7 +164,7 @@ arm_length_option = click.option(
 
 analytic_pinch_option = click.option(
     "--analytic-pinch",
-    default="feasible",
+    default=ANALYTIC_PINCHES[0],
     show_default=True,
     type=click.Choice(ANALYTIC_PINCHES),
     help="Where the analytic policy pinches: the centroid (the paper's choice) when it is feasible, else the "
@@ -226,7 +229,7 @@ def parse_methods(value: str, option: str, allowed: tuple[str, ...]) -> list[str
     try:
         return parse(value, option, allowed)
     except ValueError as error:
-        raise click.BadParameter(str(error).split(": ", 1)[1], param_hint=option) from None
+        raise click.BadParameter(str(error).removeprefix(f"{option}: "), param_hint=option) from None
 
 
 def run_dir(out: Path | None, prefix: str) -> Path:
@@ -309,12 +312,11 @@ def log(line: str) -> None:
 
 def plot_learning_curves(runs: dict[Path, str]) -> list[Path]:
     """Each training run's learning curve (``learning_curve.png/svg`` in it), titled as given."""
-    import json
-
+    from warpcut.io import read_json
     from warpcut.viz.plots import plot_learning_curve
 
     written = []
     for run, title in runs.items():
-        summary = json.loads((run / "summary.json").read_text())
+        summary = read_json(run / "summary.json")
         written += plot_learning_curve(summary["history"], summary["validation"], run, title=title)
     return written

@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from agents.cli import common
-from agents.config import BUDGETS
+from agents.config import BUDGETS, DEFAULT_BUDGET, DEFAULT_CONTOUR, DEFAULT_SELECTOR
 from agents.methods import SELECTORS
 from warpcut.sim.config import SimConfig
 
@@ -16,23 +16,27 @@ from warpcut.sim.config import SimConfig
 @click.option(
     "--contour",
     "contour_name",
-    default="fls-circle",
+    default=DEFAULT_CONTOUR,
     show_default=True,
     help="Built-in name or a .json/.svg contour file.",
 )
 @click.option(
     "--budget",
-    default="fast",
+    default=DEFAULT_BUDGET,
     show_default=True,
     type=click.Choice(list(BUDGETS)),
-    help="fast: 8 pinch candidates (plus the centroid when feasible), a PPO policy for each of the best 2, "
-    "60 PPO iterations each (a few minutes on 2 CPU cores); paper: 30 candidates, a policy for every one, "
-    "200 iterations each (hours).",
+    help="; ".join(
+        f"{name}: {b['candidates']} pinch candidates (plus the centroid when feasible), a PPO policy for "
+        + ("every one" if b["rl_candidates"] is None else f"each of the best {b['rl_candidates']}")
+        + f", {b['iterations']} PPO iterations each, {b['trials']} trials"
+        for name, b in BUDGETS.items()
+    )
+    + ". fast: a minute or two on 2 CPU cores; paper: hours.",
 )
 @click.option(
     "--policy",
     "run_policy",
-    default="rl",
+    default=DEFAULT_SELECTOR,
     show_default=True,
     type=click.Choice(SELECTORS),
     help="The tensioner that picks the pinch candidate (each candidate with its best order): rl (a PPO "

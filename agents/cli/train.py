@@ -113,7 +113,6 @@ def command(
 ) -> None:
     """Train a PPO tensioning policy (rsl-rl, 2x32 MLP, 1 mm moves) for one contour."""
     from agents.rl import load_options, train_contour
-    from agents.train import torch_device_for
     from envs.options import PatternCutOptions
     from warpcut.contours import load_contour
     from warpcut.sim.simulator import resolve_device
@@ -139,7 +138,7 @@ def command(
     name, discrete = options.contours(1)[0].name, options.action_type == "discrete"
     cfg = TrainConfig(
         num_envs=num_envs, iterations=iterations, num_steps_per_env=steps_per_env, seed=seed,
-        torch_device=torch_device_for(device), discrete=discrete, stay_prior=stay_prior if discrete else 0.0,
+        discrete=discrete, stay_prior=stay_prior if discrete else 0.0,
     )  # fmt: skip
     click.echo(f"training {name} into {out} ({num_envs} envs, {iterations} iterations, {device})")
     try:

@@ -7,7 +7,7 @@ and :mod:`warpcut.contours.polyline` for arc-length resampling.
 """
 
 from warpcut.contours.contour import DEFAULT_SHEET_MM, EDGE_REACH_MM, Contour, ContourError, validate
-from warpcut.contours.loaders import SVG_CHORD_MM, load_contour
+from warpcut.contours.loaders import SVG_CHORD_MM, contour_from_json, load_contour
 from warpcut.contours.polyline import arc_lengths, polyline_length, resample_polyline
 from warpcut.contours.suite import BUILTIN_SPACING_MM, builtin_contours, builtin_names
 
@@ -21,6 +21,7 @@ __all__ = [
     "arc_lengths",
     "builtin_contours",
     "builtin_names",
+    "contour_from_json",
     "load_contour",
     "polyline_length",
     "resample_polyline",

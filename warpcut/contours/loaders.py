@@ -61,19 +61,31 @@ def _load_json(path: Path, sheet_size: tuple[float, float]) -> Contour:
         data = json.loads(path.read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ContourError(f"contour file {str(path)!r}: cannot read it as JSON ({exc})") from None
+    return contour_from_json(data, f"contour file {str(path)!r}", sheet_size, default_name=path.stem)
+
+
+def contour_from_json(
+    data: object,
+    where: str,
+    sheet_size: tuple[float, float] = DEFAULT_SHEET_MM,
+    default_name: str | None = None,
+) -> Contour:
+    """A contour from its JSON object (``{"name", "closed", "points"}``: a contour file, or what
+    :meth:`Contour.to_json` writes), validated; errors name ``where``.
+
+    Raises:
+        ContourError: naming the field and the fix.
+    """
     if not isinstance(data, dict):
         raise ContourError(
-            f"contour file {str(path)!r}: expected a JSON object "
-            '{"name": ..., "closed": true/false, "points": [[x, y], ...]}'
+            f'{where}: expected a JSON object {{"name": ..., "closed": true/false, "points": [[x, y], ...]}}'
         )
-    name = data.get("name", path.stem)
+    name = data.get("name", default_name)
     if not isinstance(name, str) or not name:
-        raise ContourError(
-            f"contour file {str(path)!r}: field 'name' must be a non-empty string (got {name!r})"
-        )
+        raise ContourError(f"{where}: field 'name' must be a non-empty string (got {name!r})")
     if not isinstance(data.get("closed"), bool):
         raise ContourError(
-            f"contour file {str(path)!r}: field 'closed' is required and must be true or false "
+            f"{where}: field 'closed' is required and must be true or false "
             f"(got {data.get('closed', 'nothing')!r})"
         )
     points = data.get("points")
@@ -81,8 +93,7 @@ def _load_json(path: Path, sheet_size: tuple[float, float]) -> Contour:
         isinstance(p, list) and len(p) == 2 and all(_is_number(v) for v in p) for p in points
     ):
         raise ContourError(
-            f"contour file {str(path)!r}: field 'points' is required and must be a list of [x_mm, y_mm] "
-            "number pairs"
+            f"{where}: field 'points' is required and must be a list of [x_mm, y_mm] number pairs"
         )
     return validate(name, data["closed"], np.array(points, dtype=np.float64).reshape(-1, 2), sheet_size)
 

@@ -30,7 +30,7 @@ from warpcut.planning.feasibility import (
     pinch_rules,
 )
 from warpcut.planning.segmentation import ORDER_LIMIT, Segment, segment_contour, segment_orders
-from warpcut.sim.config import SEGMENT_TOLERANCE_MM, SimConfig
+from warpcut.sim.config import PINCH_CANDIDATES, SEGMENT_TOLERANCE_MM, SimConfig
 from warpcut.task import CuttingTask
 
 
@@ -38,7 +38,7 @@ def pinch_candidates(
     contour: Contour,
     config: SimConfig,
     segments: ScissorPath | None = None,
-    num: int = 30,
+    num: int = PINCH_CANDIDATES,
     rng: np.random.Generator | None = None,
     arm: ArmModel = ArmModel(),
 ) -> np.ndarray:
@@ -76,8 +76,9 @@ def pinch_candidates(
         raise ValueError(
             f"contour {contour.name!r}: no feasible pinch point on the sheet: no point is clear of its "
             f"edges, corners, fixture and the contour, nor under the cutting arm (arm.radius_mm "
-            f"{arm.radius_mm:g}); give a pinch point explicitly (--pinch), use a thinner arm, or move the "
-            "contour to leave the gripper room"
+            f"{arm.radius_mm:g}); give a pinch point explicitly (simulate/train --pinch), use a thinner arm "
+            "(--arm-radius) or a shorter footprint (--arm-length), or move the contour to leave the gripper "
+            "room"
         )
     return np.asarray(chosen)
 
@@ -223,7 +224,7 @@ def plan_cut(
     contour: Contour,
     config: SimConfig,
     *,
-    num_candidates: int = 30,
+    num_candidates: int = PINCH_CANDIDATES,
     seed: int = 0,
     device: str | None = None,
     tolerance_mm: float = SEGMENT_TOLERANCE_MM,

@@ -34,6 +34,8 @@ ARM_LENGTH_MM = math.inf
 the paper's model, a cylinder along the whole sheet, by default. Then nothing inside a closed contour is
 feasible: the grasp holds the sheet around the piece, never the piece (:func:`warpcut.planning.under_arm`).
 A short footprint (e.g. 15 mm) lets the gripper hold the piece being cut (docs/learning.md)."""
+PINCH_CANDIDATES = 30
+"""Pinch points a plan or a fixed-pinch search samples from the feasible region (the paper's N = 30)."""
 SEGMENT_TOLERANCE_MM = 1.0
 """Default segmentation tolerance (mm): x reversals of a contour smaller than this are ignored
 (:func:`warpcut.planning.segment_contour`)."""

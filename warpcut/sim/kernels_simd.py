@@ -90,7 +90,7 @@ def simd_kernels(lanes: int = DEFAULT_LANES) -> SimpleNamespace:
     if lanes not in (2, 4, 8, 16, 32):
         raise ValueError(f"lanes: choose a power of two from 2 to 32 (got {lanes!r}); 8 fills AVX registers")
     types = _lane_types(lanes)
-    module = f"warpcut.kernels_simd_L{lanes}"
+    module = f"warpcut.sim.kernels_simd_L{lanes}"
     return SimpleNamespace(
         **vars(types),
         update=_update_kernel(types, module),
