@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import shapely
 
-from warpcut.contours import Contour, arc_lengths, resample_polyline
+from warpcut.contours import Contour, arc_lengths, resample_polyline, ring
 from warpcut.scoring import Score, score_cut
 from warpcut.sim.config import SheetGrid, SimConfig
 from warpcut.sim.material import interpolate, material_cells, material_to_world
@@ -49,7 +49,7 @@ def default_segments(contour: Contour) -> list[np.ndarray]:
     if contour.closed:
         start = int(np.argmax(points[:, 0]))
         loop = np.roll(points, -start, axis=0)
-        return [np.vstack([loop, loop[:1]])]
+        return [ring(loop)]
     return [points if points[0, 0] >= points[-1, 0] else points[::-1].copy()]
 
 
@@ -224,7 +224,7 @@ class CuttingTask:
             key = (id(contour), id(trajectory))
             if key not in cache:
                 points = np.asarray(contour.points)
-                line = shapely.LineString(np.vstack([points, points[:1]]) if contour.closed else points)
+                line = shapely.LineString(ring(points, contour.closed))
                 material = trajectory.material
                 finite = np.all(np.isfinite(material), axis=1)
                 arc = np.full(len(material), np.nan)

@@ -26,7 +26,6 @@ def command(
 ) -> None:
     """Measure simulator and PPO throughput (medians over repeats, all in one run)."""
     from agents.rl import benchmark_training
-    from warpcut.sim.simulator import resolve_device
 
     try:
         sizes = tuple(int(v) for v in batch_sizes.split(","))
@@ -36,7 +35,6 @@ def command(
         ) from None
     if not sizes or min(sizes) < 1:
         raise click.BadParameter("batch sizes must be positive", param_hint="--batch-sizes")
-    device = resolve_device(device)
     result = bench.run_bench(
         device,
         repeats=repeats,

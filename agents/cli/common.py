@@ -119,8 +119,17 @@ def record_option(what: str):
     return lambda command: record(colour(check(command)))
 
 
+def _resolve_device(ctx: click.Context, param: click.Parameter, value: str | None) -> str:
+    from warpcut.sim.simulator import resolve_device
+
+    return resolve_device(value)
+
+
 device_option = click.option(
-    "--device", default=None, help="Warp device: cpu or cuda (default: cuda if available, else cpu)."
+    "--device",
+    default=None,
+    callback=_resolve_device,
+    help="Warp device: cpu or cuda (default: cuda if available, else cpu).",
 )
 seed_option = click.option(
     "--seed",

@@ -86,7 +86,6 @@ def command(
     from agents.pipeline import evaluate_table
     from warpcut.io import write_atomic, write_json
     from warpcut.planning import ArmModel
-    from warpcut.sim.simulator import resolve_device
 
     names = common.parse_methods(methods, "--methods", tuple(METHODS))
     if record_envs is not None and record_envs > trials:
@@ -103,7 +102,7 @@ def command(
             contour_args, out, methods=names, trials=trials, config=SimConfig(noise_std=noise, score=score),
             checkpoints=checkpoints, iterations=iterations, num_envs=num_envs, plan=plan,
             candidates=candidates,
-            arm=ArmModel(length_mm=arm_length), analytic_pinch=analytic_pinch, device=resolve_device(device),
+            arm=ArmModel(length_mm=arm_length), analytic_pinch=analytic_pinch, device=device,
             seed=seed, log=common.log, step_callbacks=common.step_callbacks(rec, cuts),
         )  # fmt: skip
     table = report.markdown()

@@ -54,9 +54,7 @@ def command(
 
     from warpcut.contours import load_contour
     from warpcut.planning import ArmModel, plan_cut
-    from warpcut.sim.simulator import resolve_device
 
-    device = resolve_device(device)
     contour = load_contour(contour_name)
     config = SimConfig(resolution=resolution).validated()
     start = time.perf_counter()

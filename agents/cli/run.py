@@ -104,7 +104,6 @@ def command(
     from warpcut.contours import load_contour
     from warpcut.io import write_json
     from warpcut.planning import ArmModel
-    from warpcut.sim.simulator import resolve_device
 
     out = common.run_dir(out, f"run-{load_contour(contour_name).name}")
     cuts = common.final_cuts(no_plots)
@@ -113,7 +112,7 @@ def command(
             contour_name, out, budget=budget, selector=run_policy, shared_policy=shared_policy,
             candidates=candidates, rl_candidates=rl_candidates, iterations=iterations, trials=trials,
             num_envs=num_envs, config=SimConfig(resolution=resolution, noise_std=noise, score=score),
-            arm=ArmModel(length_mm=arm_length), analytic_pinch=analytic_pinch, device=resolve_device(device),
+            arm=ArmModel(length_mm=arm_length), analytic_pinch=analytic_pinch, device=device,
             seed=seed, log=common.log, step_callbacks=common.step_callbacks(rec, cuts),
         )  # fmt: skip
     name, pinch, row = report.contour.name, report.plan.chosen["pinch"], report.row

@@ -67,11 +67,9 @@ def command(
     """Cut a contour with each baseline tensioner and compare their errors."""
     from agents.evaluation import compare_policies
     from warpcut.contours import load_contour
-    from warpcut.sim.simulator import resolve_device
 
     names = parse_methods(policies, "--policy", BASELINES)
     point = parse_point(pinch, "--pinch")
-    device = resolve_device(device)
     contour = load_contour(contour_name)
     config = SimConfig(resolution=resolution, fixture=fixture, noise_std=noise, score=score).validated()
     out = json_path.parent if json_path else run_dir(None, "simulate")

@@ -115,9 +115,7 @@ def command(
     from agents.rl import load_options, train_contour
     from envs.options import PatternCutOptions
     from warpcut.contours import load_contour
-    from warpcut.sim.simulator import resolve_device
 
-    device = resolve_device(device)
     point = common.parse_point(pinch, "--pinch")
     if resume is not None:
         run = resume if resume.is_dir() else resume.parent

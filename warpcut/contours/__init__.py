@@ -8,7 +8,7 @@ and :mod:`warpcut.contours.polyline` for arc-length resampling.
 
 from warpcut.contours.contour import DEFAULT_SHEET_MM, EDGE_REACH_MM, Contour, ContourError, validate
 from warpcut.contours.loaders import SVG_CHORD_MM, contour_from_json, load_contour
-from warpcut.contours.polyline import arc_lengths, polyline_length, resample_polyline
+from warpcut.contours.polyline import arc_lengths, polyline_length, resample_polyline, ring
 from warpcut.contours.suite import BUILTIN_SPACING_MM, builtin_contours, builtin_names
 
 __all__ = [
@@ -25,5 +25,6 @@ __all__ = [
     "load_contour",
     "polyline_length",
     "resample_polyline",
+    "ring",
     "validate",
 ]

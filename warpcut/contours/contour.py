@@ -21,7 +21,7 @@ import shapely
 import shapely.ops
 from shapely.geometry import LinearRing, LineString, Polygon, box
 
-from warpcut.contours.polyline import arc_lengths, resample_polyline
+from warpcut.contours.polyline import arc_lengths, resample_polyline, ring
 
 DEFAULT_SHEET_MM = (100.0, 100.0)
 EDGE_REACH_MM = 5.0
@@ -260,8 +260,8 @@ def _check_simple(name: str, pts: np.ndarray, closed: bool) -> None:
 
 def _first_crossing(pts: np.ndarray, closed: bool) -> np.ndarray | None:
     """A point where two segments meet other than at their shared vertex."""
-    ring = np.concatenate([pts, pts[:1]]) if closed else pts
-    segments = shapely.linestrings(np.stack([ring[:-1], ring[1:]], axis=1))
+    line = ring(pts, closed)
+    segments = shapely.linestrings(np.stack([line[:-1], line[1:]], axis=1))
     n = len(segments)
     first, second = shapely.STRtree(segments).query(segments, predicate="intersects")
     for i, j in zip(first, second, strict=True):

@@ -21,8 +21,8 @@ def arc_lengths(points: np.ndarray, closed: bool = False) -> np.ndarray:
     Returns:
         (N,) lengths; closed: (N + 1,), the last after the closing edge back to ``points[0]``.
     """
-    ring = _ring(points) if closed else points
-    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(ring, axis=0), axis=1))])
+    line = ring(points, closed)
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(line, axis=0), axis=1))])
 
 
 def polyline_length(points: np.ndarray) -> float:
@@ -53,18 +53,19 @@ def resample_polyline(
     """
     if not spacing > 0:
         raise ValueError(f"spacing: must be positive (got {spacing!r})")
-    ring = _ring(points) if closed else points
+    line = ring(points, closed)
     arc = arc_lengths(points, closed) if arc is None else np.asarray(arc, dtype=np.float64)
-    if arc.shape != (len(ring),):
-        raise ValueError(f"arc: expected shape ({len(ring)},) for this polyline, got {arc.shape}")
+    if arc.shape != (len(line),):
+        raise ValueError(f"arc: expected shape ({len(line)},) for this polyline, got {arc.shape}")
     total = arc[-1]
     # Round-off must not add a sample a hair before the end (open) or the start (closed).
     count = int(math.ceil(total / spacing - 1e-9))
     s = spacing * np.arange(count)
     if not closed:
         s = np.append(s, total)
-    return np.stack([np.interp(s, arc, ring[:, d]) for d in range(ring.shape[1])], axis=1)
+    return np.stack([np.interp(s, arc, line[:, d]) for d in range(line.shape[1])], axis=1)
 
 
-def _ring(points: np.ndarray) -> np.ndarray:
-    return np.concatenate([points, points[:1]])
+def ring(points: np.ndarray, closed: bool = True) -> np.ndarray:
+    """The polyline as drawn: a closed one with its first point repeated at the end; an open one as is."""
+    return np.concatenate([points, points[:1]]) if closed else points

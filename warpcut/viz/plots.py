@@ -20,7 +20,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, Rectangle
 
-from warpcut.contours import Contour
+from warpcut.contours import Contour, ring
 from warpcut.io import write_atomic
 from warpcut.planning import Plan, pinch_feasible
 from warpcut.scoring import Score
@@ -208,17 +208,15 @@ def plot_regions(cuts: dict[str, FinalCut], out_dir: str | os.PathLike, name: st
             vmax=len(_REGION_COLOURS) - 0.5,
             interpolation="nearest",
         )
-        points = cut.contour.points
-        if cut.contour.closed:
-            points = np.vstack([points, points[:1]])
+        points = ring(cut.contour.points, cut.contour.closed)
         ax.plot(points[:, 0], points[:, 1], color="black", linewidth=1.0)
         region = score.cut_regions[0]
         if region is not None and not region.is_empty:
             for polygon in getattr(region, "geoms", [region]):
                 if hasattr(polygon, "exterior"):
-                    ring = np.asarray(polygon.exterior.coords)
-                    ax.fill(ring[:, 0], ring[:, 1], facecolor=_PATH_COLOUR, alpha=0.12, edgecolor="none")
-                    ax.plot(ring[:, 0], ring[:, 1], color=_PATH_COLOUR, linewidth=1.0, linestyle="--")
+                    line = np.asarray(polygon.exterior.coords)
+                    ax.fill(line[:, 0], line[:, 1], facecolor=_PATH_COLOUR, alpha=0.12, edgecolor="none")
+                    ax.plot(line[:, 0], line[:, 1], color=_PATH_COLOUR, linewidth=1.0, linestyle="--")
         path = score.cut_paths[0]
         if len(path):
             ax.plot(path[:, 0], path[:, 1], ".", color=_PATH_COLOUR, markersize=1.5)
@@ -385,9 +383,7 @@ def plot_pinch_candidates(
         Patch(color="#cdeccd", label="feasible pinch region"),
         Patch(color="#eeeeee", label="infeasible"),
     ]
-    points = plan.contour.points
-    if plan.contour.closed:
-        points = np.vstack([points, points[:1]])
+    points = ring(plan.contour.points, plan.contour.closed)
     handles += ax.plot(
         points[:, 0], points[:, 1], color="black", linewidth=0.8, linestyle="--", label="contour"
     )

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from warpcut.contours import Contour
+from warpcut.contours import Contour, ring
 from warpcut.fiducials import NUM_FIDUCIALS, sample_fiducials, visible
 from warpcut.scoring import intended_mask, order_cut_path, path_errors, separation
 from warpcut.sim.config import SheetGrid, SimConfig
@@ -169,8 +169,8 @@ class RerunWriter:
         stream, grid = self.stream, task_setup.grid
         # Points every half spacing follow the deformed sheet closely enough; the contour's own points
         # would cost several times more to interpolate every frame.
-        ring = _polyline(setup.contour, 0.5 * min(grid.spacing_mm))
-        vertices, weights = material_cells(ring, grid)
+        line = _polyline(setup.contour, 0.5 * min(grid.spacing_mm))
+        vertices, weights = material_cells(line, grid)
         rows = np.repeat(np.arange(len(vertices)), vertices.shape[1])
         contour_matrix = sparse.csr_matrix(
             (weights.ravel(), (rows, vertices.ravel())), shape=(len(vertices), grid.num_vertices)
@@ -209,7 +209,7 @@ class RerunWriter:
         if env.path is not None:
             stream.log(
                 f"{root}/material_contour",
-                rr.LineStrips3D([np.column_stack([ring, np.zeros(len(ring))])], colors=[[0, 0, 0]]),
+                rr.LineStrips3D([np.column_stack([line, np.zeros(len(line))])], colors=[[0, 0, 0]]),
                 static=True,
             )
             stream.log(
@@ -401,8 +401,7 @@ def grid_triangles(grid: SheetGrid) -> np.ndarray:
 
 def _polyline(contour: Contour, spacing_mm: float) -> np.ndarray:
     """The contour's points every ``spacing_mm`` (mm), a closed one ending where it starts."""
-    points = contour.resample(spacing_mm)
-    return np.vstack([points, points[:1]]) if contour.closed else points
+    return ring(contour.resample(spacing_mm), contour.closed)
 
 
 def _blueprint(roots: list[str]):
