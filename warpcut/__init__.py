@@ -14,8 +14,7 @@ The names a script needs::
 rsl-rl, which only ``envs`` and ``agents`` use. The package map is in ``docs/architecture.md``.
 """
 
-from importlib import import_module
-
+from warpcut._lazy import lazy_attributes
 from warpcut.sim.config import ConfigError, SheetGrid, SimConfig
 
 __version__ = "0.1.0"
@@ -33,9 +32,5 @@ _LAZY = {
 
 __all__ = ["ConfigError", "SheetGrid", "SimConfig", *_LAZY]
 
-
-def __getattr__(name: str):
-    # Loaded on first use, so that ``import warpcut`` (the CLI's start-up, the recorder process) stays fast.
-    if name in _LAZY:
-        return getattr(import_module(_LAZY[name]), name)
-    raise AttributeError(f"module 'warpcut' has no attribute {name!r}")
+# Loaded on first use, so that ``import warpcut`` (the CLI's start-up, the recorder process) stays fast.
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY)

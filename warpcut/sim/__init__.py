@@ -20,8 +20,7 @@ Importing this package, or ``config``, ``springs`` and ``material``, does not lo
 :class:`Simulator` is loaded on first use.
 """
 
-from importlib import import_module
-
+from warpcut._lazy import lazy_attributes
 from warpcut.sim.config import (
     ARM_LENGTH_MM,
     ARM_RADIUS_MM,
@@ -54,8 +53,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str):
-    # Warp loads with the simulator, on first use: ``from warpcut.sim import SimConfig`` stays light.
-    if name == "Simulator":
-        return import_module("warpcut.sim.simulator").Simulator
-    raise AttributeError(f"module 'warpcut.sim' has no attribute {name!r}")
+__getattr__, __dir__ = lazy_attributes(__name__, {"Simulator": "warpcut.sim.simulator"})

@@ -20,7 +20,7 @@ The names below load their module on first use, so that ``import warpcut.viz`` i
 pyarrow nor matplotlib.
 """
 
-from importlib import import_module
+from warpcut._lazy import lazy_attributes
 
 _LAZY = {
     "Recorder": "warpcut.viz.recorder",
@@ -40,13 +40,4 @@ _LAZY = {
 __all__ = sorted(_LAZY)
 
 
-def __getattr__(name: str):
-    if name in _LAZY:
-        value = getattr(import_module(_LAZY[name]), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY)
