@@ -142,6 +142,31 @@ shaping, contour-aware observations and x-y-z moves; with :class:`~agents.train.
 choice. The paper's setting is the env's defaults (sparse reward, fiducials only, x-y moves) with
 ``stay_prior=0`` and no validation."""
 
+
+@dataclass(frozen=True)
+class Recipe:
+    """How a pipeline trains a tensioner: the env's observations, actions and reward, PPO's settings beyond
+    the batch and the budget, and model selection."""
+
+    options: dict
+    """:class:`~envs.options.PatternCutOptions` fields (reward, observations, actions)."""
+    train: dict = field(default_factory=dict)
+    """:class:`TrainConfig` fields (not ``num_envs``, ``iterations``, ``seed``: the budget's)."""
+    validation_trials: int = VALIDATION_TRIALS
+    """Held-out episodes per validation; 0: no validation, the last policy is the run's."""
+
+
+RECIPES = {
+    "warpcut": Recipe(RECIPE, {"stay_prior": TrainConfig.stay_prior}),
+    "paper": Recipe(
+        {"dense_reward": False, "contour_features": False, "allow_z": False, "action_type": "discrete"},
+        {"stay_prior": 0.0},
+        validation_trials=0,
+    ),
+}
+"""``--recipe``: warpcut's (:data:`RECIPE`, the default) or the paper's setting (sparse reward, 12
+fiducials observed, x-y moves of 1 mm, a uniform initial policy, the last policy kept)."""
+
 BUDGETS = {
     # candidates for the pinch search, of which the best rl_candidates (by fixed tension; None: all, as in
     # the paper) get a PPO policy each; PPO iterations per policy; evaluation trials

@@ -28,7 +28,8 @@ from agents.config import (
     DEFAULT_SELECTOR,
     EVALUATION_CANDIDATES,
     EVALUATION_TRIALS,
-    RECIPE,
+    RECIPES,
+    Recipe,
     TrainConfig,
 )
 from agents.evaluation import Method, MethodResult, evaluate_suite, run_method
@@ -36,7 +37,7 @@ from agents.methods import METHODS, SELECTORS, StepCallbacks, check_methods
 from agents.rl import is_run, rollout_errors, train_contour
 from envs.options import PatternCutOptions
 from warpcut.contours import Contour, builtin_names, load_contour
-from warpcut.io import write_json
+from warpcut.io import read_json, write_json
 from warpcut.planning import ArmModel, Plan, plan_cut
 from warpcut.sim.config import SimConfig
 
@@ -52,6 +53,7 @@ class TrainingInterrupted(KeyboardInterrupt):
 def train_policy(
     options: PatternCutOptions,
     run_dir: Path,
+    recipe: Recipe,
     *,
     iterations: int,
     num_envs: int,
@@ -59,11 +61,19 @@ def train_policy(
     eval_trials: int,
     progress: bool,
 ) -> dict:
-    """Train a recipe policy for ``options`` into ``run_dir`` (:func:`agents.rl.train_contour`); Ctrl-C
-    raises :class:`TrainingInterrupted` naming the run directory. Returns the training summary."""
-    cfg = TrainConfig(num_envs=num_envs, iterations=iterations, seed=seed)
+    """Train a policy with ``recipe`` for ``options`` (``options`` carry the recipe's env fields) into
+    ``run_dir`` (:func:`agents.rl.train_contour`); Ctrl-C raises :class:`TrainingInterrupted` naming the run
+    directory. Returns the training summary."""
+    discrete = options.action_type == "discrete"
+    cfg = TrainConfig(
+        **{"discrete": discrete, **recipe.train, "num_envs": num_envs, "iterations": iterations, "seed": seed}
+    )
     try:
-        return train_contour(options, run_dir, cfg, eval_trials=eval_trials, progress=progress)["summary"]
+        result = train_contour(
+            options, run_dir, cfg, eval_trials=eval_trials, progress=progress,
+            validation_trials=recipe.validation_trials,
+        )  # fmt: skip
+        return result["summary"]
     except KeyboardInterrupt as interrupt:
         raise TrainingInterrupted(run_dir) from interrupt
 
@@ -126,6 +136,7 @@ def run_pipeline(
     budget: str = DEFAULT_BUDGET,
     selector: str = DEFAULT_SELECTOR,
     shared_policy: bool = False,
+    recipe: Recipe = RECIPES["warpcut"],
     candidates: int | None = None,
     rl_candidates: int | None = None,
     iterations: int | None = None,
@@ -151,6 +162,7 @@ def run_pipeline(
         selector: ``rl`` (a PPO policy per candidate; the one that validates best wins), ``fixed`` (the
             plan's choice) or ``analytic`` (each candidate scored with the analytic policy, noise-free).
         shared_policy: With rl: one policy for all the candidates, observing its pinch point.
+        recipe: How rl policies are trained (:data:`agents.config.RECIPES`).
         num_envs: PPO envs per policy (default 64; shared: 64, or 8 per candidate when more).
         config: Simulation settings (default: ``SimConfig()``).
         arm: The cutting arm's footprint for pinch feasibility (default: the paper's).
@@ -200,7 +212,7 @@ def run_pipeline(
     else:
         train = dict(iterations=settings["iterations"], seed=seed, eval_trials=settings["trials"])
         rl_dir, chosen, runs = _train_candidates(
-            contour, plan, listed, config, out, shared_policy, num_envs, device, train, log, progress
+            contour, plan, listed, config, out, shared_policy, recipe, num_envs, device, train, log, progress
         )
     log(f"      chosen by {selector}: {_candidate_text(listed[chosen])}")
 
@@ -284,6 +296,7 @@ def _train_candidates(
     config: SimConfig,
     out: Path,
     shared: bool,
+    recipe: Recipe,
     num_envs: int | None,
     device: str | None,
     train: dict,
@@ -294,7 +307,7 @@ def _train_candidates(
     in its best order; records each candidate's validation error in ``listed``. Returns the winner's run
     directory, its index (the first, i.e. the better fixed rank, among ties) and every run directory."""
     cuts = [[s.tolist() for s in plan.ordered_segments(c["order"])] for c in listed]
-    common = dict(contour=contour, sim_config=config, device=device, **RECIPE)
+    common = dict(contour=contour, sim_config=config, device=device, **recipe.options)
     if shared:
         envs = num_envs or max(TrainConfig.num_envs, 8 * len(listed))
         choices = [{"pinch": c["pinch"], "segments": s} for c, s in zip(listed, cuts, strict=True)]
@@ -309,7 +322,7 @@ def _train_candidates(
         what = f"an RL policy for each of the best {len(listed)} pinch candidate(s) ({envs} envs each"
     log(f"[2/3] training {what}, {train['iterations']} PPO iterations)")
     for k, (run_dir, options) in enumerate(jobs):
-        summary = train_policy(options, run_dir, num_envs=envs, progress=progress, **train)
+        summary = train_policy(options, run_dir, recipe, num_envs=envs, progress=progress, **train)
         if shared:
             errors = summary["candidates"]["validation_error_vertices"]
             for c, e in zip(listed, errors, strict=True):
@@ -389,6 +402,7 @@ def evaluate_table(
     trials: int = EVALUATION_TRIALS,
     config: SimConfig | None = None,
     checkpoints: str | Path | None = None,
+    recipe: Recipe = RECIPES["warpcut"],
     iterations: int = TrainConfig.iterations,
     num_envs: int = TrainConfig.num_envs,
     plan: bool = True,
@@ -415,6 +429,7 @@ def evaluate_table(
         trials: Trials per contour and method.
         config: Simulation settings (default ``SimConfig()``); plans are searched noise-free.
         checkpoints: Directory of trained runs, one per contour.
+        recipe: How rl policies are trained when there are no checkpoints (:data:`agents.config.RECIPES`).
         iterations, num_envs: PPO iterations and envs per contour when training.
         plan: Plan every cut (see above).
         candidates: Pinch candidates per plan.
@@ -456,16 +471,17 @@ def evaluate_table(
         write_json(out / "plans.json", {p.contour.name: p.to_json() for p in plans})
     specs = [Method(m) for m in methods]
     runs: list[Path] = []
+    kept: list[int | None] = []
     for spec in specs:
         if spec.name == "fixed" and plans is not None:
             spec.pinches = [p.chosen["pinch"] for p in plans]
         elif spec.name == "analytic":
             spec.pinches = analytic_pinches(analytic_pinch, loaded, plans)
         elif spec.name == "rl":
-            spec.result, runs = _rl_result(
-                named, plans, checkpoints, out, trials, config, iterations, num_envs, device, seed, log,
-                step_callbacks,
-            )  # fmt: skip
+            training = {"recipe": recipe, "iterations": iterations, "num_envs": num_envs}
+            spec.result, runs, kept = _rl_result(
+                named, plans, checkpoints, out, trials, config, training, device, seed, log, step_callbacks
+            )
     table = evaluate_suite(
         loaded,
         specs,
@@ -477,6 +493,10 @@ def evaluate_table(
         progress=lambda what: log(f"  running {what}"),
         step_callbacks=step_callbacks,
     )
+    for row, iteration in zip(table["rows"], kept, strict=False):
+        row["rl_policy_iteration"] = iteration
+    if kept:  # how often model selection kept the initial policy (it holds still under the warpcut recipe)
+        table["rl_initial_policy_contours"] = sum(1 for it in kept if it == 0)
     report = TableReport(
         loaded, methods, config, table, plans, analytic_pinch, time.perf_counter() - start, runs
     )
@@ -491,34 +511,38 @@ def _rl_result(
     out: Path,
     trials: int,
     config: SimConfig,
-    iterations: int,
-    num_envs: int,
+    training: dict,
     device: str | None,
     seed: int,
     log: Callable[[str], None],
     step_callbacks: StepCallbacks | None,
-) -> tuple[MethodResult, list[Path]]:
-    """The rl column: per contour a run (from ``checkpoints`` or trained now, at the planned pinch and
-    segments when planned) rolled out for ``trials``, paired with the baselines' noise."""
-    rollouts, runs = [], []
+) -> tuple[MethodResult, list[Path], list[int | None]]:
+    """The rl column: per contour a run (from ``checkpoints`` or trained now with ``training``'s
+    ``recipe``, ``iterations`` and ``num_envs``, at the planned pinch and segments when planned) rolled out
+    for ``trials``, paired with the baselines' noise."""
+    recipe = training["recipe"]
+    rollouts, runs, iterations = [], [], []
     for k, (spec, contour) in enumerate(named):
         if checkpoints is not None:
             run = Path(checkpoints) / contour.name
         else:
             run = out / "policies" / contour.name
-            log(f"  training rl for {contour.name} ({iterations} iterations)")
+            log(f"  training rl for {contour.name} ({training['iterations']} iterations)")
             planned = {}
             if plans is not None:
                 planned = {
                     "pinch_point": [float(v) for v in plans[k].chosen["pinch"]],
                     "segments": [s.tolist() for s in plans[k].ordered_segments()],
                 }
-            options = PatternCutOptions(contour=spec, sim_config=config, device=device, **RECIPE, **planned)
+            options = PatternCutOptions(
+                contour=spec, sim_config=config, device=device, **recipe.options, **planned
+            )
             train_policy(
-                options, run, iterations=iterations, num_envs=num_envs, seed=seed, eval_trials=trials,
-                progress=False,
+                options, run, recipe, iterations=training["iterations"], num_envs=training["num_envs"],
+                seed=seed, eval_trials=trials, progress=False,
             )  # fmt: skip
             runs.append(run)
+        iterations.append(policy_iteration(run))
         callback = None if step_callbacks is None else step_callbacks("rl", k)
         # Trial t sees the noise of the baselines' trial t of this contour (env k * trials + t there).
         rollouts.append(
@@ -526,4 +550,14 @@ def _rl_result(
                 run, trials, seed=seed + 1, device=device, on_step=callback, paired_noise=(seed, k * trials)
             )
         )
-    return MethodResult.from_rollouts(rollouts), runs
+    return MethodResult.from_rollouts(rollouts), runs, iterations
+
+
+def policy_iteration(run_dir: Path) -> int | None:
+    """The PPO iteration whose policy a training run kept (0: the initial policy): the validated best, or
+    the last without validation; None where the run has no summary."""
+    path = Path(run_dir) / "summary.json"
+    if not path.is_file():
+        return None
+    summary = read_json(path)
+    return int(summary["best"]["iterations"] if summary.get("best") else summary["iterations"])

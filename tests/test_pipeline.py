@@ -79,3 +79,20 @@ def test_evaluate_table_without_a_plan_pairs_every_method_with_no_tension(tmp_pa
         report.markdown().splitlines()[0] == "| contour | no tension (vertices) | fixed (%) | analytic (%) |"
     )
     assert json.loads((tmp_path / "results.json").read_text())["planned"] is False
+
+
+def test_evaluate_table_trains_with_the_papers_recipe_and_records_the_kept_iteration(tmp_path):
+    """--recipe paper: sparse reward, fiducials only, x-y moves, no validation: the last policy is kept."""
+    from agents.config import RECIPES
+
+    report = evaluate_table(
+        "circle-small", tmp_path, methods=["fixed", "rl"], trials=2, config=SMALL, plan=False,
+        recipe=RECIPES["paper"], iterations=2, num_envs=4,
+    )  # fmt: skip
+    options = json.loads((tmp_path / "policies/circle-small/options.json").read_text())
+    assert not options["dense_reward"] and not options["contour_features"] and not options["allow_z"]
+    row = report.table["rows"][0]
+    assert row["rl_policy_iteration"] == 2 and report.table["rl_initial_policy_contours"] == 0
+    assert np.isfinite(row["rl_improvement_pct"]) and report.policy_runs == [
+        tmp_path / "policies/circle-small"
+    ]

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import click
 
-from agents.config import ANALYTIC_PINCHES
+from agents.config import ANALYTIC_PINCHES, RECIPES
 from warpcut.sim.config import ARM_LENGTH_MM, SCORES, SimConfig
 from warpcut.viz import COLOUR_FIELDS
 from warpcut.viz.process import RecordingError
@@ -157,6 +157,17 @@ score_option = click.option(
     type=click.Choice(SCORES),
     help="What tables and rewards use: path (the paper's: the region the scissors' path through the "
     "material encloses) or separated (the material that came free). Both are reported.",
+)
+
+
+recipe_option = click.option(
+    "--recipe",
+    default=next(iter(RECIPES)),
+    show_default=True,
+    type=click.Choice(list(RECIPES)),
+    help="How RL policies are trained: warpcut (dense path-deviation reward, contour-aware observations, "
+    "x-y-z moves, a 'hold still' prior, validation-based model selection; docs/learning.md) or paper "
+    "(sparse reward, 12 fiducials, x-y moves, a uniform start, the last policy kept).",
 )
 
 

@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from agents.cli import common
-from agents.config import EVALUATION_CANDIDATES, EVALUATION_TRIALS, TrainConfig
+from agents.config import EVALUATION_CANDIDATES, EVALUATION_TRIALS, RECIPES, TrainConfig
 from agents.methods import METHODS
 from warpcut.sim.config import SimConfig
 
@@ -32,6 +32,7 @@ from warpcut.sim.config import SimConfig
     help="Directory of trained runs, one per contour (CHECKPOINTS/NAME, as 'warpcut train' writes); "
     "without it the rl column trains a policy per contour.",
 )
+@common.recipe_option
 @common.count_option("iterations", TrainConfig.iterations, "PPO iterations per contour when training.")
 @common.count_option("num-envs", TrainConfig.num_envs, "Envs when training.")
 @common.device_option
@@ -67,6 +68,7 @@ def command(
     noise: float,
     score: str,
     checkpoints: Path | None,
+    recipe: str,
     iterations: int,
     num_envs: int,
     plan: bool,
@@ -100,7 +102,8 @@ def command(
     with common.recorder(out, record_envs, colour_by) as rec:
         report = evaluate_table(
             contour_args, out, methods=names, trials=trials, config=SimConfig(noise_std=noise, score=score),
-            checkpoints=checkpoints, iterations=iterations, num_envs=num_envs, plan=plan,
+            checkpoints=checkpoints, recipe=RECIPES[recipe], iterations=iterations, num_envs=num_envs,
+            plan=plan,
             candidates=candidates,
             arm=ArmModel(length_mm=arm_length), analytic_pinch=analytic_pinch, device=device,
             seed=seed, log=common.log, step_callbacks=common.step_callbacks(rec, cuts),
@@ -108,6 +111,11 @@ def command(
     table = report.markdown()
     click.echo(table)
     click.echo(f"({len(report.contours)} contours x {trials} trials in {report.seconds:.0f} s)")
+    if "rl_initial_policy_contours" in report.table:
+        click.echo(
+            f"rl kept its initial policy on {report.table['rl_initial_policy_contours']} of "
+            f"{len(report.contours)} contours"
+        )
     if json_path:
         write_json(json_path, report.to_json())
     if markdown_path:

@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from agents.cli import common
-from agents.config import BUDGETS, DEFAULT_BUDGET, DEFAULT_CONTOUR, DEFAULT_SELECTOR
+from agents.config import BUDGETS, DEFAULT_BUDGET, DEFAULT_CONTOUR, DEFAULT_SELECTOR, RECIPES
 from agents.methods import SELECTORS
 from warpcut.sim.config import SimConfig
 
@@ -49,6 +49,7 @@ from warpcut.sim.config import SimConfig
     help="Train one PPO policy for all the RL candidates (it observes its pinch point) instead of one each: "
     "about K times faster, but it lost to separate policies where they learn (docs/learning.md).",
 )
+@common.recipe_option
 @common.count_option("candidates", None, "Override the budget's pinch candidates.")
 @common.count_option(
     "rl-candidates",
@@ -78,6 +79,7 @@ def command(
     budget: str,
     run_policy: str,
     shared_policy: bool,
+    recipe: str,
     candidates: int | None,
     rl_candidates: int | None,
     iterations: int | None,
@@ -110,6 +112,7 @@ def command(
     with common.recorder(out, record_envs, colour_by) as rec:
         report = run_pipeline(
             contour_name, out, budget=budget, selector=run_policy, shared_policy=shared_policy,
+            recipe=RECIPES[recipe],
             candidates=candidates, rl_candidates=rl_candidates, iterations=iterations, trials=trials,
             num_envs=num_envs, config=SimConfig(resolution=resolution, noise_std=noise, score=score),
             arm=ArmModel(length_mm=arm_length), analytic_pinch=analytic_pinch, device=device,
