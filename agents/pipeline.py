@@ -405,7 +405,7 @@ def evaluate_table(
     recipe: Recipe = RECIPES["warpcut"],
     iterations: int = TrainConfig.iterations,
     num_envs: int = TrainConfig.num_envs,
-    plan: bool = True,
+    plan: bool | Sequence[Plan] = True,
     candidates: int = EVALUATION_CANDIDATES,
     arm: ArmModel | None = None,
     analytic_pinch: str = ANALYTIC_PINCHES[0],
@@ -431,7 +431,8 @@ def evaluate_table(
         checkpoints: Directory of trained runs, one per contour.
         recipe: How rl policies are trained when there are no checkpoints (:data:`agents.config.RECIPES`).
         iterations, num_envs: PPO iterations and envs per contour when training.
-        plan: Plan every cut (see above).
+        plan: Plan every cut (see above); or the plans themselves, one per contour (e.g. to compare
+            recipes on the same plans).
         candidates: Pinch candidates per plan.
         arm: The cutting arm's footprint for pinch feasibility (default: the paper's).
         analytic_pinch: :data:`ANALYTIC_PINCHES`.
@@ -454,7 +455,11 @@ def evaluate_table(
                 )
     start = time.perf_counter()
     plans = None
-    if plan:
+    if isinstance(plan, list | tuple):  # plans made already, one per contour
+        plans = list(plan)
+        if [p.contour.name for p in plans] != [c.name for c in loaded]:
+            raise ValueError("plan: give one Plan per contour, in the contours' order (or True / False)")
+    elif plan:
         plans = []
         for contour in loaded:
             log(f"  planning {contour.name} ({candidates} candidates)")

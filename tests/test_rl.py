@@ -207,3 +207,25 @@ def test_a_damaged_run_file_is_named_in_the_error(run_dir, tmp_path):
     (broken / "options.json").write_text('{"contour": {"name": "x", "points": [[1, 2], [3, 4], [5, 1]]}}')
     with pytest.raises(ValueError, match="options: contour: field 'closed' is required"):
         load_options(broken)
+
+
+@pytest.mark.slow
+def test_ppo_learns_to_move_the_grasp_under_the_papers_protocol(tmp_path):
+    """A learning test that can fail, on the default protocol (path score, noisy paired trials, the
+    paper's arm): on ``edge-bite`` holding the grasp still at the planned pinch barely helps, and PPO with
+    warpcut's recipe (60 iterations, ~25 s) must learn moves that beat it by more than both CIs. The
+    untrained policy holds still (its "stay" prior), so it cuts exactly as fixed tension does
+    (``test_a_still_policy_with_paired_noise_cuts_exactly_as_fixed_tension``): beating fixed is beating it,
+    and model selection must keep a trained iteration, not the initial one."""
+    from agents.pipeline import evaluate_table
+    from warpcut.planning import plan_cut
+
+    torch.set_num_threads(1)
+    config = SimConfig()
+    plan = plan_cut(load_contour("edge-bite"), config.replace(noise_std=0.0), num_candidates=8, seed=0)
+    report = evaluate_table(
+        "edge-bite", tmp_path, methods=["fixed", "rl"], trials=10, config=config, plan=[plan], iterations=60
+    )
+    row = report.table["rows"][0]
+    assert row["rl_policy_iteration"] > 0
+    assert row["rl_improvement_pct"] - row["rl_ci95"] > row["fixed_improvement_pct"] + row["fixed_ci95"]
