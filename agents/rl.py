@@ -240,7 +240,7 @@ def policy_errors(
                 action = action[:, 0].astype(np.int64)
             obs, _, terminated, truncated, info = env.scene.step(action)
             if on_step is not None:
-                on_step(env.task, env.scene.moves(action))
+                on_step(env.task, env.scene.last_moves)
             if terminated or truncated:
                 final = info
                 break

@@ -65,6 +65,7 @@ class PatternCut:
         action_space: One env's action space.
         area_mm2: (B,) intended area of each env's contour (mm^2).
         episode_steps: Steps per episode: the cut's ``num_steps``, or ``max_episode_steps`` if smaller.
+        last_moves: (B, 3) the grasp moves (mm) of the last step, the residual controller's included.
     """
 
     def __init__(self, options: PatternCutOptions, num_envs: int):
@@ -72,6 +73,8 @@ class PatternCut:
             raise ValueError(f"action_type: choose one of {ACTION_TYPES} (got {options.action_type!r})")
         if not isinstance(options.num_fiducials, int) or options.num_fiducials < 0:
             raise ValueError(f"num_fiducials: must be a non-negative integer (got {options.num_fiducials!r})")
+        if not (np.isfinite(options.residual_gain) and options.residual_gain >= 0):
+            raise ValueError(f"residual_gain: must be a finite number >= 0 (got {options.residual_gain!r})")
         if not options.shaft_radius_mm >= 0:
             raise ValueError(f"shaft_radius_mm: must be >= 0 mm (got {options.shaft_radius_mm!r})")
         if options.max_episode_steps is not None and options.max_episode_steps < 1:
@@ -95,6 +98,7 @@ class PatternCut:
             self.action_space = gym.spaces.Discrete(1 + 2 * num_axes)
         else:
             self.action_space = gym.spaces.Box(-1.0, 1.0, (num_axes,), dtype=np.float32)
+        self.last_moves = np.zeros((num_envs, 3), dtype=np.float32)
         self._sampled = False
         self._running_path_error = np.zeros(num_envs)
 
@@ -136,7 +140,11 @@ class PatternCut:
         if self.task.done or self.step_index >= self.episode_steps:
             raise RuntimeError("step: the episode is over; call reset() first")
         first_update = self.task.update_index
-        self.task.step(self.moves(actions))
+        moves = self.moves(actions)
+        if self.options.residual_gain:
+            moves[:, :2] -= self.options.residual_gain * np.nan_to_num(self.tracking_error()[:, :2], nan=0.0)
+        self.last_moves = moves
+        self.task.step(moves)
         terminated = self.task.done
         truncated = not terminated and self.step_index >= self.episode_steps
         rewards = np.zeros(self.num_envs)

@@ -77,6 +77,10 @@ class PatternCutOptions:
     """``"discrete"`` (paper: stay, +-x, +-y at 1 mm) or ``"continuous"`` (moves in units of 1 mm)."""
     allow_z: bool = False
     """Let the grasp move along z too: ``Discrete(7)``, or a 3-D continuous action (paper: x-y only)."""
+    residual_gain: float = 0.0
+    """Add the analytic controller's move to every action: ``-residual_gain`` times the tracking error in
+    x-y (mm per mm, per step; the paper's analytic gain is 0.048), so the policy learns a residual on it
+    and its "stay" action is analytic control. 0: off (the policy's moves alone)."""
     dense_reward: bool = False
     """Add the per-step cut-deviation penalty (the path score's increment) to the sparse final reward."""
     max_episode_steps: int | None = None

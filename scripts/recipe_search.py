@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from agents.baselines import AnalyticTension
 from agents.config import RECIPE, RECIPES, Recipe
 from agents.pipeline import evaluate_table, resolve_contours
 from warpcut.io import write_json
@@ -33,6 +34,7 @@ CANDIDATES = {
     "continuous": Recipe({**RECIPE, "action_type": "continuous"}, {"init_noise_std": 0.3}),
     "entropy": Recipe(RECIPE, {"stay_prior": 0.9, "entropy_coef": 0.03}),
     "sparse": Recipe({**RECIPE, "dense_reward": False}, {"stay_prior": 0.9}),
+    "residual": Recipe({**RECIPE, "residual_gain": AnalyticTension.gain}, {"stay_prior": 0.9}),
 }
 """The recipes this script knows: warpcut's and the paper's, and variations on warpcut's."""
 

@@ -229,3 +229,28 @@ def test_ppo_learns_to_move_the_grasp_under_the_papers_protocol(tmp_path):
     row = report.table["rows"][0]
     assert row["rl_policy_iteration"] > 0
     assert row["rl_improvement_pct"] - row["rl_ci95"] > row["fixed_improvement_pct"] + row["fixed_ci95"]
+
+
+def test_a_residual_policy_that_stays_is_the_analytic_controller():
+    """``residual_gain``: the env adds the analytic controller's move to every action, so "stay" is analytic
+    tensioning, trial for trial (paired noise), at the same pinch."""
+    from agents.baselines import AnalyticTension
+    from agents.evaluation import run_method
+    from agents.rl import policy_errors
+
+    class Stay(torch.nn.Module):
+        def forward(self, obs):
+            return torch.zeros(obs.batch_size[0], 1)
+
+    config = SimConfig(resolution=13, noise_std=0.05)
+    contour = load_contour("fls-circle")
+    pinch = default_pinch(contour, config)
+    analytic = AnalyticTension()
+    options = PatternCutOptions(
+        contour="fls-circle", sim_config=config, device="cpu", pinch_point=pinch, residual_gain=analytic.gain
+    )
+    expected = run_method([contour], [pinch], analytic, 3, config, "cpu", 4).error_vertices[0]
+    residual = policy_errors(Stay(), PatternCutVecEnv(3, options), 9, paired_noise=(4, 0))
+    np.testing.assert_array_equal(residual["error_vertices"], expected)
+    with pytest.raises(ValueError, match="residual_gain: must be a finite number >= 0"):
+        PatternCutVecEnv(1, options.__class__(contour="fls-circle", residual_gain=-1.0))
