@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import pickle
 import time
 from pathlib import Path
 
@@ -23,7 +24,7 @@ import torch
 from agents.baselines import AnalyticTension
 from agents.config import RECIPE, RECIPES, Recipe
 from agents.pipeline import evaluate_table, resolve_contours
-from warpcut.io import write_json
+from warpcut.io import write_atomic, write_json
 from warpcut.planning import plan_cut
 from warpcut.sim.config import PINCH_CANDIDATES, SimConfig
 
@@ -34,7 +35,10 @@ CANDIDATES = {
     "continuous": Recipe({**RECIPE, "action_type": "continuous"}, {"init_noise_std": 0.3}),
     "entropy": Recipe(RECIPE, {"stay_prior": 0.9, "entropy_coef": 0.03}),
     "sparse": Recipe({**RECIPE, "dense_reward": False}, {"stay_prior": 0.9}),
-    "residual": Recipe({**RECIPE, "residual_gain": AnalyticTension.gain}, {"stay_prior": 0.9}),
+    "entropy-0.1": Recipe(RECIPE, {"stay_prior": 0.9, "entropy_coef": 0.1}),
+    "residual": Recipe(
+        {**RECIPE, "residual_gain": AnalyticTension.gain}, {"stay_prior": 0.9, "entropy_coef": 0.03}
+    ),
 }
 """The recipes this script knows: warpcut's and the paper's, and variations on warpcut's."""
 
@@ -72,15 +76,20 @@ def main() -> None:
     config = SimConfig()
     contours = resolve_contours(args.contours)
     start = time.perf_counter()
-    plans = [
-        plan_cut(c, config.replace(noise_std=0.0), num_candidates=PINCH_CANDIDATES, seed=args.seed)
-        for _, c in contours
-    ]
+    cache = args.out / f"plans-seed{args.seed}.pkl"  # planning is deterministic: reuse it across runs
+    plans = pickle.loads(cache.read_bytes()) if cache.is_file() else {}
+    for _, c in contours:
+        if c.name not in plans:
+            plans[c.name] = plan_cut(
+                c, config.replace(noise_std=0.0), num_candidates=PINCH_CANDIDATES, seed=args.seed
+            )
+            write_atomic(cache, pickle.dumps(plans))
+    plans = [plans[c.name] for _, c in contours]
     print(f"planned {len(plans)} contours in {time.perf_counter() - start:.0f} s", flush=True)
     results = {}
     for name in [r.strip() for r in args.recipes.split(",") if r.strip()]:
         recipe = CANDIDATES[name]
-        out = args.out / name
+        out = args.out / f"{name}-it{args.iterations}-envs{args.num_envs}"
         start = time.perf_counter()
         report = evaluate_table(
             [s for s, _ in contours], out, trials=args.trials, config=config, plan=plans, recipe=recipe,
@@ -103,7 +112,10 @@ def main() -> None:
             f"train {summary['train_s_per_contour']:.0f} s/contour",
             flush=True,
         )
-        write_json(args.out / "results.json", {"args": {k: str(v) for k, v in vars(args).items()}, **results})
+        tag = f"it{args.iterations}-envs{args.num_envs}"
+        write_json(
+            args.out / f"results-{tag}.json", {"args": {k: str(v) for k, v in vars(args).items()}, **results}
+        )
 
 
 if __name__ == "__main__":
