@@ -50,8 +50,10 @@ class TrainConfig:
     """"adaptive": scale the learning rate to keep the KL per update near ``desired_kl``; "fixed": don't."""
     desired_kl: float = 0.01
     """Target KL divergence between successive policies for the adaptive schedule."""
-    entropy_coef: float = 0.01
-    """Entropy bonus weight; keeps exploring while the sparse final reward is rarely informative."""
+    entropy_coef: float = 0.03
+    """Entropy bonus weight. warpcut's recipe: 0.03 keeps PPO exploring moves away from the "stay" prior
+    (0.01, rsl-rl's usual value, and 0.1 both kept the still initial policy more often; docs/learning.md,
+    "Recipes that learn motion")."""
     gamma: float = 0.99
     """Discount per env step."""
     lam: float = 0.95
@@ -157,10 +159,12 @@ class Recipe:
 
 
 RECIPES = {
-    "warpcut": Recipe(RECIPE, {"stay_prior": TrainConfig.stay_prior}),
+    "warpcut": Recipe(
+        RECIPE, {"stay_prior": TrainConfig.stay_prior, "entropy_coef": TrainConfig.entropy_coef}
+    ),
     "paper": Recipe(
         {"dense_reward": False, "contour_features": False, "allow_z": False, "action_type": "discrete"},
-        {"stay_prior": 0.0},
+        {"stay_prior": 0.0, "entropy_coef": 0.01},
         validation_trials=0,
     ),
 }

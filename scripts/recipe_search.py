@@ -28,19 +28,24 @@ from warpcut.io import write_atomic, write_json
 from warpcut.planning import plan_cut
 from warpcut.sim.config import PINCH_CANDIDATES, SimConfig
 
+OLD = {"stay_prior": 0.9, "entropy_coef": 0.01}
+"""warpcut's PPO settings before issue 16 (entropy 0.01, rsl-rl's usual value)."""
+
 CANDIDATES = {
     **RECIPES,
-    "no-prior": Recipe(RECIPE, {"stay_prior": 0.0}),
-    "prior-0.5": Recipe(RECIPE, {"stay_prior": 0.5}),
-    "continuous": Recipe({**RECIPE, "action_type": "continuous"}, {"init_noise_std": 0.3}),
-    "entropy": Recipe(RECIPE, {"stay_prior": 0.9, "entropy_coef": 0.03}),
-    "sparse": Recipe({**RECIPE, "dense_reward": False}, {"stay_prior": 0.9}),
-    "entropy-0.1": Recipe(RECIPE, {"stay_prior": 0.9, "entropy_coef": 0.1}),
-    "residual": Recipe(
-        {**RECIPE, "residual_gain": AnalyticTension.gain}, {"stay_prior": 0.9, "entropy_coef": 0.03}
+    "warpcut-0.01": Recipe(RECIPE, OLD),
+    "no-prior": Recipe(RECIPE, {**OLD, "stay_prior": 0.0}),
+    "prior-0.5": Recipe(RECIPE, {**OLD, "stay_prior": 0.5}),
+    "continuous": Recipe(
+        {**RECIPE, "action_type": "continuous"}, {"init_noise_std": 0.3, "entropy_coef": 0.01}
     ),
+    "entropy-0.03": Recipe(RECIPE, {**OLD, "entropy_coef": 0.03}),
+    "entropy-0.1": Recipe(RECIPE, {**OLD, "entropy_coef": 0.1}),
+    "sparse": Recipe({**RECIPE, "dense_reward": False}, OLD),
+    "residual": Recipe({**RECIPE, "residual_gain": AnalyticTension.gain}, {**OLD, "entropy_coef": 0.03}),
 }
-"""The recipes this script knows: warpcut's and the paper's, and variations on warpcut's."""
+"""The recipes this script knows: warpcut's and the paper's (``RECIPES``), and the variations measured for
+issue 16 (``warpcut-0.01`` was warpcut's before; ``entropy-0.03`` is warpcut's now)."""
 
 
 def summarise(rows: list[dict]) -> dict:
