@@ -164,7 +164,7 @@ RECIPES = {
     ),
     "paper": Recipe(
         {"dense_reward": False, "contour_features": False, "allow_z": False, "action_type": "discrete"},
-        {"stay_prior": 0.0, "entropy_coef": 0.01},
+        {"stay_prior": 0.0},
         validation_trials=0,
     ),
 }
