@@ -42,6 +42,7 @@ CANDIDATES = {
     "entropy-0.03": Recipe(RECIPE, {**OLD, "entropy_coef": 0.03}),
     "entropy-0.1": Recipe(RECIPE, {**OLD, "entropy_coef": 0.1}),
     "sparse": Recipe({**RECIPE, "dense_reward": False}, OLD),
+    "validation-32": Recipe(RECIPE, {**OLD, "entropy_coef": 0.03}, validation_trials=32),
     "paper-0.01": Recipe(RECIPES["paper"].options, {"stay_prior": 0.0, "entropy_coef": 0.01}, 0),
     "residual": Recipe({**RECIPE, "residual_gain": AnalyticTension.gain}, {**OLD, "entropy_coef": 0.03}),
 }
