@@ -150,7 +150,10 @@ class PatternCutOptions:
             ]
             return contours, pinch, segments
         if self.pinch_point is None:
-            pinch = np.array([default_pinch(c, config) for c in contours])
+            # Once per distinct contour (envs of one contour share its object): the grid search is slow.
+            by_contour = {id(c): c for c in contours}
+            found = {key: default_pinch(c, config) for key, c in by_contour.items()}
+            pinch = np.array([found[id(c)] for c in contours])
         else:
             pinch = np.broadcast_to(np.asarray(self.pinch_point, dtype=np.float64), (num_envs, 2)).copy()
         segments = None if self.segments is None else segments_per_env(self.segments, num_envs)
