@@ -74,6 +74,11 @@ class TrainConfig:
     validation_interval: int = 10
     """With a ``validate`` callback (see :func:`train`): score the deterministic policy every this many
     iterations and keep the best in ``best.pt``."""
+    selection_margin: float = 1.0
+    """Model selection: a validated policy's score is its mean validation error plus this many standard
+    errors of its episode-by-episode difference from the initial policy's (the same held-out episodes), and
+    the lowest score is kept. 1: a trained policy must beat the initial one by more than one standard
+    error; 0: the lowest mean, however noisy (docs/learning.md, "Model selection")."""
 
     def to_rsl_rl(self, num_action_choices: int | None = None) -> dict:
         """Return rsl-rl 5.5.1's ``OnPolicyRunner`` config.

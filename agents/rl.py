@@ -94,14 +94,14 @@ def train_contour(
             per_candidate * candidates if shared else validation_trials, options
         )
 
-        def candidate_errors(actor: torch.nn.Module) -> np.ndarray:
-            """Mean validation error (vertices) per candidate (env i pinches candidate i % K)."""
+        def validate(actor: torch.nn.Module) -> np.ndarray:
+            """Validation errors (vertices), (episodes, candidates): env i pinches candidate i % K."""
             seed = cfg.seed + VALIDATION_SEED_OFFSET
-            errors = policy_errors(actor, validation_env, seed)["error_vertices"]
-            return errors.reshape(-1, candidates).mean(axis=0)
+            return policy_errors(actor, validation_env, seed)["error_vertices"].reshape(-1, candidates)
 
-        def validate(actor: torch.nn.Module) -> float:
-            return float(candidate_errors(actor).min())  # the candidate the pipeline would choose
+        def candidate_errors(actor: torch.nn.Module) -> np.ndarray:
+            """Mean validation error (vertices) per candidate."""
+            return validate(actor).mean(axis=0)
 
     summary = train(env, cfg, out_dir, resume=resume, progress=progress, validate=validate)
     if shared:

@@ -66,7 +66,7 @@ def train(
     out_dir: str | Path,
     resume: str | Path | None = None,
     progress: bool = True,
-    validate: Callable[[torch.nn.Module], float] | None = None,
+    validate: Callable[[torch.nn.Module], float | np.ndarray] | None = None,
 ) -> dict:
     """Train a PPO policy on ``env`` and write the run directory ``out_dir``.
 
@@ -80,16 +80,23 @@ def train(
             and trains until ``cfg.iterations`` in total.
         progress: Show a progress bar (on stderr). rsl-rl's per-iteration console report is never printed;
             its scalars go to TensorBoard.
-        validate: Scores an actor (called with the live actor; use its deterministic output) by an error
-            to minimise, on episodes that are not the evaluation's. Called before training and every
-            ``cfg.validation_interval`` iterations; the best-scoring policy is saved as ``best.pt``, which
-            evaluation and export then use (model selection on held-out episodes). The scores are in the
-            summary's ``validation`` list and in TensorBoard (``Validation/error``).
+        validate: Scores an actor (called with the live actor; use its deterministic output) on episodes
+            that are not the evaluation's: the error of each episode, an array ``(episodes,)`` or
+            ``(episodes, columns)`` (e.g. one column per pinch candidate), the same episodes every call; or
+            one error. Called before training and every ``cfg.validation_interval`` iterations; the policy
+            with the lowest selection score is saved as ``best.pt``, which evaluation and export then use
+            (model selection on held-out episodes). The score is the mean error plus
+            ``cfg.selection_margin`` standard errors of its paired difference from the first validation
+            (the initial policy), so a trained policy must beat the initial one by more than validation
+            noise to replace it. Errors and scores are in the summary's ``validation`` list and in
+            TensorBoard (``Validation/error``).
 
     Returns:
         The summary also written to ``out_dir/summary.json``.
     """
     cfg = cfg if isinstance(cfg, TrainConfig) else TrainConfig(**cfg)
+    if not cfg.selection_margin >= 0:
+        raise ValueError(f"selection_margin: must be >= 0 standard errors, got {cfg.selection_margin}")
     if env.num_envs != cfg.num_envs:
         raise ValueError(f"env has {env.num_envs} envs but the config asks for {cfg.num_envs}")
     out_dir = Path(out_dir)
@@ -100,6 +107,7 @@ def train(
         env.seed(cfg.seed)
     num_action_choices = getattr(env, "num_action_choices", None) if cfg.discrete else None
     runner = Runner(env, cfg.to_rsl_rl(num_action_choices), out_dir, cfg.torch_device)
+    runner.selection_margin = cfg.selection_margin
     if resume is not None:
         runner.load_checkpoint(latest_checkpoint(resume))
     obs = env.get_observations()
@@ -158,7 +166,11 @@ def train(
             "history": runner.history,
             "best": None
             if runner.best_error is None
-            else {"iterations": runner.best_iterations, "validation_error": runner.best_error},
+            else {
+                "iterations": runner.best_iterations,
+                "validation_error": runner.best_error,
+                "validation_score": runner.best_score,
+            },
         }
         write_json(out_dir / "summary.json", summary)
     return summary
@@ -200,7 +212,10 @@ class Runner(OnPolicyRunner):
         self.validation: list[dict] = []
         self.history: list[dict] = []
         self.best_error: float | None = None
+        self.best_score: float | None = None
         self.best_iterations: int | None = None
+        self.validation_baseline: list | None = None
+        self.selection_margin = 0.0
 
     def _state_bytes(self, infos: dict | None = None) -> bytes:
         state = self.alg.save()
@@ -210,7 +225,9 @@ class Runner(OnPolicyRunner):
             "validation": self.validation,
             "history": self.history,
             "best_error": self.best_error,
+            "best_score": self.best_score,
             "best_iterations": self.best_iterations,
+            "validation_baseline": self.validation_baseline,
             **(infos or {}),
         }
         buffer = io.BytesIO()
@@ -225,23 +242,49 @@ class Runner(OnPolicyRunner):
         self.checkpoint = Path(path)
         self.logger.save_model(path, self.current_learning_iteration)
 
-    def validate(self, validate: Callable[[torch.nn.Module], float]) -> float:
-        """Score the deterministic policy with ``validate``; save ``best.pt`` if it is the best yet."""
+    def validate(self, validate: Callable[[torch.nn.Module], float | np.ndarray]) -> float:
+        """Score the deterministic policy with ``validate``; save ``best.pt`` if its selection score (see
+        :meth:`_selection_score`) is the lowest yet. Returns the validation error."""
         was_training = self.alg.actor.training
         self.alg.actor.eval()
         try:
             with torch.inference_mode():
-                error = float(validate(self.alg.actor))
+                errors = validate(self.alg.actor)
         finally:
             self.alg.actor.train(was_training)
-        self.validation.append({"iterations": self.iterations_done, "error": error})
+        error, score = self._selection_score(errors)
+        self.validation.append({"iterations": self.iterations_done, "error": error, "score": score})
         if self.logger.writer is not None:
             self.logger.writer.add_scalar("Validation/error", error, self.iterations_done)
-        if self.best_error is None or error < self.best_error:
-            self.best_error, self.best_iterations = error, self.iterations_done
+        if self.best_score is None or score < self.best_score:
+            self.best_error, self.best_score, self.best_iterations = error, score, self.iterations_done
             if self.logger.log_dir is not None:
                 write_atomic(Path(self.logger.log_dir) / BEST_CHECKPOINT, self._state_bytes())
         return error
+
+    def _selection_score(self, errors: float | np.ndarray) -> tuple[float, float]:
+        """``(error, score)`` of one validation: the mean error of its best column, and the score model
+        selection minimises. The first per-episode validation is the baseline (the initial policy); a later
+        one scores ``mean + selection_margin * SE`` of its episodes' paired differences from the baseline's
+        (per column; the lowest column). A scalar validation scores its value."""
+        values = np.asarray(errors, dtype=np.float64)
+        if values.ndim == 0:
+            return float(values), float(values)
+        values = values.reshape(len(values), -1)
+        if not np.all(np.isfinite(values)):
+            raise ValueError(f"validation errors must be finite, got {values.ravel().tolist()}")
+        means = values.mean(axis=0)
+        if self.validation_baseline is None:
+            self.validation_baseline = values.tolist()
+        baseline = np.asarray(self.validation_baseline, dtype=np.float64)
+        if baseline.shape != values.shape:
+            raise ValueError(
+                f"validation errors have shape {values.shape}, the baseline's {baseline.shape}: "
+                "validate on the same episodes every time"
+            )
+        se = (values - baseline).std(axis=0, ddof=1) / np.sqrt(len(values)) if len(values) > 1 else 0.0
+        scores = means + self.selection_margin * se
+        return float(means.min()), float(scores.min())
 
     def save_interrupted(self) -> None:
         """Save the current state after a Ctrl-C, as the checkpoint of the last completed iteration."""
@@ -258,7 +301,9 @@ class Runner(OnPolicyRunner):
         self.validation = list(infos.get("validation") or [])
         self.history = list(infos.get("history") or [])
         self.best_error = infos.get("best_error")
+        self.best_score = infos.get("best_score", self.best_error)
         self.best_iterations = infos.get("best_iterations")
+        self.validation_baseline = infos.get("validation_baseline")
 
     def _end_iteration(self, it: int, metrics: dict) -> None:
         self.iterations_done = it + 1

@@ -44,6 +44,7 @@ CANDIDATES = {
     "sparse": Recipe({**RECIPE, "dense_reward": False}, OLD),
     "validation-32": Recipe(RECIPE, {**OLD, "entropy_coef": 0.03}, validation_trials=32),
     "paper-0.01": Recipe(RECIPES["paper"].options, {"stay_prior": 0.0, "entropy_coef": 0.01}, 0),
+    "margin-0": Recipe(RECIPE, {**OLD, "entropy_coef": 0.03, "selection_margin": 0.0}),
     "residual": Recipe({**RECIPE, "residual_gain": AnalyticTension.gain}, {**OLD, "entropy_coef": 0.03}),
 }
 """The recipes this script knows: warpcut's and the paper's (``RECIPES``), and the variations measured for

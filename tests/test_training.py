@@ -102,7 +102,7 @@ class ScriptedValidation:
     def __init__(self, errors: list[float]) -> None:
         self.errors, self.calls, self.weights = list(errors), 0, []
 
-    def __call__(self, actor) -> float:
+    def __call__(self, actor):
         assert not actor.training
         self.weights.append({k: v.clone() for k, v in actor.state_dict().items()})
         self.calls += 1
@@ -120,7 +120,7 @@ def test_validation_keeps_the_best_policy(tmp_path):
     )
     assert [v["iterations"] for v in summary["validation"]] == [0, 2, 4, 6]
     assert [v["error"] for v in summary["validation"]] == [5.0, 3.0, 4.0, 9.0]
-    assert summary["best"] == {"iterations": 2, "validation_error": 3.0}
+    assert summary["best"] == {"iterations": 2, "validation_error": 3.0, "validation_score": 3.0}
     best = torch.load(tmp_path / BEST_CHECKPOINT, weights_only=True)
     assert best["infos"]["iterations_done"] == 2
     assert policy_checkpoint(tmp_path) == tmp_path / BEST_CHECKPOINT
@@ -139,8 +139,36 @@ def test_validation_keeps_the_best_policy(tmp_path):
         validate=ScriptedValidation([3.5]),
     )
     assert [v["iterations"] for v in summary["validation"]] == [0, 2, 4, 6, 8]
-    assert summary["best"] == {"iterations": 2, "validation_error": 3.0}
+    assert summary["best"] == {"iterations": 2, "validation_error": 3.0, "validation_score": 3.0}
     assert torch.load(tmp_path / BEST_CHECKPOINT, weights_only=True)["infos"]["iterations_done"] == 2
+
+
+@pytest.mark.parametrize("margin, kept", [(0.0, 6), (1.0, 4)])
+def test_selection_needs_a_paired_gain_beyond_validation_noise(tmp_path, margin, kept):
+    still = [5.0, 5.0, 5.0, 5.0]  # the initial policy's error on each of 4 validation episodes
+    steady = [4.0, 4.2, 3.8, 4.0]  # 1 vertex better on every episode
+    lucky = [0.5, 8.0, 0.5, 6.0]  # a lower mean (3.75), but worse than still on half the episodes
+    validate = ScriptedValidation([np.array(e) for e in (still, [2.0, 8.0, 2.0, 8.0], steady, lucky)])
+    cfg = tiny_config(iterations=6, validation_interval=2, selection_margin=margin)
+    summary = train(ReachEnv(NUM_ENVS), cfg, tmp_path, progress=False, validate=validate)
+    assert [v["error"] for v in summary["validation"]] == [5.0, 5.0, 4.0, 3.75]
+    assert summary["best"]["iterations"] == kept
+    se = np.std(np.subtract(lucky, still), ddof=1) / 2
+    assert summary["validation"][3]["score"] == pytest.approx(3.75 + margin * se)
+    assert torch.load(tmp_path / BEST_CHECKPOINT, weights_only=True)["infos"]["iterations_done"] == kept
+
+    # Resuming scores against the same baseline: the initial policy's episodes, kept in the checkpoint.
+    validate = ScriptedValidation([np.array([3.9, 4.1, 3.7, 3.9])])
+    cfg = tiny_config(iterations=8, validation_interval=2, selection_margin=margin)
+    summary = train(ReachEnv(NUM_ENVS), cfg, tmp_path, resume=tmp_path, progress=False, validate=validate)
+    assert summary["best"]["iterations"] == (6 if margin == 0 else 8)
+    with pytest.raises(ValueError, match="same episodes"):
+        train(
+            ReachEnv(NUM_ENVS), tiny_config(iterations=10, validation_interval=2), tmp_path,
+            resume=tmp_path, progress=False, validate=ScriptedValidation([np.ones(3)]),
+        )  # fmt: skip
+    with pytest.raises(ValueError, match="selection_margin"):
+        train(ReachEnv(NUM_ENVS), tiny_config(selection_margin=-1.0), tmp_path / "bad", progress=False)
 
 
 def test_without_validation_the_latest_checkpoint_is_the_policy(trained_run):
