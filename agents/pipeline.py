@@ -13,6 +13,11 @@ to print, plot or record is the caller's.
 
 from __future__ import annotations
 
+import dataclasses
+import functools
+import hashlib
+import inspect
+import json
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -37,7 +42,7 @@ from agents.methods import METHODS, SELECTORS, StepCallbacks, check_methods
 from agents.rl import is_run, rollout_errors, train_contour
 from envs.options import PatternCutOptions
 from warpcut.contours import Contour, builtin_names, load_contour
-from warpcut.io import read_json, write_json
+from warpcut.io import claim_run_dir, finite_json, read_json, safe_name, write_json
 from warpcut.planning import ArmModel, Plan, plan_cut
 from warpcut.sim.config import SimConfig
 
@@ -60,22 +65,92 @@ def train_policy(
     seed: int,
     eval_trials: int,
     progress: bool,
+    resume: bool = False,
 ) -> dict:
     """Train a policy with ``recipe`` for ``options`` (``options`` carry the recipe's env fields) into
-    ``run_dir`` (:func:`agents.rl.train_contour`); Ctrl-C raises :class:`TrainingInterrupted` naming the run
-    directory. Returns the training summary."""
+    ``run_dir`` (:func:`agents.rl.train_contour`); Ctrl-C (or SIGTERM/SIGHUP, see the CLI) raises
+    :class:`TrainingInterrupted` naming the run directory. Returns the training summary.
+
+    With ``resume`` a run already completed in ``run_dir`` is kept (its summary returned), and one that was
+    interrupted continues from its checkpoint; without a checkpoint it starts again."""
+    if resume and finished_run(run_dir):
+        return read_json(Path(run_dir) / "summary.json")
     discrete = options.action_type == "discrete"
     cfg = TrainConfig(
         **{"discrete": discrete, **recipe.train, "num_envs": num_envs, "iterations": iterations, "seed": seed}
     )
+    checkpoint = resume and any(Path(run_dir).glob("*.pt"))
     try:
         result = train_contour(
             options, run_dir, cfg, eval_trials=eval_trials, progress=progress,
-            validation_trials=recipe.validation_trials,
+            validation_trials=recipe.validation_trials, resume=run_dir if checkpoint else None,
         )  # fmt: skip
         return result["summary"]
     except KeyboardInterrupt as interrupt:
         raise TrainingInterrupted(run_dir) from interrupt
+
+
+def finished_run(run_dir: str | Path) -> bool:
+    """Whether ``run_dir`` holds a training run that completed and was evaluated (a pipeline's ``resume``
+    keeps it)."""
+    run_dir = Path(run_dir)
+    summary, evaluation = run_dir / "summary.json", run_dir / "evaluation.json"
+    if not (summary.is_file() and evaluation.is_file()):
+        return False
+    return read_json(summary).get("status") == "completed"
+
+
+REQUEST_FILE = "request.json"
+"""What a pipeline's run directory was asked for (its arguments), so that ``resume`` continues the same
+run."""
+
+
+def _claims_out(pipeline: Callable) -> Callable:
+    """Run ``pipeline`` with its run directory ``out`` claimed (:func:`warpcut.io.claim_run_dir` with its
+    ``resume`` and ``overwrite`` arguments): locked against a second process, and refused if it holds
+    another run."""
+    signature = inspect.signature(pipeline)
+
+    @functools.wraps(pipeline)
+    def claimed(*args, **kwargs):
+        bound = signature.bind(*args, **kwargs)
+        bound.apply_defaults()
+        given = bound.arguments
+        with claim_run_dir(given["out"], resume=given["resume"], overwrite=given["overwrite"]):
+            return pipeline(*args, **kwargs)
+
+    return claimed
+
+
+def _record_request(out: Path, command: str, arguments: dict, resume: bool) -> None:
+    """Write ``out/request.json``; with ``resume``, first check that ``arguments`` are those the run was
+    started with (a ValueError names each difference)."""
+    request = {"command": command, "arguments": arguments}
+    path = out / REQUEST_FILE
+    if resume and path.is_file():
+        before = read_json(path)
+        if before.get("command") != command:
+            raise ValueError(f"--resume: {out} holds a '{before.get('command')}' run, not '{command}'")
+        old, new = before.get("arguments", {}), _jsonable(arguments)
+        changed = [k for k in sorted(set(old) | set(new)) if old.get(k) != new.get(k)]
+        if changed:
+            shown = "; ".join(f"{k}: {old.get(k)!r} then, {new.get(k)!r} now" for k in changed)
+            raise ValueError(
+                f"--resume: {out} was started with other settings ({shown}); repeat the run's settings, "
+                "or start a new run (another --out, or --overwrite)"
+            )
+    write_json(path, request)
+
+
+def _jsonable(obj):
+    """``obj`` as :func:`~warpcut.io.write_json` would write and read it back (tuples as lists)."""
+    return json.loads(json.dumps(finite_json(obj), default=str))
+
+
+def _contour_key(spec: str, contour: Contour) -> dict:
+    """How a request names a contour: as given, its name, and a digest of its points."""
+    digest = hashlib.sha1(np.ascontiguousarray(contour.points, dtype=np.float64).tobytes()).hexdigest()[:12]
+    return {"spec": spec, "name": contour.name, "points_sha1": digest}
 
 
 def analytic_pinches(mode: str, contours: Sequence[Contour], plans: Sequence[Plan] | None) -> list | None:
@@ -129,10 +204,13 @@ class RunReport:
         }
 
 
+@_claims_out
 def run_pipeline(
     contour: str,
     out: str | Path,
     *,
+    resume: bool = False,
+    overwrite: bool = False,
     budget: str = DEFAULT_BUDGET,
     selector: str = DEFAULT_SELECTOR,
     shared_policy: bool = False,
@@ -156,7 +234,11 @@ def run_pipeline(
     Args:
         contour: Built-in name or contour file.
         out: Run directory: ``plan.json``, ``results.json`` and the policies (``rl/candidate-K/``, or
-            ``rl/`` for a shared policy).
+            ``rl/`` for a shared policy). Locked while the pipeline runs; refused if it holds another run
+            (see :func:`warpcut.io.claim_run_dir`).
+        resume: Continue the run in ``out`` (started with the same arguments, ``request.json``): policies
+            trained to the end are kept, interrupted ones continue from their checkpoints.
+        overwrite: Delete what ``out`` holds first.
         budget: A :data:`BUDGETS` preset; ``candidates``, ``rl_candidates``, ``iterations`` and ``trials``
             override its fields.
         selector: ``rl`` (a PPO policy per candidate; the one that validates best wins), ``fixed`` (the
@@ -183,6 +265,13 @@ def run_pipeline(
     config = (config or SimConfig()).validated()
     out = Path(out)
     loaded = load_contour(contour)
+    arguments = {
+        "contour": _contour_key(contour, loaded), "budget": budget, "selector": selector,
+        "shared_policy": shared_policy, "recipe": dataclasses.asdict(recipe), **settings,
+        "num_envs": num_envs, "config": dataclasses.asdict(config),
+        "arm": dataclasses.asdict(arm or ArmModel()), "analytic_pinch": analytic_pinch, "seed": seed,
+    }  # fmt: skip
+    _record_request(out, "run", arguments, resume)
     start = time.perf_counter()
 
     log(f"[1/3] planning {loaded.name}: {settings['candidates']} pinch candidates")
@@ -210,7 +299,9 @@ def run_pipeline(
             "analytic", pinches=[np.asarray(best["pinch"])], segments=[plan.ordered_segments(best["order"])]
         )
     else:
-        train = dict(iterations=settings["iterations"], seed=seed, eval_trials=settings["trials"])
+        train = dict(
+            iterations=settings["iterations"], seed=seed, eval_trials=settings["trials"], resume=resume
+        )
         rl_dir, chosen, runs = _train_candidates(
             contour, plan, listed, config, out, shared_policy, recipe, num_envs, device, train, log, progress
         )
@@ -352,7 +443,17 @@ def resolve_contours(specs: str | Sequence[str]) -> list[tuple[str, Contour]]:
         names = [s for s in names if s != "all"] + [n for n in builtin_names() if n not in names]
     if not names:
         raise ValueError("contours: give at least one contour name or file, or 'all'")
-    return [(s, load_contour(s)) for s in names]
+    named = [(s, load_contour(s)) for s in names]
+    seen: dict[str, str] = {}
+    for spec, contour in named:
+        key = safe_name(contour.name)
+        if key in seen:
+            raise ValueError(
+                f"contours: {seen[key]!r} and {spec!r} are both named {contour.name!r} (their runs and plots "
+                "would share files); rename one in its file"
+            )
+        seen[key] = spec
+    return named
 
 
 @dataclass
@@ -394,10 +495,13 @@ class TableReport:
         return "\n".join(lines)
 
 
+@_claims_out
 def evaluate_table(
     contours: str | Sequence[str],
     out: str | Path,
     *,
+    resume: bool = False,
+    overwrite: bool = False,
     methods: Sequence[str] = tuple(METHODS),
     trials: int = EVALUATION_TRIALS,
     config: SimConfig | None = None,
@@ -424,7 +528,12 @@ def evaluate_table(
 
     Args:
         contours: Built-in names or contour files (``all``: the built-in suite).
-        out: Run directory: ``plans.json``, ``results.json``, ``policies/``.
+        out: Run directory: ``plans.json``, ``results.json``, ``policies/`` (one run per contour, named
+            by :func:`warpcut.io.safe_name`). Locked while the pipeline runs; refused if it holds another
+            run (see :func:`warpcut.io.claim_run_dir`).
+        resume: Continue the run in ``out`` (started with the same arguments, ``request.json``): policies
+            trained to the end are kept, interrupted ones continue from their checkpoints.
+        overwrite: Delete what ``out`` holds first.
         methods: Names from :data:`agents.methods.METHODS`.
         trials: Trials per contour and method.
         config: Simulation settings (default ``SimConfig()``); plans are searched noise-free.
@@ -448,11 +557,21 @@ def evaluate_table(
     loaded = [c for _, c in named]
     if checkpoints is not None and "rl" in methods:
         for contour in loaded:
-            if not is_run(Path(checkpoints) / contour.name):
+            run = Path(checkpoints) / safe_name(contour.name)
+            if not is_run(run):
                 raise ValueError(
-                    f"checkpoints: no trained run for {contour.name!r} at {Path(checkpoints) / contour.name} "
+                    f"checkpoints: no trained run for {contour.name!r} at {run} "
                     "(expected CHECKPOINTS/NAME/options.json from 'warpcut train --out')"
                 )
+    arguments = {
+        "contours": [_contour_key(spec, c) for spec, c in named], "methods": list(methods), "trials": trials,
+        "config": dataclasses.asdict(config),
+        "checkpoints": None if checkpoints is None else str(checkpoints),
+        "recipe": dataclasses.asdict(recipe), "iterations": iterations, "num_envs": num_envs,
+        "plan": plan if isinstance(plan, bool) else [p.contour.name for p in plan], "candidates": candidates,
+        "arm": dataclasses.asdict(arm or ArmModel()), "analytic_pinch": analytic_pinch, "seed": seed,
+    }  # fmt: skip
+    _record_request(out, "evaluate", arguments, resume)
     start = time.perf_counter()
     plans = None
     if isinstance(plan, list | tuple):  # plans made already, one per contour
@@ -483,7 +602,7 @@ def evaluate_table(
         elif spec.name == "analytic":
             spec.pinches = analytic_pinches(analytic_pinch, loaded, plans)
         elif spec.name == "rl":
-            training = {"recipe": recipe, "iterations": iterations, "num_envs": num_envs}
+            training = {"recipe": recipe, "iterations": iterations, "num_envs": num_envs, "resume": resume}
             spec.result, runs, kept = _rl_result(
                 named, plans, checkpoints, out, trials, config, training, device, seed, log, step_callbacks
             )
@@ -529,10 +648,12 @@ def _rl_result(
     rollouts, runs, iterations = [], [], []
     for k, (spec, contour) in enumerate(named):
         if checkpoints is not None:
-            run = Path(checkpoints) / contour.name
+            run = Path(checkpoints) / safe_name(contour.name)
         else:
-            run = out / "policies" / contour.name
-            log(f"  training rl for {contour.name} ({training['iterations']} iterations)")
+            run = out / "policies" / safe_name(contour.name)
+            kept = training["resume"] and finished_run(run)
+            verb = "kept" if kept else "training"
+            log(f"  {verb} rl for {contour.name} ({training['iterations']} iterations)")
             planned = {}
             if plans is not None:
                 planned = {
@@ -544,7 +665,7 @@ def _rl_result(
             )
             train_policy(
                 options, run, recipe, iterations=training["iterations"], num_envs=training["num_envs"],
-                seed=seed, eval_trials=trials, progress=False,
+                seed=seed, eval_trials=trials, progress=False, resume=training["resume"],
             )  # fmt: skip
             runs.append(run)
         iterations.append(policy_iteration(run))

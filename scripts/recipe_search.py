@@ -101,7 +101,7 @@ def main() -> None:
         start = time.perf_counter()
         report = evaluate_table(
             [s for s, _ in contours], out, trials=args.trials, config=config, plan=plans, recipe=recipe,
-            iterations=args.iterations, num_envs=args.num_envs, seed=args.seed,
+            iterations=args.iterations, num_envs=args.num_envs, seed=args.seed, resume=True,
         )  # fmt: skip
         train_s = [
             json.loads((run / "summary.json").read_text())["wall_time_s"] for run in report.policy_runs

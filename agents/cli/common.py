@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import math
 import os
 import re
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -26,12 +29,13 @@ class CleanErrors(click.Group):
 
     def main(self, *args, **kwargs):
         kwargs["standalone_mode"] = False
+        handlers = _stop_on_signals()
         try:
             result = super().main(*args, **kwargs)
-        except click.exceptions.Abort as exc:  # Ctrl-C; a pipeline's training names its checkpoint
-            where = getattr(exc.__cause__, "run_dir", None)
-            click.echo("interrupted" + (f": checkpoint saved in {where}" if where else ""), err=True)
-            sys.exit(130)
+        except click.exceptions.Abort as exc:  # Ctrl-C, SIGTERM, SIGHUP: what was saved, how to continue
+            click.echo(_interrupted_message(exc, args[0] if args else sys.argv[1:]), err=True)
+            stop = _cause(exc, Terminated)
+            sys.exit(128 + stop.signum if stop is not None else 130)
         except click.exceptions.NoArgsIsHelpError as exc:  # no command given: the help, as --help shows it
             click.echo(exc.ctx.get_help())
             sys.exit(0)
@@ -60,7 +64,57 @@ class CleanErrors(click.Group):
             for note in getattr(exc, "__notes__", ()) if os.environ.get("WARPCUT_VERBOSE") else ():
                 click.echo(note, err=True)
             sys.exit(1)
+        finally:
+            for signum, handler in handlers.items():
+                signal.signal(signum, handler)
         sys.exit(result if isinstance(result, int) else 0)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM or SIGHUP, raised where the command is, so that it stops as after Ctrl-C: training saves a
+    checkpoint and its summary, a pipeline names what to resume."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def _raise_terminated(signum: int, frame) -> None:
+    raise Terminated(signum)
+
+
+def _stop_on_signals() -> dict:
+    """Turn SIGTERM and SIGHUP into :class:`Terminated` (main thread only); returns the old handlers."""
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {signum: signal.signal(signum, _raise_terminated) for signum in (signal.SIGTERM, signal.SIGHUP)}
+
+
+def _cause(exc: BaseException, kind: type | str) -> BaseException | None:
+    """The first exception of ``kind`` (a type, or the name of an attribute it has) in ``exc``'s chain of
+    causes and contexts."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(kind, str) and hasattr(exc, kind) or isinstance(kind, type) and isinstance(exc, kind):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
+def _interrupted_message(exc: BaseException, argv: list[str]) -> str:
+    """What an interrupted command says: the signal, the checkpoint a training saved and how to continue."""
+    stop = _cause(exc, Terminated)
+    what = f"terminated ({stop})" if stop is not None else "interrupted"
+    where = getattr(_cause(exc, "run_dir"), "run_dir", None)  # a pipeline's TrainingInterrupted
+    command = next((a for a in argv if not a.startswith("-")), None)
+    if where is not None:
+        what += f": checkpoint saved in {where}"
+    if command in ("evaluate", "run"):
+        what += f"; continue with the same 'warpcut {command}' command plus --resume (same --out)"
+    elif command == "train" and where is not None:
+        what += f"; continue with 'warpcut train --resume {where}'"
+    return what
 
 
 def _negative_record(kwargs: dict, args: tuple, exc: click.NoSuchOption) -> str | None:
@@ -212,6 +266,45 @@ def out_option(default: str):
     )
 
 
+def run_dir_options(command):
+    """``--resume`` and ``--overwrite`` for a command that writes a run directory (``--out``)."""
+    command = click.option(
+        "--overwrite", is_flag=True, help="Replace the run directory's contents (an earlier run's)."
+    )(command)
+    return click.option(
+        "--resume",
+        is_flag=True,
+        help="Continue the run in --out (interrupted, or to finish it): policies trained to the end are "
+        "kept, interrupted ones continue from their checkpoints; the settings must be the run's.",
+    )(command)
+
+
+def claim(out: Path | None, prefix: str, resume: bool, overwrite: bool):
+    """``(run directory, its claim)``: ``out`` (or a fresh ``logs/PREFIX-...``) and a context that holds it
+    (:func:`warpcut.io.claim_run_dir`: locked; refused if it holds another run, unless resuming or
+    overwriting)."""
+    from warpcut.io import claim_run_dir
+
+    if resume and out is None:
+        raise click.BadParameter("give the run directory to continue with --out", param_hint="--resume")
+    out = run_dir(out, prefix)
+    return out, claim_run_dir(out, resume=resume, overwrite=overwrite)
+
+
+def check_outputs(outputs: dict[str, Path | None], inputs: list[str]) -> None:
+    """Refuse an output file (``{option: path}``) that is one of the input files (contour files): writing
+    it would destroy the input."""
+    files = [Path(i) for i in inputs if Path(i).is_file()]
+    for option, path in outputs.items():
+        if path is None or not path.exists():
+            continue
+        for given in files:
+            if path.resolve() == given.resolve():
+                raise click.BadParameter(
+                    f"{path} is an input (a contour file); choose another file", param_hint=option
+                )
+
+
 def count_option(name: str, default: int | None, help: str):
     """A positive integer option ``--NAME`` (shows its default when it has one)."""
     return click.option(
@@ -239,6 +332,8 @@ def parse_point(value: str | None, name: str) -> tuple[float, float] | None:
         x, y = (float(v) for v in value.split(","))
     except ValueError:
         raise click.BadParameter(f"expected X,Y in mm, e.g. 60,40 (got {value!r})", param_hint=name) from None
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise click.BadParameter(f"X and Y must be finite numbers in mm (got {value!r})", param_hint=name)
     return x, y
 
 

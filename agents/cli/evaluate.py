@@ -38,6 +38,7 @@ from warpcut.sim.config import SimConfig
 @common.device_option
 @common.seed_option
 @common.out_option("logs/evaluate-TIMESTAMP; results and trained policies")
+@common.run_dir_options
 @common.json_option
 @click.option(
     "--markdown",
@@ -78,6 +79,8 @@ def command(
     device: str | None,
     seed: int,
     out: Path | None,
+    resume: bool,
+    overwrite: bool,
     json_path: Path | None,
     markdown_path: Path | None,
     record_envs: int | None,
@@ -86,7 +89,7 @@ def command(
 ) -> None:
     """The paper's Table I: per contour the no-tension error and each method's improvement (95% CI)."""
     from agents.pipeline import evaluate_table
-    from warpcut.io import write_atomic, write_json
+    from warpcut.io import safe_name, write_atomic, write_json
     from warpcut.planning import ArmModel
 
     names = common.parse_methods(methods, "--methods", tuple(METHODS))
@@ -97,11 +100,13 @@ def command(
             err=True,
         )
         record_envs = trials
-    out = common.run_dir(out, "evaluate")
+    common.check_outputs({"--json": json_path, "--markdown": markdown_path}, list(contour_args))
+    out, claim = common.claim(out, "evaluate", resume, overwrite)
     cuts = common.final_cuts(no_plots)
-    with common.recorder(out, record_envs, colour_by) as rec:
+    with claim, common.recorder(out, record_envs, colour_by) as rec:
         report = evaluate_table(
-            contour_args, out, methods=names, trials=trials, config=SimConfig(noise_std=noise, score=score),
+            contour_args, out, resume=resume, methods=names, trials=trials,
+            config=SimConfig(noise_std=noise, score=score),
             checkpoints=checkpoints, recipe=RECIPES[recipe], iterations=iterations, num_envs=num_envs,
             plan=plan,
             candidates=candidates,
@@ -127,7 +132,8 @@ def command(
         shown = ["none"] + [m for m in names if m != "none"]
         common.echo_written(cuts.plot(out / "regions", shown, [c.name for c in report.contours]))
         for p in report.plans or []:
-            common.echo_written(plot_pinch_candidates(p, report.config, out / "plans", name=p.contour.name))
+            name = safe_name(p.contour.name)
+            common.echo_written(plot_pinch_candidates(p, report.config, out / "plans", name=name))
         common.plot_learning_curves({run: run.name for run in report.policy_runs})
     common.echo_recording(rec)
     click.echo(f"wrote {out}")

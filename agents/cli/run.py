@@ -71,6 +71,7 @@ from warpcut.sim.config import SimConfig
 @common.device_option
 @common.seed_option
 @common.out_option("logs/run-CONTOUR-TIMESTAMP")
+@common.run_dir_options
 @common.json_option
 @common.record_option("in the run directory")
 @common.plots_option("in the run directory")
@@ -93,6 +94,8 @@ def command(
     device: str | None,
     seed: int,
     out: Path | None,
+    resume: bool,
+    overwrite: bool,
     json_path: Path | None,
     record_envs: int | None,
     colour_by: str,
@@ -104,14 +107,15 @@ def command(
 
     from agents.pipeline import run_pipeline
     from warpcut.contours import load_contour
-    from warpcut.io import write_json
+    from warpcut.io import safe_name, write_json
     from warpcut.planning import ArmModel
 
-    out = common.run_dir(out, f"run-{load_contour(contour_name).name}")
+    common.check_outputs({"--json": json_path}, [contour_name])
+    out, claim = common.claim(out, f"run-{safe_name(load_contour(contour_name).name)}", resume, overwrite)
     cuts = common.final_cuts(no_plots)
-    with common.recorder(out, record_envs, colour_by) as rec:
+    with claim, common.recorder(out, record_envs, colour_by) as rec:
         report = run_pipeline(
-            contour_name, out, budget=budget, selector=run_policy, shared_policy=shared_policy,
+            contour_name, out, resume=resume, budget=budget, selector=run_policy, shared_policy=shared_policy,
             recipe=RECIPES[recipe],
             candidates=candidates, rl_candidates=rl_candidates, iterations=iterations, trials=trials,
             num_envs=num_envs, config=SimConfig(resolution=resolution, noise_std=noise, score=score),

@@ -60,11 +60,26 @@ def start_recorder_process() -> bool:
 
 def place_file(tmp: str | os.PathLike, path: str | os.PathLike, keep: bool) -> None:
     """Move a recording's finished temporary file ``tmp`` to ``path`` (``keep``), or delete it (nothing was
-    recorded: a file already at ``path`` stays as it was)."""
-    if keep:
-        os.replace(tmp, path)
-    else:
+    recorded: a file already at ``path`` stays as it was).
+
+    Only a complete file (:func:`~warpcut.viz.readback.is_complete`) takes ``path``: one cut short (a full
+    disk) is kept beside it as ``NAME.partial.rrd``, a file already at ``path`` stays as it was, and
+    :class:`RecordingError` says so.
+    """
+    from warpcut.viz.readback import is_complete
+
+    if not keep:
         os.unlink(tmp)
+        return
+    if is_complete(tmp):
+        os.replace(tmp, path)
+        return
+    partial = Path(path).with_suffix(".partial.rrd")
+    os.replace(tmp, partial)
+    earlier = f"; {path} still holds the earlier recording" if Path(path).exists() else ""
+    raise RecordingError(
+        f"{path}: the recording was cut short (disk full?); what was written is in {partial}{earlier}"
+    )
 
 
 def default_background() -> str | bool:

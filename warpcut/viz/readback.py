@@ -24,6 +24,20 @@ class RecordingSummary:
     """Every entity with data, sorted."""
 
 
+def is_complete(path: str | os.PathLike) -> bool:
+    """Whether the ``.rrd`` file at ``path`` was finished: it ends in rerun's footer (a file cut short, e.g.
+    by a full disk, does not; rerun then only warns and reads what it can)."""
+    from rerun.chunk import RrdReader
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            RrdReader(Path(path))
+        except (OSError, ValueError, RuntimeError):
+            return False
+    return not any("no footer" in str(w.message) for w in caught)
+
+
 def read_summary(path: str | os.PathLike) -> RecordingSummary:
     """Read a recording back: its frames, entity paths and duration.
 

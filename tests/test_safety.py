@@ -1,0 +1,277 @@
+"""Issue 17: nothing a user made is lost. Run directories (claimed, locked, resumed), file names derived from
+contour names, outputs that would overwrite inputs, recordings cut short, and SIGTERM/SIGHUP."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import agents.pipeline as pipeline
+from agents.cli import main
+from agents.pipeline import evaluate_table, run_pipeline
+from warpcut.io import LOCK_FILE, claim_run_dir, safe_name, write_json
+from warpcut.sim.config import SimConfig
+from warpcut.viz.process import RecordingError, place_file
+
+SMALL = SimConfig(resolution=13)
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def invoke(args):
+    result = CliRunner().invoke(main, args, standalone_mode=True, catch_exceptions=False)
+    return result.exit_code, result.output
+
+
+def contour_file(path: Path, name: str) -> Path:
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    points = np.stack([50 + 20 * np.cos(t), 50 + 20 * np.sin(t)], axis=1)
+    path.write_text(json.dumps({"name": name, "closed": True, "points": points.tolist()}))
+    return path
+
+
+def test_safe_names_stay_in_their_directory_and_never_collide():
+    assert safe_name("fls-circle") == "fls-circle"
+    names = ["/tmp/victim", "../../x", "..", ".", "", "a b", "a/b", "a?b", "-rf", "x" * 200, "é"]
+    made = [safe_name(n) for n in names]
+    assert len(set(made)) == len(made)
+    for name in made:
+        assert "/" not in name and name not in (".", "..") and not name.startswith((".", "-"))
+        assert 0 < len(name) <= 64
+
+
+def test_a_contour_name_never_becomes_a_path_outside_the_run(tmp_path):
+    """A contour named like a path (`/tmp/victim`, `../../x`) writes its policy, plan and plots inside the run
+    directory under a safe name."""
+    victim = tmp_path / "victim"
+    escaped = tmp_path / "x"
+    files = [
+        contour_file(tmp_path / "a.json", str(victim)),
+        contour_file(tmp_path / "b.json", "../../x"),
+    ]
+    out = tmp_path / "runs" / "deep" / "out"
+    code, output = invoke(
+        ["evaluate", "--contours", ",".join(map(str, files)), "--methods", "none,fixed", "--trials", "1",
+         "--candidates", "2", "--out", str(out)]
+    )  # fmt: skip
+    assert code == 0, output
+    assert not victim.exists() and not list(tmp_path.glob("victim*")) and not escaped.exists()
+    written = {p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file()}
+    assert (
+        f"regions/{safe_name(str(victim))}.png" in written and f"plans/{safe_name('../../x')}.png" in written
+    )
+    assert all(".." not in p for p in written)
+
+
+def test_two_contours_with_one_name_are_refused(tmp_path):
+    files = [contour_file(tmp_path / "a.json", "same"), contour_file(tmp_path / "b.json", "same")]
+    with pytest.raises(ValueError, match="both named 'same'"):
+        evaluate_table([str(f) for f in files], tmp_path / "out", methods=["none"], trials=1, config=SMALL)
+
+
+def test_an_existing_run_is_refused_unless_resumed_or_overwritten(tmp_path):
+    out = tmp_path / "run"
+    args = ["evaluate", "--contours", "circle-small", "--methods", "none,fixed", "--trials", "1",
+            "--candidates", "2", "--no-plots", "--out", str(out)]  # fmt: skip
+    assert invoke(args)[0] == 0
+    before = (out / "results.json").read_bytes()
+    code, output = invoke(args)
+    assert code == 2 and "already holds a run" in output and "--resume" in output and "--overwrite" in output
+    assert (out / "results.json").read_bytes() == before
+    (out / "stale.txt").write_text("from the earlier run")
+    code, output = invoke([*args, "--overwrite"])
+    assert code == 0, output
+    assert not (out / "stale.txt").exists() and (out / "results.json").is_file()
+    code, output = invoke([*args, "--resume", "--overwrite"])
+    assert code == 2 and "give one" in output
+
+    mine = tmp_path / "mine"  # a directory warpcut did not write: --overwrite does not empty it
+    mine.mkdir()
+    (mine / "thesis.tex").write_text("years of work")
+    code, output = invoke([*args[:-1], str(mine), "--overwrite"])
+    assert code == 2 and "does not look like one" in output and (mine / "thesis.tex").is_file()
+    code, output = invoke(["evaluate", "--resume", "--contours", "circle-small"])
+    assert code == 2 and "--out" in output
+
+
+def test_a_run_directory_is_locked_while_a_process_writes_it(tmp_path):
+    out = tmp_path / "run"
+    holder = subprocess.Popen(
+        [sys.executable, "-c", textwrap.dedent(f"""
+            import sys, time
+            from warpcut.io import claim_run_dir
+            with claim_run_dir({str(out)!r}):
+                print("held", flush=True)
+                time.sleep(60)
+        """)],
+        stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        code, output = invoke(["evaluate", "--contours", "circle-small", "--methods", "none", "--trials", "1",
+                               "--resume", "--out", str(out)])  # fmt: skip
+        assert code == 2 and f"in use by warpcut process {holder.pid}" in output
+    finally:
+        holder.kill()
+        holder.wait()
+    with claim_run_dir(out, resume=True) as claimed:  # the lock died with its process
+        assert (claimed / LOCK_FILE).is_file()
+        with claim_run_dir(out):  # a claim inside this process's own claim passes
+            pass
+
+
+def test_an_output_that_is_an_input_is_refused(tmp_path):
+    contour = contour_file(tmp_path / "disc.json", "disc")
+    before = contour.read_bytes()
+    for option in ("--json", "--markdown"):
+        code, output = invoke(["evaluate", "--contours", str(contour), "--methods", "none", "--trials", "1",
+                               option, str(contour), "--out", str(tmp_path / option)])  # fmt: skip
+        assert code == 2 and f"{option}" in output and "is an input" in output
+    code, output = invoke(["run", "--contour", str(contour), "--policy", "fixed", "--json", str(contour),
+                           "--out", str(tmp_path / "run")])  # fmt: skip
+    assert code == 2 and "is an input" in output
+    assert contour.read_bytes() == before
+
+
+def test_json_is_standard_and_missing_values_are_null(tmp_path):
+    path = write_json(
+        tmp_path / "r.json", {"a": float("nan"), "b": [np.float32(2.5), np.inf], "c": np.array([1.0])}
+    )
+    text = path.read_text()
+    assert "NaN" not in text and "Infinity" not in text
+    assert json.loads(text) == {"a": None, "b": [2.5, None], "c": [1.0]}
+
+
+def test_a_recording_cut_short_never_replaces_a_good_one(tmp_path):
+    import rerun as rr
+
+    def record(path: Path, frames: int) -> None:
+        stream = rr.RecordingStream("test")
+        stream.save(path)
+        for k in range(frames):
+            stream.set_time("step", sequence=k)
+            stream.log("points", rr.Points3D(np.full((100, 3), float(k))))
+        stream.flush()
+        stream.disconnect()
+
+    path, tmp = tmp_path / "recording.rrd", tmp_path / ".recording.rrd.tmp"
+    record(path, 5)
+    good = path.read_bytes()
+    record(tmp, 50)
+    data = tmp.read_bytes()
+    tmp.write_bytes(data[: len(data) // 2])  # what a full disk leaves
+    with pytest.raises(RecordingError, match="cut short.*still holds the earlier recording"):
+        place_file(tmp, path, keep=True)
+    assert path.read_bytes() == good and (tmp_path / "recording.partial.rrd").is_file() and not tmp.exists()
+
+    record(tmp, 3)  # a complete one replaces it
+    place_file(tmp, path, keep=True)
+    assert path.read_bytes() != good and not tmp.exists()
+
+
+def test_a_recording_on_a_full_disk_keeps_the_earlier_one(tmp_path):
+    """`--record` on a disk that fills up (here a file-size limit): the earlier recording stays intact."""
+    code = textwrap.dedent("""
+        import resource, signal, sys
+        from click.testing import CliRunner
+        from agents.cli import main
+        args = ["simulate", "--contour", "circle-small", "--policy", "none", "--resolution", "9", "--trials",
+                "2", "--no-plots", "--record", "2", "--json", sys.argv[1] + "/results.json"]
+        if sys.argv[2] == "full":
+            signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+            size = int(sys.argv[3]) // 3
+            resource.setrlimit(resource.RLIMIT_FSIZE, (size, size))
+        result = CliRunner().invoke(main, args)
+        print("exit", result.exit_code)
+        print(result.output)
+    """)
+    out = tmp_path / "sim"
+    env = dict(os.environ)
+    first = subprocess.run(
+        [sys.executable, "-c", code, str(out), "ok"], capture_output=True, text=True, env=env
+    )
+    assert "exit 0" in first.stdout, first.stdout + first.stderr
+    recording = out / "recording.rrd"
+    good = recording.read_bytes()
+    full = subprocess.run(
+        [sys.executable, "-c", code, str(out), "full", str(len(good))],
+        capture_output=True,
+        text=True,
+        env=env,
+    )
+    assert "exit 0" not in full.stdout, full.stdout + full.stderr
+    assert recording.read_bytes() == good
+
+
+def test_evaluate_resumes_after_an_interruption_keeping_finished_policies(tmp_path, monkeypatch):
+    contours = ["circle-small", "wave-1"]
+    kwargs = dict(methods=["none", "rl"], trials=1, config=SMALL, plan=False, iterations=2, num_envs=4)
+    trained = []
+    real = pipeline.train_contour
+
+    def train_then_stop(options, out_dir, cfg, **kw):
+        trained.append(Path(out_dir).name)
+        if trained == ["circle-small", "wave-1"]:
+            raise KeyboardInterrupt  # Ctrl-C as the second policy starts training
+        return real(options, out_dir, cfg, **kw)
+
+    monkeypatch.setattr(pipeline, "train_contour", train_then_stop)
+    out = tmp_path / "table"
+    with pytest.raises(pipeline.TrainingInterrupted) as stopped:
+        evaluate_table(contours, out, **kwargs)
+    assert stopped.value.run_dir == out / "policies" / "wave-1"
+    with pytest.raises(ValueError, match="already holds a run"):
+        evaluate_table(contours, out, **kwargs)
+    with pytest.raises(ValueError, match="trials: 1 then, 2 now"):
+        evaluate_table(contours, out, resume=True, **{**kwargs, "trials": 2})
+    finished = (out / "policies/circle-small/summary.json").read_bytes()
+    trained.clear()
+    report = evaluate_table(contours, out, resume=True, **kwargs)
+    assert trained == ["wave-1"]  # circle-small's finished policy was kept, not trained again
+    assert (out / "policies/circle-small/summary.json").read_bytes() == finished
+    assert [r["contour"] for r in report.table["rows"]] == contours
+    assert json.loads((out / "request.json").read_text())["command"] == "evaluate"
+
+
+def test_run_pipeline_resumes_its_candidates(tmp_path):
+    kwargs = dict(candidates=2, rl_candidates=2, iterations=2, trials=1, num_envs=4, config=SMALL)
+    first = run_pipeline("circle-small", tmp_path, **kwargs)
+    stamps = {p: p.stat().st_mtime_ns for p in tmp_path.glob("rl/candidate-*/summary.json")}
+    again = run_pipeline("circle-small", tmp_path, resume=True, **kwargs)
+    assert {p: p.stat().st_mtime_ns for p in stamps} == stamps  # nothing retrained
+    assert again.row == first.row
+
+
+@pytest.mark.parametrize("signum, status", [(signal.SIGTERM, 143), (signal.SIGHUP, 129)])
+def test_sigterm_and_sighup_save_the_training_and_say_how_to_resume(tmp_path, signum, status):
+    out = tmp_path / "table"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "warpcut", "evaluate", "--contours", "circle-small", "--methods", "none,rl",
+         "--trials", "1", "--iterations", "5000", "--num-envs", "4", "--no-plan", "--no-plots",
+         "--out", str(out)],
+        stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=ROOT,
+    )  # fmt: skip
+    lines = []
+    for line in proc.stderr:
+        lines.append(line)
+        if "training rl for circle-small" in line:
+            break
+    summary = out / "policies/circle-small/summary.json"
+    deadline = time.monotonic() + 60
+    while not any(out.glob("policies/circle-small/events.out.tfevents.*")) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    time.sleep(1.0)
+    proc.send_signal(signum)
+    rest = proc.stderr.read()
+    assert proc.wait(timeout=60) == status, "".join(lines) + rest
+    name = signal.Signals(signum).name
+    assert f"terminated ({name})" in rest and "checkpoint saved in" in rest and "--resume" in rest
+    assert json.loads(summary.read_text())["status"] == "interrupted"
+    assert (out / "policies/circle-small/latest.pt").is_file()
