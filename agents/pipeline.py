@@ -122,16 +122,16 @@ def _claims_out(pipeline: Callable) -> Callable:
     return claimed
 
 
-def _record_request(out: Path, command: str, arguments: dict, resume: bool) -> None:
+def _record_request(out: Path, command: str, resume: bool, **arguments) -> None:
     """Write ``out/request.json``; with ``resume``, first check that ``arguments`` are those the run was
     started with (a ValueError names each difference)."""
-    request = {"command": command, "arguments": arguments}
+    request = {"command": command, "arguments": _jsonable(arguments)}
     path = out / REQUEST_FILE
     if resume and path.is_file():
         before = read_json(path)
         if before.get("command") != command:
             raise ValueError(f"--resume: {out} holds a '{before.get('command')}' run, not '{command}'")
-        old, new = before.get("arguments", {}), _jsonable(arguments)
+        old, new = before.get("arguments", {}), request["arguments"]
         changed = [k for k in sorted(set(old) | set(new)) if old.get(k) != new.get(k)]
         if changed:
             shown = "; ".join(f"{k}: {old.get(k)!r} then, {new.get(k)!r} now" for k in changed)
@@ -143,8 +143,24 @@ def _record_request(out: Path, command: str, arguments: dict, resume: bool) -> N
 
 
 def _jsonable(obj):
-    """``obj`` as :func:`~warpcut.io.write_json` would write and read it back (tuples as lists)."""
-    return json.loads(json.dumps(finite_json(obj), default=str))
+    """``obj`` as :func:`~warpcut.io.write_json` would write and read it back (tuples as lists, dataclasses
+    as dicts, paths as strings)."""
+
+    def plain(value):
+        return finite_json(dataclasses.asdict(value)) if dataclasses.is_dataclass(value) else str(value)
+
+    return json.loads(json.dumps(finite_json(obj), default=plain))
+
+
+def _check_checkpoints(checkpoints: Path, contours: list[Contour]) -> None:
+    """Refuse ``checkpoints`` unless it holds a trained run for every contour."""
+    for contour in contours:
+        run = checkpoints / safe_name(contour.name)
+        if not is_run(run):
+            raise ValueError(
+                f"checkpoints: no trained run for {contour.name!r} at {run} "
+                "(expected CHECKPOINTS/NAME/options.json from 'warpcut train --out')"
+            )
 
 
 def _contour_key(spec: str, contour: Contour) -> dict:
@@ -255,23 +271,16 @@ def run_pipeline(
         progress: Show PPO's progress bars.
         step_callbacks: Step callbacks of the evaluation's batches (:data:`agents.methods.StepCallbacks`).
     """
-    if budget not in BUDGETS:
-        raise ValueError(f"budget: choose one of {', '.join(BUDGETS)} (got {budget!r})")
-    if selector not in SELECTORS:
-        raise ValueError(f"selector: choose one of {', '.join(SELECTORS)} (got {selector!r})")
-    settings = dict(BUDGETS[budget])
     overrides = dict(candidates=candidates, rl_candidates=rl_candidates, iterations=iterations, trials=trials)
-    settings.update({k: v for k, v in overrides.items() if v is not None})
+    settings = _settings(budget, selector, overrides)
     config = (config or SimConfig()).validated()
     out = Path(out)
     loaded = load_contour(contour)
-    arguments = {
-        "contour": _contour_key(contour, loaded), "budget": budget, "selector": selector,
-        "shared_policy": shared_policy, "recipe": dataclasses.asdict(recipe), **settings,
-        "num_envs": num_envs, "config": dataclasses.asdict(config),
-        "arm": dataclasses.asdict(arm or ArmModel()), "analytic_pinch": analytic_pinch, "seed": seed,
-    }  # fmt: skip
-    _record_request(out, "run", arguments, resume)
+    _record_request(
+        out, "run", resume, contour=_contour_key(contour, loaded), budget=budget, selector=selector,
+        shared_policy=shared_policy, recipe=recipe, **settings, num_envs=num_envs, config=config,
+        arm=arm or ArmModel(), analytic_pinch=analytic_pinch, seed=seed,
+    )  # fmt: skip
     start = time.perf_counter()
 
     log(f"[1/3] planning {loaded.name}: {settings['candidates']} pinch candidates")
@@ -311,14 +320,9 @@ def run_pipeline(
     log(f"[3/3] evaluating {', '.join(methods)}: {settings['trials']} trials each")
     specs = [Method("none"), Method("fixed", pinches=[pinch]), analytic]
     if rl_dir is not None:
-        rl = rollout_errors(
-            rl_dir,
-            settings["trials"],
-            seed=seed + 1,
-            device=device,
-            on_step=None if step_callbacks is None else step_callbacks("rl", 0),
-            paired_noise=(seed, 0),  # the baselines' trials' noise (evaluate_suite below, same seed)
-        )
+        on_step = None if step_callbacks is None else step_callbacks("rl", 0)
+        # Paired: the noise of the baselines' trials (evaluate_suite below, same seed).
+        rl = rollout_errors(rl_dir, settings["trials"], seed + 1, device, on_step, paired_noise=(seed, 0))
         specs.append(Method("rl", result=MethodResult.from_rollouts([rl])))
     table = evaluate_suite(
         [loaded],
@@ -336,6 +340,15 @@ def run_pipeline(
     )  # fmt: skip
     write_json(out / "results.json", report.to_json())
     return report
+
+
+def _settings(budget: str, selector: str, overrides: dict) -> dict:
+    """``run_pipeline``'s budget with the ``overrides`` that are not None."""
+    if budget not in BUDGETS:
+        raise ValueError(f"budget: choose one of {', '.join(BUDGETS)} (got {budget!r})")
+    if selector not in SELECTORS:
+        raise ValueError(f"selector: choose one of {', '.join(SELECTORS)} (got {selector!r})")
+    return {**BUDGETS[budget], **{k: v for k, v in overrides.items() if v is not None}}
 
 
 def _ranked_candidates(plan: Plan, keep: int | None) -> list[dict]:
@@ -556,22 +569,13 @@ def evaluate_table(
     named = resolve_contours(contours)
     loaded = [c for _, c in named]
     if checkpoints is not None and "rl" in methods:
-        for contour in loaded:
-            run = Path(checkpoints) / safe_name(contour.name)
-            if not is_run(run):
-                raise ValueError(
-                    f"checkpoints: no trained run for {contour.name!r} at {run} "
-                    "(expected CHECKPOINTS/NAME/options.json from 'warpcut train --out')"
-                )
-    arguments = {
-        "contours": [_contour_key(spec, c) for spec, c in named], "methods": list(methods), "trials": trials,
-        "config": dataclasses.asdict(config),
-        "checkpoints": None if checkpoints is None else str(checkpoints),
-        "recipe": dataclasses.asdict(recipe), "iterations": iterations, "num_envs": num_envs,
-        "plan": plan if isinstance(plan, bool) else [p.contour.name for p in plan], "candidates": candidates,
-        "arm": dataclasses.asdict(arm or ArmModel()), "analytic_pinch": analytic_pinch, "seed": seed,
-    }  # fmt: skip
-    _record_request(out, "evaluate", arguments, resume)
+        _check_checkpoints(Path(checkpoints), loaded)
+    _record_request(
+        out, "evaluate", resume, contours=[_contour_key(spec, c) for spec, c in named], methods=list(methods),
+        trials=trials, config=config, checkpoints=checkpoints, recipe=recipe, iterations=iterations,
+        num_envs=num_envs, plan=plan if isinstance(plan, bool) else [p.contour.name for p in plan],
+        candidates=candidates, arm=arm or ArmModel(), analytic_pinch=analytic_pinch, seed=seed,
+    )  # fmt: skip
     start = time.perf_counter()
     plans = None
     if isinstance(plan, list | tuple):  # plans made already, one per contour
@@ -582,16 +586,8 @@ def evaluate_table(
         plans = []
         for contour in loaded:
             log(f"  planning {contour.name} ({candidates} candidates)")
-            plans.append(
-                plan_cut(
-                    contour,
-                    config.replace(noise_std=0.0),
-                    num_candidates=candidates,
-                    seed=seed,
-                    device=device,
-                    arm=arm or ArmModel(),
-                )  # fmt: skip
-            )
+            settings = dict(num_candidates=candidates, seed=seed, device=device, arm=arm or ArmModel())
+            plans.append(plan_cut(contour, config.replace(noise_std=0.0), **settings))
         write_json(out / "plans.json", {p.contour.name: p.to_json() for p in plans})
     specs = [Method(m) for m in methods]
     runs: list[Path] = []

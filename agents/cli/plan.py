@@ -55,6 +55,7 @@ def command(
     from warpcut.contours import load_contour
     from warpcut.planning import ArmModel, plan_cut
 
+    common.check_outputs({"--json": json_path}, [contour_name])
     contour = load_contour(contour_name)
     config = SimConfig(resolution=resolution).validated()
     start = time.perf_counter()
