@@ -2,8 +2,17 @@
 
 from __future__ import annotations
 
+import os
+
 import pytest
 import warp as wp
+from hypothesis import settings
+
+# Hypothesis profiles, chosen by HYPOTHESIS_PROFILE: "ci" (the default: few examples, the same ones every run)
+# or "long" for a real fuzzing session: HYPOTHESIS_PROFILE=long pytest tests/test_fuzz_contours.py
+settings.register_profile("ci", max_examples=25, deadline=None, derandomize=True, database=None)
+settings.register_profile("long", max_examples=1000, deadline=None)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 wp.config.log_level = wp.LOG_WARNING
 wp.init()

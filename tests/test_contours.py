@@ -1,4 +1,5 @@
-"""Tests for warpcut.contours: the built-in suite, loaders, resampling and every validation error."""
+"""Tests for warpcut.contours: the built-in suite, loaders, resampling, every validation error, and which
+simulation grids resolve a contour (and leave a pinch point)."""
 
 from __future__ import annotations
 
@@ -15,10 +16,13 @@ from warpcut.contours import (
     ContourError,
     builtin_contours,
     builtin_names,
+    check_resolution,
     load_contour,
     validate,
 )
 from warpcut.contours.polyline import arc_lengths, polyline_length, resample_polyline
+from warpcut.planning import default_pinch, pinch_candidates
+from warpcut.sim.config import SimConfig
 
 BUILTINS = builtin_contours()
 SQUARE = [[20.0, 20.0], [40.0, 20.0], [40.0, 40.0], [20.0, 40.0]]
@@ -123,6 +127,13 @@ def test_closed_contour_is_made_counter_clockwise_keeping_its_start():
     assert contour.area_mm2 == pytest.approx(400.0)
     np.testing.assert_allclose(contour.centroid, [30.0, 30.0])
     assert contour.length == pytest.approx(80.0)
+
+
+def test_tiny_contour_far_from_the_origin_is_made_counter_clockwise():
+    # Found by fuzzing: the shoelace formula on raw coordinates got this 1e-8 mm triangle's sign wrong.
+    clockwise = [[9.99999990100075, 4.0000000141120005], [9.999999906354331, 3.999999964921677]]
+    clockwise.append([9.999999950226726, 3.999999913266954])
+    assert LinearRing(validate("speck", True, clockwise).points).is_ccw
 
 
 def test_repeated_points_are_removed():
@@ -259,10 +270,10 @@ def test_svg_open_and_relative_commands(tmp_path):
 
 
 def test_svg_viewbox_origin_and_smooth_curves(tmp_path):
-    text = '<svg viewBox="-10 20 100 100"><path d="M 10 40 Q 30 20 50 40 T 90 40 L 90 90 L 10 90 z"/></svg>'
+    text = '<svg viewBox="-5 20 100 100"><path d="M 10 40 Q 30 20 50 40 T 90 40 L 90 90 L 10 90 z"/></svg>'
     contour = load_contour(write(tmp_path, "wave.svg", text))
-    np.testing.assert_allclose(contour.points.min(axis=0), [20.0, 30.0])
-    np.testing.assert_allclose(contour.points.max(axis=0), [100.0, 90.0], atol=1e-9)
+    np.testing.assert_allclose(contour.points.min(axis=0), [15.0, 30.0])
+    np.testing.assert_allclose(contour.points.max(axis=0), [95.0, 90.0], atol=1e-9)
     # T reflects the previous control point, so the second bump dips below the first's baseline.
     assert contour.points[:, 1].max() == pytest.approx(90.0)
     assert np.sum(contour.points[:, 1] < 80.0 - 1e-9) > 0
@@ -306,6 +317,14 @@ def test_closed_contour_leaving_the_sheet():
 def test_open_contour_touching_an_edge_in_between():
     with pytest.raises(ContourError, match="exactly two pieces, but it splits it into 3"):
         validate("zigzag", False, [[0.0, 10.0], [50.0, 0.0], [100.0, 10.0]])
+
+
+def test_round_off_from_an_edge_is_on_it():
+    # Found by fuzzing: a point 1e-300 mm from an edge touches it (and would upset shapely's geometry).
+    with pytest.raises(ContourError, match="exactly two pieces, but it splits it into 3"):
+        validate("zigzag", False, [[0.0, 10.0], [50.0, 1e-300], [100.0, 10.0]])
+    near = validate("cut", False, [[1e-7, 10.0], [50.0, 50.0], [100.0 - 1e-9, 10.0]])
+    np.testing.assert_array_equal(near.points, [[0.0, 10.0], [50.0, 50.0], [100.0, 10.0]])
 
 
 def test_closed_must_be_boolean():
@@ -363,3 +382,158 @@ def test_bad_json_field(tmp_path, data, message):
     path = write(tmp_path, "bad.json", json.dumps(data))
     with pytest.raises(ContourError, match=message):
         load_contour(path)
+
+
+def test_closed_contour_on_the_sheet_boundary_is_refused(tmp_path):
+    sheet = [[0.0, 0.0], [100.0, 0.0], [100.0, 100.0], [0.0, 100.0]]
+    with pytest.raises(
+        ContourError, match=r"material all round it to clip and hold, but point 0 \(0, 0\) is on"
+    ):
+        validate("sheet", True, sheet)
+    # One side along an edge is refused too: there is nothing to cut there.
+    with pytest.raises(ContourError, match=r"point 1 \(100, 20\) is on the sheet's edge \(2 such point"):
+        validate("bite", True, [[60.0, 20.0], [100.0, 20.0], [100.0, 40.0], [60.0, 40.0]])
+    path = write(tmp_path, "sheet.json", json.dumps({"closed": True, "points": sheet}))
+    with pytest.raises(
+        ContourError, match=rf"^contour file '{re.escape(str(path))}': contour 'sheet': a closed"
+    ):
+        load_contour(path)
+
+
+def test_json_empty_points_names_the_file_and_field(tmp_path):
+    path = write(tmp_path, "empty.json", json.dumps({"closed": True, "points": []}))
+    with pytest.raises(ContourError) as caught:
+        load_contour(path)
+    assert str(caught.value) == (
+        f"contour file {str(path)!r}: field 'points' has 0 point(s); give at least 3 [x_mm, y_mm] pairs"
+    )
+    with pytest.raises(ContourError, match="fewer than 3 distinct points"):
+        validate("empty", False, np.zeros((0, 2)))
+
+
+def test_json_number_out_of_range(tmp_path):
+    path = write(
+        tmp_path, "huge.json", '{"closed": true, "points": [[1' + "0" * 400 + ", 1], [2, 3], [4, 5]]}"
+    )
+    with pytest.raises(ContourError, match="field 'points' has a number too large"):
+        load_contour(path)
+    path = write(tmp_path, "inf.json", '{"closed": true, "points": [[1e999, 1], [2, 3], [4, 5]]}')
+    with pytest.raises(
+        ContourError, match=r"inf.json': contour 'inf': point 0 is \[inf, 1.0\], which is not fin"
+    ):
+        load_contour(path)
+
+
+def test_deeply_nested_json_is_a_read_error(tmp_path):
+    path = write(tmp_path, "deep.json", "[" * 100_000 + "]" * 100_000)
+    with pytest.raises(ContourError, match="deep.json': cannot read it as JSON"):
+        load_contour(path)
+
+
+@pytest.mark.parametrize(
+    ("d", "message"),
+    [
+        (
+            "M 10 10 C 1e300 0 0 1e300 10 20 Z",
+            r"a curve of the path leaves the sheet by 4.44e\+299 mm, reaching",
+        ),
+        ("M 50 50 Q 1e308 -1e308 60 60 L 50 60 Z", r"a curve of the path leaves the sheet by 5e\+307 mm"),
+        ("M 10 10 C 1e999 0 0 10 10 20 Z", "the path reaches a coordinate too large to be a number of mm"),
+        ("M 1e308 10 l 1e308 0 L 10 20 Z", "the path reaches a coordinate too large to be a number of mm"),
+    ],
+)
+def test_svg_huge_coordinates_are_refused_before_flattening(tmp_path, d, message):
+    path = write(tmp_path, "huge.svg", f'<svg><path d="{d}"/></svg>')
+    with pytest.raises(ContourError, match=rf"^contour file '{re.escape(str(path))}': {message}"):
+        load_contour(path)
+
+
+def test_svg_curve_with_control_points_off_the_sheet(tmp_path):
+    # The control points lie 6 mm below the sheet (SVG y = 106), the curve dips to 0.5 mm above its edge.
+    text = '<svg><path d="M 20 80 C 20 106 80 106 80 80 Z"/></svg>'
+    contour = load_contour(write(tmp_path, "dip.svg", text))
+    assert contour.points[:, 1].min() == pytest.approx(0.5, abs=1e-3)
+    # A curve leaving the sheet by less than a chord is flattened, and validate() judges its points.
+    path = write(tmp_path, "over.svg", '<svg><path d="M 20 80 C 20 107.2 80 107.2 80 80 Z"/></svg>')
+    with pytest.raises(
+        ContourError, match=r"over.svg': contour 'over': a closed contour must lie inside the sheet"
+    ):
+        load_contour(path)
+
+
+@pytest.mark.parametrize("view_box", ["5", "0 0 nan 100", "a b c d", "0 0 100"])
+def test_svg_bad_viewbox(tmp_path, view_box):
+    path = write(tmp_path, "box.svg", f'<svg viewBox="{view_box}"><path d="M 10 10 h 20 v 20 z"/></svg>')
+    with pytest.raises(ContourError, match="cannot read viewBox .*; give four numbers"):
+        load_contour(path)
+
+
+def test_svg_unknown_encoding_is_a_read_error(tmp_path):
+    path = write(tmp_path, "enc.svg", '<?xml version="1.0" encoding="no-such"?><svg/>')
+    with pytest.raises(ContourError, match="enc.svg': cannot read it as SVG/XML"):
+        load_contour(path)
+
+
+# ------------------------------------------------------------------------------------------- resolution
+
+DEFAULT_SPACING = SimConfig().spacing_mm
+
+
+def test_builtin_suite_is_resolved_at_the_default_resolution():
+    for contour in BUILTINS.values():
+        check_resolution(contour, DEFAULT_SPACING)
+
+
+def test_sliver_is_too_small_for_the_grid():
+    sliver = validate("sliver", True, [[10.0, 10.0], [90.0, 10.0], [50.0, 10.5]])
+    with pytest.raises(ContourError) as caught:
+        check_resolution(sliver, DEFAULT_SPACING)
+    message = str(caught.value)
+    assert message.startswith(
+        "contour 'sliver': too small for the simulation grid: the region it cuts out is "
+    )
+    assert "at resolution 25 x 25, 4.17 x 4.17 mm between vertices," in message
+    finer = int(re.search(r"use resolution (\d+) or finer, or enlarge the contour$", message).group(1))
+    check_resolution(sliver, 100.0 / (finer - 1))  # the resolution it names resolves it...
+    with pytest.raises(ContourError):
+        check_resolution(sliver, 100.0 / (finer - 2))  # ...and is the coarsest that does
+
+
+def test_small_square_needs_a_finer_grid():
+    square = validate("dot", True, [[50.0, 50.0], [53.0, 50.0], [53.0, 53.0], [50.0, 53.0]])
+    with pytest.raises(
+        ContourError, match=r"at most 3 mm wide with an area of 9 mm\^2.*use resolution 35 or finer"
+    ):
+        check_resolution(square, DEFAULT_SPACING)
+    check_resolution(square, 100.0 / 34)
+    # A non-square grid: the coarser axis decides.
+    with pytest.raises(ContourError, match=r"at resolution 40 x 20, 2.56 x 5.26 mm between vertices"):
+        check_resolution(square, (100.0 / 39, 100.0 / 19))
+
+
+def test_too_little_material_left_round_the_contour():
+    frame = validate("frame", True, [[2.0, 2.0], [98.0, 2.0], [98.0, 98.0], [2.0, 98.0]])
+    with pytest.raises(
+        ContourError, match="the rest of the sheet is at most .* move it away from the sheet's edges"
+    ):
+        check_resolution(frame, DEFAULT_SPACING)
+    check_resolution(frame, 1.0)
+
+
+@pytest.mark.parametrize("spacing", [0.0, -1.0, math.inf, math.nan, (1.0, 2.0, 3.0), "4"])
+def test_check_resolution_rejects_a_bad_spacing(spacing):
+    with pytest.raises(ContourError, match="spacing_mm: "):
+        check_resolution(BUILTINS["fls-circle"], spacing)
+
+
+def test_coarse_grid_blames_the_resolution_for_no_pinch_point():
+    circle = BUILTINS["fls-circle"]
+    coarse = SimConfig(resolution=5)
+    expected = (
+        r"^resolution: 5 is too coarse to pinch the sheet for contour 'fls-circle': .* use resolution 12 or"
+    )
+    with pytest.raises(ValueError, match=expected):
+        pinch_candidates(circle, coarse, num=4)
+    with pytest.raises(ValueError, match=expected):
+        default_pinch(circle, coarse)
+    assert len(pinch_candidates(circle, SimConfig(resolution=12), num=4))

@@ -4,9 +4,11 @@ Units are millimetres. Contours are given in material (rest) coordinates on the 
 x-y plane with its origin at the lower-left corner, x to the right and y up (default 100 x 100 mm). The
 scissors approach from +x.
 
-A contour is either *closed* (a simple loop on the sheet; the cut separates its inside) or *open* (a simple
-polyline that enters and leaves the sheet through its edges; the cut separates the smaller of the two
-pieces it splits the sheet into). Every contour, built-in or loaded, goes through :func:`validate`.
+A contour is either *closed* (a simple loop inside the sheet, off its edges; the cut separates its inside)
+or *open* (a simple polyline that enters and leaves the sheet through its edges; the cut separates the
+smaller of the two pieces it splits the sheet into). Every contour, built-in or loaded, goes through
+:func:`validate`, which checks what holds on any grid; :func:`check_resolution` checks that a given
+simulation grid resolves it.
 """
 
 from __future__ import annotations
@@ -111,6 +113,10 @@ def validate(
     oriented counter-clockwise, keeping its start point; each end of an open contour lying within
     :data:`EDGE_REACH_MM` of a sheet edge is extended straight onto the nearest edge.
 
+    The points must be finite and on the sheet, the polyline simple; a closed contour must not touch the
+    sheet's edges (the fixture holds the material around it), an open one must split the sheet in two.
+    Whether a simulation grid resolves the contour is for :func:`check_resolution`, which needs the grid.
+
     Args:
         name: Contour name, used in messages.
         closed: True for a loop, False for a cut from edge to edge.
@@ -137,13 +143,14 @@ def validate(
             f"contour {name!r}: point {bad[0]} is {pts[bad[0]].tolist()}, which is not finite "
             f"({bad.size} such point(s)); give finite x, y in mm"
         )
-    pts = _drop_duplicates(_onto_sheet(name, pts, closed, width, height), closed)
+    pts = _drop_duplicates(_onto_sheet(name, pts, closed, width, height), closed) if len(pts) else pts
     if len(pts) < 3:
         raise ContourError(
             f"contour {name!r}: fewer than 3 distinct points ({len(pts)} after removing repeated points); "
             "give at least 3 (sample curves densely, about every 1 mm)"
         )
     if closed:
+        _check_off_edges(name, pts, width, height)
         if _signed_area(pts) < 0:
             pts = np.concatenate([pts[:1], pts[:0:-1]])
     else:
@@ -175,6 +182,75 @@ def check_sheet_size(sheet_size: tuple[float, float]) -> tuple[float, float]:
     return width, height
 
 
+def check_resolution(contour: Contour, spacing_mm: float | tuple[float, float]) -> None:
+    """Check that a simulation grid with vertices ``spacing_mm`` apart resolves ``contour``.
+
+    Both the material the cut should separate (:meth:`Contour.intended_region`) and the rest of the sheet,
+    which the fixture holds, must be at least one grid spacing wide somewhere (the diameter of the largest
+    disc inside them) and cover at least one vertex's cell (``hx * hy``): anything smaller can fall
+    between the vertices, and its error is meaningless (a sliver can score 0 vertices either way).
+
+    Args:
+        contour: A validated contour.
+        spacing_mm: Grid spacing along x and y, ``(hx, hy)``, or one for both (mm); e.g.
+            ``SheetGrid.spacing_mm`` or ``SimConfig.spacing_mm``.
+
+    Raises:
+        ContourError: naming the contour, the grid's resolution and the coarsest resolution that resolves it.
+    """
+    if not isinstance(contour, Contour):
+        raise ContourError(f"contour: expected a Contour (validate(...)), got {type(contour).__name__}")
+    try:
+        spacing = np.asarray(spacing_mm)
+    except ValueError:  # ragged
+        spacing = np.asarray(None)
+    if spacing.dtype.kind not in "iuf" or spacing.shape not in ((), (2,)):
+        raise ContourError(f"spacing_mm: give (hx_mm, hy_mm) or one number (got {spacing_mm!r})")
+    hx, hy = (float(h) for h in np.broadcast_to(spacing, (2,)))
+    if not (0 < hx < math.inf and 0 < hy < math.inf):
+        raise ContourError(f"spacing_mm: must be positive and finite (mm) (got {spacing_mm!r})")
+    width, height = contour.sheet_size
+    region = contour.intended_region()
+    rest = box(0.0, 0.0, width, height) - region
+    parts = [
+        ("the region it cuts out", region, "enlarge the contour"),
+        ("the rest of the sheet", rest, "shrink the contour or move it away from the sheet's edges"),
+    ]
+    sizes = [(_widest(part, width, height), part.area) for _, part, _ in parts]
+    # Slack for round-off, so that the resolution suggested below passes.
+    failing = [
+        i
+        for i, (across, area) in enumerate(sizes)
+        if across < max(hx, hy) * (1 - 1e-9) or area < hx * hy * (1 - 1e-9)
+    ]
+    if not failing:
+        return
+    label, _, change = parts[failing[0]]
+    across, area = sizes[failing[0]]
+    # The coarsest square grid that resolves both: spacing at most each one's width, cell at most its area.
+    need = max(max(width / w, height / w, math.sqrt(width * height / a)) if w else math.inf for w, a in sizes)
+    fix = f"use resolution {math.ceil(need) + 1} or finer, or {change}" if need < math.inf else change
+    grid = f"{_resolution(width, hx)} x {_resolution(height, hy)}, {hx:.3g} x {hy:.3g} mm between vertices"
+    raise ContourError(
+        f"contour {contour.name!r}: too small for the simulation grid: {label} is at most {across:.3g} mm "
+        f"wide with an area of {area:.3g} mm^2, but at resolution {grid}, it must be at least one spacing "
+        f"wide and one vertex cell ({hx * hy:.3g} mm^2) in area; {fix}"
+    )
+
+
+def _widest(part, width: float, height: float) -> float:
+    """Diameter of the largest disc inside ``part`` (mm; 0 if it is empty), to 1e-4 of the sheet's size."""
+    if not part.area > 0:
+        return 0.0
+    return 2.0 * shapely.maximum_inscribed_circle(part, 1e-4 * max(width, height)).length
+
+
+def _resolution(length: float, spacing: float) -> str:
+    """Vertices along a side ``length`` mm long at ``spacing`` mm, as text (a whole number if it is one)."""
+    n = length / spacing + 1
+    return f"{round(n)}" if abs(n - round(n)) < 1e-6 else f"{n:.3g}"
+
+
 def _as_points(name: str, points) -> np.ndarray:
     try:
         raw = np.asarray(points)
@@ -200,7 +276,7 @@ def _drop_duplicates(pts: np.ndarray, closed: bool) -> np.ndarray:
 
 
 def _onto_sheet(name: str, pts: np.ndarray, closed: bool, width: float, height: float) -> np.ndarray:
-    """Clip round-off onto the sheet; a real excursion is an error."""
+    """Clip round-off onto the sheet and snap it onto the edges; a real excursion is an error."""
     lo = np.zeros(2)
     hi = np.array([width, height])
     outside = np.maximum(lo - pts, pts - hi).max(axis=1)
@@ -212,7 +288,24 @@ def _onto_sheet(name: str, pts: np.ndarray, closed: bool, width: float, height: 
             f"{worst} ({pts[worst, 0]:.6g}, {pts[worst, 1]:.6g}); "
             f"move it into [0, {width:g}] x [0, {height:g}] mm"
         )
-    return np.clip(pts, lo, hi)
+    pts = np.clip(pts, lo, hi)
+    # Within round-off of an edge is on it (also spares geometry code coordinates like 1e-300).
+    pts = np.where(pts - lo <= _EDGE_TOL_MM, lo, pts)
+    return np.where(hi - pts <= _EDGE_TOL_MM, hi, pts)
+
+
+def _check_off_edges(name: str, pts: np.ndarray, width: float, height: float) -> None:
+    """A closed contour must leave material all round it: the fixture holds the sheet outside the cut."""
+    gaps = np.minimum(np.minimum(pts[:, 0], width - pts[:, 0]), np.minimum(pts[:, 1], height - pts[:, 1]))
+    on_edge = np.flatnonzero(gaps <= _EDGE_TOL_MM)
+    if on_edge.size:
+        x, y = pts[on_edge[0]]
+        raise ContourError(
+            f"contour {name!r}: a closed contour must lie inside the sheet with material all round it to "
+            f"clip and hold, but point {on_edge[0]} ({x:.6g}, {y:.6g}) is on the sheet's edge "
+            f"({on_edge.size} such point(s)); move it into (0, {width:g}) x (0, {height:g}) mm, or give a "
+            "cut from edge to edge as an open contour"
+        )
 
 
 def _extend_to_edges(name: str, pts: np.ndarray, width: float, height: float) -> np.ndarray:
@@ -242,7 +335,8 @@ def _extend_to_edges(name: str, pts: np.ndarray, width: float, height: float) ->
 
 
 def _signed_area(pts: np.ndarray) -> float:
-    x, y = pts.T
+    # Measured from the first point: far from the origin the products would cancel out a small shape's area.
+    x, y = (pts - pts[0]).T
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
 
 

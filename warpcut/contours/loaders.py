@@ -4,8 +4,9 @@
   (default: the file stem).
 * ``.svg``: the ``d`` attribute of the first ``<path>`` element. User units are millimetres and y is
   flipped (``y_mm = sheet_height - y_svg``) because SVG's y axis points down. A path ending with ``Z`` is
-  closed. Curves are flattened into segments of at most :data:`SVG_CHORD_MM`; arcs (``A``) are not
-  supported.
+  closed. Curves are flattened into segments of at most :data:`SVG_CHORD_MM` (one that leaves the sheet
+  is refused first); arcs (``A``) are not supported. The ``viewBox`` origin is the sheet's corner; its
+  size is ignored.
 
 Every loaded contour goes through :func:`~warpcut.contours.contour.validate`.
 """
@@ -59,7 +60,7 @@ def load_contour(
 def _load_json(path: Path, sheet_size: tuple[float, float]) -> Contour:
     try:
         data = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:  # recursion: too deep
         raise ContourError(f"contour file {str(path)!r}: cannot read it as JSON ({exc})") from None
     return contour_from_json(data, f"contour file {str(path)!r}", sheet_size, default_name=path.stem)
 
@@ -95,7 +96,25 @@ def contour_from_json(
         raise ContourError(
             f"{where}: field 'points' is required and must be a list of [x_mm, y_mm] number pairs"
         )
-    return validate(name, data["closed"], np.array(points, dtype=np.float64).reshape(-1, 2), sheet_size)
+    if len(points) < 3:
+        raise ContourError(
+            f"{where}: field 'points' has {len(points)} point(s); give at least 3 [x_mm, y_mm] pairs"
+        )
+    try:
+        xy = np.array(points, dtype=np.float64)
+    except OverflowError:  # an integer beyond float range; floats that large already read as inf
+        raise ContourError(f"{where}: field 'points' has a number too large for a coordinate in mm") from None
+    return _validated(where, name, data["closed"], xy, sheet_size)
+
+
+def _validated(
+    where: str, name: str, closed: bool, points: np.ndarray, sheet_size: tuple[float, float]
+) -> Contour:
+    """:func:`validate`, its errors prefixed with ``where`` (the file or field the contour came from)."""
+    try:
+        return validate(name, closed, points, sheet_size)
+    except ContourError as exc:
+        raise ContourError(f"{where}: {exc}") from None
 
 
 def _is_number(value) -> bool:
@@ -106,7 +125,7 @@ def _load_svg(path: Path, sheet_size: tuple[float, float]) -> Contour:
     where = f"contour file {str(path)!r}"
     try:
         root = ET.parse(path).getroot()
-    except (OSError, ET.ParseError) as exc:
+    except (OSError, ET.ParseError, LookupError, ValueError) as exc:  # lookup: an unknown encoding
         raise ContourError(f"{where}: cannot read it as SVG/XML ({exc})") from None
     parents = {child: parent for parent in root.iter() for child in parent}
     element = next((e for e in root.iter() if _local_tag(e.tag) == "path"), None)
@@ -124,15 +143,47 @@ def _load_svg(path: Path, sheet_size: tuple[float, float]) -> Contour:
 
     origin = np.zeros(2)
     if root.get("viewBox"):
+        box = re.split(r"[\s,]+", root.get("viewBox").strip())
         try:
-            origin = np.array([float(v) for v in re.split(r"[\s,]+", root.get("viewBox").strip())[:2]])
+            numbers = [float(v) for v in box]
         except ValueError:
-            raise ContourError(f"{where}: cannot read viewBox {root.get('viewBox')!r}") from None
-    points, closed = _parse_path(where, element.get("d"))
-    height = check_sheet_size(sheet_size)[1]
-    xy = np.asarray(points, dtype=np.float64) - origin
-    xy[:, 1] = height - xy[:, 1]
-    return validate(path.stem, closed, xy, sheet_size)
+            numbers = []
+        if len(numbers) != 4 or not all(math.isfinite(v) for v in numbers):
+            raise ContourError(
+                f"{where}: cannot read viewBox {root.get('viewBox')!r}; give four numbers: "
+                "min-x min-y width height"
+            )
+        origin = np.array(numbers[:2])
+    pieces, closed = _parse_path(where, element.get("d"))
+    width, height = check_sheet_size(sheet_size)
+    points = []
+    for piece in pieces:
+        with np.errstate(over="ignore", invalid="ignore"):
+            xy = (piece - origin) * [1.0, -1.0] + [0.0, height]  # y is flipped: SVG's points down
+        if not np.isfinite(xy).all():
+            raise ContourError(
+                f"{where}: the path reaches a coordinate too large to be a number of mm; keep it on the sheet"
+            )
+        if len(xy) > 1:  # a Bezier curve's control points, from the current point
+            _check_curve_on_sheet(where, xy, width, height)
+            points.extend(_bezier(xy)[1:])
+        else:
+            points.append(xy[0])
+    return _validated(where, path.stem, closed, np.array(points), sheet_size)
+
+
+def _check_curve_on_sheet(where: str, control: np.ndarray, width: float, height: float) -> None:
+    """Refuse a curve that leaves the sheet by more than :data:`SVG_CHORD_MM` before it is flattened: its
+    points could be too many to hold. Smaller excursions are flattened, and :func:`validate` judges them."""
+    extremes = _bezier_extremes(control)
+    outside = np.maximum(-extremes, extremes - [width, height]).max(axis=1)
+    worst = int(np.argmax(outside))
+    if outside[worst] > SVG_CHORD_MM:
+        x, y = extremes[worst]
+        raise ContourError(
+            f"{where}: a curve of the path leaves the sheet by {outside[worst]:.3g} mm, reaching "
+            f"({x:.6g}, {y:.6g}) mm; move it into [0, {width:g}] x [0, {height:g}] mm"
+        )
 
 
 def _local_tag(tag: str) -> str:
@@ -144,9 +195,14 @@ _PATH_ARGS = {"M": 2, "L": 2, "H": 1, "V": 1, "C": 6, "S": 4, "Q": 4, "T": 2, "Z
 
 
 def _parse_path(where: str, d: str) -> tuple[list[np.ndarray], bool]:
-    """Flatten one SVG subpath into points (SVG user units, y down) and whether it ends with Z."""
+    """One SVG subpath (SVG user units, y down) as pieces and whether it ends with Z.
+
+    Each piece is a (1, 2) array, the next vertex, or the (3, 2) or (4, 2) control points of a quadratic or
+    cubic Bezier curve from the current point, flattened by the caller. Coordinates may be infinite or NaN
+    where the numbers are out of range.
+    """
     tokens = _PATH_TOKEN.findall(d)
-    points: list[np.ndarray] = []
+    pieces: list[np.ndarray] = []
     closed = False
     pos = np.zeros(2)
     last_cubic = last_quad = None  # previous curve's last control point, reflected by S and T
@@ -166,11 +222,11 @@ def _parse_path(where: str, d: str) -> tuple[list[np.ndarray], bool]:
             )
         if kind not in _PATH_ARGS:
             raise ContourError(f"{where}: unknown SVG path command {command!r}")
-        if (kind == "M" and points) or (kind != "M" and closed):
+        if (kind == "M" and pieces) or (kind != "M" and closed):
             raise ContourError(
                 f"{where}: the path has several subpaths; give one contour per file (split the path)"
             )
-        if kind != "M" and not points:
+        if kind != "M" and not pieces:
             raise ContourError(f"{where}: path data must start with a moveto (M or m)")
         if kind == "Z":
             closed = True
@@ -182,31 +238,29 @@ def _parse_path(where: str, d: str) -> tuple[list[np.ndarray], bool]:
                 f"{where}: command {command!r} needs {count} numbers; the path data is cut short"
             )
         i += count
-        values = np.array(numbers, dtype=np.float64)
-        offset = pos if command.islower() else np.zeros(2)
-        if kind in ("H", "V"):
-            axis = int(kind == "V")
-            given = pos[None].copy()
-            given[0, axis] = values[0] + offset[axis]
-        else:
-            given = values.reshape(-1, 2) + offset
-        if kind == "S":
-            given = np.vstack([pos if last_cubic is None else 2 * pos - last_cubic, given])
-        elif kind == "T":
-            given = np.vstack([pos if last_quad is None else 2 * pos - last_quad, given])
-        if kind in ("C", "S", "Q", "T"):
-            points.extend(_bezier(np.vstack([pos, given]))[1:])
-        else:
-            points.append(given[-1])
+        with np.errstate(over="ignore", invalid="ignore"):  # out-of-range numbers: the caller refuses them
+            values = np.array(numbers, dtype=np.float64)
+            offset = pos if command.islower() else np.zeros(2)
+            if kind in ("H", "V"):
+                axis = int(kind == "V")
+                given = pos[None].copy()
+                given[0, axis] = values[0] + offset[axis]
+            else:
+                given = values.reshape(-1, 2) + offset
+            if kind == "S":
+                given = np.vstack([pos if last_cubic is None else 2 * pos - last_cubic, given])
+            elif kind == "T":
+                given = np.vstack([pos if last_quad is None else 2 * pos - last_quad, given])
+        pieces.append(np.vstack([pos, given]) if kind in ("C", "S", "Q", "T") else given[-1:])
         if kind == "M":
             # Pairs after a moveto are implicit linetos.
             command = "l" if command.islower() else "L"
         last_cubic = given[-2] if kind in ("C", "S") else None
         last_quad = given[-2] if kind in ("Q", "T") else None
         pos = given[-1]
-    if not points:
+    if not pieces:
         raise ContourError(f"{where}: the path has no points")
-    return points, closed
+    return pieces, closed
 
 
 def _bezier(control: np.ndarray) -> np.ndarray:
@@ -214,6 +268,27 @@ def _bezier(control: np.ndarray) -> np.ndarray:
     degree = len(control) - 1
     # |B'(t)| <= degree * (longest control leg), which bounds each piece's arc length and so its chord.
     longest = float(np.linalg.norm(np.diff(control, axis=0), axis=1).max())
-    t = np.linspace(0.0, 1.0, max(1, math.ceil(degree * longest / SVG_CHORD_MM)) + 1)[:, None]
+    return _bezier_at(control, np.linspace(0.0, 1.0, max(1, math.ceil(degree * longest / SVG_CHORD_MM)) + 1))
+
+
+def _bezier_extremes(control: np.ndarray) -> np.ndarray:
+    """The points of a quadratic or cubic Bezier curve where x or y is extremal, and its two ends; exact
+    (from the roots of the derivative) and free of overflow for finite control points of any size."""
+    scale = float(np.abs(control).max()) or 1.0
+    unit = control / scale
+    legs = np.diff(unit, axis=0)  # the derivative's control points, over the degree
+    t = [0.0, 1.0]
+    for d in legs.T:
+        # The derivative in powers of t, highest first: linear for a quadratic, quadratic for a cubic.
+        power = [d[1] - d[0], d[0]] if len(d) == 2 else [d[0] - 2 * d[1] + d[2], 2 * (d[1] - d[0]), d[0]]
+        # Real parts of complex roots too: an extra point on the curve does no harm, a missed extreme would.
+        t.extend(np.clip(np.roots(power).real, 0.0, 1.0))
+    return _bezier_at(unit, np.array(t)) * scale
+
+
+def _bezier_at(control: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(T, 2) points of the Bezier curve with these control points at the parameters ``t`` (T,)."""
+    degree = len(control) - 1
+    t = t[:, None]
     weights = [math.comb(degree, k) * t**k * (1 - t) ** (degree - k) for k in range(degree + 1)]
     return sum(w * c for w, c in zip(weights, control, strict=True))

@@ -30,6 +30,10 @@ CORNER_MARGIN_MM = 15.0
 FEASIBLE_GRID_MM = 0.5
 """Spacing of the grid of points :func:`nearest_feasible` searches (mm)."""
 
+_FINEST_RESOLUTION = 100
+"""The finest grid :class:`~warpcut.sim.config.SimConfig` allows (vertices per side), the finest one
+:func:`no_pinch_error` tries."""
+
 ScissorPath = np.ndarray | Segment | Sequence[np.ndarray | Segment]
 """The scissors' path: one (P, 2) polyline, a :class:`~warpcut.planning.segmentation.Segment`, or a sequence
 of them (material mm)."""
@@ -175,13 +179,60 @@ def nearest_feasible(
     point = np.asarray(point, dtype=np.float64)
     if pinch_feasible(point, contour, config, segments, arm)[0]:
         return point
-    xs = np.arange(0.0, config.width_mm + 1e-9, FEASIBLE_GRID_MM)
-    ys = np.arange(0.0, config.height_mm + 1e-9, FEASIBLE_GRID_MM)
-    grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    grid = _sheet_points(config)
     grid = grid[pinch_feasible(grid, contour, config, segments, arm)]
     if not len(grid):
-        raise ValueError(f"contour {contour.name!r}: no feasible pinch point on the sheet")
+        raise no_pinch_error(contour, config, segments, arm)
     return grid[np.argmin(np.linalg.norm(grid - point, axis=1))]
+
+
+def no_pinch_error(
+    contour: Contour,
+    config: SimConfig,
+    segments: ScissorPath | None = None,
+    arm: ArmModel = ArmModel(),
+) -> ValueError:
+    """The error for a contour that leaves no feasible pinch point (:func:`pinch_feasible`), naming the cause.
+
+    The grasp radius and the cut radius default to multiples of the grid spacing, so on a coarse grid they
+    can cover the whole sheet whatever the contour: when a finer grid would leave a feasible point, the
+    error blames ``config.resolution`` and names the coarsest square resolution that works (searched by
+    bisection, a few feasibility maps); otherwise it blames the contour and the arm.
+    """
+
+    def pinchable(grid: SimConfig) -> bool:
+        return bool(pinch_feasible(_sheet_points(grid), contour, grid, segments, arm).any())
+
+    def square(resolution: int) -> SimConfig:
+        return config.replace(resolution=resolution)
+
+    coarse = min(config.nx, config.ny)  # no coarser than the grid given along either side
+    if pinchable(config):  # rejection sampling missed a feasible region this small
+        return ValueError(
+            f"contour {contour.name!r}: the feasible pinch region is too small to sample candidates "
+            "from; give a pinch point explicitly (simulate/train --pinch), or move the contour to leave the "
+            "gripper room"
+        )
+    if coarse < _FINEST_RESOLUTION and pinchable(square(_FINEST_RESOLUTION)):
+        lo, hi = coarse, _FINEST_RESOLUTION  # pinchable at hi, not at lo (or so the search assumes)
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            lo, hi = (lo, mid) if pinchable(square(mid)) else (mid, hi)
+        spacing = max(config.spacing_mm)
+        return ValueError(
+            f"resolution: {config.resolution!r} is too coarse to pinch the sheet for contour "
+            f"{contour.name!r}: with {spacing:.3g} mm between vertices, the grasp radius "
+            f"({config.grasp_radius:.3g} mm) and the cut radius ({config.cut_radius:.3g} mm) leave no point "
+            "clear of the sheet's edges, corners, fixture and the contour, nor under the cutting arm; use "
+            f"resolution {hi} or finer (--resolution {hi}), or give a pinch point explicitly (--pinch)"
+        )
+    return ValueError(
+        f"contour {contour.name!r}: no feasible pinch point on the sheet: no point is clear of its "
+        f"edges, corners, fixture and the contour, nor under the cutting arm (arm.radius_mm "
+        f"{arm.radius_mm:g}); give a pinch point explicitly (simulate/train --pinch), use a thinner arm "
+        "(--arm-radius) or a shorter footprint (--arm-length), or move the contour to leave the gripper "
+        "room"
+    )
 
 
 def default_pinch(
@@ -217,6 +268,13 @@ def material_points(name: str, points: np.ndarray) -> np.ndarray:
     if pts.ndim != 2 or pts.shape[1] != 2:
         raise ValueError(f"{name}: expected (M, 2) or (2,) material points (mm), got shape {pts.shape}")
     return pts
+
+
+def _sheet_points(config: SimConfig) -> np.ndarray:
+    """(M, 2) points of a grid :data:`FEASIBLE_GRID_MM` apart over the sheet (mm), the pinch points tried."""
+    xs = np.arange(0.0, config.width_mm + 1e-9, FEASIBLE_GRID_MM)
+    ys = np.arange(0.0, config.height_mm + 1e-9, FEASIBLE_GRID_MM)
+    return np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
 
 
 def _polylines(path: ScissorPath) -> list[np.ndarray]:

@@ -26,6 +26,7 @@ from warpcut.planning.feasibility import (
     ScissorPath,
     default_pinch,
     material_points,
+    no_pinch_error,
     pinch_feasible,
     pinch_rules,
 )
@@ -73,13 +74,7 @@ def pinch_candidates(
         chosen.extend(good)
         need -= len(good)
     if not chosen:
-        raise ValueError(
-            f"contour {contour.name!r}: no feasible pinch point on the sheet: no point is clear of its "
-            f"edges, corners, fixture and the contour, nor under the cutting arm (arm.radius_mm "
-            f"{arm.radius_mm:g}); give a pinch point explicitly (simulate/train --pinch), use a thinner arm "
-            "(--arm-radius) or a shorter footprint (--arm-length), or move the contour to leave the gripper "
-            "room"
-        )
+        raise no_pinch_error(contour, config, segments, arm)
     return np.asarray(chosen)
 
 
