@@ -23,7 +23,7 @@ from rsl_rl.models import MLPModel
 from rsl_rl.utils import resolve_class
 from tensordict import TensorDict
 
-from agents.train import policy_checkpoint
+from agents.train import layout_mismatch, make_run_dir, policy_checkpoint, read_checkpoint
 from warpcut.io import read_json, write_atomic
 
 ONNX_OPSET = 18
@@ -35,21 +35,42 @@ def load_policy(source: str | Path) -> MLPModel:
 
     Args:
         source: Run directory (its ``best.pt`` if training validated, else ``latest.pt``) or a checkpoint
-            file; ``config.json`` is read from the
-            checkpoint's directory.
+            file; ``config.json`` is read from the checkpoint's directory.
 
     Returns:
         The actor; ``actor(obs_tensordict)`` returns deterministic actions.
+
+    Raises:
+        FileNotFoundError: No checkpoint, or no ``config.json`` beside it.
+        ValueError: The checkpoint or ``config.json`` cannot be read, or they do not fit together; the
+            message names the file and the fix.
     """
     checkpoint = policy_checkpoint(source)
-    config = read_json(checkpoint.parent / "config.json")
-    env, rsl_cfg = config["env"], config["rsl_rl"]
-    obs = TensorDict(
-        {group: torch.zeros(1, *shape) for group, shape in env["obs_shapes"].items()}, batch_size=[1]
-    )
-    actor_class, actor_cfg = resolve_class(rsl_cfg["actor"])
-    actor = actor_class(obs, rsl_cfg["obs_groups"], "actor", env["num_actions"], **actor_cfg)
-    state = torch.load(checkpoint, map_location="cpu", weights_only=True)
+    state = read_checkpoint(checkpoint)
+    path = checkpoint.parent / "config.json"
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"{path}: missing; a checkpoint is read with the config.json 'warpcut train' wrote beside it "
+            "(give the run directory, or a checkpoint inside it)"
+        )
+    config = read_json(path)
+    try:
+        env, rsl_cfg = config["env"], config["rsl_rl"]
+        obs = TensorDict(
+            {group: torch.zeros(1, *shape) for group, shape in env["obs_shapes"].items()}, batch_size=[1]
+        )
+        actor_class, actor_cfg = resolve_class(rsl_cfg["actor"])
+        actor = actor_class(obs, rsl_cfg["obs_groups"], "actor", env["num_actions"], **actor_cfg)
+    except (KeyError, TypeError, AttributeError, ValueError) as exc:
+        raise ValueError(
+            f"{path}: not a run's config.json ({type(exc).__name__}: {exc}); restore it or retrain"
+        ) from None
+    mismatch = layout_mismatch(state["actor_state_dict"], actor.state_dict(), path.name)
+    if mismatch:
+        raise ValueError(
+            f"{checkpoint}: {mismatch}: {path.name} was written by another training than this checkpoint; "
+            "export or evaluate a checkpoint of the run that wrote it, or retrain"
+        )
     actor.load_state_dict(state["actor_state_dict"])
     return actor.eval()
 
@@ -65,8 +86,10 @@ def export_policy(source: str | Path, out_dir: str | Path | None = None) -> dict
         Paths of the files, under the keys "torchscript" and "onnx".
     """
     actor = load_policy(source)
-    out_dir = Path(out_dir) if out_dir is not None else policy_checkpoint(source).parent / "exported"
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = make_run_dir(out_dir if out_dir is not None else policy_checkpoint(source).parent / "exported")
+    for name in ("policy.pt", "policy.onnx"):
+        if (out_dir / name).is_dir():
+            raise ValueError(f"{out_dir / name}: is a directory; remove it, or choose another --out")
 
     buffer = io.BytesIO()
     with warnings.catch_warnings():

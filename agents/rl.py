@@ -5,12 +5,17 @@ A run directory (``warpcut train``) holds rsl-rl's ``config.json``, checkpoints 
 policy was trained on, so its env can be rebuilt without guessing) and ``evaluation.json`` (the trained
 policy against no tension). Runs written before ``options.json`` existed hold ``scenario.json``, which
 :func:`load_options` still reads.
+
+Before a run's policy is scored as a contour's (e.g. ``warpcut evaluate --checkpoints``),
+:func:`check_policy_run` checks that it was trained on that contour, observes and acts as asked, and finished.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -20,12 +25,21 @@ from agents.config import EVALUATION_TRIALS, VALIDATION_TRIALS, TrainConfig
 from agents.evaluation import Method, MethodResult, evaluate_suite
 from agents.export import load_policy
 from agents.methods import StepCallbacks
-from agents.train import train
-from envs.options import PatternCutOptions
+from agents.train import (
+    layout_difference,
+    make_run_dir,
+    policy_checkpoint,
+    policy_layout,
+    read_checkpoint,
+    resume_checkpoint,
+    train,
+)
+from envs.observations import observation_bounds
+from envs.options import ContourSpec, PatternCutOptions, plain
 from envs.rsl import PatternCutRslEnv
 from envs.vector import PatternCutVecEnv
+from warpcut.contours import Contour, builtin_names, load_contour
 from warpcut.io import read_json, write_json
-from warpcut.sim.config import SimConfig
 from warpcut.task import StepCallback
 
 VALIDATION_SEED_OFFSET = 7919
@@ -60,9 +74,11 @@ def train_contour(
         options: Contour, pinch point (None: the default, resolved and saved), segments, simulation
             settings, observations and actions; ``options.device`` is the simulator's Warp device (not
             saved: a run evaluates on any device).
-        out_dir: Run directory.
+        out_dir: Run directory; its ``options.json`` is written once the options are known to fit
+            ``resume``'s policy.
         cfg: PPO settings (``cfg.torch_device`` is torch's device).
-        resume: Run directory or checkpoint to continue from.
+        resume: Run directory or checkpoint to continue from (see :func:`agents.train.resume_checkpoint`);
+            its policy must observe and act as ``options`` do.
         eval_trials: Trials of the final evaluation against no tension.
         progress: Show the progress bar.
         validation_trials: Held-out episodes per validation; 0 disables validation (the run's policy is
@@ -71,16 +87,27 @@ def train_contour(
 
     Returns:
         ``{"summary": training summary, "evaluation": evaluation of the run's policy}``.
+
+    Raises:
+        ValueError: ``resume`` holds no readable checkpoint, or its policy observes or acts otherwise than
+            ``options`` (the message names the options that differ from its run's), or it validated on other
+            episodes than ``validation_trials`` and ``cfg.seed`` give (see :func:`resume_settings`).
     """
     if cfg.discrete != (options.action_type == "discrete"):
         raise ValueError(
             f"cfg.discrete={cfg.discrete} does not match the options' {options.action_type} actions"
         )
-    out_dir = Path(out_dir)
     shared = options.candidates is not None
     if shared and validation_trials < 1:
         raise ValueError("validation_trials: options with candidates need validation to choose one (>= 1)")
-    out_dir.mkdir(parents=True, exist_ok=True)
+    candidates = len(options.candidates) if shared else 1
+    per_candidate = max(CANDIDATE_VALIDATION_MIN, -(-validation_trials // candidates)) if shared else None
+    out_dir = make_run_dir(out_dir)
+    if resume is not None:  # before options.json is written: a resume with other options changes nothing
+        checkpoint, state, _ = resume_checkpoint(resume)
+        _check_layout(state["actor_state_dict"], checkpoint, options, "the env", _RESUME_FIX)
+        if validation_trials > 0:
+            _check_validation(checkpoint, state, cfg.seed, per_candidate or validation_trials, candidates)
     if not shared:
         pinch = options.per_env(1)[1][0]
         options = dataclasses.replace(options, pinch_point=[float(v) for v in pinch])
@@ -88,8 +115,6 @@ def train_contour(
     env = training_env(options, cfg)
     validate = None
     if validation_trials > 0:
-        candidates = len(options.candidates) if shared else 1
-        per_candidate = max(CANDIDATE_VALIDATION_MIN, -(-validation_trials // candidates)) if shared else None
         validation_env = PatternCutVecEnv(
             per_candidate * candidates if shared else validation_trials, options
         )
@@ -122,6 +147,55 @@ def train_contour(
     return {"summary": summary, "evaluation": evaluation}
 
 
+def resume_settings(resume: str | Path) -> dict:
+    """What a run fixes beyond its options, so that resuming it validates on the episodes it started with
+    (model selection compares every validation with the first, episode by episode).
+
+    Args:
+        resume: Run directory or checkpoint (as :func:`train_contour` takes it).
+
+    Returns:
+        ``seed``: the run's PPO seed (its ``config.json``'s; the validation episodes derive from it), and
+        ``validation_trials``: its ``train_contour`` argument (for a shared policy, the episodes per
+        candidate times the candidates); each None where the run does not fix it (it never validated).
+    """
+    checkpoint, state, _ = resume_checkpoint(resume)
+    baseline = (state.get("infos") or {}).get("validation_baseline")
+    if not baseline:
+        return {"seed": None, "validation_trials": None}
+    return {"seed": _run_seed(checkpoint.parent), "validation_trials": len(baseline) * len(baseline[0])}
+
+
+def _run_seed(run_dir: Path) -> int | None:
+    """The PPO seed in a run's ``config.json`` (None if it holds none)."""
+    path = run_dir / "config.json"
+    if not path.is_file():
+        return None
+    config = read_json(path)
+    seed = config.get("train", {}).get("seed") if isinstance(config, dict) else None
+    return seed if isinstance(seed, int) else None
+
+
+def _check_validation(checkpoint: Path, state: dict, seed: int, episodes: int, candidates: int) -> None:
+    """A ``ValueError`` if the run of ``checkpoint`` (contents ``state``) validated on other episodes than
+    ``episodes`` per candidate seeded from ``seed`` would be."""
+    baseline = (state.get("infos") or {}).get("validation_baseline")
+    if not baseline:
+        return
+    if len(baseline) != episodes:
+        trials = len(baseline) * candidates
+        raise ValueError(
+            f"validation_trials: {checkpoint} validated on {trials} episode(s), these settings on "
+            f"{episodes * candidates}: resume with validation_trials={trials} (--validation-trials)"
+        )
+    trained = _run_seed(checkpoint.parent)
+    if trained is not None and trained != seed:
+        raise ValueError(
+            f"seed: {checkpoint.parent} was trained with seed {trained} (its config.json), these settings "
+            f"have {seed}; its validation episodes derive from the seed: resume with seed={trained} (--seed)"
+        )
+
+
 def training_env(options: PatternCutOptions, cfg: TrainConfig) -> PatternCutRslEnv:
     """The rsl-rl env PPO trains in: ``cfg.num_envs`` envs of ``options``, seeded with ``cfg.seed``."""
     env = PatternCutVecEnv(cfg.num_envs, options)
@@ -144,7 +218,10 @@ def chosen_candidate(run_dir: str | Path) -> int:
         raise FileNotFoundError(
             f"{run_dir}: no {CANDIDATES_FILE}; the shared policy's training did not finish"
         )
-    return int(read_json(path)["chosen"])
+    data = read_json(path)
+    if not isinstance(data, dict) or not isinstance(data.get("chosen"), int):
+        raise ValueError(f"{path}: no candidate index 'chosen'; restore it, or resume the training")
+    return data["chosen"]
 
 
 def is_run(run_dir: str | Path) -> bool:
@@ -154,27 +231,55 @@ def is_run(run_dir: str | Path) -> bool:
 
 
 def load_options(run_dir: str | Path, device: str | None = None) -> PatternCutOptions:
-    """The options a run was trained on, for the Warp ``device``; a shared policy's run gives those of the
-    candidate it chose (as its evaluation uses)."""
+    """The options a run was trained on, for the Warp ``device`` (a shared policy's with all its candidates;
+    :func:`policy_options` gives those of the candidate it chose, as its evaluation uses).
+
+    Raises:
+        FileNotFoundError: ``run_dir`` holds neither ``options.json`` nor ``scenario.json``.
+        ValueError: ``run_dir`` is a file, or its options file cannot be read as options (the message names
+            the file and the field).
+    """
     run_dir = Path(run_dir)
+    if run_dir.is_file():
+        raise ValueError(
+            f"{run_dir}: is a file, not a run directory; give the directory 'warpcut train' wrote"
+            + (f" (e.g. {run_dir.parent})" if is_run(run_dir.parent) else "")
+        )
+    for name in (OPTIONS_FILE, LEGACY_SCENARIO_FILE):
+        if (run_dir / name).exists() and not (run_dir / name).is_file():
+            raise ValueError(f"{run_dir / name}: is a directory, not a file; remove it, or retrain the run")
     if (run_dir / OPTIONS_FILE).is_file():
-        options = PatternCutOptions.from_dict(read_json(run_dir / OPTIONS_FILE))
+        path, read = run_dir / OPTIONS_FILE, PatternCutOptions.from_dict
     elif (run_dir / LEGACY_SCENARIO_FILE).is_file():
-        options = _from_scenario(read_json(run_dir / LEGACY_SCENARIO_FILE))
+        path, read = run_dir / LEGACY_SCENARIO_FILE, _from_scenario
     else:
         raise FileNotFoundError(
             f"{run_dir}: no {OPTIONS_FILE}; give a run directory written by 'warpcut train'"
         )
+    data = read_json(path)
+    try:
+        options = read(data)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}; restore the file, or retrain the run") from None
+    for spec in options.contour if isinstance(options.contour, list | tuple) else [options.contour]:
+        if isinstance(spec, str) and spec not in builtin_names() and not Path(spec).is_file():
+            raise ValueError(
+                f"{path}: contour {spec!r} is neither a built-in name nor a file from {Path.cwd()} (older "
+                "runs stored a contour file's path as typed): run from the directory it was trained in, or "
+                "put the contour's points in the file (as PatternCutOptions.to_dict writes them)"
+            )
     return dataclasses.replace(options, device=device)
 
 
-def _from_scenario(scenario: dict) -> PatternCutOptions:
+def _from_scenario(scenario: object) -> PatternCutOptions:
     """The options of a run's legacy ``scenario.json`` (its fields, renamed)."""
+    if not isinstance(scenario, dict) or "contour" not in scenario:
+        raise ValueError('expected a JSON object with a "contour" and the scenario\'s other fields')
     fields = dict(scenario)
     renamed = {
         "contour": fields.pop("contour"),
         "pinch_point": fields.pop("pinch", None),
-        "sim_config": SimConfig(**fields.pop("sim", {})),
+        "sim_config": fields.pop("sim", {}),
     }
     return PatternCutOptions.from_dict({**fields, **renamed})
 
@@ -202,8 +307,174 @@ def rollout_errors(
     and after every step, as in :meth:`warpcut.task.CuttingTask.run` (e.g. a recorder's callback).
     ``paired_noise``: see :func:`policy_errors`.
     """
-    env = PatternCutVecEnv(trials, policy_options(run_dir, device))
-    return policy_errors(load_policy(run_dir), env, seed=seed, on_step=on_step, paired_noise=paired_noise)
+    options = policy_options(run_dir, device)
+    actor = load_policy(run_dir)
+    checkpoint = policy_checkpoint(run_dir)
+    _check_layout(actor.state_dict(), checkpoint, options, _options_file(run_dir), _OPTIONS_FIX)
+    env = PatternCutVecEnv(trials, options)
+    return policy_errors(actor, env, seed=seed, on_step=on_step, paired_noise=paired_noise)
+
+
+LAYOUT_FIELDS = (
+    "num_fiducials",
+    "contour_features",
+    "observe_pinch",
+    "action_type",
+    "allow_z",
+    "residual_gain",
+)
+"""The :class:`~envs.options.PatternCutOptions` fields that set what a policy observes and how its actions
+act (:func:`check_policy_run` compares them)."""
+
+_RESUME_FIX = "resume with the options the run was trained with (load_options; 'warpcut train --resume RUN')"
+_OPTIONS_FIX = "its options file does not describe this policy: restore it, or retrain the run"
+
+
+def options_layout(options: PatternCutOptions) -> tuple[int, int]:
+    """``(observations, outputs)`` of a policy acting in ``options``' env, as
+    :func:`agents.train.policy_layout` reads them from a policy: the observation's size
+    (:func:`envs.observations.observation_bounds`) and the action choices (discrete: stay and +-1 mm per
+    axis) or axes (continuous)."""
+    low, _ = observation_bounds(options.num_fiducials, options.contour_features, options.observe_pinch)
+    axes = 3 if options.allow_z else 2
+    return int(low.size), 1 + 2 * axes if options.action_type == "discrete" else axes
+
+
+def _options_file(run_dir: str | Path) -> str:
+    """The options file of a run (``options.json``, or a legacy run's ``scenario.json``)."""
+    run_dir = Path(run_dir)
+    legacy = not (run_dir / OPTIONS_FILE).is_file() and (run_dir / LEGACY_SCENARIO_FILE).is_file()
+    return str(run_dir / (LEGACY_SCENARIO_FILE if legacy else OPTIONS_FILE))
+
+
+def _check_layout(
+    actor_state: dict, checkpoint: Path, options: PatternCutOptions, source: str, fix: str
+) -> None:
+    """A ``ValueError`` naming ``checkpoint`` if its policy (``actor_state``) does not observe and act as
+    ``options`` (``source``, e.g. "the env") do, with the options that differ from its run's and ``fix``."""
+    difference = layout_difference(policy_layout(actor_state), options_layout(options), source)
+    if difference is None:
+        return
+    differing = ""
+    if is_run(checkpoint.parent):
+        with contextlib.suppress(ValueError, FileNotFoundError):
+            run = load_options(checkpoint.parent)
+            differing = ", ".join(_differences(run, options, LAYOUT_FIELDS, "the run", "here"))
+    trained = f"the run was trained with other options ({differing})" if differing else "another policy"
+    raise ValueError(f"{checkpoint}: {difference}: {trained}; {fix}")
+
+
+def _differences(
+    run: PatternCutOptions, options: PatternCutOptions, fields: Sequence[str], ours: str, theirs: str
+) -> list[str]:
+    """``field: VALUE in OURS, VALUE THEIRS`` for each of ``fields`` that differs between ``run`` and
+    ``options``."""
+    return [
+        f"{name}={getattr(run, name)!r} in {ours}, {getattr(options, name)!r} {theirs}"
+        for name in fields
+        if getattr(run, name) != getattr(options, name)
+    ]
+
+
+def check_policy_run(
+    run_dir: str | Path,
+    requested: PatternCutOptions | ContourSpec,
+    allow_partial: bool = False,
+) -> PatternCutOptions:
+    """Check that the run ``run_dir`` holds a policy for what is ``requested``, before it is scored as one
+    (e.g. ``evaluate --checkpoints DIR``: ``DIR/NAME`` as contour ``NAME``'s policy).
+
+    Checked, in this order: the training finished (its ``summary.json`` says ``completed``); the run's
+    contour is the requested one (its points, closedness and sheet, not just its name); with requested
+    options also the fields that set what the policy observes and how it acts (:data:`LAYOUT_FIELDS`) and
+    the simulation settings (``options.config()``: physics, noise, score); and the run's policy checkpoint
+    is readable and observes and acts as its options say.
+
+    Args:
+        run_dir: A run directory ``warpcut train`` wrote.
+        requested: The options the policy is to be scored in (e.g. ``PatternCutOptions(contour=spec,
+            sim_config=config, **recipe.options)``; ``pinch_point``, ``segments``, rewards and the device are
+            not compared), or only the contour (a built-in name, a contour file or a ``Contour``).
+        allow_partial: Accept a run whose training was interrupted or failed (or has no summary): its
+            last saved policy is scored.
+
+    Returns:
+        The options the run's policy is evaluated in (:func:`policy_options`).
+
+    Raises:
+        FileNotFoundError: ``run_dir`` is not a run (no options file) or has no checkpoint.
+        ValueError: Naming the run and the mismatch: unfinished training (pass ``--allow-partial`` or resume
+            it), another contour, other observations, actions or simulation settings, or an unreadable
+            checkpoint.
+    """
+    run_dir = Path(run_dir)
+    run_options = load_options(run_dir)
+    if not allow_partial:
+        _check_finished(run_dir)
+    options = requested if isinstance(requested, PatternCutOptions) else PatternCutOptions(contour=requested)
+    wanted, trained = _single_contour(options, "requested"), _single_contour(run_options, str(run_dir))
+    if not same_contour(trained, wanted):
+        raise ValueError(
+            f"{run_dir}: trained on contour {trained.name!r}, not on the requested {wanted.name!r}"
+            + (" (same name, other points)" if trained.name == wanted.name else "")
+            + "; give the run trained on it, or train one"
+        )
+    if isinstance(requested, PatternCutOptions):
+        differing = _differences(run_options, options, LAYOUT_FIELDS, "the run", "requested")
+        run_sim = plain(dataclasses.asdict(run_options.config()))
+        sim = plain(dataclasses.asdict(options.config()))
+        differing += [
+            f"{name}={run_sim[name]!r} in the run, {sim[name]!r} requested"
+            for name in sim
+            if run_sim.get(name) != sim[name]
+        ]
+        if differing:
+            raise ValueError(
+                f"{run_dir}: trained with other settings than requested ({'; '.join(differing)}); "
+                "evaluate with the run's settings, or train a run with these"
+            )
+    checkpoint = policy_checkpoint(run_dir)
+    state = read_checkpoint(checkpoint)
+    _check_layout(state["actor_state_dict"], checkpoint, run_options, _options_file(run_dir), _OPTIONS_FIX)
+    return policy_options(run_dir)
+
+
+def _check_finished(run_dir: Path) -> None:
+    """A ``ValueError`` unless ``run_dir``'s ``summary.json`` says its training completed."""
+    path = run_dir / "summary.json"
+    partial = "pass --allow-partial to evaluate its last saved policy, or resume the training"
+    resume = f"'warpcut train --resume {run_dir}'"
+    if not path.is_file():
+        raise ValueError(
+            f"{run_dir}: no summary.json, its training never finished (or still runs); {partial} ({resume})"
+        )
+    summary = read_json(path)
+    summary = summary if isinstance(summary, dict) else {}
+    status = summary.get("status")
+    if status != "completed":
+        at = f" at iteration {summary['iterations']}" if "iterations" in summary else ""
+        raise ValueError(
+            f"{run_dir}: training {status or 'status unknown'}{at} ({path.name}); {partial} ({resume})"
+        )
+
+
+def _single_contour(options: PatternCutOptions, what: str) -> Contour:
+    """The one contour of ``options`` (loaded); a ``ValueError`` naming ``what`` for several."""
+    specs = options.contour if isinstance(options.contour, list | tuple) else [options.contour]
+    if len(specs) != 1:
+        raise ValueError(f"{what}: {len(specs)} contours (one per env); a policy run is checked for one")
+    spec = specs[0]
+    return spec if isinstance(spec, Contour) else load_contour(spec)
+
+
+def same_contour(a: Contour, b: Contour) -> bool:
+    """Whether two contours are the same cut: closedness, sheet and points (to 1 um); names may differ."""
+    return (
+        a.closed == b.closed
+        and tuple(a.sheet_size) == tuple(b.sheet_size)
+        and a.points.shape == b.points.shape
+        and bool(np.allclose(a.points, b.points, rtol=0.0, atol=1e-3))
+    )
 
 
 def policy_errors(

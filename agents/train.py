@@ -4,13 +4,20 @@ A run directory holds::
 
     config.json        TrainConfig, the rsl-rl config built from it, and the env's shapes (for export)
     model_K.pt         checkpoint after learning iteration K (0-based, rsl-rl's naming), every save_interval
-    latest.pt          copy of the newest checkpoint; ``resume`` reads it
+    latest.pt          copy of the newest checkpoint; ``resume`` reads it (or, where it is missing, damaged
+                       or older, the newest readable model_K.pt: :func:`resume_checkpoint`)
     best.pt            with a ``validate`` callback: the checkpoint whose deterministic policy scored the
                        lowest validation error so far (iteration 0, the initial policy, included);
                        ``policy_checkpoint`` (evaluation, export) prefers it
     events.out.tfevents.*   TensorBoard scalars written by rsl-rl's logger
     summary.json       status (completed, interrupted, failed), iterations, env steps, speed, last metrics,
-                       ``history`` (every iteration's metrics) and ``validation`` (the validation scores)
+                       ``checkpoint`` (the newest one written whole), ``error`` (why a failed run stopped),
+                       ``resumed_from``, ``history`` (every iteration's metrics) and ``validation`` (the
+                       validation scores)
+
+Every checkpoint is read through :func:`read_checkpoint`: a damaged, truncated or empty file, or one that is
+not a checkpoint, is a ``ValueError`` naming the file and what to use instead. A full disk while writing one
+is a ``ValueError`` naming the file; the previous checkpoint stays intact (files are written atomically).
 
 The env is any :class:`rsl_rl.env.VecEnv` (``envs.rsl`` for warpcut). Beyond that contract, train() relies on:
 
@@ -34,9 +41,12 @@ The env is any :class:`rsl_rl.env.VecEnv` (``envs.rsl`` for warpcut). Beyond tha
 from __future__ import annotations
 
 import contextlib
+import errno
 import io
 import random
+import re
 import statistics
+import sys
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import asdict
@@ -99,8 +109,7 @@ def train(
         raise ValueError(f"selection_margin: must be >= 0 standard errors, got {cfg.selection_margin}")
     if env.num_envs != cfg.num_envs:
         raise ValueError(f"env has {env.num_envs} envs but the config asks for {cfg.num_envs}")
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = make_run_dir(out_dir)
 
     seed_everything(cfg.seed)
     if hasattr(env, "seed"):
@@ -108,23 +117,14 @@ def train(
     num_action_choices = getattr(env, "num_action_choices", None) if cfg.discrete else None
     runner = Runner(env, cfg.to_rsl_rl(num_action_choices), out_dir, cfg.torch_device)
     runner.selection_margin = cfg.selection_margin
+    checkpoint, note = None, None
     if resume is not None:
-        runner.load_checkpoint(latest_checkpoint(resume))
-    obs = env.get_observations()
-    write_json(
-        out_dir / "config.json",
-        {
-            "train": asdict(cfg),
-            "rsl_rl": runner.cfg,
-            "env": {
-                "num_envs": env.num_envs,
-                "num_actions": env.num_actions,
-                "num_action_choices": num_action_choices,
-                "obs_shapes": {group: list(obs[group].shape[1:]) for group in obs.keys()},
-            },
-            "resumed_from": None if resume is None else str(resume),
-        },
-    )
+        checkpoint, state, note = resume_checkpoint(resume)
+        if note is not None:
+            print(f"warning: {note}", file=sys.stderr)
+        runner.load_checkpoint(checkpoint, state)
+        runner.checkpoint = checkpoint if checkpoint.parent.resolve() == out_dir.resolve() else None
+    _write_config(out_dir, cfg, runner, env, num_action_choices, checkpoint)
 
     start_iterations, start_time, status = runner.iterations_done, time.monotonic(), "failed"
     try:
@@ -149,6 +149,7 @@ def train(
         runner.save_interrupted()
         raise
     finally:
+        ending = sys.exc_info()[1]  # the exception that ends the run, if any
         if runner.logger.writer is not None:
             runner.logger.writer.close()
         wall_time = time.monotonic() - start_time
@@ -162,6 +163,9 @@ def train(
             "steps_per_s": new_steps / max(wall_time, 1e-9),
             **runner.metrics,
             "checkpoint": None if runner.checkpoint is None else runner.checkpoint.name,
+            "error": None if ending is None or isinstance(ending, KeyboardInterrupt) else _one_line(ending),
+            "resumed_from": None if checkpoint is None else str(checkpoint),
+            "resume_note": note,
             "validation": runner.validation,
             "history": runner.history,
             "best": None
@@ -172,8 +176,86 @@ def train(
                 "validation_score": runner.best_score,
             },
         }
-        write_json(out_dir / "summary.json", summary)
+        _write_summary(out_dir / "summary.json", summary, runner.checkpoint, ending)
     return summary
+
+
+def _write_config(
+    out_dir: Path,
+    cfg: TrainConfig,
+    runner: Runner,
+    env: VecEnv,
+    num_action_choices: int | None,
+    checkpoint: Path | None,
+) -> None:
+    """Write the run's ``config.json``: the settings, rsl-rl's config and the env's shapes (for export)."""
+    obs = env.get_observations()
+    _write(
+        out_dir / "config.json",
+        {
+            "train": asdict(cfg),
+            "rsl_rl": runner.cfg,
+            "env": {
+                "num_envs": env.num_envs,
+                "num_actions": env.num_actions,
+                "num_action_choices": num_action_choices,
+                "obs_shapes": {group: list(obs[group].shape[1:]) for group in obs.keys()},
+            },
+            "resumed_from": None if checkpoint is None else str(checkpoint),
+        },
+        "nothing was trained yet" if checkpoint is None else f"{checkpoint.name} is intact",
+        resumable=checkpoint is not None,
+    )
+
+
+def make_run_dir(path: str | Path) -> Path:
+    """Create the output directory ``path`` (and its parents) if needed; a ``ValueError`` naming the file
+    where ``path`` or a parent of it is a file."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"{path}: is a file, not a directory; choose another --out")
+    for parent in path.parents:  # a file where a parent directory should be
+        if parent.exists() and not parent.is_dir():
+            raise ValueError(f"{parent}: is a file, not a directory; choose another --out")
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def _one_line(exc: BaseException) -> str:
+    """What an exception says, on one line (its type when it says nothing)."""
+    text = " ".join(str(exc).split())
+    return text or type(exc).__name__
+
+
+def _write(path: Path, data: bytes | dict, intact: str, resumable: bool = True) -> None:
+    """Write a checkpoint (bytes) or a JSON file (dict) of a run atomically (the previous version stays
+    until the new one is whole).
+
+    Raises:
+        ValueError: The disk is full (``OSError`` ENOSPC, its cause): the message names ``path``, what is
+            ``intact`` (e.g. "the previous checkpoint model_4.pt is intact") and the run directory to resume
+            from (``resumable``) or that the run must start again.
+    """
+    try:
+        write_atomic(path, data) if isinstance(data, bytes) else write_json(path, data)
+    except OSError as exc:
+        if exc.errno != errno.ENOSPC:
+            raise
+        then = f"resume from {path.parent}" if resumable else "start again"
+        raise ValueError(f"{path}: not written, the disk is full; {intact}: free space, then {then}") from exc
+
+
+def _write_summary(path: Path, summary: dict, checkpoint: Path | None, ending: BaseException | None) -> None:
+    """Write ``summary.json``; on a full disk, while an exception (``ending``) ends the run, keep that
+    exception (the checkpoints on disk still say where to resume) and note on it that the summary was not
+    updated."""
+    intact = f"the newest checkpoint {checkpoint.name} is intact" if checkpoint else "no checkpoint was saved"
+    try:
+        _write(path, summary, intact, resumable=checkpoint is not None)
+    except ValueError as exc:
+        if ending is None or not isinstance(exc.__cause__, OSError):
+            raise
+        ending.add_note(str(exc))
 
 
 class Runner(OnPolicyRunner):
@@ -235,12 +317,20 @@ class Runner(OnPolicyRunner):
         return buffer.getvalue()
 
     def save(self, path: str, infos: dict | None = None) -> None:
-        """Save models, optimizer and iteration count to ``path`` and to ``latest.pt``, each atomically."""
+        """Save models, optimizer and iteration count to ``path`` and to ``latest.pt``, each atomically.
+
+        A full disk is a ``ValueError`` naming the file; :attr:`checkpoint` stays the newest checkpoint
+        written whole (``path`` once it is written, even if ``latest.pt`` then is not)."""
         data = self._state_bytes(infos)
-        write_atomic(path, data)
-        write_atomic(Path(path).with_name(LATEST_CHECKPOINT), data)
-        self.checkpoint = Path(path)
-        self.logger.save_model(path, self.current_learning_iteration)
+        path = Path(path)
+        previous = self.checkpoint
+        if previous is None:
+            _write(path, data, "no checkpoint was saved yet", resumable=False)
+        else:
+            _write(path, data, f"the previous checkpoint {previous.name} is intact")
+        self.checkpoint = path
+        _write(path.with_name(LATEST_CHECKPOINT), data, f"{path.name} (the newest checkpoint) is intact")
+        self.logger.save_model(str(path), self.current_learning_iteration)
 
     def validate(self, validate: Callable[[torch.nn.Module], float | np.ndarray]) -> float:
         """Score the deterministic policy with ``validate``; save ``best.pt`` if its selection score (see
@@ -257,9 +347,18 @@ class Runner(OnPolicyRunner):
         if self.logger.writer is not None:
             self.logger.writer.add_scalar("Validation/error", error, self.iterations_done)
         if self.best_score is None or score < self.best_score:
+            previous = self.best_error, self.best_score, self.best_iterations
             self.best_error, self.best_score, self.best_iterations = error, score, self.iterations_done
             if self.logger.log_dir is not None:
-                write_atomic(Path(self.logger.log_dir) / BEST_CHECKPOINT, self._state_bytes())
+                try:
+                    _write(
+                        Path(self.logger.log_dir) / BEST_CHECKPOINT,
+                        self._state_bytes(),
+                        f"the previous {BEST_CHECKPOINT} is intact",
+                    )
+                except ValueError:  # a full disk: the summary keeps naming the best.pt on disk
+                    self.best_error, self.best_score, self.best_iterations = previous
+                    raise
         return error
 
     def _selection_score(self, errors: float | np.ndarray) -> tuple[float, float]:
@@ -292,9 +391,34 @@ class Runner(OnPolicyRunner):
         name = f"model_{self.iterations_done - 1}.pt" if self.iterations_done else LATEST_CHECKPOINT
         self.save(str(Path(self.logger.log_dir) / name))  # type: ignore[arg-type]
 
-    def load_checkpoint(self, path: str | Path) -> None:
-        """Load models, optimizer and learning rate; continue the iteration count after the checkpoint's."""
-        infos = self.load(str(path), map_location=self.device) or {}
+    def load_checkpoint(self, path: str | Path, state: dict | None = None) -> None:
+        """Load models, optimizer and learning rate; continue the iteration count after the checkpoint's.
+
+        Args:
+            path: The checkpoint (named in errors).
+            state: Its contents, if already read (:func:`resume_checkpoint`); default: read ``path``.
+
+        Raises:
+            ValueError: ``path`` is not a readable checkpoint, or its policy does not fit this env (e.g.
+                another number of observations) or network.
+        """
+        path = Path(path)
+        state = read_checkpoint(path, map_location=self.device) if state is None else state
+        mismatch = layout_mismatch(state["actor_state_dict"], self.alg.get_policy().state_dict(), "the env")
+        if mismatch:
+            raise ValueError(
+                f"{path}: {mismatch}: the run was trained with other options; resume it with the options it "
+                "was trained with, or start a new run"
+            )
+        try:
+            self.alg.load(state, None, True)
+        except (RuntimeError, ValueError, KeyError) as exc:  # another network or optimizer than this config's
+            raise ValueError(
+                f"{path}: does not fit these PPO settings ({_one_line(exc)[:200]}); resume with the run's "
+                "own settings (its config.json), or start a new run"
+            ) from None
+        self.current_learning_iteration = state["iter"]
+        infos = state.get("infos") or {}
         # rsl-rl would repeat the checkpoint's iteration; continue after it instead.
         self.iterations_done = infos.get("iterations_done", self.current_learning_iteration + 1)
         self.current_learning_iteration = self.iterations_done
@@ -343,22 +467,196 @@ class _QuietLogger(Logger):
         return []
 
 
-def latest_checkpoint(path: str | Path) -> Path:
-    """Return ``path`` if it is a checkpoint file, else the run directory's ``latest.pt``."""
+_MODEL_CHECKPOINT = re.compile(r"model_(\d+)\.pt")
+"""rsl-rl's name of the checkpoint after learning iteration K (0-based): ``model_K.pt``."""
+
+CHECKPOINT_KEYS = ("actor_state_dict", "critic_state_dict", "optimizer_state_dict", "iter")
+"""What every checkpoint of a run holds."""
+
+
+def model_checkpoints(run_dir: str | Path) -> list[Path]:
+    """The run directory's ``model_K.pt`` files, newest (highest K) first."""
+    found = [
+        (int(match[1]), p)
+        for p in Path(run_dir).glob("model_*.pt")
+        if (match := _MODEL_CHECKPOINT.fullmatch(p.name)) and p.is_file()
+    ]
+    return [p for _, p in sorted(found, reverse=True)]
+
+
+def read_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> dict:
+    """A checkpoint's contents (weights only: nothing in it is executed).
+
+    Raises:
+        FileNotFoundError: There is no file at ``path``.
+        ValueError: ``path`` is a directory, or not a readable checkpoint (empty, truncated, damaged, or
+            another kind of file); the message names the file and what to use instead.
+    """
     path = Path(path)
-    checkpoint = path / LATEST_CHECKPOINT if path.is_dir() else path
-    if not checkpoint.is_file():
-        raise FileNotFoundError(f"no checkpoint at {checkpoint}")
-    return checkpoint
+    if path.is_dir():
+        raise ValueError(
+            f"{path}: is a directory, not a checkpoint file; give a run directory or one of its .pt files"
+        )
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such checkpoint; give a run directory or one of its .pt files")
+    why = _load_or_why(path, map_location)
+    if isinstance(why, dict):
+        return why
+    raise ValueError(f"{path}: not a readable checkpoint ({why}); {_instead(path)}")
+
+
+def _load_or_why(path: Path, map_location: str | torch.device = "cpu") -> dict | str:
+    """``path``'s checkpoint, or why it is not one (e.g. "truncated or damaged?")."""
+    with open(path, "rb") as f:
+        head = f.read(4)
+    if not head:
+        return "an empty file: its write was cut short"
+    try:
+        state = torch.load(path, map_location=map_location, weights_only=True)
+    except PermissionError:
+        raise
+    except Exception:  # torch raises EOFError, OSError 22, UnpicklingError, RuntimeError, KeyError, ...
+        return "truncated or damaged?" if head.startswith(b"PK") else "not a PyTorch checkpoint file"
+    missing = [k for k in CHECKPOINT_KEYS if not isinstance(state, dict) or k not in state]
+    if missing:
+        return f"not a checkpoint of 'warpcut train': no {', '.join(missing)}"
+    return state
+
+
+def _readable(path: Path) -> bool:
+    return path.is_file() and isinstance(_load_or_why(path), dict)
+
+
+def _instead(path: Path) -> str:
+    """What to do about the unreadable checkpoint ``path``: which checkpoint of its run to use instead."""
+    run = path.parent
+    if path.suffix != ".pt":
+        where = f" (such as {run})" if (run / "config.json").is_file() else ""
+        return f"give a run directory written by 'warpcut train'{where}, or one of its .pt checkpoints"
+    others = [p for p in (run / LATEST_CHECKPOINT, *model_checkpoints(run)) if p != path]
+    fallback = next((p for p in others if _readable(p)), None)
+    if fallback is None:
+        return "the run has no other readable checkpoint: retrain it"
+    if path.name == BEST_CHECKPOINT:
+        return f"delete it to use the run's last policy ({fallback.name}), not the validated best, or retrain"
+    if path.name == LATEST_CHECKPOINT:
+        return f"delete it to fall back to {fallback.name} (the newest readable checkpoint), or retrain"
+    return f"use another checkpoint (e.g. {fallback.name}, the newest readable one), or retrain"
+
+
+def resume_checkpoint(path: str | Path) -> tuple[Path, dict, str | None]:
+    """The checkpoint to continue ``path`` from, its contents, and a note when it is not the run's
+    ``latest.pt``.
+
+    A checkpoint file is read as it is. A run directory resumes from ``latest.pt``, unless it is missing or
+    unreadable (a run that never wrote one, or a damaged file) or older than the newest ``model_K.pt`` (its
+    write failed): then from the newest readable ``model_K.pt``, and the note says so.
+
+    Raises:
+        FileNotFoundError: ``path`` does not exist, or the run directory holds no checkpoint.
+        ValueError: A checkpoint file that cannot be read, or a run directory with no readable checkpoint.
+    """
+    path = Path(path)
+    if not path.is_dir():
+        return path, read_checkpoint(path), None
+    latest = path / LATEST_CHECKPOINT
+    models = model_checkpoints(path)
+    if not latest.exists() and not models:
+        raise FileNotFoundError(
+            f"{path}: no checkpoint to resume from (no {LATEST_CHECKPOINT} or model_K.pt): start it again "
+            "without resuming"
+        )
+    state, why = None, "missing"
+    if latest.exists():
+        found = _load_or_why(latest) if latest.is_file() else "not a file"
+        state, why = (found, None) if isinstance(found, dict) else (None, found)
+    done = (state.get("infos") or {}).get("iterations_done", state["iter"] + 1) if state is not None else -1
+    skipped = []
+    for model in models:
+        if int(_MODEL_CHECKPOINT.fullmatch(model.name)[1]) + 1 <= done:
+            break  # latest.pt is at least as new
+        found = _load_or_why(model)
+        if not isinstance(found, dict):
+            skipped.append(model.name)
+            continue
+        why = why or f"older than {model.name} (its last write failed?)"
+        unread = f" ({', '.join(skipped)} unreadable)" if skipped else ""
+        return model, found, f"{path}: {LATEST_CHECKPOINT} {why}; resuming from {model.name}{unread}"
+    if state is None:
+        raise ValueError(
+            f"{path}: no readable checkpoint to resume from ({LATEST_CHECKPOINT}: {why}"
+            + (f"; unreadable: {', '.join(skipped)}" if skipped else "")
+            + "); delete the run directory and retrain"
+        )
+    unread = f"{path}: newer checkpoints unreadable ({', '.join(skipped)}); resuming from {LATEST_CHECKPOINT}"
+    return latest, state, unread if skipped else None
+
+
+def latest_checkpoint(path: str | Path) -> Path:
+    """``path`` if it is a file, else the run directory's ``latest.pt``, or its newest ``model_K.pt`` where
+    it never wrote one (unread: see :func:`resume_checkpoint` for the checkpoint a resume reads)."""
+    path = Path(path)
+    if not path.is_dir():
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no such checkpoint or run directory")
+        return path
+    if (path / LATEST_CHECKPOINT).exists():
+        return path / LATEST_CHECKPOINT
+    models = model_checkpoints(path)
+    if not models:
+        raise FileNotFoundError(
+            f"{path}: no checkpoint ({LATEST_CHECKPOINT} or model_K.pt); give a run directory that "
+            "'warpcut train' wrote"
+        )
+    return models[0]
 
 
 def policy_checkpoint(path: str | Path) -> Path:
     """The checkpoint whose policy a run stands for: ``path`` if it is a file, else the run directory's
-    ``best.pt`` (the validated best, when training validated) or its ``latest.pt``."""
+    ``best.pt`` (the validated best, when training validated) or its newest (:func:`latest_checkpoint`)."""
     path = Path(path)
-    if path.is_dir() and (path / BEST_CHECKPOINT).is_file():
+    if path.is_dir() and (path / BEST_CHECKPOINT).exists():
         return path / BEST_CHECKPOINT
     return latest_checkpoint(path)
+
+
+def policy_layout(actor_state: dict) -> tuple[int, int]:
+    """``(observations, outputs)`` of an actor's state dict: the inputs of its MLP's first layer and the
+    outputs of its last (discrete: actions times choices; continuous: the actions)."""
+    layers = sorted(
+        (int(match[1]), value)
+        for key, value in actor_state.items()
+        if (match := re.fullmatch(r"mlp\.(\d+)\.weight", key)) and value.ndim == 2
+    )
+    if not layers:
+        raise ValueError("actor state: no MLP layers (mlp.K.weight); not an rsl-rl MLP actor")
+    return int(layers[0][1].shape[1]), int(layers[-1][1].shape[0])
+
+
+def layout_difference(saved: tuple[int, int], expected: tuple[int, int], source: str) -> str | None:
+    """How a policy of layout ``saved`` (``(observations, outputs)``, :func:`policy_layout`) does not fit
+    the ``expected`` one of ``source`` (e.g. "the env"), in words; None when they are the same."""
+    if saved[0] != expected[0]:
+        return f"policy expects {saved[0]} observations, {source} gives {expected[0]}"
+    if saved[1] != expected[1]:
+        return f"policy has {saved[1]} action outputs, {source} needs {expected[1]}"
+    return None
+
+
+def layout_mismatch(saved: dict, expected: dict, source: str) -> str | None:
+    """How the actor state ``saved`` (a checkpoint's) does not fit the actor state ``expected`` (built for
+    ``source``, e.g. "the env"), in words; None when every tensor has the shape expected."""
+    difference = layout_difference(policy_layout(saved), policy_layout(expected), source)
+    if difference:
+        return difference
+    if set(saved) != set(expected):
+        keys = sorted(set(saved) ^ set(expected))
+        return f"policy network differs from {source}'s ({', '.join(keys[:4])})"
+    for key, value in expected.items():
+        if tuple(saved[key].shape) != tuple(value.shape):
+            shapes = f"{tuple(saved[key].shape)}, {source}'s {tuple(value.shape)}"
+            return f"policy network differs from {source}'s ({key}: {shapes})"
+    return None
 
 
 def seed_everything(seed: int) -> None:

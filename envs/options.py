@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from warpcut.contours import Contour, contour_from_json, load_contour
+from warpcut.contours import Contour, builtin_names, contour_from_json, load_contour
 from warpcut.fiducials import NUM_FIDUCIALS, SHAFT_RADIUS_MM
 from warpcut.planning import default_pinch
 from warpcut.sim.config import PerEnv, SimConfig
@@ -160,8 +160,9 @@ class PatternCutOptions:
         return contours, pinch, segments
 
     def to_dict(self) -> dict[str, Any]:
-        """The options as plain JSON values; :meth:`from_dict` reads them back. Contours are given by their
-        name or file path, a :class:`Contour` object by its points."""
+        """The options as plain JSON values; :meth:`from_dict` reads them back. A built-in contour is given
+        by its name; any other (a ``Contour``, or a contour file, read now) by itself: ``name``, ``closed``,
+        ``points`` and ``sheet_size``, so the options do not depend on the file or the working directory."""
         out = {}
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
@@ -173,12 +174,17 @@ class PatternCutOptions:
                 )
             elif f.name == "sim_config":
                 value = dataclasses.asdict(value)
-            out[f.name] = _plain(value)
+            out[f.name] = plain(value)
         return out
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> PatternCutOptions:
-        """Options from :meth:`to_dict`'s output (e.g. a run directory's ``options.json``)."""
+        """Options from :meth:`to_dict`'s output (e.g. a run directory's ``options.json``).
+
+        Raises:
+            ValueError: ``data`` is not an object of the options' fields, or a field has the wrong type or an
+                invalid value; the message starts with ``options: FIELD``.
+        """
         if not isinstance(data, dict):
             raise ValueError(
                 f"options: expected a JSON object of PatternCutOptions fields (got {type(data).__name__})"
@@ -190,34 +196,115 @@ class PatternCutOptions:
                 f"options: unknown field(s) {', '.join(unknown)}; known: {', '.join(sorted(names))}"
             )
         fields = dict(data)
+        for name, value in fields.items():
+            problem = _field_problem(name, value)
+            if problem:
+                raise ValueError(f"options: {name}: {problem} (got {value!r:.80})")
         if "sim_config" in fields:
             sim = fields["sim_config"]
             if isinstance(sim, dict):  # JSON lists back to the tuples SimConfig holds
+                known = {f.name for f in dataclasses.fields(SimConfig)}
+                unknown = sorted(set(sim) - known)
+                if unknown:
+                    raise ValueError(
+                        f"options: sim_config: unknown field(s) {', '.join(unknown)}; known: "
+                        f"{', '.join(sorted(known))}"
+                    )
                 sim = SimConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in sim.items()})
             fields["sim_config"] = sim
         sim = fields.get("sim_config", SimConfig())
-        sheet = (sim.width_mm, sim.height_mm)
+        default_sheet = (sim.width_mm, sim.height_mm)
 
         def contour(spec):
-            return contour_from_json(spec, "options: contour", sheet) if isinstance(spec, dict) else spec
+            if not isinstance(spec, dict):
+                return spec
+            sheet = spec.get("sheet_size", default_sheet)
+            if not (
+                isinstance(sheet, list | tuple) and len(sheet) == 2 and all(_is_number(v) for v in sheet)
+            ):
+                raise ValueError(f"options: contour: sheet_size: give [width_mm, height_mm] (got {sheet!r})")
+            return contour_from_json(spec, "options: contour", tuple(float(v) for v in sheet))
 
         if "contour" in fields:
             c = fields["contour"]
             fields["contour"] = [contour(s) for s in c] if isinstance(c, list) else contour(c)
-        return cls(**fields)
+        try:
+            options = cls(**fields)
+            options.config()  # the simulation settings, checked now
+        except (TypeError, ValueError) as exc:  # TypeError: a setting of the wrong type, e.g. "x" > 0
+            message = str(exc)
+            raise ValueError(message if message.startswith("options: ") else f"options: {message}") from None
+        return options
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _is_count(value: Any, least: int) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= least
+
+
+_FLAGS = ("resample_fiducials", "contour_features", "observe_pinch", "allow_z", "dense_reward")
+
+
+def _field_problem(name: str, value: Any) -> str | None:
+    """What is wrong with the JSON ``value`` of the options field ``name`` (None: nothing this checks; the
+    env checks the values themselves)."""
+    if name in _FLAGS and not isinstance(value, bool):
+        return "must be true or false"
+    if name == "contour":
+        specs = value if isinstance(value, list) else [value]
+        if not specs or not all(isinstance(c, str | dict | os.PathLike | Contour) and c for c in specs):
+            return "give a built-in name, a contour file, a contour object {name, closed, points}, or a list"
+    if name == "sim_config" and not isinstance(value, dict | SimConfig):
+        return "give an object of SimConfig fields"
+    if name == "action_type":
+        from envs.core import ACTION_TYPES  # envs.core imports this module
+
+        if value not in ACTION_TYPES:
+            return f"choose one of {', '.join(ACTION_TYPES)}"
+    if name == "num_fiducials" and not _is_count(value, 0):
+        return "must be a non-negative integer"
+    if name == "max_episode_steps" and value is not None and not _is_count(value, 1):
+        return "must be an integer >= 1, or null"
+    if name in ("residual_gain", "shaft_radius_mm") and not (_is_number(value) and value >= 0):
+        return "must be a number >= 0"
+    lists = ("pinch_point", "segments", "candidates")
+    if name in lists and value is not None and not isinstance(value, list | tuple | np.ndarray):
+        return "must be a list, or null"
+    if name == "pinch_point" and value is not None:
+        try:
+            points = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            points = None
+        if points is None or points.ndim not in (1, 2) or points.shape[-1] != 2:
+            return "give [x_mm, y_mm], or one such pair per env"
+        if not np.isfinite(points).all():
+            return "must be finite numbers (mm)"
+    if name in ("fixture", "device") and value is not None and not isinstance(value, str):
+        return "must be a string, or null"
+    return None
 
 
 def _contour_spec(contour: ContourSpec) -> str | dict:
-    """A contour as :meth:`PatternCutOptions.to_dict` stores it: its name or path, or its points."""
-    return contour.to_json() if isinstance(contour, Contour) else os.fspath(contour)
+    """A contour as :meth:`PatternCutOptions.to_dict` stores it: a built-in's name, or else the contour
+    itself (a file is read, as :meth:`PatternCutOptions.contours` reads it)."""
+    if not isinstance(contour, Contour):
+        spec = os.fspath(contour)
+        if spec in builtin_names():
+            return spec
+        contour = load_contour(spec)
+    return {**contour.to_json(), "sheet_size": [float(v) for v in contour.sheet_size]}
 
 
-def _plain(value: Any) -> Any:
-    """``value`` with NumPy arrays and scalars and tuples turned into lists and Python numbers."""
+def plain(value: Any) -> Any:
+    """``value`` as plain JSON values: NumPy arrays and scalars and tuples turned into lists and Python
+    numbers."""
     if isinstance(value, np.ndarray | list | tuple):
-        return [_plain(v) for v in value]
+        return [plain(v) for v in value]
     if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
+        return {k: plain(v) for k, v in value.items()}
     if isinstance(value, np.generic):
         return value.item()
     return value

@@ -16,7 +16,10 @@ import click
     help="Where to write policy.pt and policy.onnx (default: RUN_DIR/exported).",
 )
 def command(run_dir: Path, out: Path | None) -> None:
-    """Export a trained policy as TorchScript and ONNX (observation -> action index)."""
+    """Export a trained policy as TorchScript and ONNX (observation -> action index).
+
+    RUN_DIR is a run directory of 'warpcut train' (its validated best.pt, else its newest checkpoint), or one
+    of its .pt checkpoints."""
     from agents.export import export_policy
 
     for kind, path in export_policy(run_dir, out).items():

@@ -15,8 +15,26 @@ TRAIN = TrainConfig()
 """The PPO settings the options show and pass on (the library's defaults)."""
 
 
+RESUMED_FLAGS = {
+    "contour_name": "--contour",
+    "pinch": "--pinch",
+    "noise": "--noise",
+    "score": "--score",
+    "reward": "--reward",
+    "observe": "--observe",
+    "action_type": "--actions",
+    "allow_z": "--z/--no-z",
+}
+"""The env options a run fixes (its options.json): with --resume they may only repeat the run's values."""
+
+
 @click.command("train")
-@common.contour_option
+@click.option(
+    "--contour",
+    "contour_name",
+    default=None,
+    help="Built-in name or a .json/.svg contour file (required unless --resume: a run keeps its contour).",
+)
 @click.option(
     "--pinch", default=None, help="Pinch point X,Y (mm); default: centroid or nearest feasible point."
 )
@@ -82,13 +100,15 @@ TRAIN = TrainConfig()
     "--resume",
     type=click.Path(exists=True, path_type=Path),
     default=None,
-    help="Run directory or checkpoint to continue from (writes into it unless --out is given).",
+    help="Run directory or checkpoint to continue from (writes into it unless --out is given), with the "
+    "run's options: --contour, the other env options, --seed and --validation-trials may be left out, and "
+    "may not differ from the run's.",
 )
 @common.record_option("of the final evaluation, in the run directory")
 @common.plots_option("learning_curve.png/svg in the run directory")
 @click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
 def command(
-    contour_name: str,
+    contour_name: str | None,
     pinch: str | None,
     num_envs: int,
     iterations: int,
@@ -118,9 +138,21 @@ def command(
 
     point = common.parse_point(pinch, "--pinch")
     if resume is not None:
+        if not resume.is_dir():
+            from agents.train import read_checkpoint
+
+            read_checkpoint(resume)  # a file that is not a checkpoint: named before its directory is read
         run = resume if resume.is_dir() else resume.parent
         options, out = load_options(run, device), out or run
+        given = dict(
+            contour_name=contour_name, pinch=point, noise=noise, score=score, reward=reward, observe=observe,
+            action_type=action_type, allow_z=allow_z,
+        )  # fmt: skip
+        _check_resumed_flags(run, options, given)
+        seed, validation_trials = _resumed_validation(resume, seed, validation_trials)
     else:
+        if contour_name is None:
+            raise click.UsageError("--contour: give the contour to train on (or --resume RUN to continue)")
         options = PatternCutOptions(
             contour=contour_name,
             pinch_point=point,
@@ -164,3 +196,67 @@ def command(
         common.echo_written(plot_learning_curve(s["history"], s["validation"], out, title=name))
     common.echo_recording(rec)
     click.echo(f"wrote {out}")
+
+
+def _check_resumed_flags(run: Path, options, given: dict) -> None:
+    """A usage error naming the first env option given on the command line whose value differs from the
+    resumed run's (``options``, from its options.json)."""
+    import numpy as np
+
+    from agents.rl import same_contour
+    from warpcut.contours import load_contour
+
+    ctx = click.get_current_context()
+    config = options.config()
+    for name, flag in RESUMED_FLAGS.items():
+        if ctx.get_parameter_source(name) != click.core.ParameterSource.COMMANDLINE:
+            continue
+        value = given[name]
+        if name == "contour_name":
+            trained = options.contours(1)[0]
+            if same_contour(load_contour(value), trained):
+                continue
+            has = f"was trained on contour {trained.name!r}"
+        elif name == "pinch":
+            trained = options.pinch_point
+            if trained is not None and np.allclose(np.asarray(trained, dtype=float), value, atol=1e-6):
+                continue
+            has = "shares its policy across pinch candidates" if trained is None else f"pinches at {trained}"
+        else:
+            trained = {
+                "noise": config.noise_std,
+                "score": config.score,
+                "reward": "dense" if options.dense_reward else "sparse",
+                "observe": "contour" if options.contour_features else "fiducials",
+                "action_type": options.action_type,
+                "allow_z": options.allow_z,
+            }[name]
+            if np.array_equal(np.asarray(trained), np.asarray(value)):
+                continue
+            has = f"was trained with {flag} {trained}"
+            if name == "allow_z":
+                has = f"was trained with {'--z' if trained else '--no-z'}"
+        raise click.UsageError(
+            f"{flag}: the resumed run {run} {has} (its options.json); a resumed run keeps its options: drop "
+            f"{flag.split('/')[0]}, or train a new run without --resume"
+        )
+
+
+def _resumed_validation(resume: Path, seed: int, validation_trials: int) -> tuple[int, int]:
+    """``--seed`` and ``--validation-trials`` for a resumed run: the run's, which fix its validation
+    episodes (:func:`agents.rl.resume_settings`); a usage error naming the flag given with another value."""
+    from agents.rl import resume_settings
+
+    ctx = click.get_current_context()
+    fixed = resume_settings(resume)
+    values = {"seed": seed, "validation_trials": validation_trials}
+    for name, flag in (("seed", "--seed"), ("validation_trials", "--validation-trials")):
+        if fixed[name] is None or fixed[name] == values[name]:
+            continue
+        if ctx.get_parameter_source(name) == click.core.ParameterSource.COMMANDLINE:
+            raise click.UsageError(
+                f"{flag}: the resumed run {resume} was trained with {flag} {fixed[name]}, which fixes the "
+                f"episodes its policies are validated on; drop {flag}, or train a new run without --resume"
+            )
+        values[name] = fixed[name]
+    return values["seed"], values["validation_trials"]

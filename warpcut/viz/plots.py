@@ -7,6 +7,7 @@ no display and leaves matplotlib's global state alone.
 
 from __future__ import annotations
 
+import errno
 import io
 import math
 import os
@@ -41,12 +42,33 @@ _PATH_COLOUR = "#1f4fd1"
 
 
 def save_figure(fig: Figure, out_dir: str | os.PathLike, name: str) -> list[Path]:
-    """Write ``fig`` as ``out_dir/name.png`` and ``out_dir/name.svg``, each atomically."""
+    """Write ``fig`` as ``out_dir/name.png`` and ``out_dir/name.svg``, each atomically.
+
+    Raises:
+        ValueError: ``out_dir`` (or a parent) is a file, or a figure's path is a directory; or the disk is
+            full (the ``OSError`` is its cause): the message names the file, and a figure written before
+            stays as it was.
+    """
+    out_dir = Path(out_dir)
+    for where in (out_dir, *out_dir.parents):
+        if where.exists() and not where.is_dir():
+            raise ValueError(f"{where}: is a file, not a directory for the figures; choose another output")
     paths = []
     for fmt in FORMATS:
+        path = out_dir / f"{name}.{fmt}"
+        if path.is_dir():
+            raise ValueError(f"{path}: is a directory, not a figure file; remove it or choose another output")
         buffer = io.BytesIO()
         fig.savefig(buffer, format=fmt, dpi=150, bbox_inches="tight")
-        paths.append(write_atomic(Path(out_dir) / f"{name}.{fmt}", buffer.getvalue()))
+        try:
+            paths.append(write_atomic(path, buffer.getvalue()))
+        except OSError as exc:
+            if exc.errno != errno.ENOSPC:
+                raise
+            raise ValueError(
+                f"{path}: not written, the disk is full; its previous version (if any) is intact: free "
+                "space, then plot again (or skip the plots with --no-plots)"
+            ) from exc
     return paths
 
 
