@@ -39,7 +39,7 @@ from agents.config import (
 )
 from agents.evaluation import Method, MethodResult, evaluate_suite, run_method
 from agents.methods import METHODS, SELECTORS, StepCallbacks, check_methods
-from agents.rl import is_run, rollout_errors, train_contour
+from agents.rl import check_policy_run, is_run, rollout_errors, train_contour
 from envs.options import PatternCutOptions
 from warpcut.contours import Contour, builtin_names, load_contour
 from warpcut.io import claim_run_dir, finite_json, read_json, safe_name, write_json
@@ -152,8 +152,16 @@ def _jsonable(obj):
     return json.loads(json.dumps(finite_json(obj), default=plain))
 
 
-def _check_checkpoints(checkpoints: Path, contours: list[Contour]) -> None:
-    """Refuse ``checkpoints`` unless it holds a trained run for every contour."""
+def _check_checkpoints(
+    checkpoints: Path,
+    contours: list[Contour],
+    config: SimConfig,
+    recipe: Recipe,
+    allow_partial: bool,
+) -> None:
+    """Refuse ``checkpoints`` unless it holds, for every contour, a finished run (or any, with
+    ``allow_partial``) trained on that contour, with the recipe's observations and actions and the same
+    simulation settings (:func:`agents.rl.check_policy_run`)."""
     for contour in contours:
         run = checkpoints / safe_name(contour.name)
         if not is_run(run):
@@ -161,6 +169,8 @@ def _check_checkpoints(checkpoints: Path, contours: list[Contour]) -> None:
                 f"checkpoints: no trained run for {contour.name!r} at {run} "
                 "(expected CHECKPOINTS/NAME/options.json from 'warpcut train --out')"
             )
+        requested = PatternCutOptions(contour=contour, sim_config=config, **recipe.options)
+        check_policy_run(run, requested, allow_partial=allow_partial)
 
 
 def _contour_key(spec: str, contour: Contour) -> dict:
@@ -519,6 +529,7 @@ def evaluate_table(
     trials: int = EVALUATION_TRIALS,
     config: SimConfig | None = None,
     checkpoints: str | Path | None = None,
+    allow_partial: bool = False,
     recipe: Recipe = RECIPES["warpcut"],
     iterations: int = TrainConfig.iterations,
     num_envs: int = TrainConfig.num_envs,
@@ -550,7 +561,8 @@ def evaluate_table(
         methods: Names from :data:`agents.methods.METHODS`.
         trials: Trials per contour and method.
         config: Simulation settings (default ``SimConfig()``); plans are searched noise-free.
-        checkpoints: Directory of trained runs, one per contour.
+        checkpoints: Directory of trained runs, one per contour, each checked against the request.
+        allow_partial: Accept checkpoints whose training was interrupted (their last saved policy).
         recipe: How rl policies are trained when there are no checkpoints (:data:`agents.config.RECIPES`).
         iterations, num_envs: PPO iterations and envs per contour when training.
         plan: Plan every cut (see above); or the plans themselves, one per contour (e.g. to compare
@@ -569,7 +581,7 @@ def evaluate_table(
     named = resolve_contours(contours)
     loaded = [c for _, c in named]
     if checkpoints is not None and "rl" in methods:
-        _check_checkpoints(Path(checkpoints), loaded)
+        _check_checkpoints(Path(checkpoints), loaded, config, recipe, allow_partial)
     _record_request(
         out, "evaluate", resume, contours=[_contour_key(spec, c) for spec, c in named], methods=list(methods),
         trials=trials, config=config, checkpoints=checkpoints, recipe=recipe, iterations=iterations,

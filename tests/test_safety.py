@@ -275,3 +275,39 @@ def test_sigterm_and_sighup_save_the_training_and_say_how_to_resume(tmp_path, si
     assert f"terminated ({name})" in rest and "checkpoint saved in" in rest and "--resume" in rest
     assert json.loads(summary.read_text())["status"] == "interrupted"
     assert (out / "policies/circle-small/latest.pt").is_file()
+
+
+def test_checkpoints_of_another_contour_or_an_unfinished_run_are_refused(tmp_path):
+    """Issue 17, item 9: a circle-small policy filed as fls-circle was scored as fls-circle's."""
+    from agents.config import TrainConfig
+    from agents.rl import train_contour
+    from envs.options import PatternCutOptions
+
+    runs = tmp_path / "runs"
+    options = PatternCutOptions(contour="circle-small", sim_config=SMALL, dense_reward=True,
+                                contour_features=True, allow_z=True)  # fmt: skip
+    cfg = TrainConfig(num_envs=4, iterations=1, num_steps_per_env=4)
+    train_contour(options, runs / "fls-circle", cfg, eval_trials=1, progress=False, validation_trials=0)
+    kwargs = dict(methods=["none", "rl"], trials=1, config=SMALL, plan=False, checkpoints=runs)
+    with pytest.raises(
+        ValueError, match="trained on contour 'circle-small', not on the requested 'fls-circle'"
+    ):
+        evaluate_table("fls-circle", tmp_path / "a", **kwargs)
+
+    (runs / "fls-circle").rename(runs / "circle-small")
+    summary = runs / "circle-small" / "summary.json"
+    summary.write_text(json.dumps({**json.loads(summary.read_text()), "status": "interrupted"}))
+    with pytest.raises(ValueError, match="--allow-partial"):
+        evaluate_table("circle-small", tmp_path / "b", **kwargs)
+    report = evaluate_table("circle-small", tmp_path / "c", allow_partial=True, **kwargs)
+    assert np.isfinite(report.table["rows"][0]["rl_improvement_pct"])
+    code, output = invoke(["evaluate", "--contours", "circle-small", "--methods", "none,rl", "--trials", "1",
+                           "--checkpoints", str(runs), "--out", str(tmp_path / "d")])  # fmt: skip
+    assert code == 2 and "--allow-partial" in output and len(output.strip().splitlines()) == 1
+
+
+def test_plan_json_never_overwrites_its_contour(tmp_path):
+    contour = contour_file(tmp_path / "disc.json", "disc")
+    before = contour.read_bytes()
+    code, output = invoke(["plan", "--contour", str(contour), "--json", str(contour)])
+    assert code == 2 and "is an input" in output and contour.read_bytes() == before

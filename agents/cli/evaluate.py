@@ -32,6 +32,11 @@ from warpcut.sim.config import SimConfig
     help="Directory of trained runs, one per contour (CHECKPOINTS/NAME, as 'warpcut train' writes); "
     "without it the rl column trains a policy per contour.",
 )
+@click.option(
+    "--allow-partial",
+    is_flag=True,
+    help="Accept --checkpoints runs whose training was interrupted (their last saved policy).",
+)
 @common.recipe_option
 @common.count_option("iterations", TrainConfig.iterations, "PPO iterations per contour when training.")
 @common.count_option("num-envs", TrainConfig.num_envs, "Envs when training.")
@@ -69,6 +74,7 @@ def command(
     noise: float,
     score: str,
     checkpoints: Path | None,
+    allow_partial: bool,
     recipe: str,
     iterations: int,
     num_envs: int,
@@ -107,7 +113,8 @@ def command(
         report = evaluate_table(
             contour_args, out, resume=resume, methods=names, trials=trials,
             config=SimConfig(noise_std=noise, score=score),
-            checkpoints=checkpoints, recipe=RECIPES[recipe], iterations=iterations, num_envs=num_envs,
+            checkpoints=checkpoints, allow_partial=allow_partial, recipe=RECIPES[recipe],
+            iterations=iterations, num_envs=num_envs,
             plan=plan,
             candidates=candidates,
             arm=ArmModel(length_mm=arm_length), analytic_pinch=analytic_pinch, device=device,

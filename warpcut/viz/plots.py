@@ -22,7 +22,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, Rectangle
 
 from warpcut.contours import Contour, ring
-from warpcut.io import write_atomic
+from warpcut.io import safe_name, write_atomic
 from warpcut.planning import Plan, pinch_feasible
 from warpcut.scoring import Score
 from warpcut.sim.config import SheetGrid, SimConfig
@@ -42,7 +42,8 @@ _PATH_COLOUR = "#1f4fd1"
 
 
 def save_figure(fig: Figure, out_dir: str | os.PathLike, name: str) -> list[Path]:
-    """Write ``fig`` as ``out_dir/name.png`` and ``out_dir/name.svg``, each atomically.
+    """Write ``fig`` as ``out_dir/NAME.png`` and ``out_dir/NAME.svg``, each atomically, where NAME is
+    :func:`~warpcut.io.safe_name` of ``name`` (``name`` itself when it is a plain file name).
 
     Raises:
         ValueError: ``out_dir`` (or a parent) is a file, or a figure's path is a directory; or the disk is
@@ -55,7 +56,7 @@ def save_figure(fig: Figure, out_dir: str | os.PathLike, name: str) -> list[Path
             raise ValueError(f"{where}: is a file, not a directory for the figures; choose another output")
     paths = []
     for fmt in FORMATS:
-        path = out_dir / f"{name}.{fmt}"
+        path = out_dir / f"{safe_name(name)}.{fmt}"  # a contour's name may be anything: never a path
         if path.is_dir():
             raise ValueError(f"{path}: is a directory, not a figure file; remove it or choose another output")
         buffer = io.BytesIO()
