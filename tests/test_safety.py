@@ -311,3 +311,37 @@ def test_plan_json_never_overwrites_its_contour(tmp_path):
     before = contour.read_bytes()
     code, output = invoke(["plan", "--contour", str(contour), "--json", str(contour)])
     assert code == 2 and "is an input" in output and contour.read_bytes() == before
+
+
+def test_train_refuses_an_existing_run_and_stops_on_sigterm_with_a_checkpoint(tmp_path):
+    run = tmp_path / "run"
+    args = ["train", "--contour", "circle-small", "--num-envs", "4", "--steps-per-env", "4",
+            "--eval-trials", "1", "--validation-trials", "0", "--no-progress", "--no-plots",
+            "--out", str(run)]  # fmt: skip
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "warpcut", *args, "--iterations", "5000"],
+        stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=ROOT,
+    )  # fmt: skip
+    deadline = time.monotonic() + 90
+    while not any(run.glob("events.out.tfevents.*")) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    time.sleep(1.0)
+    code, output = invoke([*args, "--iterations", "2"])  # a second process on the same run
+    assert code == 2 and f"in use by warpcut process {proc.pid}" in output
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, err
+    assert (
+        f"terminated (SIGTERM): checkpoint saved in {run}; continue with 'warpcut train --resume {run}'"
+        in err
+    )
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["status"] == "interrupted" and (run / "latest.pt").is_file()
+
+    code, output = invoke([*args, "--iterations", "2"])
+    assert code == 2 and "already holds a run" in output
+    code, output = invoke(["train", "--resume", str(run), "--iterations", str(summary["iterations"] + 1),
+                           "--num-envs", "4", "--steps-per-env", "4", "--eval-trials", "1", "--no-progress",
+                           "--no-plots"])  # fmt: skip
+    assert code == 0, output
+    assert json.loads((run / "summary.json").read_text())["status"] == "completed"

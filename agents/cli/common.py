@@ -79,6 +79,14 @@ class Terminated(KeyboardInterrupt):
         self.signum = signum
 
 
+class RunInterrupted(KeyboardInterrupt):
+    """A command's Ctrl-C (or :class:`Terminated`) once its training saved a checkpoint in ``run_dir``."""
+
+    def __init__(self, run_dir: Path):
+        super().__init__(str(run_dir))
+        self.run_dir = run_dir
+
+
 def _raise_terminated(signum: int, frame) -> None:
     raise Terminated(signum)
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import click
@@ -104,6 +103,9 @@ RESUMED_FLAGS = {
     "run's options: --contour, the other env options, --seed and --validation-trials may be left out, and "
     "may not differ from the run's.",
 )
+@click.option(
+    "--overwrite", is_flag=True, help="Replace the contents of --out (an earlier run's) instead of refusing."
+)
 @common.record_option("of the final evaluation, in the run directory")
 @common.plots_option("learning_curve.png/svg in the run directory")
 @click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
@@ -126,6 +128,7 @@ def command(
     seed: int,
     out: Path | None,
     resume: Path | None,
+    overwrite: bool,
     record_envs: int | None,
     colour_by: str,
     no_plots: bool,
@@ -135,6 +138,7 @@ def command(
     from agents.rl import load_options, train_contour
     from envs.options import PatternCutOptions
     from warpcut.contours import load_contour
+    from warpcut.io import safe_name
 
     point = common.parse_point(pinch, "--pinch")
     if resume is not None:
@@ -164,22 +168,24 @@ def command(
             allow_z=allow_z,
         )
         options.per_env(1)  # fail early on a bad contour or an infeasible default pinch
-        out = common.run_dir(out, f"train-{load_contour(contour_name).name}")
+        out = out or common.run_dir(None, f"train-{safe_name(load_contour(contour_name).name)}")
     name, discrete = options.contours(1)[0].name, options.action_type == "discrete"
     cfg = TrainConfig(
         num_envs=num_envs, iterations=iterations, num_steps_per_env=steps_per_env, seed=seed,
         discrete=discrete, stay_prior=stay_prior if discrete else 0.0,
     )  # fmt: skip
+    out, claim = common.claim(out, "train", resume is not None, overwrite)
     click.echo(f"training {name} into {out} ({num_envs} envs, {iterations} iterations, {device})")
     try:
-        with common.recorder(out, record_envs, colour_by) as rec:
+        with claim, common.recorder(out, record_envs, colour_by) as rec:
             result = train_contour(
                 options, out, cfg, resume=resume, eval_trials=eval_trials, progress=not no_progress,
                 validation_trials=validation_trials, step_callbacks=common.step_callbacks(rec, None),
             )  # fmt: skip
-    except KeyboardInterrupt:
-        click.echo(f"interrupted: checkpoint saved in {out}; continue with --resume {out}", err=True)
-        sys.exit(130)
+    except KeyboardInterrupt as stop:  # Ctrl-C, SIGTERM, SIGHUP: the checkpoint is saved
+        if not (out / "summary.json").is_file():
+            raise
+        raise common.RunInterrupted(out) from stop
     s, e = result["summary"], result["evaluation"]
     click.echo(
         f"done: {s['iterations']} iterations, {s['env_steps']:,} env steps in {s['wall_time_s']:.0f} s "
