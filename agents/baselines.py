@@ -14,7 +14,7 @@ import numpy as np
 from warpcut.contours import Contour
 from warpcut.planning import default_pinch, pinch_candidates
 from warpcut.sim.config import AUTHORS_UNITS_PER_MM, PINCH_CANDIDATES, SimConfig
-from warpcut.task import CuttingTask
+from warpcut.task import CuttingTask, SimulationDiverged
 
 
 @dataclass
@@ -119,6 +119,9 @@ def search_fixed_pinches(
     """:func:`search_fixed_pinch` for several contours at once: all their candidates form one batch.
 
     Candidates are scored noise-free, so the search is deterministic for a seed.
+
+    Raises:
+        SimulationDiverged: A candidate's simulation diverged (its error is NaN, so no best could be told).
     """
     rng = np.random.default_rng(seed)
     points = [pinch_candidates(c, config, num=candidates, rng=rng) for c in contours]
@@ -126,5 +129,12 @@ def search_fixed_pinches(
     task = CuttingTask(
         config.replace(noise_std=0.0), owners, pinch_points=np.vstack(points), device=device, seed=seed
     )
-    errors = np.split(task.run(None).error_vertices, np.cumsum([len(p) for p in points])[:-1])
+    score = task.run(None)
+    if score.diverged is not None and score.diverged.any():
+        bad = sorted({owners[e].name for e in np.flatnonzero(score.diverged)})
+        raise SimulationDiverged(
+            f"simulation diverged in {int(score.diverged.sum())} of {len(owners)} fixed-pinch candidates "
+            f"(of {', '.join(bad)}), scored noise-free: lower gravity or dt, or raise sweeps"
+        )
+    errors = np.split(score.error_vertices, np.cumsum([len(p) for p in points])[:-1])
     return [(p[int(np.argmin(e))], p, e) for p, e in zip(points, errors, strict=True)]

@@ -14,7 +14,8 @@ from agents.methods import BASELINES, StepCallbacks, tensioner
 from warpcut.contours import Contour
 from warpcut.scoring import mean_ci95, paired_improvement
 from warpcut.sim.config import SimConfig
-from warpcut.task import CuttingTask, StepCallback, default_segments
+from warpcut.sim.memory import check_batch_memory
+from warpcut.task import CuttingTask, SimulationDiverged, StepCallback, default_segments, estimate_horizon
 
 
 @dataclass
@@ -51,17 +52,29 @@ class MethodResult:
     """(num_contours, trials) bool: the intended piece came free (None: not measured)."""
     dropped: np.ndarray | None = None
     """(num_contours, trials) share of cutting updates dropped from the path (None: not measured)."""
+    diverged: np.ndarray | None = None
+    """(num_contours, trials) bool: the trial's simulation diverged, its error is NaN (None: not
+    measured; a NaN error counts as diverged all the same)."""
 
     @classmethod
     def from_rollouts(cls, rollouts: Sequence[dict]) -> MethodResult:
         """From one rollout dict per contour (:func:`agents.rl.rollout_errors`)."""
+        diverged = None
+        if any("diverged" in r for r in rollouts):
+            diverged = np.array([np.asarray(r.get("diverged", False), dtype=bool) for r in rollouts])
         return cls(
             np.array([r["error_vertices"] for r in rollouts]),
             np.array([r["error_mm2"] for r in rollouts]),
             [r["pinch"] for r in rollouts],
             np.array([r["separated"] for r in rollouts]),
             np.array([r["dropped_fraction"] for r in rollouts]),
+            diverged,
         )
+
+    def diverged_trials(self) -> np.ndarray:
+        """(num_contours, trials) bool: trials whose simulation diverged (flagged, or a NaN error)."""
+        flagged = np.zeros(self.error_vertices.shape, dtype=bool) if self.diverged is None else self.diverged
+        return flagged | ~np.isfinite(np.asarray(self.error_vertices, dtype=np.float64))
 
 
 def baseline_pinches(
@@ -101,27 +114,79 @@ def run_method(
         seed: Seed of the process noise.
         on_step: Passed to :meth:`CuttingTask.run`.
         segments: Per contour, the polylines cut in order (None: the default single segment).
+
+    Raises:
+        ValueError: The batch (``trials`` x contours envs) would not fit in memory (the message names
+            ``trials``, the estimate and the limit: :mod:`warpcut.sim.memory`), or a pinch point is not
+            finite.
+        SimulationDiverged: Some trials diverged (non-finite or runaway vertex positions); the message
+            counts them per contour and names the parameters to lower. No error is averaged over them.
     """
+    contours = list(contours)
+    if not isinstance(trials, int | np.integer) or trials < 1:
+        raise ValueError(f"trials: must be a positive integer (got {trials!r})")
+    trials = int(trials)
+    pinches = list(pinches)
+    _check_pinches(contours, pinches)
+    cut = None
+    if segments is not None:
+        cut = [s if s is not None else default_segments(c) for c, s in zip(contours, segments, strict=True)]
+    check_batch_memory(
+        len(contours) * trials,
+        config.nx * config.ny,
+        estimate_horizon(contours, cut, config),
+        device=device,
+        name="trials",
+        envs_per_unit=len(contours),
+    )
     envs = [(c, p) for c, p in zip(contours, pinches, strict=True) for _ in range(trials)]
     points = np.array([np.full(2, np.nan) if p is None else p for _, p in envs], dtype=np.float64)
-    per_env_segments = None
-    if segments is not None:
-        per_env_segments = [
-            s if s is not None else default_segments(c)
-            for c, s in zip(contours, segments, strict=True)
-            for _ in range(trials)
-        ]
+    per_env_segments = None if cut is None else [s for s in cut for _ in range(trials)]
     task = CuttingTask(
         config, [c for c, _ in envs], pinch_points=points, segments=per_env_segments, device=device, seed=seed
     )
     score = task.run(policy, on_step=on_step)
     shape = (len(contours), trials)
-    return MethodResult(
+    result = MethodResult(
         score.error_vertices.reshape(shape),
         score.error_mm2.reshape(shape),
-        list(pinches),
+        pinches,
         score.separated.reshape(shape),
         score.dropped_fraction.reshape(shape),
+        task.diverged().reshape(shape),
+    )
+    if result.diverged_trials().any():
+        reasons = [r for r in task.divergence_reasons() if r is not None]
+        raise divergence_error(contours, result.diverged_trials(), config, sorted(set(reasons)))
+    return result
+
+
+def _check_pinches(contours: Sequence[Contour], pinches: Sequence[np.ndarray | None]) -> None:
+    """Raise ``ValueError`` naming ``pinch_point`` and the contour for a pinch point that is not finite (it
+    would silently mean no grasp)."""
+    for contour, pinch in zip(contours, pinches, strict=True):
+        if pinch is not None and not np.all(np.isfinite(np.asarray(pinch, dtype=np.float64))):
+            raise ValueError(
+                f"pinch_point: {contour.name}'s pinch point {np.asarray(pinch).tolist()} is not finite; give "
+                "material coordinates (mm), or None for no grasp"
+            )
+
+
+def divergence_error(
+    contours: Sequence[Contour], diverged: np.ndarray, config: SimConfig, reasons: Sequence[str] = ()
+) -> SimulationDiverged:
+    """The error of a run whose (num_contours, trials) ``diverged`` trials are not all False: how many
+    diverged per contour, why (``reasons``), and what to change."""
+    counts = [
+        f"{int(row.sum())} of {row.size} trials of {contour.name}"
+        for contour, row in zip(contours, diverged, strict=True)
+        if row.any()
+    ]
+    why = f" ({', '.join(reasons)})" if reasons else ""
+    noise, gravity, dt = (float(np.max(getattr(config, k))) for k in ("noise_std", "gravity", "dt"))
+    return SimulationDiverged(
+        f"simulation diverged in {', '.join(counts)}{why}; their errors are not numbers: lower noise_std "
+        f"(now {noise:g} mm per update), gravity ({gravity:g} mm/s^2) or dt ({dt:g} s), or raise sweeps"
     )
 
 
@@ -155,6 +220,11 @@ def evaluate_suite(
         step_callbacks: ``step_callbacks(method, first_contour)`` gives the step callback of a batch run
             here (all contours, so ``first_contour`` is 0), e.g. a recorder's; None: none.
 
+    Raises:
+        SimulationDiverged: A method's trials diverged (:func:`run_method`; a given result with NaN
+            errors, too): the message starts with the method, counts the trials per contour and names the
+            parameters to lower. The table never averages a diverged trial.
+
     Returns:
         ``{"score": "path"|"separated", "rows": [{"contour", "none_error_vertices", "none_error_mm2",
         "METHOD_error_vertices", "METHOD_improvement_pct", "METHOD_ci95", "METHOD_pinch",
@@ -175,10 +245,16 @@ def evaluate_suite(
     for name, value in [("segments", segments)] + [(f"{m}.segments", s.segments) for m, s in specs.items()]:
         if value is not None and len(value) != len(contours):
             raise ValueError(f"{name}: give one list of polylines (or None) per contour ({len(contours)})")
+    for spec in specs.values():  # before anything runs
+        if spec.pinches is not None and len(spec.pinches) == len(contours):
+            _check_pinches(contours, spec.pinches)
     results = {}
     for method in order:
         spec = specs[method]
         if spec.result is not None:
+            diverged = spec.result.diverged_trials()
+            if diverged.any():
+                raise SimulationDiverged(f"{method}: {divergence_error(contours, diverged, config)}")
             results[method] = spec.result
             continue
         if method not in BASELINES:
@@ -199,9 +275,12 @@ def evaluate_suite(
         )
         progress(f"{method}: {len(contours)} contour(s) x {trials} trial(s)")
         callback = step_callbacks(method, 0) if step_callbacks is not None else None
-        results[method] = run_method(
-            contours, pinches, tensioner(method), trials, config, device, seed, callback, segments=cut
-        )
+        try:
+            results[method] = run_method(
+                contours, pinches, tensioner(method), trials, config, device, seed, callback, segments=cut
+            )
+        except SimulationDiverged as error:
+            raise SimulationDiverged(f"{method}: {error}") from None
     rows = [
         _row(contour.name, k, results, [m for m in order if m in shown]) for k, contour in enumerate(contours)
     ]

@@ -31,6 +31,15 @@ Episode:
     and separated errors, ``separated``, ``dropped_fraction``, ``missed_vertices``, ``excess_vertices``)
     and ``relative_error`` (``error_mm2 / area_mm2``). With ``max_episode_steps`` below ``num_steps`` the
     episode is instead cut short (``truncated``) with no score and no final reward.
+
+Divergence:
+    An env whose simulation leaves the physical range (non-finite vertex positions, or vertices flung far
+    from the sheet: :meth:`warpcut.task.CuttingTask.diverged`, e.g. from a huge ``noise_std``) is frozen:
+    from that step on its observation is all zeros (never NaN), its reward 0, its score NaN (never a
+    number to average in), and ``info["diverged"]`` (B,) bool, present in every step's info once any env
+    has diverged, is True for it. :class:`PatternCut` ends the episode (``terminated``) once every env has
+    diverged: the single env at once. :class:`envs.vector.PatternCutVecEnv` terminates each diverged env at
+    the step it diverged.
 """
 
 from __future__ import annotations
@@ -73,6 +82,7 @@ class PatternCut:
             raise ValueError(f"action_type: choose one of {ACTION_TYPES} (got {options.action_type!r})")
         if not isinstance(options.num_fiducials, int) or options.num_fiducials < 0:
             raise ValueError(f"num_fiducials: must be a non-negative integer (got {options.num_fiducials!r})")
+        _check_pinch_option(options)
         if not (np.isfinite(options.residual_gain) and options.residual_gain >= 0):
             raise ValueError(f"residual_gain: must be a finite number >= 0 (got {options.residual_gain!r})")
         if not options.shaft_radius_mm >= 0:
@@ -101,6 +111,11 @@ class PatternCut:
         self.last_moves = np.zeros((num_envs, 3), dtype=np.float32)
         self._sampled = False
         self._running_path_error = np.zeros(num_envs)
+        self.diverged = np.zeros(num_envs, dtype=bool)
+        """(B,) bool: envs whose simulation diverged this episode (module docstring)."""
+        self.newly_diverged = np.zeros(num_envs, dtype=bool)
+        """(B,) bool: envs that diverged in the last step."""
+        self._over = False
 
     @property
     def step_index(self) -> int:
@@ -116,12 +131,18 @@ class PatternCut:
         """
         seed = int(rng.integers(2**31 - 1))
         if resample_fiducials or not self._sampled:
-            self.fiducials.material = sample_fiducials(
-                rng, self.options.num_fiducials, self.task.contours, self.task.pinch_points, self.config
-            )
+            if self.options.num_fiducials == 0:  # an observation of time, grasp (and contour features) only
+                self.fiducials.material = np.zeros((self.num_envs, 0, 2))
+            else:
+                self.fiducials.material = sample_fiducials(
+                    rng, self.options.num_fiducials, self.task.contours, self.task.pinch_points, self.config
+                )
             self._sampled = True
         self.task.reset(seed=seed)
         self._running_path_error = np.zeros(self.num_envs)
+        self.diverged = np.zeros(self.num_envs, dtype=bool)
+        self.newly_diverged = np.zeros(self.num_envs, dtype=bool)
+        self._over = False
         self.fiducials.reset(self.task.sim.positions())
         return self.observe()
 
@@ -135,9 +156,10 @@ class PatternCut:
         Returns:
             ``(observations (B, D) float32, rewards (B,) float64, terminated, truncated, info)``; ``info``
             holds (B,) arrays: every step the cut's deviation, and at the last step of a completed cut the
-            score (module docstring).
+            score (module docstring); ``diverged`` once an env diverged. ``terminated`` is also True once
+            every env has diverged.
         """
-        if self.task.done or self.step_index >= self.episode_steps:
+        if self._over or self.task.done or self.step_index >= self.episode_steps:
             raise RuntimeError("step: the episode is over; call reset() first")
         first_update = self.task.update_index
         moves = self.moves(actions)
@@ -145,20 +167,28 @@ class PatternCut:
             moves[:, :2] -= self.options.residual_gain * np.nan_to_num(self.tracking_error()[:, :2], nan=0.0)
         self.last_moves = moves
         self.task.step(moves)
-        terminated = self.task.done
+        diverged = self.task.diverged()
+        self.newly_diverged = diverged & ~self.diverged
+        self.diverged = diverged
+        terminated = self.task.done or bool(diverged.all())
         truncated = not terminated and self.step_index >= self.episode_steps
+        self._over = terminated or truncated
         rewards = np.zeros(self.num_envs)
         deviation, count = self.task.cut_deviation(first_update, self.task.update_index)
+        deviation = np.where(diverged, np.nan, deviation)
+        count = np.where(diverged, 0, count)
         moved = np.nan_to_num(deviation, nan=0.0)
         self._running_path_error += moved * count * self.config.trajectory_spacing_mm
         if self.options.dense_reward:
             rewards -= moved / self.config.max_displacement_mm / self.task.num_steps
         info = {"cut_deviation_mm": deviation, "running_path_error_mm2": self._running_path_error.copy()}
+        if diverged.any():
+            info["diverged"] = diverged.copy()
         if terminated:
-            score = self.task.score()
+            score = self.task.score()  # NaN for the diverged envs
             relative = score.error_mm2 / self.area_mm2
-            rewards -= relative
-            info.update(score.info(), relative_error=relative)
+            rewards -= np.where(diverged, 0.0, relative)
+            info.update(_score_info(score), relative_error=relative)
         return self.observe(), rewards, terminated, truncated, info
 
     def moves(self, actions: np.ndarray) -> np.ndarray:
@@ -206,7 +236,36 @@ class PatternCut:
             pinch = np.nan_to_num(self.task.pinch_points, nan=0.0)
             parts.append(normalise_positions(np.pad(pinch, ((0, 0), (0, 1))), self.config)[:, :2])
         obs = np.concatenate(parts, axis=1).astype(np.float32)
+        obs[self.diverged] = 0.0  # a diverged env's state means nothing (and may be NaN)
+        obs = np.nan_to_num(obs, nan=0.0)
         return np.clip(obs, self.observation_space.low, self.observation_space.high)
+
+
+def _score_info(score) -> dict[str, np.ndarray]:
+    """:meth:`Score.info`, with ``diverged`` only where an env diverged (the step infos' convention)."""
+    info = score.info()
+    if not info["diverged"].any():
+        del info["diverged"]
+    return info
+
+
+def _check_pinch_option(options: PatternCutOptions) -> None:
+    """Raise ``ValueError`` naming ``pinch_point`` (or the candidate) unless every pinch point given is
+    finite: a NaN or infinite pinch point would silently mean "no grasp"."""
+    given = [("pinch_point", options.pinch_point)]
+    candidates = [c if isinstance(c, dict) else {} for c in options.candidates or []]
+    given += [(f"candidates[{k}].pinch", c.get("pinch")) for k, c in enumerate(candidates)]
+    for name, point in given:
+        if point is None:
+            continue
+        try:
+            values = np.asarray(point, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name}: expected material coordinates (x, y) in mm, got {point!r}") from None
+        if not np.all(np.isfinite(values)):
+            raise ValueError(
+                f"{name}: {values.tolist()} is not finite; give material coordinates (x, y) on the sheet (mm)"
+            )
 
 
 def reject_reset_options(options: dict[str, Any] | None) -> None:

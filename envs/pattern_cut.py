@@ -50,6 +50,9 @@ class PatternCutEnv(gym.Env):
         return obs[0], {}
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        """Move the grasp by ``action`` and advance the scissors one step (:mod:`envs.core`)."""
+        """Move the grasp by ``action`` and advance the scissors one step (:mod:`envs.core`). A simulation
+        that diverges ends the episode: ``terminated``, ``info["diverged"]`` True, a NaN score and a zero
+        observation and reward."""
         obs, rewards, terminated, truncated, info = self.scene.step(np.asarray(action)[None])
-        return obs[0], float(rewards[0]), terminated, truncated, {k: float(v[0]) for k, v in info.items()}
+        scalars = {k: bool(v[0]) if k == "diverged" else float(v[0]) for k, v in info.items()}
+        return obs[0], float(rewards[0]), terminated, truncated, scalars

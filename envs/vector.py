@@ -10,6 +10,14 @@ the per-step ``cut_deviation_mm`` and ``running_path_error_mm2`` of :mod:`envs.c
 episode that the step ended, where it ended one), with their masks. Same-step rather than
 next-step because a next-step reset would spend a whole ``step`` call of B envs ignoring their actions
 after every episode, and because rsl-rl (:mod:`envs.rsl`) expects resets inside ``step``.
+
+An env whose simulation diverges (:mod:`envs.core`, "Divergence") is terminated at that step on its own:
+``terminated[env]`` is True, ``info["final_obs"][env]`` is its (zero) observation and ``info["final_info"]``
+holds ``diverged`` (with ``_final_info``, ``_final_obs`` and ``_diverged`` True for the envs that ended
+there); it has no score. It cannot restart before the others (one clock), so until the batch's episode ends
+it idles: zero observations, zero rewards, its actions ignored; at the batch's end it is reset with the
+others, its ``terminated`` True but its ``_final_obs`` and ``_final_info`` False (nothing more to report).
+Every step's info has ``diverged`` (with its mask) once an env has diverged.
 """
 
 from __future__ import annotations
@@ -48,6 +56,7 @@ class PatternCutVecEnv(VectorEnv):
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
         self._started = False
+        self._ended = np.zeros(num_envs, dtype=bool)
 
     @property
     def task(self) -> CuttingTask:
@@ -63,6 +72,7 @@ class PatternCutVecEnv(VectorEnv):
         super().reset(seed=None if seed is None else int(seed))
         reject_reset_options(options)
         self._started = True
+        self._ended[:] = False
         return self.scene.reset(self.np_random, seed is not None or self.options.resample_fiducials), {}
 
     def step(
@@ -74,20 +84,32 @@ class PatternCutVecEnv(VectorEnv):
         obs, rewards, terminated, truncated, info = self.scene.step(actions)
         b = self.num_envs
         every_env = np.ones(b, dtype=bool)
-        step_keys = ("cut_deviation_mm", "running_path_error_mm2")
+        step_keys = [k for k in ("cut_deviation_mm", "running_path_error_mm2", "diverged") if k in info]
         infos: dict[str, Any] = {k: info[k] for k in step_keys}
         infos.update({f"_{k}": every_env for k in step_keys})
+        ended = np.full(b, terminated)
         if terminated or truncated:
-            final_obs = np.empty(b, dtype=object)
-            for env in range(b):
-                final_obs[env] = obs[env]
-            everyone = np.ones(b, dtype=bool)
-            final_info = {**info, **{f"_{k}": everyone.copy() for k in info}}
-            infos |= {
-                "final_obs": final_obs,
-                "_final_obs": everyone,
-                "final_info": final_info,
-                "_final_info": everyone.copy(),
-            }
+            ending = ~self._ended  # envs that ended earlier (diverged) have nothing more to report
+            final_info = {**info, **{f"_{k}": ending.copy() for k in info}}
+            infos |= self._final(obs, ending, final_info)
             obs = self.scene.reset(self.np_random, self.options.resample_fiducials)
-        return obs, rewards, np.full(b, terminated), np.full(b, truncated), infos
+            self._ended[:] = False
+        elif self.scene.newly_diverged.any():
+            newly = self.scene.newly_diverged.copy()
+            ended |= newly
+            self._ended |= newly
+            infos |= self._final(obs, newly, {"diverged": info["diverged"], "_diverged": newly.copy()})
+        return obs, rewards, ended, np.full(b, truncated), infos
+
+    @staticmethod
+    def _final(obs: np.ndarray, ending: np.ndarray, final_info: dict[str, Any]) -> dict[str, Any]:
+        """The same-step autoreset entries of the envs ``ending`` (B,) bool (module docstring)."""
+        final_obs = np.empty(len(obs), dtype=object)
+        for env in range(len(obs)):
+            final_obs[env] = obs[env]
+        return {
+            "final_obs": final_obs,
+            "_final_obs": ending.copy(),
+            "final_info": final_info,
+            "_final_info": ending.copy(),
+        }

@@ -149,7 +149,8 @@ def test_evaluate_writes_the_comparison_plot_and_recording(tmp_path):
 
     code, stdout = invoke([*args, "--out", str(tmp_path / "bare"), "--no-plots"])
     assert code == 0, stdout
-    assert sorted(p.name for p in (tmp_path / "bare").iterdir()) == ["plans.json", "results.json"]
+    written = sorted(p.name for p in (tmp_path / "bare").iterdir())
+    assert written == [".warpcut.lock", "plans.json", "request.json", "results.json"]
 
 
 def test_recording_does_not_change_the_results(tmp_path):

@@ -175,6 +175,12 @@ def test_a_recording_cut_short_never_replaces_a_good_one(tmp_path):
     place_file(tmp, path, keep=True)
     assert path.read_bytes() != good and not tmp.exists()
 
+    path.unlink()  # with no earlier recording, one cut short takes its place, and says so
+    tmp.write_bytes(data[: len(data) // 2])
+    with pytest.raises(RecordingError, match="cut short.*the file holds what was written"):
+        place_file(tmp, path, keep=True)
+    assert path.read_bytes() == data[: len(data) // 2]
+
 
 def test_a_recording_on_a_full_disk_keeps_the_earlier_one(tmp_path):
     """`--record` on a disk that fills up (here a file-size limit): the earlier recording stays intact."""

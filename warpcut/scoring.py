@@ -24,6 +24,7 @@ the sheet (:meth:`warpcut.contours.Contour.intended_region`).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -83,6 +84,40 @@ class Score:
     """Per env, the region the cut path encloses (a shapely geometry, possibly empty)."""
     separation: Separation
     """The separated-material score (``missed_vertices``, ``achieved`` ...)."""
+    diverged: np.ndarray | None = None
+    """(B,) bool: the env's simulation diverged (:meth:`warpcut.task.CuttingTask.diverged`), so it was not
+    scored: its errors are NaN (never a number to average in); None: all fine."""
+
+    def mark_diverged(self, diverged: np.ndarray) -> Score:
+        """This score with the envs ``diverged`` (B,) bool blanked: their errors, missed and excess
+        vertices and dropped fraction NaN, nothing achieved (``separated`` False), ``diverged`` True."""
+        diverged = np.asarray(diverged, dtype=bool).reshape(-1)
+        if not diverged.any():
+            return dataclasses.replace(self, diverged=diverged)
+
+        def blank(values: np.ndarray) -> np.ndarray:
+            return np.where(diverged, np.nan, np.asarray(values, dtype=np.float64))
+
+        sep = self.separation
+        achieved = sep.achieved.copy()
+        achieved[diverged] = False
+        return dataclasses.replace(
+            self,
+            error_vertices=blank(self.error_vertices),
+            error_mm2=blank(self.error_mm2),
+            path_error_mm2=blank(self.path_error_mm2),
+            path_error_vertices=blank(self.path_error_vertices),
+            dropped_fraction=blank(self.dropped_fraction),
+            separation=Separation(
+                blank(sep.error_vertices),
+                blank(sep.error_mm2),
+                blank(sep.missed_vertices),
+                blank(sep.excess_vertices),
+                achieved,
+                sep.intended,
+            ),
+            diverged=diverged,
+        )
 
     @property
     def separated_error_vertices(self) -> np.ndarray:
@@ -137,6 +172,7 @@ class Score:
                 sep.achieved[envs],
                 intended,
             ),
+            diverged=None if self.diverged is None else self.diverged[envs],
         )
 
     def info(self) -> dict[str, np.ndarray]:
@@ -152,6 +188,9 @@ class Score:
             "dropped_fraction": self.dropped_fraction,
             "missed_vertices": self.missed_vertices,
             "excess_vertices": self.excess_vertices,
+            "diverged": (
+                np.zeros(len(self.error_vertices), dtype=bool) if self.diverged is None else self.diverged
+            ),
         }
 
 

@@ -17,15 +17,17 @@ import shapely
 
 from warpcut.contours import Contour, arc_lengths, resample_polyline, ring
 from warpcut.scoring import Score, score_cut
-from warpcut.sim.config import SheetGrid, SimConfig
+from warpcut.sim.config import SheetGrid, SimConfig, SimulationDiverged
 from warpcut.sim.material import interpolate, material_cells, material_to_world
-from warpcut.sim.simulator import Simulator
+from warpcut.sim.memory import check_batch_memory
+from warpcut.sim.simulator import DIVERGENCE_REASONS, Simulator, check_pinch_points, resolve_device
 
 if TYPE_CHECKING:
     from warpcut.fiducials import Fiducials
 
 __all__ = [
     "CuttingTask",
+    "SimulationDiverged",
     "Trajectory",
     "default_segments",
     "interpolate",
@@ -33,6 +35,11 @@ __all__ = [
     "material_to_world",
 ]
 
+
+MAX_TRAJECTORY_STRETCH = 4.0
+"""A trajectory longer than this many times the material path it follows (plus the travel between
+segments) means the settled sheet is stretched far beyond gauze: :class:`CuttingTask` refuses it
+(:class:`SimulationDiverged`) instead of running an episode that long. A sane sheet stretches a few %."""
 
 StepCallback = Callable[["CuttingTask", "np.ndarray | None"], None]
 """``on_step(task, moves)``: called after a task's reset (moves None) and after every step with the (B, 3)
@@ -88,6 +95,32 @@ class Trajectory:
         return cls(np.vstack(tips).astype(np.float32), np.vstack(materials))
 
 
+def estimate_horizon(
+    contours: Sequence[Contour],
+    segments: Sequence[Sequence[np.ndarray]] | None,
+    config: SimConfig,
+    margin: float = 1.1,
+) -> int:
+    """Updates the longest trajectory of a batch takes, from the material paths alone (before the sheet is
+    settled): ``margin`` times the longest path (its segments and the travel between them) over
+    ``trajectory_spacing_mm``. Each distinct contour or segment list is measured once."""
+    lengths = [0.0]
+    if segments is None:
+        for contour in {id(c): c for c in contours}.values():
+            lengths.append(contour.length)
+    else:
+        for polylines in {id(s): s for s in segments}.values():
+            ends, total = [], 0.0
+            for polyline in polylines:
+                points = np.asarray(polyline, dtype=np.float64).reshape(-1, 2)
+                if len(points):
+                    total += float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
+                    ends.append((points[0], points[-1]))
+            total += sum(float(np.linalg.norm(b[0] - a[1])) for a, b in zip(ends[:-1], ends[1:], strict=True))
+            lengths.append(total)
+    return math.ceil(margin * max(lengths) / config.trajectory_spacing_mm) + 2
+
+
 def _densify(polyline: np.ndarray, max_step: float) -> np.ndarray:
     out = [polyline[:1]]
     for a, b in zip(polyline[:-1], polyline[1:], strict=True):
@@ -103,8 +136,9 @@ class CuttingTask:
         config: Simulation parameters.
         contours: One contour for every env, or one per env.
         num_envs: Batch size; default ``len(contours)`` or 1.
-        pinch_points: (B, 2) or (2,) material coordinates of the pinch point (mm); NaN rows or
-            ``None``: no grasp (the no-tension case).
+        pinch_points: (B, 2) or (2,) material coordinates of the pinch point (mm), finite; a row of
+            NaN in a (B, 2) array, or ``None`` for all: no grasp (the no-tension case). Anything else not
+            finite (an inf, a half-NaN row, a NaN (2,) point) is a ``ValueError``.
         segments: Per env, the material polylines cut in order; default :func:`default_segments`.
         device: Warp device.
         seed: Process-noise seed.
@@ -112,6 +146,11 @@ class CuttingTask:
         threads: CPU threads stepping the batch (default: all cores).
         trace_path: Trace the cut path (:meth:`Simulator.trace_path`) for the path score; without it
             :meth:`score` has only the separated-material score (its path fields are NaN), a little faster.
+
+    A batch that would not fit in memory is refused before anything is allocated (``ValueError`` naming
+    ``num_envs``; :mod:`warpcut.sim.memory`); so is a sheet that does not settle (:class:`SimulationDiverged`,
+    naming the parameters to change). An env that diverges during the cut (:meth:`diverged`) is scored
+    NaN (:meth:`score`).
     """
 
     def __init__(
@@ -133,6 +172,11 @@ class CuttingTask:
         num_envs = num_envs or len(contours)
         if len(contours) != num_envs:
             raise ValueError(f"contours: got {len(contours)} for {num_envs} envs; give one or one per env")
+        config = config.validated()
+        device = resolve_device(device)
+        if isinstance(num_envs, int) and num_envs >= 1:  # else Simulator names the problem
+            estimate = estimate_horizon(contours, segments, config)
+            check_batch_memory(num_envs, config.nx * config.ny, estimate, device=device)
         self.sim = Simulator(config, num_envs, device=device, seed=seed, backend=backend, threads=threads)
         self.config, self.grid, self.num_envs = self.sim.config, self.sim.grid, num_envs
         self.contours = contours
@@ -144,6 +188,7 @@ class CuttingTask:
         self.pinch_points = self._pinch_array(pinch_points)
         self.trajectories = self._build_trajectories()
         self.horizon_updates = max(len(t.tip) for t in self.trajectories)
+        self._check_horizon(segments)
         self._tips = np.zeros((num_envs, self.horizon_updates, 4), dtype=np.float32)
         self._targets = np.full((num_envs, self.horizon_updates, 2), np.nan)
         for env, trajectory in enumerate(self.trajectories):
@@ -181,9 +226,15 @@ class CuttingTask:
             return np.full((self.num_envs, 2), np.nan)
         points = np.asarray(pinch_points, dtype=np.float64)
         if points.shape == (2,):
+            if not np.all(np.isfinite(points)):
+                raise ValueError(
+                    f"pinch_points: the pinch point {points.tolist()} is not finite; give material "
+                    "coordinates (mm), or None for no grasp"
+                )
             points = np.broadcast_to(points, (self.num_envs, 2)).copy()
         if points.shape != (self.num_envs, 2):
             raise ValueError(f"pinch_points: expected (2,) or ({self.num_envs}, 2), got {points.shape}")
+        check_pinch_points(points)
         w, h = self.config.width_mm, self.config.height_mm
         given = np.all(np.isfinite(points), axis=1)
         off = given & ((points[:, 0] < 0) | (points[:, 0] > w) | (points[:, 1] < 0) | (points[:, 1] > h))
@@ -193,6 +244,19 @@ class CuttingTask:
                 "give material coordinates on the sheet"
             )
         return points
+
+    def _check_horizon(self, segments: Sequence[Sequence[np.ndarray]] | None) -> None:
+        """Refuse trajectories stretched beyond :data:`MAX_TRAJECTORY_STRETCH` (a sheet that hangs like no
+        gauze), which would make an episode that long. ``segments``: as given to the constructor."""
+        longest = estimate_horizon(self.contours, segments, self.config, margin=MAX_TRAJECTORY_STRETCH)
+        if self.horizon_updates > longest:
+            p = self.sim.params
+            raise SimulationDiverged(
+                f"simulation diverged while settling the sheet: the scissors' path over it is "
+                f"{self.horizon_updates} updates, more than {MAX_TRAJECTORY_STRETCH:g} times the contour's "
+                f"length; the springs do not hold it (gravity {p['gravity'].max():g} mm/s^2, dt "
+                f"{p['dt'].max():g} s): lower gravity or dt, or raise sweeps"
+            )
 
     def _build_trajectories(self) -> list[Trajectory]:
         settled = self.sim.settled_positions()
@@ -301,12 +365,28 @@ class CuttingTask:
             mean = np.where(count > 0, distance.sum(axis=1) / count, np.nan)
         return mean, count
 
+    def diverged(self) -> np.ndarray:
+        """(B,) bool: envs whose simulation diverged since the reset (non-finite or runaway vertices;
+        :meth:`Simulator.diverged`). Their score is NaN."""
+        return self.sim.diverged()
+
+    def divergence_reasons(self) -> list[str | None]:
+        """Per env, why it diverged in words (e.g. ``"non-finite vertex positions"``), or None."""
+        return [DIVERGENCE_REASONS.get(int(code)) for code in self.sim.divergence()]
+
     def score(self) -> Score:
         """Each env's error under both scores (:mod:`warpcut.scoring`); ``error_*`` follows
-        ``config.score``."""
-        return score_cut(
-            self.config.score, self.cut_path(), self._arc_mm, self.sim.alive_mask(), self.contours, self.grid
-        )
+        ``config.score``. An env that diverged (:meth:`diverged`) is not scored: its errors and
+        ``dropped_fraction`` are NaN, ``separated`` False and ``Score.diverged`` True."""
+        diverged = self.diverged()
+        paths, alive = self.cut_path(), self.sim.alive_mask()
+        if diverged.any():  # score what is left as an idle, uncut sheet, then blank it
+            if paths is not None:
+                paths = paths.copy()  # on the CPU, a view of the simulator's own path
+                paths[diverged] = (0.0, 0.0, -1.0)  # kernels.PATH_IDLE
+            alive[diverged] = True
+        score = score_cut(self.config.score, paths, self._arc_mm, alive, self.contours, self.grid)
+        return score.mark_diverged(diverged)
 
     def run(self, policy, on_step: StepCallback | None = None) -> Score:
         """Reset, then step ``policy(task) -> (B, 3)`` (or ``None`` for no moves) to the end; score.

@@ -4,7 +4,8 @@ Package map:
 
 - ``config``: :class:`SimConfig` (every parameter, validated; :class:`ConfigError`), :class:`SheetGrid`
   (the rest layout of the vertices) and the constants (units, fixtures, scores, spring families, the
-  cutting arm's footprint). Plain NumPy.
+  cutting arm's footprint, the ranges and divergence bounds); :class:`SimulationDiverged`. Plain NumPy.
+- ``memory``: the memory a batch needs, checked before it is allocated. Plain Python.
 - ``springs``: the springs grouped into colours (sets that share no vertex), in sweep order. Plain NumPy.
 - ``material``: material points on the sheet, and their world positions by bilinear interpolation.
   Plain NumPy.
@@ -14,7 +15,9 @@ Package map:
   functions every backend shares (process noise, locating the tip in the deformed mesh).
 - ``kernels_simd``: the ``simd`` backend (the default on CPU: blocks of 8 envs in SIMD lanes).
 - ``reference``: the NumPy implementation of one sheet, the oracle the tests compare against.
-- ``_warp``: Warp, imported quietly; every module that uses Warp imports it from there.
+- ``_warp``: Warp, imported quietly; every module that uses Warp imports it from there, and launches
+  through its ``launch`` (a module Warp cannot load, e.g. from a corrupt kernel cache, raises
+  ``KernelCacheError``, one line naming the cache to delete).
 
 Importing this package, or ``config``, ``springs`` and ``material``, does not load Warp:
 :class:`Simulator` is loaded on first use.
@@ -34,6 +37,7 @@ from warpcut.sim.config import (
     ConfigError,
     SheetGrid,
     SimConfig,
+    SimulationDiverged,
 )
 
 __all__ = [
@@ -49,6 +53,7 @@ __all__ = [
     "ConfigError",
     "SheetGrid",
     "SimConfig",
+    "SimulationDiverged",
     "Simulator",
 ]
 

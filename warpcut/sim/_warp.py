@@ -9,10 +9,15 @@ load the NVIDIA CUDA driver" on every start, which says nothing to someone who r
 initialised here, at import, with its standard error silenced when the driver cannot be loaded (so set
 ``wp.config`` options that ``wp.init()`` reads, such as the kernel cache, by their environment variables,
 e.g. ``WARP_CACHE_PATH``, or before importing warpcut's simulator).
+
+warpcut launches its kernels through :func:`launch`, which loads each module once through
+:func:`load_module`: a module Warp cannot load (a corrupt kernel cache) raises :class:`KernelCacheError`,
+one line naming the cache directory to delete, instead of Warp's traceback.
 """
 
 import ctypes
 import os
+import shlex
 import sys
 
 import warp as wp
@@ -47,9 +52,47 @@ def _init_quietly() -> None:
         os.close(saved)
 
 
+class KernelCacheError(ValueError):
+    """Warp could not load (or compile) one of warpcut's kernel modules, most often because its kernel
+    cache holds truncated or garbled files; the message names the cache directory and how to clear it.
+    A ``ValueError`` so that the CLI reports it in one line."""
+
+
+_loaded: set[tuple[str, str]] = set()
+
+
+def load_module(module: wp.Module, device: str) -> None:
+    """Load ``module`` on ``device`` (compile it, or read it from Warp's kernel cache) unless done before.
+
+    Raises:
+        KernelCacheError: Warp failed (e.g. a corrupt cached binary or ``.meta`` file); the message says
+            where the cache is (``wp.config.kernel_cache_dir``) and to delete it.
+    """
+    key = (module.name, str(device))
+    if key in _loaded:
+        return
+    try:
+        wp.load_module(module, device=wp.get_device(device))
+    except Exception as error:  # Warp raises bare Exceptions, JSONDecodeError, OSError...
+        cache = wp.config.kernel_cache_dir
+        detail = " ".join(f"{type(error).__name__}: {error}".split())
+        raise KernelCacheError(
+            f"Warp kernels: could not load module {module.name!r} on {device} ({detail}); its kernel cache "
+            f"{cache!r} may be corrupt: delete that directory (rm -rf {shlex.quote(str(cache))}) and run "
+            "again, Warp recompiles the kernels"
+        ) from error
+    _loaded.add(key)
+
+
+def launch(kernel: wp.Kernel, dim, inputs=(), outputs=(), device: str | None = None, **options) -> None:
+    """``wp.launch``, after :func:`load_module` of the kernel's module (a set lookup once loaded)."""
+    load_module(kernel.module, device)
+    wp.launch(kernel, dim=dim, inputs=inputs, outputs=outputs, device=device, **options)
+
+
 if not os.environ.get("WARPCUT_VERBOSE"):
     wp.config.log_level = wp.LOG_WARNING
     if not _cuda_driver_loadable():
         _init_quietly()
 
-__all__ = ["wp"]
+__all__ = ["KernelCacheError", "launch", "load_module", "wp"]

@@ -44,8 +44,33 @@ Scalar = float | int
 PerEnv = Scalar | Sequence[Scalar] | np.ndarray
 
 
+DT_MAX_S = 1.0
+"""Largest ``dt`` accepted (s): 60 times the paper's 0.016 s. The sheet falls ``gravity * dt**2`` per
+update; beyond some mm per update the springs no longer hold it (see :data:`SETTLED_REACH_SHEETS`)."""
+GRAVITY_MAX_MM_S2 = 1.0e5
+"""Largest ``gravity`` accepted (mm/s^2), about 10 g (the default is the authors' 521 mm/s^2)."""
+RUNAWAY_SHEETS = 10.0
+"""A vertex farther than this many sheet sizes (``max(width_mm, height_mm)``, plus
+``max_displacement_mm``) beyond the sheet's rest outline in x or y, or above it, has run away: its env
+*diverged* (:class:`SimulationDiverged`), as has one with a non-finite coordinate. Material cut free may
+fall any distance, so there is no bound below. The bound is generous (a noisy but sane sheet never comes
+near it) because it marks blow-ups, not poor physics."""
+SETTLED_REACH_SHEETS = 1.0
+"""A settled (uncut, fixture-held) sheet with a vertex farther than this many sheet sizes from its rest
+outline, in any direction, does not hang but falls through its springs: the settling diverged. (At the
+default sweeps the sheet sags ~17 mm at the default gravity and dt, ~75 mm when ``gravity * dt**2`` is
+5 mm, and more than its size beyond ~15 mm per update.)"""
+
+
 class ConfigError(ValueError):
     """A configuration value is invalid; the message names the field and how to fix it."""
+
+
+class SimulationDiverged(ValueError):
+    """A simulation left the physical range: non-finite vertex positions, or vertices flung far from the
+    sheet (:data:`RUNAWAY_SHEETS`), usually from too much ``noise_std``, ``gravity`` or ``dt``. The message
+    says where and which parameters to change. A ``ValueError`` (bad input), so the CLI reports it in one
+    line."""
 
 
 @dataclass
@@ -66,16 +91,18 @@ class SimConfig:
     damping: PerEnv = 0.99
     """Verlet velocity retention per update (paper alpha = 0.99). 1 = undamped, 0 = no momentum."""
     dt: PerEnv = 0.016
-    """Update time step (s); gravity acts as ``gravity * dt**2`` per update."""
+    """Update time step (s), in (0, 1]; gravity acts as ``gravity * dt**2`` per update."""
     gravity: PerEnv = GRAVITY_MM_S2
-    """Downward (-z) acceleration (mm/s^2): the authors' 2500 units/s^2 at 4.8 units/mm (paper f(t))."""
+    """Downward (-z) acceleration (mm/s^2), in [0, 1e5]: the authors' 2500 units/s^2 at 4.8 units/mm
+    (paper f(t))."""
     elasticity: PerEnv = 1.0
     """Fraction of a spring's length error corrected per relaxation sweep (paper tau = 1)."""
     noise_std: PerEnv = 0.03
     """Std. dev. of Gaussian process noise added to every free vertex per update (mm), paper sigma. The
     default makes seeded trials real samples (the authors' trials differed by their relaxation order; its
     calibration: docs/physics.md, "Process noise"); 0 is the noise-free protocol. Settling is always
-    noise-free."""
+    noise-free. Noise large enough to blow the sheet up (non-finite or runaway vertices) makes its env
+    *diverge* (:data:`RUNAWAY_SHEETS`): flagged, never scored."""
 
     sweeps: int = 20
     """Gauss-Seidel relaxation sweeps per update, each relaxing every spring colour once. The paper used 5
@@ -136,6 +163,13 @@ class SimConfig:
     def grasp_radius(self) -> float:
         return self.grasp_radius_mm if self.grasp_radius_mm is not None else 1.6 * max(self.spacing_mm)
 
+    @property
+    def runaway_bounds(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """``(lower, upper)`` world corners (mm) of the box a vertex must stay in, or its env diverged
+        (:data:`RUNAWAY_SHEETS`; no bound below: ``lower[2]`` is ``-inf``)."""
+        reach = RUNAWAY_SHEETS * max(self.width_mm, self.height_mm) + self.max_displacement_mm
+        return (-reach, -reach, -math.inf), (self.width_mm + reach, self.height_mm + reach, reach)
+
     def replace(self, **changes) -> SimConfig:
         """A copy with some fields changed (validated)."""
         return dataclasses.replace(self, **changes).validated()
@@ -175,7 +209,12 @@ class SimConfig:
     def validated(self) -> SimConfig:
         """Check every field; raise :class:`ConfigError` naming the field and the fix."""
         for name in ("width_mm", "height_mm"):
-            _require(getattr(self, name) > 0, name, "must be positive (mm)")
+            value = getattr(self, name)
+            _require(
+                isinstance(value, int | float | np.number) and math.isfinite(value) and value > 0,
+                name,
+                "must be a positive number (mm)",
+            )
         res = self.resolution
         if isinstance(res, int | np.integer):
             res = (int(res), int(res))
@@ -184,13 +223,29 @@ class SimConfig:
         for name in PHYSICAL_PARAMETERS:
             values = np.atleast_1d(np.asarray(getattr(self, name), dtype=np.float64))
             _require(values.ndim == 1 and values.size >= 1, name, "give one number or a list, one per env")
-            _require(bool(np.all(np.isfinite(values))), name, "must be finite")
+            _require(
+                bool(np.all(np.isfinite(values)) and np.all(np.abs(values) <= np.finfo(np.float32).max)),
+                name,
+                "must be finite (and within float32 range)",
+            )
         _require(
             bool(np.all(np.asarray(self.damping) >= 0) and np.all(np.asarray(self.damping) <= 1)),
             "damping",
             "must lie in [0, 1] (paper: 0.99)",
         )
-        _require(bool(np.all(np.asarray(self.dt) > 0)), "dt", "must be positive (s; paper: 0.016)")
+        _require(
+            bool(np.all(np.asarray(self.dt) > 0) and np.all(np.asarray(self.dt) <= DT_MAX_S)),
+            "dt",
+            f"must lie in (0, {DT_MAX_S:g}] s (paper: 0.016)",
+        )
+        _require(
+            bool(
+                np.all(np.asarray(self.gravity) >= 0)
+                and np.all(np.asarray(self.gravity) <= GRAVITY_MAX_MM_S2)
+            ),
+            "gravity",
+            f"must lie in [0, {GRAVITY_MAX_MM_S2:g}] mm/s^2 (downward; default {GRAVITY_MM_S2:g})",
+        )
         _require(
             bool(np.all(np.asarray(self.elasticity) > 0) and np.all(np.asarray(self.elasticity) < 2)),
             "elasticity",

@@ -192,23 +192,35 @@ def cut_kernel(
     n: int,
     cut_radius: float,
     cut_height: float,
+    lower: wp.vec3,
+    upper: wp.vec3,
     # Data in:
     x: wp.array(dtype=wp.vec3),
     alive: wp.array(dtype=wp.int32),
     tip: wp.array(dtype=wp.vec4),
     # Data out:
     alive_out: wp.array(dtype=wp.int32),
+    # Data in/out:
+    status: wp.array2d(dtype=wp.int32),
 ):
-    """Remove vertices within ``cut_radius`` (in x-y) and ``cut_height`` (in z) of an active scissor tip.
+    """Remove vertices within ``cut_radius`` (in x-y) and ``cut_height`` (in z) of an active scissor tip;
+    watch for divergence.
 
     ``tip[env] = (x, y, z, cutting)``; ``cutting`` is 0 while the scissors travel between segments.
+    ``status[0, env]`` is set to 1 once a vertex of the env is not finite, ``status[1, env]`` once one lies
+    outside the box ``lower .. upper`` (:attr:`SimConfig.runaway_bounds`); both stay set until a reset.
+    Every writer writes the same 1, so the unsynchronised stores are deterministic.
     """
     env, v = wp.tid()
     i = env * n + v
     a = alive[i]
     t = tip[env]
+    p = x[i]
+    if not wp.isfinite(p):
+        status[0, env] = 1
+    elif p[0] < lower[0] or p[0] > upper[0] or p[1] < lower[1] or p[1] > upper[1] or p[2] > upper[2]:
+        status[1, env] = 1
     if a != 0 and t[3] > 0.5:
-        p = x[i]
         dx = p[0] - t[0]
         dy = p[1] - t[1]
         if dx * dx + dy * dy <= cut_radius * cut_radius and wp.abs(p[2] - t[2]) <= cut_height:

@@ -22,7 +22,8 @@ scissor tip.
 float expressions in the same order, spring colour by spring colour (Warp compiles CPU kernels without
 FMA contraction), and each branch becomes a select whose discarded side never reaches the result (only
 the sign of an exact zero may differ). Process noise draws the same stream (``process_noise(seed,
-env * n + v)``). Not differentiable; CPU only (the relaxation is C++ for the CPU compiler).
+env * n + v)``), and the cut stage flags divergence as ``cut_kernel`` does (a few whole-lane vector
+operations per vertex). Not differentiable; CPU only (the relaxation is C++ for the CPU compiler).
 
 Use: keep a :class:`SimdState` for the batch: pack once per reset (:meth:`SimdState.load`), per update
 :meth:`SimdState.load_controls` + :meth:`SimdState.step`, unpack on read-back (:meth:`SimdState.store`).
@@ -34,7 +35,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from warpcut.sim._warp import wp
+from warpcut.sim._warp import launch, wp
 from warpcut.sim.config import SheetGrid, SimConfig
 from warpcut.sim.kernels import PIN_FREE, PIN_GRASP, TipSearch, process_noise, tip_locator
 from warpcut.sim.springs import colour_springs
@@ -141,12 +142,11 @@ def _lane_types(lanes: int) -> SimpleNamespace:
     return SimpleNamespace(lanes=lanes, vec=vecL, Vert=Vert, Prev=Prev, Anchor=Anchor, Lanes=Lanes)
 
 
-def _update_kernel(types: SimpleNamespace, module: str) -> wp.Kernel:
-    """The kernel of one update (integrate, relax, cut) of ``L`` envs per thread, in place."""
-    L, vecL = types.lanes, types.vec  # noqa: N806 (a constant and a type, as the kernel reads them)
-    Vert, Prev, Anchor, Lanes = types.Vert, types.Prev, types.Anchor, types.Lanes  # noqa: N806
+def _relax_func(types: SimpleNamespace) -> wp.Function:
+    """The native function that relaxes the springs of one block of ``L`` envs (:data:`_RELAX_SOURCE`)."""
+    vecL, Vert = types.vec, types.Vert  # noqa: N806 (types)
 
-    @wp.func_native(_RELAX_SOURCE.replace("LANES", str(L)))
+    @wp.func_native(_RELAX_SOURCE.replace("LANES", str(types.lanes)))
     def relax(
         vert: wp.array(dtype=Vert),
         pairs: wp.array(dtype=wp.vec2i),
@@ -157,6 +157,15 @@ def _update_kernel(types: SimpleNamespace, module: str) -> wp.Kernel:
         stiff: vecL,
     ):
         """``sweeps`` Gauss-Seidel sweeps of one block, colour by colour, ``L`` envs per spring."""
+
+    return relax
+
+
+def _update_kernel(types: SimpleNamespace, module: str) -> wp.Kernel:
+    """The kernel of one update (integrate, relax, cut) of ``L`` envs per thread, in place."""
+    L, vecL = types.lanes, types.vec  # noqa: N806 (a constant and a type, as the kernel reads them)
+    Vert, Prev, Anchor, Lanes = types.Vert, types.Prev, types.Anchor, types.Lanes  # noqa: N806
+    relax = _relax_func(types)
 
     @wp.kernel(enable_backward=False, module=module)
     def update_kernel(
@@ -171,6 +180,8 @@ def _update_kernel(types: SimpleNamespace, module: str) -> wp.Kernel:
         num_envs: int,
         cut_radius: float,
         cut_height: float,
+        lower: wp.vec3,
+        upper: wp.vec3,
         pairs: wp.array(dtype=wp.vec2i),
         colour_rest: wp.array(dtype=float),
         colour_start: wp.array(dtype=wp.int32),
@@ -179,6 +190,7 @@ def _update_kernel(types: SimpleNamespace, module: str) -> wp.Kernel:
         # Data in/out:
         vert: wp.array(dtype=Vert),
         prev: wp.array(dtype=Prev),
+        status: wp.array2d(dtype=wp.int32),
     ):
         blk = wp.tid() + block_offset
         base = blk * n
@@ -231,8 +243,16 @@ def _update_kernel(types: SimpleNamespace, module: str) -> wp.Kernel:
             vert[i].z = nz
         # ---- relax
         relax(vert, pairs, colour_rest, colour_start, sweeps, base, p.stiff)
-        # ---- cut
+        # ---- cut, and watch for divergence (cut_kernel's status, in whole-lane vector operations: x - x is
+        # 0 for a finite x and NaN otherwise; ``beyond`` is the largest distance outside lower .. upper)
         r2 = cut_radius * cut_radius
+        lo_x = vecL(lower[0])
+        lo_y = vecL(lower[1])
+        hi_x = vecL(upper[0])
+        hi_y = vecL(upper[1])
+        hi_z = vecL(upper[2])
+        not_finite = vecL()
+        beyond = vecL()
         for v in range(n):
             i = base + v
             vt = vert[i]
@@ -245,6 +265,17 @@ def _update_kernel(types: SimpleNamespace, module: str) -> wp.Kernel:
                 hit = p.cutting[lane] > 0.5 and d2[lane] <= r2 and wp.abs(ez[lane]) <= cut_height
                 alive[lane] = wp.where(hit, 0.0, vt.alive[lane])
             vert[i].alive = alive
+            not_finite = not_finite + (vt.x - vt.x) + (vt.y - vt.y) + (vt.z - vt.z)
+            out_x = wp.max(vt.x - hi_x, lo_x - vt.x)
+            out_y = wp.max(vt.y - hi_y, lo_y - vt.y)
+            beyond = wp.max(beyond, wp.max(wp.max(out_x, out_y), vt.z - hi_z))
+        for lane in range(L):
+            env = blk * L + lane
+            if env < num_envs:
+                if not_finite[lane] != 0.0:
+                    status[0, env] = 1
+                elif beyond[lane] > 0.0:
+                    status[1, env] = 1
 
     return update_kernel
 
@@ -428,6 +459,10 @@ class SimdModel:
     first_order_z: int
     cut_radius: float
     cut_height: float
+    lower: wp.vec3
+    """Lower corner of the box a vertex must stay in (mm; :attr:`SimConfig.runaway_bounds`)."""
+    upper: wp.vec3
+    """Upper corner of that box (mm)."""
 
     @classmethod
     def from_config(cls, config: SimConfig, grid: SheetGrid, device: str) -> "SimdModel":
@@ -447,6 +482,8 @@ class SimdModel:
             first_order_z=int(config.first_order_z),
             cut_radius=float(config.cut_radius),
             cut_height=float(config.cut_height),
+            lower=wp.vec3(*config.runaway_bounds[0]),
+            upper=wp.vec3(*config.runaway_bounds[1]),
         )
 
 
@@ -473,12 +510,15 @@ class SimdState:
         self.prev = wp.zeros(size, dtype=k.Prev, device=device)
         self.anchor = wp.zeros(size, dtype=k.Anchor, device=device)
         self.lane_params = wp.zeros(self.blocks, dtype=k.Lanes, device=device)
+        self.status = wp.zeros((2, self.num_envs), dtype=wp.int32, device=device)
+        """(2, B) divergence flags of :meth:`step` without a ``status`` of the caller's: row 0 non-finite,
+        row 1 beyond the bounds (``kernels.cut_kernel``)."""
         self.any_noise = 0
         self._lanes_view: np.ndarray | None = None
 
     def load(self, x: wp.array, x_prev: wp.array, alive: wp.array, pin: wp.array, anchor: wp.array) -> None:
         """Env-major state (``B * n`` entries each, as the simulator holds it) into blocks."""
-        wp.launch(
+        launch(
             self.kernels.pack,
             dim=(self.blocks, self.n),
             inputs=[self.n, self.num_envs, x, x_prev, alive, pin, anchor, self.vert, self.prev, self.anchor],
@@ -488,7 +528,7 @@ class SimdState:
     def load_params(self, damping, dt, gravity, noise_std, elasticity) -> None:
         """Per-env parameter arrays of length 1 or B (read as ``p[env % len]``)."""
         self.any_noise = int(np.any(noise_std.numpy() > 0.0))
-        wp.launch(
+        launch(
             self.kernels.pack_params,
             dim=self.blocks,
             inputs=[self.num_envs, damping, dt, gravity, noise_std, elasticity, self.lane_params],
@@ -497,7 +537,7 @@ class SimdState:
 
     def load_controls(self, displacement: wp.array, tip: wp.array) -> None:
         """(B,) ``vec3`` grasp displacements and (B,) ``vec4`` tips; call after every change."""
-        wp.launch(
+        launch(
             self.kernels.pack_controls,
             dim=self.blocks,
             inputs=[self.num_envs, displacement, tip, self.lane_params],
@@ -518,7 +558,7 @@ class SimdState:
 
     def store(self, x: wp.array, x_prev: wp.array, alive: wp.array) -> None:
         """Blocks back into env-major arrays (padding lanes dropped)."""
-        wp.launch(
+        launch(
             self.kernels.unpack,
             dim=(self.blocks, self.n),
             inputs=[self.n, self.num_envs, self.vert, self.prev, x, x_prev, alive],
@@ -532,15 +572,17 @@ class SimdState:
         block_offset: int = 0,
         block_count: int | None = None,
         first_stream: int = 0,
+        status: wp.array | None = None,
     ) -> None:
         """One update of blocks ``[block_offset, block_offset + block_count)`` (default: to the end); env
-        ``e`` draws noise stream ``first_stream + e``.
+        ``e`` draws noise stream ``first_stream + e``. Divergence is flagged in ``status`` (2, B) (default:
+        :attr:`status`), as ``kernels.cut_kernel`` flags it.
 
         Disjoint block ranges may be stepped from different Python threads at once (``wp.launch``
         releases the GIL), as ``Simulator`` does with env slices.
         """
         count = self.blocks - block_offset if block_count is None else block_count
-        wp.launch(
+        launch(
             self.kernels.update,
             dim=count,
             inputs=[
@@ -554,12 +596,14 @@ class SimdState:
                 self.num_envs,
                 model.cut_radius,
                 model.cut_height,
+                model.lower,
+                model.upper,
                 model.pairs,
                 model.colour_rest,
                 model.colour_start,
                 self.lane_params,
                 self.anchor,
             ],
-            outputs=[self.vert, self.prev],
+            outputs=[self.vert, self.prev, self.status if status is None else status],
             device=self.device,
         )

@@ -15,12 +15,27 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from warpcut.sim import kernels
-from warpcut.sim._warp import wp
-from warpcut.sim.config import PHYSICAL_PARAMETERS, SheetGrid, SimConfig
+from warpcut.sim._warp import launch, wp
+from warpcut.sim.config import (
+    PHYSICAL_PARAMETERS,
+    SETTLED_REACH_SHEETS,
+    SheetGrid,
+    SimConfig,
+    SimulationDiverged,
+)
 from warpcut.sim.kernels_simd import SimdModel, SimdState
+from warpcut.sim.memory import check_batch_memory
 from warpcut.sim.springs import spring_colours
 
-__all__ = ["Simulator", "default_device", "resolve_device", "settled_figures"]
+__all__ = [
+    "DIVERGENCE_REASONS",
+    "SimulationDiverged",
+    "Simulator",
+    "check_pinch_points",
+    "default_device",
+    "resolve_device",
+    "settled_figures",
+]
 
 BACKENDS = ("auto", "simd", "colours")
 
@@ -66,6 +81,13 @@ class Simulator:
             kept per arrangement of the ping-pong buffers (at most 6). Default: on for ``colours`` on CUDA,
             off elsewhere. Works on CPU too (same results bit for bit). Updates with ``tape_mode``, or
             while a displacement array of the caller's is plugged in, are launched one by one.
+
+    Every update also watches each env for divergence: a vertex with a non-finite coordinate, or one
+    beyond :attr:`SimConfig.runaway_bounds` (flung far from the sheet). :meth:`diverged` says which envs
+    did since the last reset, :meth:`divergence` why; a settled sheet that diverged (or hangs more than
+    :data:`~warpcut.sim.config.SETTLED_REACH_SHEETS` sheet sizes from its rest outline) raises
+    :class:`SimulationDiverged`. A batch that would not fit in memory is refused before it is allocated
+    (:func:`warpcut.sim.memory.check_batch_memory`).
     """
 
     def __init__(
@@ -83,6 +105,7 @@ class Simulator:
         self.config = config.validated()
         self.num_envs = num_envs
         self.device = resolve_device(device)
+        check_batch_memory(num_envs, self.config.nx * self.config.ny, device=self.device)
         self._seed_base = wp.zeros(1, dtype=wp.int32, device=self.device)
         self.seed = int(seed)
         self.grid = SheetGrid.from_config(self.config)
@@ -103,6 +126,11 @@ class Simulator:
         self._displacement_own = self.displacement
         # The update count on the device: the colours path reads its noise seed from it (graph replays).
         self._update_counter = wp.zeros(1, dtype=wp.int32, device=self.device)
+        self._status = wp.zeros((2, num_envs), dtype=wp.int32, device=self.device)
+        """Divergence flags since the last reset: row 0 non-finite, row 1 beyond the bounds (set by the
+        cut stage of every update, ``kernels.cut_kernel``)."""
+        lower, upper = self.config.runaway_bounds
+        self._lower, self._upper = wp.vec3(*lower), wp.vec3(*upper)
         self._counter_synced = True
         self._graphs: dict[tuple, tuple] = {}
         self._first_noise_stream = 0
@@ -199,7 +227,9 @@ class Simulator:
             sheet.reset_flat()
             for _ in range(self.config.settle_updates):
                 sheet.update()
-            self._settled = sheet.positions()[env_group]
+            settled = sheet.positions()
+            _check_settled(settled, sheet.divergence(), group_params, self.config)
+            self._settled = settled[env_group]
         return self._settled
 
     # ------------------------------------------------------------------ episode
@@ -214,7 +244,8 @@ class Simulator:
 
         Args:
             pinch_points: (B, 2) material coordinates (mm) of each env's pinch point; a row of NaN (or
-                ``None`` for all) means that env is not grasped.
+                ``None`` for all) means that env is not grasped; any other non-finite value is a
+                ``ValueError`` (:func:`check_pinch_points`).
         """
         self._load(self.settled_positions(), pinch_points)
 
@@ -226,6 +257,7 @@ class Simulator:
             pinch_points = np.asarray(pinch_points, dtype=np.float64).reshape(-1, 2)
             if pinch_points.shape[0] != b:
                 raise ValueError(f"pinch_points: expected shape ({b}, 2), got {pinch_points.shape}")
+            check_pinch_points(pinch_points)
             for env, point in enumerate(pinch_points):
                 if np.all(np.isfinite(point)):
                     disc = self.grid.disc_mask(point, self.config.grasp_radius) & ~self.fixture
@@ -249,6 +281,7 @@ class Simulator:
             self.path.fill_(wp.vec3(0.0, 0.0, kernels.PATH_IDLE))
         self.update_count = 0
         self._update_counter.zero_()
+        self._status.zero_()
         self._counter_synced = True
         self._flat_current, self._packed_current = True, False
 
@@ -315,7 +348,7 @@ class Simulator:
 
     def _map_flat(self) -> None:
         """Trace every env's tip from the env-major state."""
-        wp.launch(
+        launch(
             kernels.map_tip_kernel,
             dim=self.num_envs,
             inputs=[
@@ -346,7 +379,7 @@ class Simulator:
         # that wp.Tape keeps the history.
         taped = self.displacement.requires_grad
         out = wp.empty_like(self.displacement) if taped else self.displacement
-        wp.launch(
+        launch(
             kernels.move_grasp_kernel,
             dim=self.num_envs,
             inputs=[
@@ -399,7 +432,7 @@ class Simulator:
         seed = self._noise_seed()
         tracing = self._tracing()
 
-        def launch(part: tuple[int, int]) -> None:
+        def step_part(part: tuple[int, int]) -> None:
             count, offset = part
             state.step(
                 self._simd_model,
@@ -407,9 +440,10 @@ class Simulator:
                 block_offset=offset,
                 block_count=count,
                 first_stream=self.first_noise_stream,
+                status=self._status,
             )
             if tracing:
-                wp.launch(
+                launch(
                     state.kernels.map_tip,
                     dim=count,
                     inputs=[
@@ -425,9 +459,9 @@ class Simulator:
                 )
 
         if self._pool is None:
-            launch(self._slices[0])
+            step_part(self._slices[0])
         else:
-            list(self._pool.map(launch, self._slices))
+            list(self._pool.map(step_part, self._slices))
         self._flat_current = False
 
     def _sync_flat(self) -> None:
@@ -477,7 +511,7 @@ class Simulator:
         p = self._wp_params
         spacing = self.grid.spacing_mm
         out = _fresh(self.x) if tape_mode else self._spare
-        wp.launch(
+        launch(
             kernels.integrate_kernel,
             dim=(b, n),
             inputs=[
@@ -505,7 +539,7 @@ class Simulator:
         for _ in range(self.config.sweeps):
             for colour in self.colours:
                 dest = _fresh(work) if tape_mode else spare
-                wp.launch(
+                launch(
                     kernels.relax_colour_kernel,
                     dim=(b, n),
                     inputs=[
@@ -530,14 +564,23 @@ class Simulator:
             alive_out = wp.empty_like(self.alive)
         else:
             alive_out = self._alive[1] if self.alive is self._alive[0] else self._alive[0]
-        wp.launch(
+        launch(
             kernels.cut_kernel,
             dim=(b, n),
-            inputs=[n, self.config.cut_radius, self.config.cut_height, work, self.alive, self.tip],
-            outputs=[alive_out],
+            inputs=[
+                n,
+                self.config.cut_radius,
+                self.config.cut_height,
+                self._lower,
+                self._upper,
+                work,
+                self.alive,
+                self.tip,
+            ],
+            outputs=[alive_out, self._status],
             device=self.device,
         )
-        wp.launch(kernels.count_update_kernel, dim=1, inputs=[self._update_counter], device=self.device)
+        launch(kernels.count_update_kernel, dim=1, inputs=[self._update_counter], device=self.device)
         self.x_prev, self.x, self.alive = new_prev, work, alive_out
         if not tape_mode:
             self._spare = spare
@@ -613,6 +656,66 @@ class Simulator:
     def displacements(self) -> np.ndarray:
         """(B, 3) grasp displacement from where it pinched (mm)."""
         return self.displacement.numpy().copy()
+
+    # ------------------------------------------------------------------ divergence
+    def diverged(self) -> np.ndarray:
+        """(B,) bool: envs whose state left the physical range since the last reset (a non-finite vertex
+        coordinate, or a vertex beyond :attr:`SimConfig.runaway_bounds`). Cheap: B flags set by the
+        kernels of every update; no state is read back."""
+        return self.divergence() != 0
+
+    def divergence(self) -> np.ndarray:
+        """(B,) int8 why each env diverged since the last reset: 0 it did not, 1 a non-finite vertex
+        coordinate (:data:`DIVERGENCE_REASONS`), 2 a vertex flung beyond the bounds."""
+        status = self._status.numpy()
+        return np.where(status[0] != 0, 1, np.where(status[1] != 0, 2, 0)).astype(np.int8)
+
+
+def check_pinch_points(points: np.ndarray) -> None:
+    """Raise ``ValueError`` naming the env unless each row of the (B, 2) ``points`` is finite or all NaN
+    (no grasp): an infinite or half-NaN pinch point is a mistake, never a silent "no grasp"."""
+    finite = np.isfinite(points)
+    bad = ~(finite.all(axis=1) | np.isnan(points).all(axis=1))
+    if bad.any():
+        env = int(np.argmax(bad))
+        raise ValueError(
+            f"pinch_points: env {env}'s pinch point {points[env].tolist()} is not finite; give material "
+            "coordinates (mm), or a row of NaN (None for all envs) for no grasp"
+        )
+
+
+DIVERGENCE_REASONS = {
+    1: "non-finite vertex positions",
+    2: "vertices flung far from the sheet",
+}
+"""What :meth:`Simulator.divergence` codes mean, in words."""
+
+
+def _check_settled(settled: np.ndarray, divergence: np.ndarray, group_params: np.ndarray, config: SimConfig):
+    """Raise :class:`SimulationDiverged` if a settled sheet (G, N, 3), one per parameter group, diverged
+    or hangs farther than :data:`SETTLED_REACH_SHEETS` sheet sizes from its rest outline."""
+    size = max(config.width_mm, config.height_mm)
+    rest_high = np.array([config.width_mm, config.height_mm, 0.0])
+    with np.errstate(invalid="ignore"):
+        outside = np.maximum(-settled, 0.0) + np.maximum(settled - rest_high, 0.0)
+        reach = np.linalg.norm(outside, axis=-1).max(axis=1)
+    bad = (divergence != 0) | ~np.isfinite(reach) | (reach > SETTLED_REACH_SHEETS * size)
+    if not bad.any():
+        return
+    g = int(np.argmax(bad))
+    default = SimConfig()
+    damping, dt, gravity, elasticity = (float(v) for v in group_params[g])
+    if divergence[g] == 1 or not np.isfinite(reach[g]):
+        what = "its vertex positions became non-finite"
+    else:
+        what = f"it hangs {reach[g]:.3g} mm from its rest outline, more than its size ({size:g} mm)"
+    raise SimulationDiverged(
+        f"simulation diverged while settling the sheet (gravity {gravity:g} mm/s^2, dt {dt:g} s, damping "
+        f"{damping:g}, elasticity {elasticity:g}): {what}, the springs cannot hold a fall of "
+        f"gravity * dt^2 = {gravity * dt * dt:.3g} mm per update; lower gravity or dt (defaults "
+        f"{default.gravity:g} mm/s^2 and {default.dt:g} s: {default.gravity * default.dt**2:.2g} mm per "
+        "update), or raise sweeps"
+    )
 
 
 def settled_figures(sim: Simulator) -> tuple[float, float, float]:

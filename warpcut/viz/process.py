@@ -62,9 +62,10 @@ def place_file(tmp: str | os.PathLike, path: str | os.PathLike, keep: bool) -> N
     """Move a recording's finished temporary file ``tmp`` to ``path`` (``keep``), or delete it (nothing was
     recorded: a file already at ``path`` stays as it was).
 
-    Only a complete file (:func:`~warpcut.viz.readback.is_complete`) takes ``path``: one cut short (a full
-    disk) is kept beside it as ``NAME.partial.rrd``, a file already at ``path`` stays as it was, and
-    :class:`RecordingError` says so.
+    A file cut short (a full disk, a killed process: no rerun footer,
+    :func:`~warpcut.viz.readback.is_complete`) raises :class:`RecordingError` and never replaces a file
+    already at ``path``: it is kept beside it as ``NAME.partial.rrd``; where there is none, it takes
+    ``path`` (rerun reads what it holds).
     """
     from warpcut.viz.readback import is_complete
 
@@ -74,12 +75,14 @@ def place_file(tmp: str | os.PathLike, path: str | os.PathLike, keep: bool) -> N
     if is_complete(tmp):
         os.replace(tmp, path)
         return
-    partial = Path(path).with_suffix(".partial.rrd")
-    os.replace(tmp, partial)
-    earlier = f"; {path} still holds the earlier recording" if Path(path).exists() else ""
-    raise RecordingError(
-        f"{path}: the recording was cut short (disk full?); what was written is in {partial}{earlier}"
-    )
+    if Path(path).exists():
+        partial = Path(path).with_suffix(".partial.rrd")
+        os.replace(tmp, partial)
+        where = f"what was written is in {partial}; {path} still holds the earlier recording"
+    else:
+        os.replace(tmp, path)
+        where = "the file holds what was written"
+    raise RecordingError(f"{path}: the recording was cut short (disk full?); {where}")
 
 
 def default_background() -> str | bool:

@@ -193,9 +193,12 @@ class ProcessSink:
                         f"the recorder process did not finish the file within {CLOSE_TIMEOUT_S:.0f} s "
                         "and was stopped; the file holds what it wrote so far"
                     )
-        except RecordingError:
+        except RecordingError as failure:
             if self.tmp.exists():
-                place_file(self.tmp, self.path, keep)
+                try:
+                    place_file(self.tmp, self.path, keep)
+                except RecordingError as placed:  # cut short: say where it went, after why
+                    failure.args = (f"{failure}; {str(placed).removeprefix(f'{self.path}: ')}",)
             raise
         finally:
             if closed and self._failure is None:
