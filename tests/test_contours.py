@@ -493,6 +493,9 @@ def test_sliver_is_too_small_for_the_grid():
         "contour 'sliver': too small for the simulation grid: the region it cuts out is "
     )
     assert "at resolution 25 x 25, 4.17 x 4.17 mm between vertices," in message
+    assert message.endswith("no resolution up to 100 resolves it: enlarge the contour")
+    sliver = validate("sliver", True, [[10.0, 10.0], [90.0, 10.0], [50.0, 13.0]])
+    message = str(pytest.raises(ContourError, check_resolution, sliver, DEFAULT_SPACING).value)
     finer = int(re.search(r"use resolution (\d+) or finer, or enlarge the contour$", message).group(1))
     check_resolution(sliver, 100.0 / (finer - 1))  # the resolution it names resolves it...
     with pytest.raises(ContourError):

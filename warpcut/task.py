@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import shapely
 
-from warpcut.contours import Contour, arc_lengths, resample_polyline, ring
+from warpcut.contours import Contour, arc_lengths, check_resolution, resample_polyline, ring
 from warpcut.scoring import Score, score_cut
 from warpcut.sim.config import SheetGrid, SimConfig, SimulationDiverged
 from warpcut.sim.material import interpolate, material_cells, material_to_world
@@ -179,6 +179,8 @@ class CuttingTask:
             check_batch_memory(num_envs, config.nx * config.ny, estimate, device=device)
         self.sim = Simulator(config, num_envs, device=device, seed=seed, backend=backend, threads=threads)
         self.config, self.grid, self.num_envs = self.sim.config, self.sim.grid, num_envs
+        for contour in {id(c): c for c in contours}.values():
+            check_resolution(contour, self.grid.spacing_mm)  # a contour the grid cannot resolve: refused
         self.contours = contours
         self.segments = (
             [list(s) for s in segments] if segments is not None else [default_segments(c) for c in contours]

@@ -16,7 +16,7 @@ from pathlib import Path
 import click
 
 from agents.config import ANALYTIC_PINCHES, RECIPES
-from warpcut.sim.config import ARM_LENGTH_MM, SCORES, SimConfig
+from warpcut.sim.config import ARM_LENGTH_MM, RESOLUTION_RANGE, SCORES, SimConfig
 from warpcut.viz import COLOUR_FIELDS
 from warpcut.viz.process import RecordingError
 
@@ -327,7 +327,7 @@ resolution_option = click.option(
     "--resolution",
     default=DEFAULTS.resolution,
     show_default=True,
-    type=click.IntRange(5, 100),
+    type=click.IntRange(*RESOLUTION_RANGE),
     help="Vertices per side.",
 )
 

@@ -24,6 +24,7 @@ import shapely.ops
 from shapely.geometry import LinearRing, LineString, Polygon, box
 
 from warpcut.contours.polyline import arc_lengths, resample_polyline, ring
+from warpcut.sim.config import RESOLUTION_RANGE
 
 DEFAULT_SHEET_MM = (100.0, 100.0)
 EDGE_REACH_MM = 5.0
@@ -229,7 +230,12 @@ def check_resolution(contour: Contour, spacing_mm: float | tuple[float, float]) 
     across, area = sizes[failing[0]]
     # The coarsest square grid that resolves both: spacing at most each one's width, cell at most its area.
     need = max(max(width / w, height / w, math.sqrt(width * height / a)) if w else math.inf for w, a in sizes)
-    fix = f"use resolution {math.ceil(need) + 1} or finer, or {change}" if need < math.inf else change
+    finest = RESOLUTION_RANGE[1]
+    fix = (
+        f"use resolution {math.ceil(need) + 1} or finer, or {change}"
+        if need + 1 <= finest
+        else f"no resolution up to {finest} resolves it: {change}"
+    )
     grid = f"{_resolution(width, hx)} x {_resolution(height, hy)}, {hx:.3g} x {hy:.3g} mm between vertices"
     raise ContourError(
         f"contour {contour.name!r}: too small for the simulation grid: {label} is at most {across:.3g} mm "

@@ -21,7 +21,7 @@ import shapely
 
 from warpcut.contours import Contour
 from warpcut.planning.segmentation import Segment
-from warpcut.sim.config import ARM_LENGTH_MM, ARM_RADIUS_MM, SheetGrid, SimConfig
+from warpcut.sim.config import ARM_LENGTH_MM, ARM_RADIUS_MM, RESOLUTION_RANGE, SheetGrid, SimConfig
 from warpcut.task import default_segments
 
 CORNER_MARGIN_MM = 15.0
@@ -30,9 +30,6 @@ CORNER_MARGIN_MM = 15.0
 FEASIBLE_GRID_MM = 0.5
 """Spacing of the grid of points :func:`nearest_feasible` searches (mm)."""
 
-_FINEST_RESOLUTION = 100
-"""The finest grid :class:`~warpcut.sim.config.SimConfig` allows (vertices per side), the finest one
-:func:`no_pinch_error` tries."""
 
 ScissorPath = np.ndarray | Segment | Sequence[np.ndarray | Segment]
 """The scissors' path: one (P, 2) polyline, a :class:`~warpcut.planning.segmentation.Segment`, or a sequence
@@ -213,8 +210,8 @@ def no_pinch_error(
             "from; give a pinch point explicitly (simulate/train --pinch), or move the contour to leave the "
             "gripper room"
         )
-    if coarse < _FINEST_RESOLUTION and pinchable(square(_FINEST_RESOLUTION)):
-        lo, hi = coarse, _FINEST_RESOLUTION  # pinchable at hi, not at lo (or so the search assumes)
+    if coarse < RESOLUTION_RANGE[1] and pinchable(square(RESOLUTION_RANGE[1])):
+        lo, hi = coarse, RESOLUTION_RANGE[1]  # pinchable at hi, not at lo (or so the search assumes)
         while hi - lo > 1:
             mid = (lo + hi) // 2
             lo, hi = (lo, mid) if pinchable(square(mid)) else (mid, hi)

@@ -73,6 +73,10 @@ class SimulationDiverged(ValueError):
     line."""
 
 
+RESOLUTION_RANGE = (5, 100)
+"""The vertices per sheet side a simulation may have (``SimConfig.resolution``), coarsest and finest."""
+
+
 @dataclass
 class SimConfig:
     """Everything that defines a batch of gauze sheets, the scissors and the grasp.
@@ -218,8 +222,11 @@ class SimConfig:
         res = self.resolution
         if isinstance(res, int | np.integer):
             res = (int(res), int(res))
-        if len(res) != 2 or not all(isinstance(r, int | np.integer) and 5 <= r <= 100 for r in res):
-            raise ConfigError(f"resolution: got {self.resolution!r}; give n or (nx, ny) with 5 <= n <= 100")
+        low, high = RESOLUTION_RANGE
+        if len(res) != 2 or not all(isinstance(r, int | np.integer) and low <= r <= high for r in res):
+            raise ConfigError(
+                f"resolution: got {self.resolution!r}; give n or (nx, ny) with {low} <= n <= {high}"
+            )
         for name in PHYSICAL_PARAMETERS:
             values = np.atleast_1d(np.asarray(getattr(self, name), dtype=np.float64))
             _require(values.ndim == 1 and values.size >= 1, name, "give one number or a list, one per env")
