@@ -15,7 +15,14 @@ from warpcut.contours import Contour
 from warpcut.scoring import mean_ci95, paired_improvement
 from warpcut.sim.config import SimConfig
 from warpcut.sim.memory import check_batch_memory
-from warpcut.task import CuttingTask, SimulationDiverged, StepCallback, default_segments, estimate_horizon
+from warpcut.task import (
+    CuttingTask,
+    SimulationDiverged,
+    StepCallback,
+    default_segments,
+    divergence_error,
+    estimate_horizon,
+)
 
 
 @dataclass
@@ -170,24 +177,6 @@ def _check_pinches(contours: Sequence[Contour], pinches: Sequence[np.ndarray | N
                 f"pinch_point: {contour.name}'s pinch point {np.asarray(pinch).tolist()} is not finite; give "
                 "material coordinates (mm), or None for no grasp"
             )
-
-
-def divergence_error(
-    contours: Sequence[Contour], diverged: np.ndarray, config: SimConfig, reasons: Sequence[str] = ()
-) -> SimulationDiverged:
-    """The error of a run whose (num_contours, trials) ``diverged`` trials are not all False: how many
-    diverged per contour, why (``reasons``), and what to change."""
-    counts = [
-        f"{int(row.sum())} of {row.size} trials of {contour.name}"
-        for contour, row in zip(contours, diverged, strict=True)
-        if row.any()
-    ]
-    why = f" ({', '.join(reasons)})" if reasons else ""
-    noise, gravity, dt = (float(np.max(getattr(config, k))) for k in ("noise_std", "gravity", "dt"))
-    return SimulationDiverged(
-        f"simulation diverged in {', '.join(counts)}{why}; their errors are not numbers: lower noise_std "
-        f"(now {noise:g} mm per update), gravity ({gravity:g} mm/s^2) or dt ({dt:g} s), or raise sweeps"
-    )
 
 
 def evaluate_suite(

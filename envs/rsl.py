@@ -96,11 +96,12 @@ class PatternCutRslEnv(VecEnv):
         self._obs = self._tensordict(obs)
         extras: dict = {"time_outs": torch.as_tensor(truncated, device=self.device)}
         score = info.get("final_info", {})
-        if "relative_error" in score:
+        scored = np.isfinite(score["relative_error"]) if "relative_error" in score else None
+        if scored is not None and scored.any():  # a diverged env's NaN score is never averaged in
             extras["log"] = {
-                FINAL_ERROR_KEY: self._tensor(score["relative_error"]),
-                "Cut/error_mm2": self._tensor(score["error_mm2"]),
-                "Cut/error_vertices": self._tensor(score["error_vertices"]),
+                FINAL_ERROR_KEY: self._tensor(score["relative_error"][scored]),
+                "Cut/error_mm2": self._tensor(score["error_mm2"][scored]),
+                "Cut/error_vertices": self._tensor(score["error_vertices"][scored]),
             }
         dones = torch.as_tensor(terminated | truncated, device=self.device).long()
         return self._obs, self._tensor(rewards), dones, extras

@@ -282,3 +282,21 @@ def test_a_half_finite_pinch_row_is_rejected_and_a_nan_row_still_means_no_grasp(
     )
     task.reset()
     assert task.sim.grasped.tolist() == [True, False]
+
+
+def test_planning_never_chooses_a_diverged_candidate(monkeypatch):
+    import warpcut.planning.search as search
+    from warpcut.contours import load_contour
+    from warpcut.planning import plan_cut
+
+    real = search.search_orders
+
+    def with_a_blow_up(*args, **kwargs):
+        orders, errors = real(*args, **kwargs)
+        errors = errors.copy()
+        errors[0, 0] = np.nan  # argmin would pick it
+        return orders, errors
+
+    monkeypatch.setattr(search, "search_orders", with_a_blow_up)
+    with pytest.raises(SimulationDiverged, match="1 of .* trials of circle-small"):
+        plan_cut(load_contour("circle-small"), SimConfig(resolution=13), num_candidates=2)

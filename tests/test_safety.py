@@ -134,6 +134,8 @@ def test_an_output_that_is_an_input_is_refused(tmp_path):
         code, output = invoke(["evaluate", "--contours", str(contour), "--methods", "none", "--trials", "1",
                                option, str(contour), "--out", str(tmp_path / option)])  # fmt: skip
         assert code == 2 and f"{option}" in output and "is an input" in output
+    code, output = invoke(["simulate", "--contour", str(contour), "--json", str(contour)])
+    assert code == 2 and "is an input" in output
     code, output = invoke(["run", "--contour", str(contour), "--policy", "fixed", "--json", str(contour),
                            "--out", str(tmp_path / "run")])  # fmt: skip
     assert code == 2 and "is an input" in output

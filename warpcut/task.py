@@ -407,3 +407,21 @@ class CuttingTask:
             if on_step is not None:
                 on_step(self, action)
         return self.score()
+
+
+def divergence_error(
+    contours: Sequence[Contour], diverged: np.ndarray, config: SimConfig, reasons: Sequence[str] = ()
+) -> SimulationDiverged:
+    """The error of a run whose (num_contours, trials) ``diverged`` trials are not all False: how many
+    diverged per contour, why (``reasons``), and what to change."""
+    counts = [
+        f"{int(row.sum())} of {row.size} trials of {contour.name}"
+        for contour, row in zip(contours, diverged, strict=True)
+        if row.any()
+    ]
+    why = f" ({', '.join(reasons)})" if reasons else ""
+    noise, gravity, dt = (float(np.max(getattr(config, k))) for k in ("noise_std", "gravity", "dt"))
+    return SimulationDiverged(
+        f"simulation diverged in {', '.join(counts)}{why}; their errors are not numbers: lower noise_std "
+        f"(now {noise:g} mm per update), gravity ({gravity:g} mm/s^2) or dt ({dt:g} s), or raise sweeps"
+    )

@@ -32,7 +32,7 @@ from warpcut.planning.feasibility import (
 )
 from warpcut.planning.segmentation import ORDER_LIMIT, Segment, segment_contour, segment_orders
 from warpcut.sim.config import PINCH_CANDIDATES, SEGMENT_TOLERANCE_MM, SimConfig
-from warpcut.task import CuttingTask
+from warpcut.task import CuttingTask, divergence_error
 
 
 def pinch_candidates(
@@ -257,6 +257,8 @@ def plan_cut(
     rng = np.random.default_rng(seed)
     points = pinch_candidates(contour, config, segments, num_candidates, rng, arm)
     orders, errors = search_orders(contour, config, segments, points, device=device, seed=seed)
+    if not np.all(np.isfinite(errors)):  # diverged simulations: no candidate may be chosen by a NaN
+        raise divergence_error([contour], ~np.isfinite(errors.reshape(1, -1)), config)
     best = np.argmin(errors, axis=1)  # each candidate's best order: the first among ties
     candidates = [
         {
