@@ -24,3 +24,15 @@ DEVICES = ["cpu"] + (["cuda"] if wp.is_cuda_available() else [])
 def device(request) -> str:
     """Run the test once per available Warp device."""
     return request.param
+
+
+@pytest.fixture(scope="module")
+def one_torch_thread():
+    """Tiny MLPs gain nothing from threads, and threads slow to a crawl on a busy 2-core machine (use it
+    per module: ``pytestmark = pytest.mark.usefixtures("one_torch_thread")``)."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)

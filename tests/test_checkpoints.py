@@ -35,12 +35,7 @@ from warpcut.sim.config import SimConfig
 NUM_ENVS = 8
 
 
-@pytest.fixture(scope="module", autouse=True)
-def one_torch_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def tiny(**overrides) -> TrainConfig:
@@ -58,9 +53,7 @@ def dummy_run(tmp_path_factory):
 
 @pytest.fixture
 def run(dummy_run, tmp_path):
-    copy = tmp_path / "run"
-    shutil.copytree(dummy_run, copy)
-    return copy
+    return shutil.copytree(dummy_run, tmp_path / "run")
 
 
 def damage(path, kind: str) -> None:
@@ -335,9 +328,7 @@ def real_run(tmp_path_factory):
 
 @pytest.fixture
 def real_copy(real_run, tmp_path):
-    copy = tmp_path / "circle-small"
-    shutil.copytree(real_run, copy)
-    return copy
+    return shutil.copytree(real_run, tmp_path / "circle-small")
 
 
 @pytest.mark.parametrize(

@@ -40,13 +40,7 @@ def mean_final_error(env: ReachEnv, policy, episodes: int = 4) -> float:
     return float(np.mean(errors))
 
 
-@pytest.fixture(scope="module", autouse=True)
-def one_torch_thread():
-    """Tiny MLPs gain nothing from threads, and threads slow to a crawl on a busy 2-core machine."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")
