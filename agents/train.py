@@ -41,7 +41,6 @@ The env is any :class:`rsl_rl.env.VecEnv` (``envs.rsl`` for warpcut). Beyond tha
 from __future__ import annotations
 
 import contextlib
-import errno
 import io
 import random
 import re
@@ -62,7 +61,7 @@ from rsl_rl.utils.logger import Logger
 
 from agents.config import TrainConfig
 from envs.rsl import FINAL_ERROR_KEY
-from warpcut.io import write_atomic, write_json
+from warpcut.io import DiskFull, write_atomic, write_json
 
 LATEST_CHECKPOINT = "latest.pt"
 """File name of the copy of the newest checkpoint in a run directory."""
@@ -238,11 +237,11 @@ def _write(path: Path, data: bytes | dict, intact: str, resumable: bool = True) 
     """
     try:
         write_atomic(path, data) if isinstance(data, bytes) else write_json(path, data)
-    except OSError as exc:
-        if exc.errno != errno.ENOSPC:
-            raise
+    except DiskFull as exc:
         then = f"resume from {path.parent}" if resumable else "start again"
-        raise ValueError(f"{path}: not written, the disk is full; {intact}: free space, then {then}") from exc
+        raise ValueError(
+            f"{path}: not written, the disk is full; {intact}: free space, then {then}"
+        ) from exc.__cause__
 
 
 def _write_summary(path: Path, summary: dict, checkpoint: Path | None, ending: BaseException | None) -> None:

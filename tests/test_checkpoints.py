@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import errno
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -212,21 +213,17 @@ def test_a_run_with_no_readable_checkpoint_says_so(run, tmp_path):
 
 
 def full_disk(monkeypatch, module: str, names: set[str]) -> None:
-    """Make ``write_atomic`` (as ``module`` and ``warpcut.io.write_json`` call it) fail with ENOSPC for the
-    files named in ``names``."""
-    import importlib
+    """Fill the disk for the files named in ``names``: syncing their temporary files (``write_atomic``'s
+    ``.NAME.*.tmp``) fails with ENOSPC, as a full disk makes it. ``module`` is the writer under test."""
+    real = os.fsync
 
-    import warpcut.io
-
-    write = warpcut.io.write_atomic
-
-    def write_atomic(path, data):
-        if Path(path).name in names:
+    def fsync(fd):
+        name = Path(os.readlink(f"/proc/self/fd/{fd}")).name
+        if any(name.startswith(f".{n}.") for n in names):
             raise OSError(errno.ENOSPC, "No space left on device")
-        return write(path, data)
+        return real(fd)
 
-    monkeypatch.setattr(warpcut.io, "write_atomic", write_atomic)
-    monkeypatch.setattr(importlib.import_module(module), "write_atomic", write_atomic)
+    monkeypatch.setattr(os, "fsync", fsync)
 
 
 def test_a_full_disk_while_saving_keeps_the_last_good_checkpoint(tmp_path, monkeypatch):

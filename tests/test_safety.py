@@ -353,3 +353,32 @@ def test_train_refuses_an_existing_run_and_stops_on_sigterm_with_a_checkpoint(tm
                            "--no-plots"])  # fmt: skip
     assert code == 0, output
     assert json.loads((run / "summary.json").read_text())["status"] == "completed"
+
+
+def test_a_failed_write_never_replaces_a_good_file(tmp_path, monkeypatch):
+    import errno
+
+    from warpcut.io import DiskFull, write_atomic
+
+    path = write_json(tmp_path / "results.json", {"good": True})
+
+    def no_space(fd):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "fsync", no_space)
+    with pytest.raises(DiskFull, match=r"results.json: not written, the disk is full; its previous version"):
+        write_json(path, {"good": False})
+    monkeypatch.undo()
+    assert json.loads(path.read_text()) == {"good": True}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["results.json"]  # no temporary file left
+    (tmp_path / "x.json").mkdir()
+    with pytest.raises(ValueError, match="x.json: is a directory, not a file"):
+        write_atomic(tmp_path / "x.json", b"{}")
+    code, output = invoke(["simulate", "--contour", "circle-small", "--json", str(tmp_path / "x.json")])
+    assert code == 2 and "is a directory" in output and len(output.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("pinch", ["nan,50", "50,inf", "-inf,-inf"])
+def test_a_non_finite_pinch_is_refused(pinch):
+    code, output = invoke(["simulate", "--contour", "circle-small", "--pinch", pinch])
+    assert code == 2 and "--pinch" in output and "finite" in output

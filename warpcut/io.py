@@ -37,9 +37,21 @@ def plain_file_mode() -> int:
     return 0o666 & ~umask
 
 
+class DiskFull(ValueError):
+    """A write failed for lack of space (``ENOSPC``, ``EDQUOT``); the file it would replace is intact."""
+
+
 def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
-    """Write ``data`` to a temporary file beside ``path``, fsync it, then rename it over ``path``."""
+    """Write ``data`` to a temporary file beside ``path``, fsync it, then rename it over ``path``: a write
+    that fails (a full disk, a signal) leaves the file at ``path`` as it was and no temporary file.
+
+    Raises:
+        ValueError: ``path`` is a directory; :class:`DiskFull` (a ``ValueError``; the ``OSError`` is its
+            cause) when the disk is full. The message names the file.
+    """
     path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"{path}: is a directory, not a file; choose another path")
     path.parent.mkdir(parents=True, exist_ok=True)
     raw = data.encode() if isinstance(data, str) else data
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
@@ -50,8 +62,12 @@ def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         Path(tmp).unlink(missing_ok=True)
+        if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            raise DiskFull(
+                f"{path}: not written, the disk is full; its previous version (if any) is intact"
+            ) from exc
         raise
     return path
 

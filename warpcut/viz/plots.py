@@ -7,7 +7,6 @@ no display and leaves matplotlib's global state alone.
 
 from __future__ import annotations
 
-import errno
 import io
 import math
 import os
@@ -22,7 +21,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, Rectangle
 
 from warpcut.contours import Contour, ring
-from warpcut.io import safe_name, write_atomic
+from warpcut.io import DiskFull, safe_name, write_atomic
 from warpcut.planning import Plan, pinch_feasible
 from warpcut.scoring import Score
 from warpcut.sim.config import SheetGrid, SimConfig
@@ -63,13 +62,10 @@ def save_figure(fig: Figure, out_dir: str | os.PathLike, name: str) -> list[Path
         fig.savefig(buffer, format=fmt, dpi=150, bbox_inches="tight")
         try:
             paths.append(write_atomic(path, buffer.getvalue()))
-        except OSError as exc:
-            if exc.errno != errno.ENOSPC:
-                raise
-            raise ValueError(
-                f"{path}: not written, the disk is full; its previous version (if any) is intact: free "
-                "space, then plot again (or skip the plots with --no-plots)"
-            ) from exc
+        except DiskFull as exc:
+            raise ValueError(f"{exc}: free space, then plot again (or skip the plots with --no-plots)") from (
+                exc.__cause__
+            )
     return paths
 
 
