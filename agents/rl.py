@@ -155,25 +155,32 @@ def resume_settings(resume: str | Path) -> dict:
         resume: Run directory or checkpoint (as :func:`train_contour` takes it).
 
     Returns:
-        ``seed``: the run's PPO seed (its ``config.json``'s; the validation episodes derive from it), and
+        ``seed``: the run's PPO seed (its ``config.json``'s; the validation episodes derive from it);
         ``validation_trials``: its ``train_contour`` argument (for a shared policy, the episodes per
-        candidate times the candidates); each None where the run does not fix it (it never validated).
+        candidate times the candidates), None where the run never validated; and the PPO batch and prior
+        the run was trained with (:data:`RESUMED_TRAIN_FIELDS` of its ``config.json``; None where it
+        holds none).
     """
     checkpoint, state, _ = resume_checkpoint(resume)
+    train = _run_train_config(checkpoint.parent)
+    fixed = {name: train.get(name) for name in RESUMED_TRAIN_FIELDS}
     baseline = (state.get("infos") or {}).get("validation_baseline")
     if not baseline:
-        return {"seed": None, "validation_trials": None}
-    return {"seed": _run_seed(checkpoint.parent), "validation_trials": len(baseline) * len(baseline[0])}
+        return {**fixed, "seed": train.get("seed"), "validation_trials": None}
+    return {**fixed, "seed": train.get("seed"), "validation_trials": len(baseline) * len(baseline[0])}
 
 
-def _run_seed(run_dir: Path) -> int | None:
-    """The PPO seed in a run's ``config.json`` (None if it holds none)."""
+RESUMED_TRAIN_FIELDS = ("num_envs", "num_steps_per_env", "stay_prior")
+"""The :class:`~agents.config.TrainConfig` fields a resumed run keeps (its batch, and the prior its policy
+was initialised with), besides the seed."""
+
+
+def _run_train_config(run_dir: Path) -> dict:
+    """The ``train`` section of a run's ``config.json`` (empty if it holds none)."""
     path = run_dir / "config.json"
-    if not path.is_file():
-        return None
-    config = read_json(path)
-    seed = config.get("train", {}).get("seed") if isinstance(config, dict) else None
-    return seed if isinstance(seed, int) else None
+    config = read_json(path) if path.is_file() else {}
+    train = config.get("train") if isinstance(config, dict) else None
+    return train if isinstance(train, dict) else {}
 
 
 def _check_validation(checkpoint: Path, state: dict, seed: int, episodes: int, candidates: int) -> None:
@@ -188,7 +195,7 @@ def _check_validation(checkpoint: Path, state: dict, seed: int, episodes: int, c
             f"validation_trials: {checkpoint} validated on {trials} episode(s), these settings on "
             f"{episodes * candidates}: resume with validation_trials={trials} (--validation-trials)"
         )
-    trained = _run_seed(checkpoint.parent)
+    trained = _run_train_config(checkpoint.parent).get("seed")
     if trained is not None and trained != seed:
         raise ValueError(
             f"seed: {checkpoint.parent} was trained with seed {trained} (its config.json), these settings "

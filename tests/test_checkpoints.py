@@ -406,7 +406,9 @@ def test_resuming_with_other_options_fails_before_touching_the_run(real_copy):
         cfg = TrainConfig(num_envs=2, iterations=2, seed=kwargs.pop("seed", 0))
         with pytest.raises(ValueError, match=match):
             train_contour(options, real_copy, cfg, resume=real_copy, **kwargs)
-    assert resume_settings(real_copy) == {"seed": 0, "validation_trials": 1}
+    assert resume_settings(real_copy) == {
+        "seed": 0, "validation_trials": 1, "num_envs": 2, "num_steps_per_env": 4, "stay_prior": 0.9
+    }  # fmt: skip
 
 
 def test_check_policy_run(real_copy):
@@ -453,14 +455,16 @@ def test_train_resume_needs_no_contour_and_refuses_a_conflicting_one(real_copy, 
     err = cli_error(capfd, "train", "--resume", str(real_copy), "--z")
     assert "--z/--no-z: the resumed run" in err and "was trained with --no-z" in err
     err = cli_error(capfd, "train", "--resume", str(real_copy), "--validation-trials", "16")
-    assert "--validation-trials: the resumed run" in err and "was trained with --validation-trials 1," in err
+    assert "--validation-trials: the resumed run" in err and "was trained with --validation-trials 1 " in err
     err = cli_error(capfd, "train", "--resume", str(real_copy), "--seed", "3")
-    assert "--seed: the resumed run" in err and "was trained with --seed 0," in err
+    assert "--seed: the resumed run" in err and "was trained with --seed 0 " in err
+    err = cli_error(capfd, "train", "--resume", str(real_copy), "--num-envs", "8")
+    assert "--num-envs: the resumed run" in err and "was trained with --num-envs 2 " in err
     err = cli_error(capfd, "train", "--iterations", "1")
     assert "--contour: give the contour to train on" in err
 
-    common = ["--num-envs", "2", "--steps-per-env", "4", "--eval-trials", "1"]
-    with pytest.raises(SystemExit) as exit_info:  # no --contour or --validation-trials: the run knows them
+    common = ["--eval-trials", "1"]  # no --contour, --validation-trials, --num-envs: the run knows them
+    with pytest.raises(SystemExit) as exit_info:
         main.main(
             args=[
                 "train",
@@ -475,4 +479,6 @@ def test_train_resume_needs_no_contour_and_refuses_a_conflicting_one(real_copy, 
             prog_name="warpcut",
         )
     assert exit_info.value.code == 0, capfd.readouterr().err
-    assert json.loads((real_copy / "summary.json").read_text())["iterations"] == 2
+    summary = json.loads((real_copy / "summary.json").read_text())
+    assert summary["iterations"] == 2 and summary["env_steps"] == 2 * 2 * 4  # the run's 2 envs x 4 steps
+    assert json.loads((real_copy / "config.json").read_text())["train"]["num_envs"] == 2

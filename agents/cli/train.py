@@ -153,7 +153,12 @@ def command(
             action_type=action_type, allow_z=allow_z,
         )  # fmt: skip
         _check_resumed_flags(run, options, given)
-        seed, validation_trials = _resumed_validation(resume, seed, validation_trials)
+        kept = _resumed_settings(
+            resume, seed=seed, validation_trials=validation_trials, num_envs=num_envs,
+            num_steps_per_env=steps_per_env, stay_prior=stay_prior,
+        )  # fmt: skip
+        seed, validation_trials, num_envs = kept["seed"], kept["validation_trials"], kept["num_envs"]
+        steps_per_env, stay_prior = kept["num_steps_per_env"], kept["stay_prior"]
     else:
         if contour_name is None:
             raise click.UsageError("--contour: give the contour to train on (or --resume RUN to continue)")
@@ -248,21 +253,31 @@ def _check_resumed_flags(run: Path, options, given: dict) -> None:
         )
 
 
-def _resumed_validation(resume: Path, seed: int, validation_trials: int) -> tuple[int, int]:
-    """``--seed`` and ``--validation-trials`` for a resumed run: the run's, which fix its validation
-    episodes (:func:`agents.rl.resume_settings`); a usage error naming the flag given with another value."""
+RESUMED_SETTINGS = {
+    "seed": ("seed", "--seed"),
+    "validation_trials": ("validation_trials", "--validation-trials"),
+    "num_envs": ("num_envs", "--num-envs"),
+    "num_steps_per_env": ("steps_per_env", "--steps-per-env"),
+    "stay_prior": ("stay_prior", "--stay-prior"),
+}
+"""What a resumed run keeps beyond its options (:func:`agents.rl.resume_settings`): its key, the command's
+parameter and flag."""
+
+
+def _resumed_settings(resume: Path, **values) -> dict:
+    """The training settings of a resumed run: the run's own (its seed and validation episodes, its batch,
+    its prior), whatever the defaults say; a usage error naming a flag given with another value."""
     from agents.rl import resume_settings
 
     ctx = click.get_current_context()
     fixed = resume_settings(resume)
-    values = {"seed": seed, "validation_trials": validation_trials}
-    for name, flag in (("seed", "--seed"), ("validation_trials", "--validation-trials")):
-        if fixed[name] is None or fixed[name] == values[name]:
+    for name, (parameter, flag) in RESUMED_SETTINGS.items():
+        if fixed.get(name) is None or fixed[name] == values[name]:
             continue
-        if ctx.get_parameter_source(name) == click.core.ParameterSource.COMMANDLINE:
+        if ctx.get_parameter_source(parameter) == click.core.ParameterSource.COMMANDLINE:
             raise click.UsageError(
-                f"{flag}: the resumed run {resume} was trained with {flag} {fixed[name]}, which fixes the "
-                f"episodes its policies are validated on; drop {flag}, or train a new run without --resume"
+                f"{flag}: the resumed run {resume} was trained with {flag} {fixed[name]} (its config.json); "
+                f"a resumed run keeps its settings: drop {flag}, or train a new run without --resume"
             )
         values[name] = fixed[name]
-    return values["seed"], values["validation_trials"]
+    return values
