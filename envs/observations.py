@@ -35,6 +35,7 @@ from warpcut.sim.config import SimConfig
 
 __all__ = [
     "POSITION_LIMIT",
+    "observation_names",
     "TRACKING_LIMIT",
     "Fiducials",
     "normalise_positions",
@@ -68,3 +69,15 @@ def normalise_positions(points: np.ndarray, config: SimConfig) -> np.ndarray:
     """World positions (..., 3) in mm to the observation's unit scale (see the module docstring)."""
     centre = np.array([config.width_mm / 2, config.height_mm / 2, 0.0])
     return (points - centre) / (max(config.width_mm, config.height_mm) / 2)
+
+
+def observation_names(num_fiducials: int, contour_features: bool, observe_pinch: bool = False) -> list[str]:
+    """The name of each entry of one env's observation, in the layout of the module docstring (e.g. for an
+    exported policy's metadata)."""
+    names = ["time", "grasp_dx", "grasp_dy", "grasp_dz"]
+    names += [f"fiducial_{k}_{axis}" for k in range(num_fiducials) for axis in "xyz"]
+    if contour_features:
+        names += ["tip_x", "tip_y", "tip_z", "tip_cutting", "tracking_dx", "tracking_dy", "tracking_dz"]
+    if observe_pinch:
+        names += ["pinch_x", "pinch_y"]
+    return names

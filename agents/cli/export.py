@@ -13,14 +13,19 @@ import click
     "--out",
     type=click.Path(file_okay=False, path_type=Path),
     default=None,
-    help="Where to write policy.pt and policy.onnx (default: RUN_DIR/exported).",
+    help="Where to write policy.pt and policy.onnx (default: exported/ beside the policy's checkpoint; for "
+    "an evaluate directory, RUN_DIR/exported/CONTOUR).",
 )
 def command(run_dir: Path, out: Path | None) -> None:
-    """Export a trained policy as TorchScript and ONNX (observation -> action index).
+    """Export trained policies as TorchScript and ONNX (observation -> action), with ONNX metadata saying
+    what each observation entry and action means and the scenario.
 
-    RUN_DIR is a run directory of 'warpcut train' (its validated best.pt, else its newest checkpoint), or one
-    of its .pt checkpoints."""
-    from agents.export import export_policy
+    RUN_DIR is a run directory of 'warpcut train' (its validated best.pt, else its newest checkpoint), of
+    'warpcut run' (the chosen candidate's policy) or of 'warpcut evaluate' (every contour's policy), or a
+    .pt checkpoint."""
+    from agents.export import export_run
 
-    for kind, path in export_policy(run_dir, out).items():
-        click.echo(f"{kind}: {path}")
+    for exported in export_run(run_dir, out):
+        click.echo(f"exported {exported['policy']}")
+        for kind in ("torchscript", "onnx"):
+            click.echo(f"  {kind}: {exported[kind]}")
