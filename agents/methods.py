@@ -51,3 +51,8 @@ def tensioner(name: str):
     if name not in classes:
         raise ValueError(f"methods: {name!r} is not a baseline; baselines are {', '.join(BASELINES)}")
     return classes[name]()
+
+
+def point_text(point) -> str:
+    """A point (mm) as the progress lines and tables print it: ``(x, y)`` to 0.1 mm."""
+    return f"({float(point[0]):.1f}, {float(point[1]):.1f})"

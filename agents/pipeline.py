@@ -38,7 +38,7 @@ from agents.config import (
     TrainConfig,
 )
 from agents.evaluation import Method, MethodResult, evaluate_suite, run_method
-from agents.methods import METHODS, SELECTORS, StepCallbacks, check_methods
+from agents.methods import METHODS, SELECTORS, StepCallbacks, check_methods, point_text
 from agents.rl import check_policy_run, is_run, rollout_errors, train_contour
 from envs.options import PatternCutOptions
 from warpcut.contours import Contour, builtin_names, load_contour
@@ -66,6 +66,7 @@ def train_policy(
     eval_trials: int,
     progress: bool,
     resume: bool = False,
+    label: str | None = None,
 ) -> dict:
     """Train a policy with ``recipe`` for ``options`` (``options`` carry the recipe's env fields) into
     ``run_dir`` (:func:`agents.rl.train_contour`); Ctrl-C (or SIGTERM/SIGHUP, see the CLI) raises
@@ -83,7 +84,7 @@ def train_policy(
     try:
         result = train_contour(
             options, run_dir, cfg, eval_trials=eval_trials, progress=progress,
-            validation_trials=recipe.validation_trials, resume=run_dir if checkpoint else None,
+            validation_trials=recipe.validation_trials, resume=run_dir if checkpoint else None, label=label,
         )  # fmt: skip
         return result["summary"]
     except KeyboardInterrupt as interrupt:
@@ -301,7 +302,7 @@ def run_pipeline(
     pinch = plan.chosen["pinch"]
     log(
         f"      {len(plan.segments)} segment(s), order {list(plan.order)}, pinch "
-        f"({pinch[0]:.1f}, {pinch[1]:.1f}) with fixed tension: {plan.chosen['error_vertices']:.1f} vertices"
+        f"{point_text(pinch)} with fixed tension: {plan.chosen['error_vertices']:.1f} vertices"
     )
     listed = _ranked_candidates(plan, settings["rl_candidates"] if selector == "rl" else None)
     analytic = Method("analytic", pinches=analytic_pinches(analytic_pinch, [loaded], [plan]))
@@ -378,7 +379,7 @@ def _candidate_text(candidate: dict) -> str:
     """A candidate's pinch, order and scores, as the progress lines show them."""
     scores = ("fixed_error_vertices", "analytic_error_vertices", "rl_validation_error_vertices")
     return (
-        f"pinch ({candidate['pinch'][0]:.1f}, {candidate['pinch'][1]:.1f}), order {candidate['order']}"
+        f"pinch {point_text(candidate['pinch'])}, order {candidate['order']}"
         + "".join(f", {k.split('_')[0]} {candidate[k]:.1f}" for k in scores if k in candidate)
         + " vertices"
     )
@@ -436,7 +437,14 @@ def _train_candidates(
         what = f"an RL policy for each of the best {len(listed)} pinch candidate(s) ({envs} envs each"
     log(f"[2/3] training {what}, {train['iterations']} PPO iterations)")
     for k, (run_dir, options) in enumerate(jobs):
-        summary = train_policy(options, run_dir, recipe, num_envs=envs, progress=progress, **train)
+        label = (
+            f"PPO {plan.contour.name}, {len(listed)} candidates"
+            if shared
+            else f"PPO {plan.contour.name}, candidate {k + 1}/{len(jobs)} {point_text(listed[k]['pinch'])}"
+        )
+        summary = train_policy(
+            options, run_dir, recipe, num_envs=envs, progress=progress, label=label, **train
+        )
         if shared:
             errors = summary["candidates"]["validation_error_vertices"]
             for c, e in zip(listed, errors, strict=True):
@@ -446,7 +454,7 @@ def _train_candidates(
         listed[k]["rl_best_iteration"] = summary["best"]["iterations"]
         listed[k]["run"] = str(run_dir.relative_to(out))
         log(
-            f"      candidate ({listed[k]['pinch'][0]:.1f}, {listed[k]['pinch'][1]:.1f}): fixed "
+            f"      candidate {point_text(listed[k]['pinch'])}: fixed "
             f"{listed[k]['fixed_error_vertices']:.1f}, rl {summary['best']['validation_error']:.1f} vertices "
             "(validation)"
         )
@@ -595,12 +603,13 @@ def evaluate_table(
         if [p.contour.name for p in plans] != [c.name for c in loaded]:
             raise ValueError("plan: give one Plan per contour, in the contours' order (or True / False)")
     elif plan:
-        plans = []
-        for contour in loaded:
-            log(f"  planning {contour.name} ({candidates} candidates)")
+        plans, started = [], time.perf_counter()
+        for k, contour in enumerate(loaded):
+            log(f"  [{k + 1}/{len(loaded)}] planning {contour.name} ({candidates} candidates)")
             settings = dict(num_candidates=candidates, seed=seed, device=device, arm=arm or ArmModel())
             plans.append(plan_cut(contour, config.replace(noise_std=0.0), **settings))
         write_json(out / "plans.json", {p.contour.name: p.to_json() for p in plans})
+        log(f"  planned {len(plans)} contour(s) in {time.perf_counter() - started:.0f} s")
     specs = [Method(m) for m in methods]
     runs: list[Path] = []
     kept: list[int | None] = []
@@ -625,6 +634,7 @@ def evaluate_table(
         progress=lambda what: log(f"  running {what}"),
         step_callbacks=step_callbacks,
     )
+    log(f"  evaluated {len(methods)} method(s) x {len(loaded)} contour(s) x {trials} trials")
     for row, iteration in zip(table["rows"], kept, strict=False):
         row["rl_policy_iteration"] = iteration
     if kept:  # how often model selection kept the initial policy (it holds still under the warpcut recipe)
@@ -653,7 +663,7 @@ def _rl_result(
     ``recipe``, ``iterations`` and ``num_envs``, at the planned pinch and segments when planned) rolled out
     for ``trials``, paired with the baselines' noise."""
     recipe = training["recipe"]
-    rollouts, runs, iterations = [], [], []
+    rollouts, runs, iterations, started = [], [], [], time.perf_counter()
     for k, (spec, contour) in enumerate(named):
         if checkpoints is not None:
             run = Path(checkpoints) / safe_name(contour.name)
@@ -661,7 +671,8 @@ def _rl_result(
             run = out / "policies" / safe_name(contour.name)
             kept = training["resume"] and finished_run(run)
             verb = "kept" if kept else "training"
-            log(f"  {verb} rl for {contour.name} ({training['iterations']} iterations)")
+            count = f"[{k + 1}/{len(named)}]"
+            log(f"  {count} {verb} rl for {contour.name} ({training['iterations']} iterations)")
             planned = {}
             if plans is not None:
                 planned = {
@@ -684,6 +695,8 @@ def _rl_result(
                 run, trials, seed=seed + 1, device=device, on_step=callback, paired_noise=(seed, k * trials)
             )
         )
+    what = "trained" if checkpoints is None else "rolled out"
+    log(f"  rl: {what} {len(named)} policy(ies) in {time.perf_counter() - started:.0f} s")
     return MethodResult.from_rollouts(rollouts), runs, iterations
 
 

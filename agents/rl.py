@@ -63,6 +63,7 @@ def train_contour(
     progress: bool = True,
     validation_trials: int = VALIDATION_TRIALS,
     step_callbacks: StepCallbacks | None = None,
+    label: str | None = None,
 ) -> dict:
     """Train a PPO tensioner for ``options`` into ``out_dir``, then evaluate it.
 
@@ -84,6 +85,7 @@ def train_contour(
         validation_trials: Held-out episodes per validation; 0 disables validation (the run's policy is
             then the last one).
         step_callbacks: Step callbacks of the final evaluation's batches (see :func:`evaluate_run`).
+        label: The progress bar's label (default: "PPO CONTOUR").
 
     Returns:
         ``{"summary": training summary, "evaluation": evaluation of the run's policy}``.
@@ -128,7 +130,8 @@ def train_contour(
             """Mean validation error (vertices) per candidate."""
             return validate(actor).mean(axis=0)
 
-    summary = train(env, cfg, out_dir, resume=resume, progress=progress, validate=validate)
+    label = label or f"PPO {options.contours(1)[0].name}"
+    summary = train(env, cfg, out_dir, resume=resume, progress=progress, validate=validate, label=label)
     if shared:
         errors = candidate_errors(load_policy(out_dir))
         chosen = int(np.argmin(errors))  # the first (the better fixed rank, as ordered) among ties

@@ -54,7 +54,15 @@ from pathlib import Path
 import numpy as np
 import torch
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+from rich.markup import escape
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
 from rsl_rl.env import VecEnv
 from rsl_rl.runners import OnPolicyRunner
 from rsl_rl.utils.logger import Logger
@@ -76,6 +84,7 @@ def train(
     resume: str | Path | None = None,
     progress: bool = True,
     validate: Callable[[torch.nn.Module], float | np.ndarray] | None = None,
+    label: str = "PPO",
 ) -> dict:
     """Train a PPO policy on ``env`` and write the run directory ``out_dir``.
 
@@ -89,6 +98,7 @@ def train(
             and trains until ``cfg.iterations`` in total.
         progress: Show a progress bar (on stderr). rsl-rl's per-iteration console report is never printed;
             its scalars go to TensorBoard.
+        label: The progress bar's label (e.g. the contour and pinch candidate being trained).
         validate: Scores an actor (called with the live actor; use its deterministic output) on episodes
             that are not the evaluation's: the error of each episode, an array ``(episodes,)`` or
             ``(episodes, columns)`` (e.g. one column per pinch candidate), the same episodes every call; or
@@ -127,7 +137,8 @@ def train(
 
     start_iterations, start_time, status = runner.iterations_done, time.monotonic(), "failed"
     try:
-        with _progress_display(progress, cfg.iterations, start_iterations) as report:
+        steps = cfg.num_steps_per_env * cfg.num_envs
+        with _progress_display(bool(progress), cfg.iterations, start_iterations, steps, label) as report:
             if validate is None:
                 runner.on_iteration = report
             else:
@@ -677,20 +688,27 @@ def _mean_log_value(ep_extras: list[dict], key: str) -> float | None:
 
 
 @contextlib.contextmanager
-def _progress_display(enabled: bool, total: int, completed: int) -> Iterator[Callable[[int, dict], None]]:
-    """Yield a callback ``(iterations_done, metrics)`` that advances a progress bar, or does nothing."""
+def _progress_display(
+    enabled: bool, total: int, completed: int, steps_per_iteration: int, label: str = "PPO"
+) -> Iterator[Callable[[int, dict], None]]:
+    """Yield a callback ``(iterations_done, metrics)`` that advances a progress bar labelled ``label``, or
+    does nothing. The bar shows env steps/s since it started (not one iteration's rate, which swings with
+    validation and evaluation), the last known final error and return, the elapsed time and the ETA."""
     if not enabled:
         yield lambda iterations_done, metrics: None
         return
     columns = (
-        TextColumn("PPO"),
+        TextColumn(escape(label)),
         BarColumn(),
         MofNCompleteColumn(),
         TextColumn("{task.fields[steps_per_s]} steps/s"),
         TextColumn("final error {task.fields[final_error]}"),
         TextColumn("return {task.fields[mean_return]}"),
+        TimeElapsedColumn(),
+        TextColumn("ETA"),
         TimeRemainingColumn(),
     )
+    start = time.monotonic()
     # stderr: rsl-rl's report is swallowed by redirecting stdout, which must not catch the bar's redraws.
     with Progress(*columns, console=Console(stderr=True)) as bar:
         task = bar.add_task(
@@ -704,11 +722,7 @@ def _progress_display(enabled: bool, total: int, completed: int) -> Iterator[Cal
                 for key in ("final_error", "mean_return")
                 if metrics[key] is not None
             }
-            bar.update(
-                task,
-                completed=iterations_done,
-                steps_per_s=f"{metrics['iteration_steps_per_s']:.0f}",
-                **known,
-            )
+            rate = (iterations_done - completed) * steps_per_iteration / max(time.monotonic() - start, 1e-9)
+            bar.update(task, completed=iterations_done, steps_per_s=f"{rate:,.0f}", **known)
 
         yield report

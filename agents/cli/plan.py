@@ -9,6 +9,7 @@ import click
 
 from agents.cli import common
 from agents.config import EVALUATION_CANDIDATES
+from agents.methods import point_text
 from warpcut.sim.config import ARM_RADIUS_MM, SEGMENT_TOLERANCE_MM, SimConfig
 
 
@@ -79,8 +80,8 @@ def command(
     )
     for k, s in enumerate(data["segments"]):
         click.echo(
-            f"  segment {k}: notch ({s['notch'][0]:.1f}, {s['notch'][1]:.1f}) -> termination "
-            f"({s['termination'][0]:.1f}, {s['termination'][1]:.1f}), {len(s['points'])} points"
+            f"  segment {k}: notch {point_text(s['notch'])} -> termination {point_text(s['termination'])}, "
+            f"{len(s['points'])} points"
         )
     errors = result.errors
     click.echo(f"orders searched: {len(result.orders)}" + (" (heuristic)" if result.heuristic_orders else ""))
@@ -92,16 +93,13 @@ def command(
     ranked = sorted(result.candidates, key=lambda c: c["error_vertices"])
     for c in ranked[:5]:
         click.echo(
-            f"  ({c['point'][0]:.1f}, {c['point'][1]:.1f}): {c['error_vertices']:.1f} vertices, "
-            f"order {list(c['best_order'])}"
+            f"  {point_text(c['point'])}: {c['error_vertices']:.1f} vertices, order {list(c['best_order'])}"
         )
     for r in result.rejected:
-        click.echo(
-            f"  centroid ({r['point'][0]:.1f}, {r['point'][1]:.1f}) infeasible: {', '.join(r['violates'])}"
-        )
+        click.echo(f"  centroid {point_text(r['point'])} infeasible: {', '.join(r['violates'])}")
     chosen = data["chosen"]
     click.echo(
-        f"chosen: pinch ({chosen['pinch'][0]:.1f}, {chosen['pinch'][1]:.1f}), order {chosen['order']}, "
+        f"chosen: pinch {point_text(chosen['pinch'])}, order {chosen['order']}, "
         f"{chosen['error_vertices']:.1f} vertices"
     )
     if json_path:

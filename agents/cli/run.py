@@ -8,7 +8,7 @@ import click
 
 from agents.cli import common
 from agents.config import BUDGETS, DEFAULT_BUDGET, DEFAULT_CONTOUR, DEFAULT_SELECTOR, RECIPES
-from agents.methods import SELECTORS
+from agents.methods import SELECTORS, point_text
 from warpcut.sim.config import SimConfig
 
 
@@ -124,13 +124,13 @@ def command(
         )  # fmt: skip
     name, pinch, row = report.contour.name, report.plan.chosen["pinch"], report.row
     click.echo(
-        f"{name}: planned order {list(report.plan.order)}, pinch ({pinch[0]:.1f}, {pinch[1]:.1f}); "
+        f"{name}: planned order {list(report.plan.order)}, pinch {point_text(pinch)}; "
         f"{report.table['trials']} trials, {report.seconds:.0f} s"
     )
     click.echo(f"{'method':<10} {'error (vertices)':>16} {'improvement':>14} {'pinch (mm)':>16}")
     for m in report.methods:
         p = row[f"{m}_pinch"]
-        p_txt = "-" if p is None else f"({p[0]:.1f}, {p[1]:.1f})"
+        p_txt = "-" if p is None else point_text(p)
         imp = row[f"{m}_improvement_pct"]
         imp_txt = f"{imp:+.1f}% ±{row[f'{m}_ci95']:.1f}" if np.isfinite(imp) else "n/a"
         click.echo(f"{m:<10} {row[f'{m}_error_vertices']:>16.1f} {imp_txt:>14} {p_txt:>16}")
@@ -152,5 +152,5 @@ def _policy_title(report, run: Path, out: Path) -> str:
     served = [c for c in report.candidates if c.get("run") == str(run.relative_to(out))]
     if len(served) == 1:
         pinch = served[0]["pinch"]
-        return f"{report.contour.name}, pinch ({pinch[0]:.1f}, {pinch[1]:.1f})"
+        return f"{report.contour.name}, pinch {point_text(pinch)}"
     return f"{report.contour.name}, one policy for {len(served)} pinch candidates"
