@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import random
 import re
 import statistics
@@ -161,6 +162,7 @@ def train(
     finally:
         ending = sys.exc_info()[1]  # the exception that ends the run, if any
         if runner.logger.writer is not None:
+            _log_hparams(runner.logger.writer, cfg, runner)
             runner.logger.writer.close()
         wall_time = time.monotonic() - start_time
         steps_per_iteration = cfg.num_steps_per_env * cfg.num_envs
@@ -216,6 +218,28 @@ def _write_config(
         "nothing was trained yet" if checkpoint is None else f"{checkpoint.name} is intact",
         resumable=checkpoint is not None,
     )
+
+
+def _log_hparams(writer, cfg: TrainConfig, runner: Runner) -> None:
+    """Log the run's settings and outcome to TensorBoard's HPARAMS tab (in the run's own event file, so
+    runs compare side by side): scalar settings of ``cfg`` (lists as text), the last iteration's final
+    error and return, and the kept policy's validation error."""
+    from torch.utils.tensorboard.summary import hparams
+
+    settings = {
+        k: v if isinstance(v, int | float | str | bool) else json.dumps(v) for k, v in asdict(cfg).items()
+    }
+    outcome = {
+        "hparam/final_error": runner.metrics.get("final_error"),
+        "hparam/mean_return": runner.metrics.get("mean_return"),
+        "hparam/validation_error": runner.best_error,
+    }
+    outcome = {k: float(v) for k, v in outcome.items() if v is not None and np.isfinite(v)}
+    file_writer = writer._get_file_writer()  # SummaryWriter.add_hparams would open another run directory
+    for summary in hparams(settings, outcome):
+        file_writer.add_summary(summary)
+    for name, value in outcome.items():
+        writer.add_scalar(name, value, runner.iterations_done)
 
 
 def make_run_dir(path: str | Path) -> Path:

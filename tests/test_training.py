@@ -281,3 +281,11 @@ def _scalars(log_dir, tag: str) -> list:
     events = EventAccumulator(str(log_dir))
     events.Reload()
     return events.Scalars(tag)
+
+
+def test_the_run_logs_its_hyperparameters_for_tensorboard(tmp_path):
+    train(ReachEnv(NUM_ENVS), tiny_config(iterations=2), tmp_path, progress=False, validate=lambda actor: 2.5)
+    events = EventAccumulator(str(tmp_path))
+    events.Reload()
+    assert events.PluginTagToContent("hparams")  # the HPARAMS tab's experiment and session
+    assert [e.value for e in events.Scalars("hparam/validation_error")] == [2.5]
