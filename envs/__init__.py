@@ -8,8 +8,15 @@ Importing this package registers ``warpcut/PatternCut-v0``::
     env = gym.make("warpcut/PatternCut-v0", contour="fls-circle", action_type="discrete")
     vec = gym.make_vec("warpcut/PatternCut-v0", num_envs=64, vectorization_mode="vector_entry_point")
 
-Keyword arguments are the fields of :class:`PatternCutOptions`. The rsl-rl adapter lives in
-:mod:`envs.rsl` (imported on demand: it pulls in torch).
+Keyword arguments are the fields of :class:`PatternCutOptions`, plus ``render_mode`` (``"rgb_array"``,
+``"human"``: :mod:`envs.pattern_cut`) and, for the vector env, ``autoreset_mode`` and ``render_envs``
+(:mod:`envs.vector`). The rsl-rl adapter lives in :mod:`envs.rsl` (imported on demand: it pulls in torch).
+
+Registration: :func:`register_envs`, which importing this package runs, is also the ``warpcut`` entry point
+of the ``gymnasium.envs`` group. Gymnasium 1.x no longer loads that group by itself (0.26 to 0.29 did), so
+a script imports ``envs`` (or names it in the id, ``"envs:warpcut/PatternCut-v0"``). A script's own
+top-level ``agents`` package does not get in the way; its own top-level ``envs`` package, first on
+``sys.path``, hides this one under the same name, and then nothing of ours can be imported by name.
 """
 
 import gymnasium
@@ -21,12 +28,24 @@ from envs.vector import PatternCutVecEnv
 
 ENV_ID = "warpcut/PatternCut-v0"
 
-if ENV_ID not in gymnasium.registry:
+
+def register_envs() -> None:
+    """Register :data:`ENV_ID` with Gymnasium (once; importing this package does it). Also the
+    ``gymnasium.envs`` entry point of the ``warpcut`` distribution, for tools that load that group.
+
+    The entry points are the modules' full names (``envs.pattern_cut:PatternCutEnv``), as this package was
+    imported, so ``gym.make`` and ``gym.make_vec`` build the envs from this package and no other.
+    """
+    if ENV_ID in gymnasium.registry:
+        return
     gymnasium.register(
         id=ENV_ID,
-        entry_point="envs.pattern_cut:PatternCutEnv",
-        vector_entry_point="envs.vector:PatternCutVecEnv",
+        entry_point=f"{PatternCutEnv.__module__}:{PatternCutEnv.__qualname__}",
+        vector_entry_point=f"{PatternCutVecEnv.__module__}:{PatternCutVecEnv.__qualname__}",
     )
+
+
+register_envs()
 
 
 def make(num_envs: int | None = None, **options) -> PatternCutEnv | PatternCutVecEnv:
@@ -34,4 +53,12 @@ def make(num_envs: int | None = None, **options) -> PatternCutEnv | PatternCutVe
     return PatternCutEnv(**options) if num_envs is None else PatternCutVecEnv(num_envs, **options)
 
 
-__all__ = ["ENV_ID", "PatternCut", "PatternCutEnv", "PatternCutOptions", "PatternCutVecEnv", "make"]
+__all__ = [
+    "ENV_ID",
+    "PatternCut",
+    "PatternCutEnv",
+    "PatternCutOptions",
+    "PatternCutVecEnv",
+    "make",
+    "register_envs",
+]

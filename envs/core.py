@@ -268,7 +268,19 @@ def _check_pinch_option(options: PatternCutOptions) -> None:
             )
 
 
+def check_reset_options(options: dict[str, Any] | None, allowed: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The reset ``options`` as a dict; ``ValueError`` naming any key outside ``allowed``."""
+    if options is None:
+        return {}
+    if not isinstance(options, dict):
+        raise ValueError(f"reset: options must be a dict or None (got {type(options).__name__})")
+    unknown = sorted(set(options) - set(allowed), key=str)
+    if unknown:
+        takes = f"it takes only {', '.join(map(repr, allowed))}" if allowed else "this env takes none"
+        raise ValueError(f"reset: unknown options {unknown}; {takes}")
+    return options
+
+
 def reject_reset_options(options: dict[str, Any] | None) -> None:
     """Raise ``ValueError`` for non-empty reset ``options``: these envs take none."""
-    if options:
-        raise ValueError(f"reset: unknown options {sorted(options)}; the pattern-cutting envs take none")
+    check_reset_options(options)

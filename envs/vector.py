@@ -1,36 +1,69 @@
 """The pattern-cutting env natively batched: one :class:`~warpcut.task.CuttingTask` of B sheets.
 
-Autoreset is ``AutoresetMode.SAME_STEP``. All B envs share one episode clock, so every episode ends on
-the same step; the env then resets all of them at once inside that ``step`` and returns the new
-episodes' first observations. Following the Gymnasium spec for same-step autoreset
-(https://farama.org/Vector-Autoreset-Mode), the ending step's observations and score are in
-``info["final_obs"]`` (an object array of B observations) and ``info["final_info"]`` (a dict of (B,)
-arrays), each with its ``"_final_obs"`` / ``"_final_info"`` mask (all True). Every step's info also has
-the per-step ``cut_deviation_mm`` and ``running_path_error_mm2`` of :mod:`envs.core` (of the
-episode that the step ended, where it ended one), with their masks. Same-step rather than
-next-step because a next-step reset would spend a whole ``step`` call of B envs ignoring their actions
-after every episode, and because rsl-rl (:mod:`envs.rsl`) expects resets inside ``step``.
+All B envs share one episode clock, so every episode ends on the same step. How the batch restarts is
+``autoreset_mode`` (https://farama.org/Vector-Autoreset-Mode), ``metadata["autoreset_mode"]``:
+
+``AutoresetMode.SAME_STEP`` (the default):
+    the env resets all envs at once inside the ending ``step`` and returns the new episodes' first
+    observations. The ending step's observations and score are in ``info["final_obs"]`` (an object array
+    of B observations) and ``info["final_info"]`` (a dict of (B,) arrays), each with its ``"_final_obs"`` /
+    ``"_final_info"`` mask (all True). The default because rsl-rl (:mod:`envs.rsl`) expects resets inside
+    ``step``, and because it wastes no step.
+``AutoresetMode.NEXT_STEP``:
+    the ending step returns the final observations, with the score in its ``info`` (each key with its
+    ``_key`` mask); the next ``step`` ignores its actions, resets every env and returns the first
+    observations, zero rewards and no ``terminated`` / ``truncated``. Gymnasium's vector observation
+    wrappers (``gymnasium.wrappers.vector.NormalizeObservation``, ``TransformObservation``,
+    ``DtypeObservation``, ``FlattenObservation``, ...) need it: they refuse SAME_STEP. It costs one extra
+    ``step`` call per episode, the reset that SAME_STEP does inside the ending step anyway: the same
+    simulation work (``tests/test_gym_conventions.py`` counts it; timed, the seconds per episode of a 64-env
+    fls-circle batch are the same within the noise).
+``AutoresetMode.DISABLED``:
+    as NEXT_STEP, but a ``step`` after the episode's end raises ``RuntimeError``: call ``reset()``.
+
+Every step's info has the per-step ``cut_deviation_mm`` and ``running_path_error_mm2`` of :mod:`envs.core`
+(of the episode that the step ended, where it ended one), with their masks.
 
 An env whose simulation diverges (:mod:`envs.core`, "Divergence") is terminated at that step on its own:
-``terminated[env]`` is True, ``info["final_obs"][env]`` is its (zero) observation and ``info["final_info"]``
-holds ``diverged`` (with ``_final_info``, ``_final_obs`` and ``_diverged`` True for the envs that ended
-there); it has no score. It cannot restart before the others (one clock), so until the batch's episode ends
-it idles: zero observations, zero rewards, its actions ignored; at the batch's end it is reset with the
-others, its ``terminated`` True but its ``_final_obs`` and ``_final_info`` False (nothing more to report).
-Every step's info has ``diverged`` (with its mask) once an env has diverged.
+``terminated[env]`` is True and its observation zero; with SAME_STEP ``info["final_obs"][env]`` is that
+observation and ``info["final_info"]`` holds ``diverged`` (with ``_final_info``, ``_final_obs`` and
+``_diverged`` True for the envs that ended there); it has no score. It cannot restart before the others (one
+clock), so until the batch's episode ends it idles: zero observations, zero rewards, its actions ignored; at
+the batch's end it is reset with the others, its ``terminated`` True but (SAME_STEP) its ``_final_obs`` and
+``_final_info`` False, or (NEXT_STEP, DISABLED) its score masks False: nothing more to report. Every step's
+info has ``diverged`` (with its mask) once an env has diverged.
+
+Resets take Gymnasium's forms: ``seed`` is an int, None, or a list of B ints (or of B Nones). The batch has
+one random stream (process noise and fiducials, which differ from env to env), so a list seeds the batch as
+a whole: ``[s, s + 1, ..., s + B - 1]`` (what a ``SyncVectorEnv`` makes of ``seed=s``) is the same as
+``seed=s``, any other list a batch seed derived from all of it (the same list, the same episodes; env k of
+that batch is not the single env seeded with list[k]). ``options={"reset_mask": mask}`` with a (B,) bool
+``mask`` resets every env where it is all True and nothing where it is all False; a partial mask is accepted
+only where each env it names has already ended (diverged: it idles, and restarts with the batch), and then
+resets nothing; any other partial mask is a ``ValueError`` (the envs cannot restart one by one). No other
+reset options exist.
+
+Rendering: ``render_mode="rgb_array"`` makes :meth:`PatternCutVecEnv.render` return a tuple of images, one
+per env of the first ``render_envs`` (default: all B, Gymnasium's convention, which its vector
+``RecordVideo`` needs), each (H, W, 3) uint8 as :class:`~envs.pattern_cut.PatternCutEnv` draws it, a few ms
+per env; without a render mode nothing is drawn and nothing is spent.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from envs.core import PatternCut, reject_reset_options
+from envs.core import PatternCut, check_reset_options
 from envs.options import PatternCutOptions
+from envs.pattern_cut import check_render_mode, step_fps
 from warpcut.task import CuttingTask
+
+VECTOR_RENDER_MODES = ["rgb_array"]
 
 
 class PatternCutVecEnv(VectorEnv):
@@ -40,14 +73,47 @@ class PatternCutVecEnv(VectorEnv):
         num_envs: Batch size B.
         options: The scenario; keyword arguments (any :class:`~envs.options.PatternCutOptions` field)
             replace its fields. Per-env lists (contours, physical parameters, pinch points) have length B.
+        autoreset_mode: ``AutoresetMode.SAME_STEP`` (default), ``NEXT_STEP`` or ``DISABLED``, or its value
+            (``"SameStep"``, ...) or name (``"next_step"``, ...); module docstring.
+        render_mode: ``None`` or ``"rgb_array"`` (module docstring).
+        render_envs: How many envs :meth:`render` draws, the first ones; default all.
+        render_size: Rendered image size in pixels: ``N`` (square) or ``(width, height)``.
+        render_view: The rendering camera, ``"top"`` or ``"three-quarter"``.
 
-    ``reset(seed=...)`` takes one int (not a list): it seeds the process noise and the fiducials of all
-    envs, which differ from env to env. Actions are (B,) indices (discrete) or (B, A) moves (continuous).
+    ``reset(seed=..., options=...)`` takes Gymnasium's forms (module docstring). Actions are (B,) indices
+    (discrete) or (B, A) moves (continuous).
     """
 
-    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
+    metadata = {
+        "autoreset_mode": AutoresetMode.SAME_STEP,
+        "render_modes": VECTOR_RENDER_MODES,
+        "render_fps": 31,
+    }
 
-    def __init__(self, num_envs: int = 1, options: PatternCutOptions | None = None, **kwargs: Any):
+    def __init__(
+        self,
+        num_envs: int = 1,
+        options: PatternCutOptions | None = None,
+        *,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
+        render_mode: str | None = None,
+        render_envs: int | None = None,
+        render_size: int | tuple[int, int] = 256,
+        render_view: str = "top",
+        **kwargs: Any,
+    ):
+        self.autoreset_mode = _autoreset_mode(autoreset_mode)
+        check_render_mode(render_mode, VECTOR_RENDER_MODES)
+        if render_envs is not None and (
+            isinstance(render_envs, bool) or not isinstance(render_envs, int | np.integer) or render_envs < 1
+        ):
+            raise ValueError(
+                f"render_envs: must be an integer >= 1 or None for all envs (got {render_envs!r})"
+            )
+        if render_mode is not None:
+            from warpcut.viz.render import check_render_settings
+
+            check_render_settings(render_size, render_view, prefix="render_")
         self.options = PatternCutOptions.build(options, **kwargs)
         self.num_envs = num_envs
         self.scene = PatternCut(self.options, num_envs)
@@ -55,8 +121,21 @@ class PatternCutVecEnv(VectorEnv):
         self.single_action_space = self.scene.action_space
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
+        self.metadata = {
+            **type(self).metadata,
+            "autoreset_mode": self.autoreset_mode,
+            "render_modes": list(VECTOR_RENDER_MODES),
+            "render_fps": step_fps(self.options),
+        }
+        self.render_mode = render_mode
+        self.render_envs = num_envs if render_envs is None else min(int(render_envs), num_envs)
+        self._render_args = {"size": render_size, "view": render_view}
+        self._renderer = None
         self._started = False
+        self._over = False
+        """The batch's episode ended (NEXT_STEP: the next step resets; DISABLED: reset() must)."""
         self._ended = np.zeros(num_envs, dtype=bool)
+        self._obs: np.ndarray | None = None
 
     @property
     def task(self) -> CuttingTask:
@@ -64,23 +143,30 @@ class PatternCutVecEnv(VectorEnv):
         return self.scene.task
 
     def reset(
-        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
-        """Reset every env; a ``seed`` also redraws the fiducials. There are no reset ``options``."""
-        if seed is not None and not isinstance(seed, int | np.integer):
-            raise TypeError(f"reset: seed must be one int for the whole batch (got {type(seed).__name__})")
-        super().reset(seed=None if seed is None else int(seed))
-        reject_reset_options(options)
-        self._started = True
+        """Reset every env (or, with ``options["reset_mask"]``, as the module docstring says); a ``seed``
+        also redraws the fiducials."""
+        options = check_reset_options(options, allowed=("reset_mask",))
+        seed = batch_seed(seed, self.num_envs)
+        if "reset_mask" in options and not self._resets_all(options["reset_mask"]):
+            return self._obs, {}
+        super().reset(seed=seed)
+        self._started, self._over = True, False
         self._ended[:] = False
-        return self.scene.reset(self.np_random, seed is not None or self.options.resample_fiducials), {}
+        self._obs = self.scene.reset(self.np_random, seed is not None or self.options.resample_fiducials)
+        return self._obs, {}
 
     def step(
         self, actions: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-        """Step every env; at the episode's end, reset them all in the same call (module docstring)."""
+        """Step every env; at the episode's end, reset them as ``autoreset_mode`` says (module docstring)."""
         if not self._started:
             raise RuntimeError("step: call reset() first")
+        if self._over:
+            if self.autoreset_mode is AutoresetMode.NEXT_STEP:
+                return self._reset_step()
+            raise RuntimeError("step: the episode is over and autoreset_mode is DISABLED; call reset() first")
         obs, rewards, terminated, truncated, info = self.scene.step(actions)
         b = self.num_envs
         every_env = np.ones(b, dtype=bool)
@@ -88,18 +174,72 @@ class PatternCutVecEnv(VectorEnv):
         infos: dict[str, Any] = {k: info[k] for k in step_keys}
         infos.update({f"_{k}": every_env for k in step_keys})
         ended = np.full(b, terminated)
+        same_step = self.autoreset_mode is AutoresetMode.SAME_STEP
         if terminated or truncated:
             ending = ~self._ended  # envs that ended earlier (diverged) have nothing more to report
-            final_info = {**info, **{f"_{k}": ending.copy() for k in info}}
-            infos |= self._final(obs, ending, final_info)
-            obs = self.scene.reset(self.np_random, self.options.resample_fiducials)
-            self._ended[:] = False
+            if same_step:
+                final_info = {**info, **{f"_{k}": ending.copy() for k in info}}
+                infos |= self._final(obs, ending, final_info)
+                obs = self.scene.reset(self.np_random, self.options.resample_fiducials)
+                self._ended[:] = False
+            else:  # the score in this step's info; the next step (NEXT_STEP) or reset() restarts
+                score_keys = [k for k in info if k not in step_keys]
+                infos |= {k: info[k] for k in score_keys} | {f"_{k}": ending.copy() for k in score_keys}
+                self._ended[:] = True
+                self._over = True
         elif self.scene.newly_diverged.any():
             newly = self.scene.newly_diverged.copy()
             ended |= newly
             self._ended |= newly
-            infos |= self._final(obs, newly, {"diverged": info["diverged"], "_diverged": newly.copy()})
+            if same_step:
+                infos |= self._final(obs, newly, {"diverged": info["diverged"], "_diverged": newly.copy()})
+        self._obs = obs
         return obs, rewards, ended, np.full(b, truncated), infos
+
+    def render(self) -> tuple[np.ndarray, ...] | None:
+        """Images of the first ``render_envs`` envs as they are now, each (H, W, 3) uint8, in
+        ``render_mode="rgb_array"``; without a render mode, a warning and None."""
+        if self.render_mode is None:
+            gym.logger.warn(
+                "render: the vector env was made without a render_mode; make it with render_mode='rgb_array'"
+            )
+            return None
+        if self._renderer is None:  # built at the first render: no cost without rendering
+            from warpcut.viz.render import TaskRenderer
+
+            self._renderer = TaskRenderer(self.task, envs=self.render_envs, **self._render_args)
+        return tuple(self._renderer.render())
+
+    def _reset_step(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """NEXT_STEP's step after the episode's end: every env restarts, its action ignored."""
+        b = self.num_envs
+        self._obs = self.scene.reset(self.np_random, self.options.resample_fiducials)
+        self._ended[:] = False
+        self._over = False
+        none = np.zeros(b, dtype=bool)
+        return self._obs, np.zeros(b), none, none.copy(), {}
+
+    def _resets_all(self, mask: Any) -> bool:
+        """Whether ``options["reset_mask"]`` resets every env (True) or none (False); ``ValueError`` for a
+        mask the one episode clock cannot honour (module docstring)."""
+        mask = np.asarray(mask)
+        if mask.shape != (self.num_envs,) or mask.dtype != bool:
+            raise ValueError(
+                f"reset: options['reset_mask'] must be a ({self.num_envs},) bool array, one flag per env "
+                f"(got {mask.dtype} {mask.shape})"
+            )
+        if mask.all():
+            return True
+        if not self._started:
+            raise ValueError("reset: the first reset resets every env; leave out options['reset_mask']")
+        alive = mask & ~self._ended
+        if alive.any():
+            raise ValueError(
+                f"reset: options['reset_mask'] names envs {np.flatnonzero(alive).tolist()} whose episode "
+                "has not ended, but not every env; the envs share one episode clock and restart together: "
+                "reset all of them (a mask of all True, or no options)"
+            )
+        return False
 
     @staticmethod
     def _final(obs: np.ndarray, ending: np.ndarray, final_info: dict[str, Any]) -> dict[str, Any]:
@@ -113,3 +253,42 @@ class PatternCutVecEnv(VectorEnv):
             "final_info": final_info,
             "_final_info": ending.copy(),
         }
+
+
+def batch_seed(seed: Any, num_envs: int) -> int | None:
+    """The batch's one seed for a Gymnasium ``reset(seed=...)``: None, an int, or a list of ``num_envs``
+    ints (or all None); ``ValueError`` naming ``seed`` otherwise (module docstring)."""
+    if seed is None:
+        return None
+    if isinstance(seed, int | np.integer) and not isinstance(seed, bool):
+        return int(seed)
+    form = f"an int, a list of {num_envs} ints (one per env) or None"
+    if isinstance(seed, str | bytes | bool | float) or not hasattr(seed, "__len__"):
+        raise ValueError(f"reset: seed must be {form} (got {seed!r})")
+    seeds = list(seed)
+    if len(seeds) != num_envs:
+        raise ValueError(f"reset: seed lists {len(seeds)} seeds for {num_envs} envs; give {form}")
+    if all(s is None for s in seeds):
+        return None
+    if any(isinstance(s, bool) or not isinstance(s, int | np.integer) or s < 0 for s in seeds):
+        raise ValueError(
+            f"reset: seed {seeds} mixes non-negative ints with other values; give an int for every env, or "
+            "None for all: the batch has one random stream"
+        )
+    seeds = [int(s) for s in seeds]
+    if seeds == list(range(seeds[0], seeds[0] + num_envs)):
+        return seeds[0]
+    return int(np.random.SeedSequence(seeds).generate_state(1)[0])
+
+
+def _autoreset_mode(mode: AutoresetMode | str) -> AutoresetMode:
+    if isinstance(mode, AutoresetMode):
+        return mode
+    for candidate in AutoresetMode:
+        if isinstance(mode, str) and mode.replace("-", "_").lower() in (
+            candidate.value.lower(),
+            candidate.name.lower(),
+        ):
+            return candidate
+    names = ", ".join(f"AutoresetMode.{m.name}" for m in AutoresetMode)
+    raise ValueError(f"autoreset_mode: choose one of {names} (or their values), got {mode!r}")

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from agents.cli import common
+from agents.cli.video import video_option, videos, with_videos
 from agents.config import EVALUATION_CANDIDATES, EVALUATION_TRIALS, RECIPES, TrainConfig
 from agents.methods import METHODS
 from warpcut.sim.config import SimConfig
@@ -63,6 +64,7 @@ from warpcut.sim.config import SimConfig
 @common.arm_length_option
 @common.analytic_pinch_option
 @common.record_option("in the run directory; of the first contour, at most --trials envs")
+@video_option
 @common.plots_option(
     "improvement.png/svg, regions/CONTOUR.png/svg and plans/CONTOUR.png/svg in the run directory, and "
     "policies/CONTOUR/learning_curve.png/svg when training"
@@ -91,6 +93,7 @@ def command(
     markdown_path: Path | None,
     record_envs: int | None,
     colour_by: str,
+    video_envs: int | None,
     no_plots: bool,
 ) -> None:
     """The paper's Table I: per contour the no-tension error and each method's improvement (95% CI)."""
@@ -106,10 +109,17 @@ def command(
             err=True,
         )
         record_envs = trials
+    if video_envs is not None and video_envs > trials:
+        click.echo(
+            f"warning: --video {video_envs}: the first contour has only {trials} env(s) per method "
+            f"(--trials); filming {trials}",
+            err=True,
+        )
+        video_envs = trials
     common.check_outputs({"--json": json_path, "--markdown": markdown_path}, list(contour_args))
     out, claim = common.claim(out, "evaluate", resume, overwrite)
     cuts = common.final_cuts(no_plots)
-    with claim, common.recorder(out, record_envs, colour_by) as rec:
+    with claim, common.recorder(out, record_envs, colour_by) as rec, videos(out, video_envs) as vid:
         report = evaluate_table(
             contour_args, out, resume=resume, methods=names, trials=trials,
             config=SimConfig(noise_std=noise, score=score),
@@ -118,7 +128,7 @@ def command(
             plan=plan,
             candidates=candidates,
             arm=ArmModel(length_mm=arm_length), analytic_pinch=analytic_pinch, device=device,
-            seed=seed, log=common.log, step_callbacks=common.step_callbacks(rec, cuts),
+            seed=seed, log=common.log, step_callbacks=with_videos(common.step_callbacks(rec, cuts), vid),
         )  # fmt: skip
     table = report.markdown()
     click.echo(table)

@@ -29,6 +29,7 @@ from agents.cli.common import (
     seed_option,
     step_callbacks,
 )
+from agents.cli.video import video_option, videos, with_videos
 from agents.methods import BASELINES
 from warpcut.sim.config import FIXTURES, SimConfig
 
@@ -48,6 +49,7 @@ from warpcut.sim.config import FIXTURES, SimConfig
 @seed_option
 @json_option
 @record_option("next to --json, or in logs/simulate-TIMESTAMP")
+@video_option
 @plots_option("regions.png/svg next to --json, or in logs/simulate-TIMESTAMP")
 def command(
     contour_name: str,
@@ -63,6 +65,7 @@ def command(
     json_path: Path | None,
     record_envs: int | None,
     colour_by: str,
+    video_envs: int | None,
     no_plots: bool,
 ) -> None:
     """Cut a contour with each baseline tensioner and compare their errors."""
@@ -77,10 +80,10 @@ def command(
     out = json_path.parent if json_path else run_dir(None, "simulate")
     cuts = final_cuts(no_plots)
     start = time.perf_counter()
-    with recorder(out, record_envs, colour_by) as rec:
+    with recorder(out, record_envs, colour_by) as rec, videos(out, video_envs) as vid:
         report = compare_policies(
             contour, names, trials=trials, config=config, pinch=point, device=device, seed=seed,
-            step_callbacks=step_callbacks(rec, cuts),
+            step_callbacks=with_videos(step_callbacks(rec, cuts), vid),
         )  # fmt: skip
     elapsed = time.perf_counter() - start
     click.echo(

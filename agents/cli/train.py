@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from agents.cli import common
+from agents.cli.video import video_option, videos, with_videos
 from agents.config import EVALUATION_TRIALS, RECIPE, VALIDATION_TRIALS, TrainConfig
 from warpcut.sim.config import SimConfig
 
@@ -107,6 +108,7 @@ RESUMED_FLAGS = {
     "--overwrite", is_flag=True, help="Replace the contents of --out (an earlier run's) instead of refusing."
 )
 @common.record_option("of the final evaluation, in the run directory")
+@video_option
 @common.plots_option("learning_curve.png/svg in the run directory")
 @click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
 def command(
@@ -131,6 +133,7 @@ def command(
     overwrite: bool,
     record_envs: int | None,
     colour_by: str,
+    video_envs: int | None,
     no_plots: bool,
     no_progress: bool,
 ) -> None:
@@ -182,10 +185,11 @@ def command(
     out, claim = common.claim(out, "train", resume is not None, overwrite)
     click.echo(f"training {name} into {out} ({num_envs} envs, {iterations} iterations, {device})")
     try:
-        with claim, common.recorder(out, record_envs, colour_by) as rec:
+        with claim, common.recorder(out, record_envs, colour_by) as rec, videos(out, video_envs) as vid:
             result = train_contour(
                 options, out, cfg, resume=resume, eval_trials=eval_trials, progress=not no_progress,
-                validation_trials=validation_trials, step_callbacks=common.step_callbacks(rec, None),
+                validation_trials=validation_trials,
+                step_callbacks=with_videos(common.step_callbacks(rec, None), vid),
             )  # fmt: skip
     except KeyboardInterrupt as stop:  # Ctrl-C, SIGTERM, SIGHUP: the checkpoint is saved
         if not (out / "summary.json").is_file():
