@@ -288,6 +288,7 @@ def _row(name: str, k: int, results: dict[str, MethodResult], shown: list[str]) 
         "contour": name,
         "none_error_vertices": float(none.error_vertices[k].mean()),
         "none_error_mm2": float(none.error_mm2[k].mean()),
+        "none_trials_error_vertices": [float(e) for e in none.error_vertices[k]],
     }
     for method in shown:
         result = results[method]

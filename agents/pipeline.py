@@ -294,7 +294,8 @@ def run_pipeline(
     )  # fmt: skip
     start = time.perf_counter()
 
-    log(f"[1/3] planning {loaded.name}: {settings['candidates']} pinch candidates")
+    sampled = f"{settings['candidates']} sampled pinch candidates (+ the centroid if feasible)"
+    log(f"[1/3] planning {loaded.name}: {sampled}")
     plan = plan_cut(
         loaded, config, num_candidates=settings["candidates"], seed=seed, device=device, arm=arm or ArmModel()
     )

@@ -9,7 +9,7 @@ import re
 
 import numpy as np
 import pytest
-from shapely.geometry import LinearRing, LineString, Point
+from shapely.geometry import LinearRing, LineString, Point, Polygon
 
 from warpcut.contours import (
     Contour,
@@ -348,22 +348,190 @@ def test_unsupported_file_type(tmp_path):
         load_contour(write(tmp_path, "shape.txt", "M 0 0"))
 
 
-def test_svg_arc_is_unsupported(tmp_path):
-    path = write(tmp_path, "arc.svg", '<svg><path d="M 20 50 A 10 10 0 0 1 40 50 Z"/></svg>')
-    with pytest.raises(ContourError, match=r"SVG arcs \(A/a commands\) are unsupported; convert them"):
-        load_contour(path)
-
-
 def test_svg_with_several_subpaths(tmp_path):
     path = write(tmp_path, "two.svg", '<svg><path d="M 20 20 h 10 v 10 z M 50 50 h 10 v 10 z"/></svg>')
     with pytest.raises(ContourError, match="several subpaths; give one contour per file"):
         load_contour(path)
 
 
-def test_svg_transform_is_refused(tmp_path):
+def centre(contour) -> np.ndarray:
+    return np.asarray(Polygon(contour.points).centroid.coords[0])
+
+
+def test_svg_arcs_are_flattened(tmp_path):
+    # A half disc of radius 20 above y_svg = 50 (sweep flag 1: clockwise on the page, through y_svg = 30).
+    path = write(tmp_path, "arc.svg", '<svg><path d="M 30 50 A 20 20 0 0 1 70 50 Z"/></svg>')
+    contour = load_contour(path)
+    assert contour.closed and contour.area_mm2 == pytest.approx(math.pi * 400 / 2, rel=1e-3)
+    np.testing.assert_allclose(contour.points.max(axis=0), [70.0, 70.0], atol=1e-9)
+    np.testing.assert_allclose(contour.points.min(axis=0), [30.0, 50.0], atol=1e-9)
+    steps = np.linalg.norm(np.diff(contour.points, axis=0), axis=1)
+    assert steps[steps < 39].max() <= 0.5  # the arc is flattened; the straight side stays whole
+
+
+@pytest.mark.parametrize(
+    ("element", "closed", "area", "centroid"),
+    [
+        ('<circle cx="50" cy="40" r="20"/>', True, math.pi * 400, (50, 60)),
+        ('<ellipse cx="50" cy="50" rx="30" ry="10"/>', True, math.pi * 300, (50, 50)),
+        ('<rect x="20" y="30" width="40" height="20"/>', True, 800, (40, 60)),
+        ('<rect x="20" y="30" width="40" height="20" rx="5"/>', True, 800 - (4 - math.pi) * 25, (40, 60)),
+        ('<polygon points="20,20 80,20 50,70"/>', True, 1500, (50, 100 - 110 / 3)),
+        ('<polyline points="0,50 50,40 100,50"/>', False, None, None),
+    ],
+    ids=["circle", "ellipse", "rect", "rounded-rect", "polygon", "polyline"],
+)
+def test_svg_shapes(tmp_path, element, closed, area, centroid):
+    contour = load_contour(
+        write(tmp_path, "shape.svg", f'<svg xmlns="http://www.w3.org/2000/svg">{element}</svg>')
+    )
+    assert contour.closed is closed
+    if closed:
+        assert contour.area_mm2 == pytest.approx(area, rel=1e-3)
+        np.testing.assert_allclose(centre(contour), centroid, atol=1e-6)
+    else:
+        np.testing.assert_allclose(contour.points, [[0, 50], [50, 60], [100, 50]])
+
+
+def test_svg_transforms_apply(tmp_path):
     text = '<svg><g transform="translate(5)"><path d="M 20 20 h 9 v 9 z"/></g></svg>'
-    path = write(tmp_path, "moved.svg", text)
-    with pytest.raises(ContourError, match="has a transform"):
+    contour = load_contour(write(tmp_path, "moved.svg", text))
+    np.testing.assert_allclose(contour.points.min(axis=0), [25.0, 71.0])
+    # Nested: scale by 2 about the origin, then rotate 90 degrees about (50, 50) (page coordinates).
+    text = (
+        '<svg><g transform="rotate(90 50 50)"><g transform="scale(2)">'
+        '<rect x="10" y="10" width="10" height="5"/></g></g></svg>'
+    )
+    contour = load_contour(write(tmp_path, "turned.svg", text))
+    # The rect spans page x 20..40, y 20..30; turned: x 70..80, y 20..40; on the sheet y 60..80.
+    np.testing.assert_allclose(contour.points.min(axis=0), [70.0, 60.0], atol=1e-9)
+    np.testing.assert_allclose(contour.points.max(axis=0), [80.0, 80.0], atol=1e-9)
+
+
+def test_svg_use_nested_svg_and_hidden_shapes(tmp_path):
+    text = (
+        '<svg xmlns="http://www.w3.org/2000/svg" xmlns:xlink="http://www.w3.org/1999/xlink">'
+        '<defs><circle id="c" cx="20" cy="20" r="10"/></defs>'
+        '<rect x="1" y="1" width="5" height="5" style="display:none"/>'
+        '<use xlink:href="#c" x="30" y="10"/></svg>'
+    )
+    contour = load_contour(write(tmp_path, "use.svg", text))
+    np.testing.assert_allclose(centre(contour), [50.0, 70.0], atol=1e-6)
+    text = (
+        '<svg><svg x="10" y="10" width="40" height="40" viewBox="0 0 10 10">'
+        '<rect x="2" y="2" width="5" height="5"/></svg></svg>'
+    )
+    contour = load_contour(write(tmp_path, "nested.svg", text))
+    np.testing.assert_allclose(contour.points.min(axis=0), [18.0, 62.0], atol=1e-9)
+    assert contour.area_mm2 == pytest.approx(400.0)
+
+
+@pytest.mark.parametrize(
+    ("root", "lower_left", "side"),
+    [
+        # A physical width and height: the viewBox maps onto them (here 2 user units per mm).
+        ('width="50mm" height="50mm" viewBox="0 0 100 100"', (10.0, 80.0), 5.0),
+        ('width="5cm" height="5cm" viewBox="0 0 100 100"', (10.0, 80.0), 5.0),
+        # preserveAspectRatio (default xMidYMid meet): 0.5 mm per unit, centred across the 100 mm width.
+        ('width="100mm" height="50mm" viewBox="0 0 100 100"', (35.0, 80.0), 5.0),
+        (
+            'width="100mm" height="50mm" viewBox="0 0 100 100" preserveAspectRatio="none"',
+            (20.0, 80.0),
+            (10, 5),
+        ),
+        (
+            'width="100mm" height="50mm" viewBox="0 0 100 100" preserveAspectRatio="xMinYMin"',
+            (10.0, 80.0),
+            5.0,
+        ),
+        # Not physical (px, plain numbers, no viewBox): a user unit is a mm, the viewBox's origin the corner.
+        ('width="50px" height="50px" viewBox="0 0 100 100"', (20.0, 60.0), 10.0),
+        ('width="50" height="50" viewBox="-10 0 100 100"', (30.0, 60.0), 10.0),
+        ('width="50mm" height="50mm"', (20.0, 60.0), 10.0),
+    ],
+)
+def test_svg_units(tmp_path, root, lower_left, side):
+    text = (
+        f'<svg xmlns="http://www.w3.org/2000/svg" {root}><rect x="20" y="30" width="10" height="10"/></svg>'
+    )
+    contour = load_contour(write(tmp_path, "units.svg", text))
+    np.testing.assert_allclose(contour.points.min(axis=0), lower_left, atol=1e-9)
+    np.testing.assert_allclose(np.ptp(contour.points, axis=0), np.broadcast_to(side, 2), atol=1e-9)
+
+
+def test_svg_lengths_with_units_inside(tmp_path):
+    # Without a physical size, a length in mm is that many mm; with one, CSS's 96 px per inch applies.
+    contour = load_contour(write(tmp_path, "r.svg", '<svg><circle cx="50" cy="50" r="5mm"/></svg>'))
+    assert contour.area_mm2 == pytest.approx(math.pi * 25, rel=2e-3)  # flattened: a polygon inside
+    text = '<svg width="100mm" height="100mm" viewBox="0 0 100 100"><circle cx="50" cy="50" r="0.1in"/></svg>'
+    contour = load_contour(write(tmp_path, "in.svg", text))
+    assert contour.area_mm2 == pytest.approx(math.pi * 9.6**2, rel=1e-3)
+
+
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        (
+            '<path d="M 10 10 L 20"/>',
+            r"cannot read the path data at character \d+ .*: a command is cut short",
+        ),
+        ('<path d="M 10 10 X 20 20"/>', r"cannot read the path data at character 8 \(near 'X 20 20'\)"),
+        ('<path d="M 10 10 L 20 20 30 10 Z 40 40"/>', "cannot read the path data"),
+        (
+            '<path d="L 10 10 20 20 30 10 Z"/>',
+            r"path data must start with a moveto \(M or m\), not 'L 10 10 20 2'",
+        ),
+        ('<text x="5" y="5">a</text>', r"no shape to read \(<path>, <circle>"),
+        ('<defs><circle cx="50" cy="50" r="10"/></defs>', "no shape to read"),
+        (
+            '<g id="a"><use xmlns:xlink="http://www.w3.org/1999/xlink" xlink:href="#a"/></g>',
+            r"cannot read the drawing \(maximum recursion depth",
+        ),
+        ('<circle cx="50" cy="50" r="1e100"/>', r"a curve of the path leaves the sheet by 1e\+100 mm"),
+        (
+            '<circle cx="50" cy="50" r="1e300"/>',
+            "the path reaches a coordinate too large to be a number of mm",
+        ),
+        (
+            '<ellipse cx="50" cy="50" rx="1e999" ry="5"/>',
+            "the path reaches a coordinate too large to be a number of mm",
+        ),
+        (
+            '<g transform="scale(1e100)"><circle cx="50" cy="50" r="10"/></g>',
+            "a curve of the path leaves the sheet by 6e\\+101 mm",
+        ),
+    ],
+    ids=[
+        "cut-short",
+        "unknown-command",
+        "after-close",
+        "no-moveto",
+        "text",
+        "defs",
+        "recursive-use",
+        "huge-circle",
+        "overflowing-circle",
+        "infinite-ellipse",
+        "huge-transform",
+    ],
+)
+def test_svg_errors_name_the_file_on_one_line(tmp_path, body, message):
+    path = write(tmp_path, "bad.svg", f"<svg>{body}</svg>")
+    with pytest.raises(ContourError, match=rf"^contour file '{re.escape(str(path))}': {message}") as caught:
+        load_contour(path)
+    assert "\n" not in str(caught.value)
+
+
+@pytest.mark.parametrize(
+    ("root", "message"),
+    [
+        ('width="0mm" height="50mm" viewBox="0 0 10 10"', r"the svg's width '0mm' must be a positive length"),
+        ('width="50mm" height="50mm" viewBox="0 0 0 10"', r"viewBox '0 0 0 10' has a width or height <= 0"),
+    ],
+)
+def test_svg_bad_physical_size(tmp_path, root, message):
+    path = write(tmp_path, "size.svg", f'<svg {root}><path d="M 1 1 h 5 v 5 z"/></svg>')
+    with pytest.raises(ContourError, match=message):
         load_contour(path)
 
 

@@ -1,11 +1,16 @@
-"""Plots: the learning curve, the pinch candidate map and the cut regions (files written, PNGs decode,
-feasibility agrees, the regions show the first trial of each contour)."""
+"""Plots: the Table I figure, the learning curve, the pinch candidate map and the cut regions (files
+written, PNGs decode, feasibility agrees, the regions show the first trial of each contour, confidence
+intervals stay at or below 100%, legends sit outside the axes and match what is drawn)."""
 
 import math
 
 import numpy as np
 import pytest
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.collections import PathCollection
 from matplotlib.image import imread
+from matplotlib.lines import Line2D
+from scipy import stats
 
 from warpcut.contours import load_contour
 from warpcut.planning import ArmModel, Plan, pinch_feasible, plan_cut
@@ -13,7 +18,15 @@ from warpcut.sim.config import SimConfig
 from warpcut.task import CuttingTask
 from warpcut.viz.plots import (
     FinalCuts,
+    aggregate_improvements,
+    bootstrap_mean_ci,
+    candidate_counts,
+    candidate_summary,
     feasible_grid,
+    improvement_figure,
+    learning_curve_figure,
+    pinch_candidates_figure,
+    plot_improvements,
     plot_learning_curve,
     plot_pinch_candidates,
     plot_regions,
@@ -146,3 +159,178 @@ def test_regions_of_a_two_contour_batch(tmp_path):
         plot_regions({"a": cuts.of("fls-circle")["none"], "b": cuts.of("s-curve")["none"]}, tmp_path)
     with pytest.raises(ValueError, match="no cuts"):
         plot_regions(cuts.of("missing"), tmp_path)
+
+
+# ------------------------------------------------------------------------------------------ Table I figure
+
+
+def suite_report(contours: int, trials: int, seed: int = 0, with_trials: bool = True) -> dict:
+    """An evaluate_suite-like report: none, fixed (about 80% better) and analytic (near 100%) per trial,
+    with the table's Student t half-widths."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for c in range(contours):
+        none = rng.uniform(8.0, 14.0, trials)
+        row = {"contour": f"shape-{c}", "none_error_vertices": float(none.mean())}
+        if with_trials:
+            row["none_trials_error_vertices"] = none.tolist()
+        for method, spread in (("fixed", 0.4), ("analytic", 0.06)):
+            errors = none * rng.uniform(0.0, spread, trials)
+            improvement = 100 * (none - errors) / none
+            half = (
+                stats.t.ppf(0.975, trials - 1) * improvement.std(ddof=1) / np.sqrt(trials)
+                if trials > 1
+                else 0
+            )
+            row[f"{method}_improvement_pct"] = float(improvement.mean())
+            row[f"{method}_ci95"] = float(half)
+            if with_trials:
+                row[f"{method}_trials_error_vertices"] = errors.tolist()
+        rows.append(row)
+    return {"rows": rows, "mean": {}, "trials": trials, "score": "path"}
+
+
+def drawn(fig):
+    FigureCanvasAgg(fig).draw()
+    return fig
+
+
+def whisker_tops(ax) -> list[float]:
+    return [float(s[:, 1].max()) for c in ax.collections for s in c.get_segments() if len(s)]
+
+
+def assert_legend_outside_the_axes(fig):
+    renderer = fig.canvas.get_renderer()
+    (legend,) = fig.legends
+    box = legend.get_window_extent(renderer)
+    for ax in fig.axes:
+        assert not box.overlaps(ax.get_window_extent(renderer)), ax.get_title()
+
+
+def test_improvement_intervals_never_pass_100_percent_and_say_how_they_were_made(tmp_path):
+    report = suite_report(contours=4, trials=2)
+    # The table's t interval with 1 degree of freedom reaches far beyond 100% here.
+    assert any(r["analytic_improvement_pct"] + r["analytic_ci95"] > 100 for r in report["rows"])
+    fig = drawn(improvement_figure(report, ["none", "fixed", "analytic"]))
+    bars, aggregate = fig.subfigs
+    (ax,) = bars.axes
+    tops = whisker_tops(ax)
+    assert len(tops) == 4 * 2 and max(tops) <= 100.0
+    assert "percentile bootstrap over trials (10,000 resamples)" in ax.get_title()
+    assert [t.get_text() for t in ax.get_xticklabels()] == [f"shape-{c}" for c in range(4)]  # no mean group
+    assert [a.get_title() for a in aggregate.axes] == ["mean", "IQM"]
+    assert "bootstrap over\ncontours and their trials" in aggregate._suptitle.get_text()
+    for bar_axes in aggregate.axes:  # every interval's right end
+        assert max(p.get_x() + p.get_width() for p in bar_axes.patches) <= 100.0
+    assert_legend_outside_the_axes(fig)
+    paths = plot_improvements(report, ["none", "fixed", "analytic"], tmp_path)
+    assert_figure(paths, tmp_path, "improvement")
+
+
+def test_improvement_of_one_contour_has_no_mean_group_and_old_reports_get_clipped_t_intervals():
+    report = suite_report(contours=1, trials=3, with_trials=False)
+    row = report["rows"][0]
+    row["analytic_ci95"] = 50.0  # a wide table interval: clipped at 100%
+    fig = drawn(improvement_figure(report, ["none", "fixed", "analytic"]))
+    assert not fig.subfigs and len(fig.axes) == 1
+    (ax,) = fig.axes
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["shape-0"]
+    assert "Student t interval, clipped at 100%" in ax.get_title()
+    assert max(whisker_tops(ax)) == 100.0
+    assert_legend_outside_the_axes(fig)
+    # One trial: no interval at all, and the figure says so.
+    fig = drawn(improvement_figure(suite_report(contours=2, trials=1), ["fixed"]))
+    assert not whisker_tops(fig.subfigs[0].axes[0])
+    assert "no whisker where a contour has one trial" in fig.subfigs[0].axes[0].get_title()
+
+
+def test_bootstrap_mean_ci():
+    assert bootstrap_mean_ci([5.0]) is None and bootstrap_mean_ci([np.nan, 3.0]) is None
+    assert bootstrap_mean_ci([90.0, 100.0]) == (90.0, 100.0)  # two values: the mean lies between them
+    values = np.random.default_rng(1).normal(50.0, 10.0, 40)
+    low, high = bootstrap_mean_ci(values)
+    assert values.min() <= low < values.mean() < high <= values.max()
+    half = stats.t.ppf(0.975, 39) * values.std(ddof=1) / np.sqrt(40)
+    assert high - low == pytest.approx(2 * half, rel=0.15)  # close to the t interval for many trials
+    assert bootstrap_mean_ci(values) == (low, high)  # seeded
+
+
+def test_aggregate_improvements_mean_and_iqm():
+    report = suite_report(contours=6, trials=3, seed=2)
+    result = aggregate_improvements(report, ["fixed", "analytic"])
+    for method in ("fixed", "analytic"):
+        per_trial = [
+            100
+            * (np.array(r["none_trials_error_vertices"]) - r[f"{method}_trials_error_vertices"])
+            / np.array(r["none_trials_error_vertices"])
+            for r in report["rows"]
+        ]
+        mean, iqm = result[method]["mean"], result[method]["iqm"]
+        assert mean[0] == pytest.approx(np.mean([r[f"{method}_improvement_pct"] for r in report["rows"]]))
+        assert iqm[0] == pytest.approx(stats.trim_mean(np.concatenate(per_trial), 0.25))
+        for point, low, high in (mean, iqm):
+            assert low <= point <= high <= 100.0
+        assert (result[method]["contours"], result[method]["scores"]) == (6, 18)
+    assert result["analytic"]["mean"][1] > result["fixed"]["mean"][2]  # clearly apart here
+    nothing = aggregate_improvements({"rows": [{"fixed_improvement_pct": float("nan")}]}, ["fixed"])
+    assert nothing["fixed"]["contours"] == 0 and math.isnan(nothing["fixed"]["mean"][0])
+
+
+# ------------------------------------------------------------------------------------------ learning curve
+
+
+@pytest.mark.parametrize("iterations", [1, 3, 30])
+def test_learning_curve_has_one_unit_per_panel_and_whole_iterations(iterations):
+    validation = [{"iterations": k, "error": 20.0 - k / 3} for k in range(0, iterations + 1, 10)]
+    fig = drawn(learning_curve_figure(metrics(iterations), validation))
+    assert len(fig.axes) == 3  # three panels, no second y axis
+    assert [ax.get_ylabel() for ax in fig.axes] == [
+        "error mm² / intended area",
+        "error (vertices)",
+        "env steps/s",
+    ]
+    ticks = fig.axes[-1].get_xticks()
+    low, high = fig.axes[-1].get_xlim()
+    shown = ticks[(ticks >= low) & (ticks <= high)]
+    assert len(shown) >= 2 and np.all(shown == np.round(shown)), shown
+
+
+# ------------------------------------------------------------------------------------------ pinch candidates
+
+
+def assert_legend_matches_the_map(fig):
+    """Every marker in the legend is drawn on the map as it is shown (marker, fill, edge)."""
+    (ax,) = [a for a in fig.axes if a.get_label() != "<colorbar>"]
+    (legend,) = fig.legends
+
+    def look(line):
+        return (line.get_marker(), str(line.get_markerfacecolor()), str(line.get_markeredgecolor()))
+
+    on_map = {look(line) for line in ax.lines if line.get_marker() not in ("None", None, "")}
+    for handle, text in zip(legend.legend_handles, legend.get_texts(), strict=True):
+        if isinstance(handle, Line2D) and handle.get_marker() not in ("None", None, ""):
+            assert look(handle) in on_map, text.get_text()
+    scatters = [h for h in legend.legend_handles if isinstance(h, PathCollection)]
+    assert len(scatters) == len([c for c in ax.collections if isinstance(c, PathCollection)])
+
+
+def test_pinch_candidate_map_counts_and_legend(small_plan):
+    assert candidate_counts(small_plan) == (2, False)
+    assert candidate_summary(small_plan) == "2 sampled pinch candidates; the centroid is infeasible"
+    fig = drawn(pinch_candidates_figure(small_plan, SIM))
+    assert fig.axes[0].get_title().startswith("circle-offset: 2 sampled pinch candidates; the centroid is")
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert any(label.startswith("centroid, infeasible (") for label in labels)
+    assert "sampled candidate (fill: its error)" in labels
+    assert_legend_matches_the_map(fig)
+    assert_legend_outside_the_axes(fig)
+    # A short arm leaves the centroid feasible: a candidate besides the sampled ones (N + 1 in all).
+    plan = plan_cut(
+        load_contour("fls-circle"), SIM, num_candidates=2, seed=0, device="cpu", arm=ArmModel(length_mm=15.0)
+    )
+    assert len(plan.candidates) == 3 and candidate_counts(plan) == (2, True) and not plan.rejected
+    assert candidate_summary(plan) == "3 pinch candidates: 2 sampled + the centroid"
+    fig = drawn(pinch_candidates_figure(plan, SIM))
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert "the centroid, a candidate (fill: its error)" in labels
+    assert_legend_matches_the_map(fig)

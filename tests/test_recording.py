@@ -250,6 +250,134 @@ def test_replay_of_a_missing_or_bad_file_exits_2_with_one_line(tmp_path, capfd, 
     assert len(err) == 1 and err[0].startswith("error: ") and message in err[0], err
 
 
+@pytest.fixture(scope="module")
+def tiny_recording(tmp_path_factory):
+    """A recording of one point at two steps, written with rerun directly (no simulation)."""
+    import rerun as rr
+
+    path = tmp_path_factory.mktemp("tiny") / "tiny.rrd"
+    stream = rr.RecordingStream("warpcut")
+    stream.save(path)
+    for step in (0, 1):
+        stream.set_time("step", sequence=step)
+        stream.log("/point", rr.Points3D([[0.0, 0.0, float(step)]]))
+    stream.flush()
+    stream.disconnect()
+    return path
+
+
+# A stand-in for rerun's `rerun` command: a wrapper (as rerun_cli is) that starts a server process which,
+# like a stubborn one, ignores SIGINT; it notes its arguments and the server's pid.
+FAKE_VIEWER = """
+import json, os, signal, subprocess, sys
+stubborn = "import signal, time; signal.signal(signal.SIGINT, signal.SIG_IGN); time.sleep(120)"
+server = subprocess.Popen([sys.executable, "-c", stubborn])
+with open(os.environ["FAKE_VIEWER_NOTE"] + ".tmp", "w") as note:
+    json.dump({"argv": sys.argv[1:], "server": server.pid}, note)
+os.replace(os.environ["FAKE_VIEWER_NOTE"] + ".tmp", os.environ["FAKE_VIEWER_NOTE"])
+sys.exit(server.wait())
+"""
+
+
+def replay_web(path, viewer: list[str] | None, env: dict | None = None) -> subprocess.Popen:
+    """``warpcut replay PATH --web`` in a new process, with ``viewer`` as rerun's command (None: rerun's)."""
+    driver = textwrap.dedent(
+        f"""
+        import sys
+        from agents.cli import main, replay
+        if {viewer!r} is not None:
+            replay.VIEWER = {viewer!r}
+        replay.VIEWER_STOP_S = 1.0
+        main.main(args=["replay", {str(path)!r}, "--web"], prog_name="warpcut")
+        """
+    )
+    return subprocess.Popen(
+        [sys.executable, "-c", driver],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, **(env or {})},
+    )
+
+
+def running(pid: int) -> bool:
+    """Whether process ``pid`` runs (a zombie, ended but not reaped, does not)."""
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT, signal.SIGHUP])
+def test_replay_web_prints_the_recording_url_and_stops_the_server_on_a_signal(
+    tmp_path, tiny_recording, signum
+):
+    from agents.cli.replay import web_url
+
+    note = tmp_path / "viewer.json"
+    command = replay_web(
+        tiny_recording, [sys.executable, "-c", FAKE_VIEWER], env={"FAKE_VIEWER_NOTE": str(note)}
+    )
+    deadline = time.monotonic() + 60
+    while not note.exists():
+        assert command.poll() is None and time.monotonic() < deadline, command.communicate()
+        time.sleep(0.05)
+    started = json.loads(note.read_text())
+    assert running(started["server"])
+    command.send_signal(signum)  # to the command alone, as `kill` or a job scheduler sends it
+    stdout, stderr = command.communicate(timeout=30)
+    assert command.returncode == 128 + signum if signum != signal.SIGINT else 130, stderr
+    assert "terminated" in stderr or "interrupted" in stderr
+    deadline = time.monotonic() + 10
+    while running(started["server"]) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not running(started["server"]), "the viewer's server outlived replay --web"
+    # The address that opens the recording, not rerun's Welcome page; and what rerun was asked to do.
+    url = "http://127.0.0.1:9090/?url=rerun%2Bhttp%3A%2F%2Flocalhost%3A9876%2Fproxy"
+    assert web_url() == url and f"open {url}" in stdout
+    assert started["argv"] == [
+        "--web-viewer", "--bind", "127.0.0.1", "--server-memory-limit", "1GiB", str(tiny_recording)
+    ]  # fmt: skip
+
+
+def _port_open(port: int) -> bool:
+    import socket
+
+    with socket.socket() as probe:
+        probe.settimeout(0.5)
+        return probe.connect_ex(("127.0.0.1", port)) == 0
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_replay_web_serves_with_rerun_and_frees_its_ports(tiny_recording):
+    """rerun's own viewer: the page at the printed address answers, and SIGTERM frees both ports."""
+    import urllib.request
+
+    from agents.cli.replay import GRPC_PORT, WEB_PORT, web_url
+
+    if _port_open(WEB_PORT) or _port_open(GRPC_PORT):
+        pytest.skip(f"port {WEB_PORT} or {GRPC_PORT} is in use here")
+    command = replay_web(tiny_recording, None)
+    try:
+        deadline = time.monotonic() + 60
+        while not (_port_open(WEB_PORT) and _port_open(GRPC_PORT)):
+            assert command.poll() is None and time.monotonic() < deadline, command.communicate()
+            time.sleep(0.1)
+        with urllib.request.urlopen(web_url(), timeout=10) as page:
+            assert page.status == 200 and b"<html" in page.read(4096).lower()
+    finally:
+        command.send_signal(signal.SIGTERM)
+        stdout, stderr = command.communicate(timeout=30)
+    assert command.returncode == 128 + signal.SIGTERM, stderr
+    assert f"open {web_url()}" in stdout
+    deadline = time.monotonic() + 10
+    while (_port_open(WEB_PORT) or _port_open(GRPC_PORT)) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not _port_open(WEB_PORT) and not _port_open(GRPC_PORT), "rerun's server outlived replay --web"
+
+
 def read_columns(path) -> dict[tuple[str, str], list]:
     """Every (entity, component) of a recording as its (step, value) pairs sorted by step; static data
     under step None."""
@@ -374,6 +502,41 @@ def test_vertex_colours_follow_the_chosen_field(tmp_path, colour_by):
     assert np.array_equal(np.array(colours[-1][1], dtype=np.uint32), expected[0])
     (info,) = columns[("/fixed/env_0/info", "TextDocument:text")][0][1]
     assert f"vertex colours: {colour_by}" in info
+
+
+@pytest.mark.parametrize("colour_by", ["strain", "height"])
+def test_the_grasp_is_a_disc_and_the_colours_have_a_legend(tmp_path, colour_by):
+    """The grasp: a solid disc of the grasp radius on the grasped vertices, every frame; the colour bar
+    (the ramp, low to high) and its meaning, once; the height ramp's ends in the env's info."""
+    from warpcut.viz.colours import GRASP_RGB, ramp_image
+    from warpcut.viz.rerun_writer import GRASP_DISC_MM
+
+    config = SimConfig(resolution=RESOLUTION)
+    task = CuttingTask(
+        config, load_contour("circle-small"), device="cpu", pinch_points=np.array([50.0, 50.0])
+    )
+    with Recorder(tmp_path / "r.rrd", colour_by=colour_by, background=False) as recorder:
+        task.run(lambda t: np.array([[0.5, 0.0, 0.0]]), on_step=recorder.step_callback("fixed"))
+    columns = read_columns(tmp_path / "r.rrd")
+    disc = "/fixed/env_0/grasp/disc"
+    assert columns[(disc, "Cylinders3D:radii")] == [(None, [pytest.approx(config.grasp_radius)])]
+    assert columns[(disc, "Cylinders3D:lengths")] == [(None, [GRASP_DISC_MM])]
+    (colour,) = columns[(disc, "Cylinders3D:colors")][0][1]
+    assert colour == (GRASP_RGB[0] << 24) | (GRASP_RGB[1] << 16) | (GRASP_RGB[2] << 8) | 0xFF
+    assert columns[(disc, "Cylinders3D:fill_mode")][0][1] == [3]  # rerun's FillMode.Solid
+    centres = columns[(disc, "Cylinders3D:centers")]
+    held = columns[("/fixed/env_0/grasp/vertices", "Points3D:positions")]
+    assert [s for s, _ in centres] == [s for s, _ in held] == list(range(task.num_steps + 1))
+    for (_, (centre,)), (_, vertices) in zip(centres, held, strict=True):
+        np.testing.assert_allclose(centre, np.mean(vertices, axis=0), atol=1e-4)
+    assert not np.allclose(centres[0][1], centres[-1][1])  # the disc moves with the grasp
+    (bar,) = columns[("/legend/colour_bar", "Image:buffer")][0][1]
+    assert np.array_equal(np.array(bar, dtype=np.uint8), ramp_image().ravel())
+    (legend,) = columns[("/legend/colour_scale", "TextDocument:text")][0][1]
+    assert f"Sheet colour: {colour_by}" in legend and "magenta disc" in legend
+    assert ("0%" in legend and "5%" in legend) == (colour_by == "strain")
+    infos = [text for _, (text,) in columns[("/fixed/env_0/info", "TextDocument:text")]]
+    assert any("from z = " in text for text in infos) == (colour_by == "height")
 
 
 def test_the_recorded_error_is_the_score(tmp_path):

@@ -378,14 +378,15 @@ def recorder(out: Path, record_envs: int | None, colour_by: str):
     return Recorder(out / "recording.rrd", envs=record_envs, colour_by=colour_by)
 
 
-def step_callbacks(recorder, cuts):
+def step_callbacks(recorder, cuts, meshes=None):
     """The pipelines' ``step_callbacks(method, first_contour)``: the recorder's (of the batches starting at
-    the first contour: it records the first envs) and the final-cut collector's; None when neither is on."""
-    if recorder is None and cuts is None:
+    the first contour: it records the first envs), the final-cut collector's and the mesh exporter's; None
+    when none is on."""
+    if recorder is None and cuts is None and meshes is None:
         return None
 
     def for_batch(method: str, first_contour: int):
-        callbacks = [cuts.step_callback(method)] if cuts is not None else []
+        callbacks = [c.step_callback(method) for c in (cuts, meshes) if c is not None]
         if recorder is not None and first_contour == 0:
             callbacks.insert(0, recorder.step_callback(method))
         if len(callbacks) == 1:

@@ -30,7 +30,7 @@ from agents.cli.common import (
     step_callbacks,
 )
 from agents.cli.video import video_option, videos, with_videos
-from agents.methods import BASELINES
+from agents.methods import BASELINES, point_text
 from warpcut.sim.config import FIXTURES, SimConfig
 
 
@@ -50,6 +50,14 @@ from warpcut.sim.config import FIXTURES, SimConfig
 @json_option
 @record_option("next to --json, or in logs/simulate-TIMESTAMP")
 @video_option
+@click.option(
+    "--export-mesh",
+    "mesh_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Write each policy's final sheet (its first trial) as DIR/POLICY_env0_stepN.glb (mm, z up, "
+    "strain colours; trimesh).",
+)
 @plots_option("regions.png/svg next to --json, or in logs/simulate-TIMESTAMP")
 def command(
     contour_name: str,
@@ -66,6 +74,7 @@ def command(
     record_envs: int | None,
     colour_by: str,
     video_envs: int | None,
+    mesh_dir: Path | None,
     no_plots: bool,
 ) -> None:
     """Cut a contour with each baseline tensioner and compare their errors."""
@@ -79,11 +88,16 @@ def command(
     config = SimConfig(resolution=resolution, fixture=fixture, noise_std=noise, score=score).validated()
     out = json_path.parent if json_path else run_dir(None, "simulate")
     cuts = final_cuts(no_plots)
+    meshes = None
+    if mesh_dir is not None:
+        from warpcut.viz.mesh_export import MeshExports
+
+        meshes = MeshExports(mesh_dir)
     start = time.perf_counter()
     with recorder(out, record_envs, colour_by) as rec, videos(out, video_envs) as vid:
         report = compare_policies(
             contour, names, trials=trials, config=config, pinch=point, device=device, seed=seed,
-            step_callbacks=with_videos(step_callbacks(rec, cuts), vid),
+            step_callbacks=with_videos(step_callbacks(rec, cuts, meshes), vid),
         )  # fmt: skip
     elapsed = time.perf_counter() - start
     click.echo(
@@ -95,7 +109,7 @@ def command(
     )
     for name, r in report["results"].items():
         ci = f" ±{r['ci95_pct']:.1f}" if trials > 1 else ""
-        pinch_txt = "-" if r["pinch"] is None else f"({r['pinch'][0]:.1f}, {r['pinch'][1]:.1f})"
+        pinch_txt = "-" if r["pinch"] is None else point_text(r["pinch"])
         click.echo(
             f"{name:<10} {r['error_vertices']:>16.1f} {r['error_mm2']:>13.1f} "
             f"{r['improvement_pct']:>+11.1f}%{ci} {pinch_txt:>16}"
@@ -109,4 +123,5 @@ def command(
         from warpcut.viz.plots import plot_regions
 
         echo_written(plot_regions(cuts.of(contour.name), out))
+    echo_written(meshes.written if meshes is not None else [])
     echo_recording(rec)

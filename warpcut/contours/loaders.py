@@ -2,17 +2,32 @@
 
 * ``.json``: ``{"name": "my-shape", "closed": true, "points": [[x_mm, y_mm], ...]}``; ``name`` is optional
   (default: the file stem).
-* ``.svg``: the ``d`` attribute of the first ``<path>`` element. User units are millimetres and y is
-  flipped (``y_mm = sheet_height - y_svg``) because SVG's y axis points down. A path ending with ``Z`` is
-  closed. Curves are flattened into segments of at most :data:`SVG_CHORD_MM` (one that leaves the sheet
-  is refused first); arcs (``A``) are not supported. The ``viewBox`` origin is the sheet's corner; its
-  size is ignored.
+* ``.svg``: the first shape drawn, in document order: a ``<path>`` (one subpath), ``<circle>``,
+  ``<ellipse>``, ``<rect>`` (rounded corners too), ``<polygon>``, ``<polyline>`` or ``<line>``, read with
+  `svgelements <https://github.com/meerk40t/svgelements>`_: transforms, ``<use>``, nested ``<svg>``, arcs
+  and lengths with units all apply. A path ending with ``Z`` and the closed shapes (circle, ellipse, rect,
+  polygon) are closed contours. Millimetres:
+
+  - the root ``<svg>`` with a ``viewBox`` and a ``width`` and ``height`` both in a physical unit (mm, cm,
+    Q, in, pt, pc): the viewBox maps onto that size as SVG says (``preserveAspectRatio`` too; lengths with
+    units inside follow CSS, 96 px per inch). ``width="100mm" height="100mm" viewBox="0 0 200 200"``: a
+    user unit is 0.5 mm.
+  - otherwise (no viewBox, or width/height missing, unitless, in px or %): one user unit is one mm, the
+    viewBox's origin is the sheet's corner and its size is ignored; a length given with a unit inside is
+    converted to mm (``r="5mm"`` is 5, ``r="1in"`` 25.4).
+
+  The page's top-left corner is the sheet's top-left corner, and y is flipped (``y_mm = sheet_height -
+  y_page_mm``) because SVG's y axis points down. Curves and arcs are flattened into segments of at most
+  :data:`SVG_CHORD_MM`; a curve that leaves the sheet is refused first, so that huge coordinates never
+  make many points. Path data is read to its end: a command cut short or unknown is an error, never a
+  silently shorter contour.
 
 Every loaded contour goes through :func:`~warpcut.contours.contour.validate`.
 """
 
 from __future__ import annotations
 
+import io
 import json
 import math
 import os
@@ -127,39 +142,32 @@ def _load_svg(path: Path, sheet_size: tuple[float, float]) -> Contour:
         root = ET.parse(path).getroot()
     except (OSError, ET.ParseError, LookupError, ValueError) as exc:  # lookup: an unknown encoding
         raise ContourError(f"{where}: cannot read it as SVG/XML ({exc})") from None
-    parents = {child: parent for parent in root.iter() for child in parent}
-    element = next((e for e in root.iter() if _local_tag(e.tag) == "path"), None)
-    if element is None or not element.get("d"):
-        raise ContourError(f"{where}: no <path> element with a 'd' attribute; draw the contour as a path")
-    node = element
-    while node is not None:
-        # Coordinates are read as written, so a transform would silently move or distort the contour.
-        if node.get("transform"):
+    box = _view_box(where, root)
+    size = _physical_size(where, root)
+    if box is not None and size is not None:  # the viewBox maps onto a physical size, as SVG says
+        if box[2] <= 0 or box[3] <= 0:
             raise ContourError(
-                f"{where}: the path or a group around it has a transform ({node.get('transform')!r}), which "
-                "is not supported; apply it to the path first (Inkscape: ungroup, then Path > Object to Path)"
+                f"{where}: viewBox {root.get('viewBox')!r} has a width or height <= 0; give positive sizes"
             )
-        node = parents.get(node)
-
-    origin = np.zeros(2)
-    if root.get("viewBox"):
-        box = re.split(r"[\s,]+", root.get("viewBox").strip())
-        try:
-            numbers = [float(v) for v in box]
-        except ValueError:
-            numbers = []
-        if len(numbers) != 4 or not all(math.isfinite(v) for v in numbers):
-            raise ContourError(
-                f"{where}: cannot read viewBox {root.get('viewBox')!r}; give four numbers: "
-                "min-x min-y width height"
-            )
-        origin = np.array(numbers[:2])
-    pieces, closed = _parse_path(where, element.get("d"))
+        scale, offset = _view_box_transform(box, size, root.get("preserveAspectRatio"))
+        ppi = 96.0  # CSS: lengths with units inside the drawing, in user units
+    else:  # one user unit is one mm; the viewBox's origin is the sheet's corner, its size is ignored
+        scale, offset = np.ones(2), -np.array(box[:2] if box is not None else (0.0, 0.0))
+        ppi = 25.4  # a length given in mm inside the drawing is that many user units
+    # svgelements reads the drawing in the root's user units; the root's mapping to mm is applied here.
+    for name in ("width", "height", "viewBox", "preserveAspectRatio"):
+        root.attrib.pop(name, None)
+    viewport = None if box is None else box[2:]
+    for element in root.iter():
+        if _local_tag(element.tag) == "path" and element.get("d"):
+            _check_path_data(where, element.get("d"))
+    shape = _first_shape(where, root, ppi, viewport)
+    pieces, closed = _shape_pieces(where, shape)
     width, height = check_sheet_size(sheet_size)
     points = []
     for piece in pieces:
         with np.errstate(over="ignore", invalid="ignore"):
-            xy = (piece - origin) * [1.0, -1.0] + [0.0, height]  # y is flipped: SVG's points down
+            xy = (piece * scale + offset) * [1.0, -1.0] + [0.0, height]  # y is flipped: SVG's points down
         if not np.isfinite(xy).all():
             raise ContourError(
                 f"{where}: the path reaches a coordinate too large to be a number of mm; keep it on the sheet"
@@ -170,6 +178,167 @@ def _load_svg(path: Path, sheet_size: tuple[float, float]) -> Contour:
         else:
             points.append(xy[0])
     return _validated(where, path.stem, closed, np.array(points), sheet_size)
+
+
+def _view_box(where: str, root: ET.Element) -> tuple[float, float, float, float] | None:
+    """The root's ``viewBox`` (min-x, min-y, width, height), or None without one."""
+    if not root.get("viewBox"):
+        return None
+    box = re.split(r"[\s,]+", root.get("viewBox").strip())
+    try:
+        numbers = [float(v) for v in box]
+    except ValueError:
+        numbers = []
+    if len(numbers) != 4 or not all(math.isfinite(v) for v in numbers):
+        raise ContourError(
+            f"{where}: cannot read viewBox {root.get('viewBox')!r}; give four numbers: "
+            "min-x min-y width height"
+        )
+    return numbers[0], numbers[1], numbers[2], numbers[3]
+
+
+_MM_PER = {"mm": 1.0, "cm": 10.0, "q": 0.25, "in": 25.4, "pt": 25.4 / 72.0, "pc": 25.4 / 6.0}
+"""Millimetres per physical CSS unit (``width="100mm"``); px and plain numbers are not physical."""
+_LENGTH = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([A-Za-z]+)\s*")
+
+
+def _physical_size(where: str, root: ET.Element) -> tuple[float, float] | None:
+    """The root's ``width`` and ``height`` in mm where both are in a physical unit (mm, cm, Q, in, pt, pc);
+    None otherwise."""
+    size = []
+    for name in ("width", "height"):
+        match = _LENGTH.fullmatch(root.get(name) or "")
+        if match is None or match.group(2).lower() not in _MM_PER:
+            return None
+        value = float(match.group(1)) * _MM_PER[match.group(2).lower()]
+        if not (math.isfinite(value) and value > 0):
+            raise ContourError(f"{where}: the svg's {name} {root.get(name)!r} must be a positive length")
+        size.append(value)
+    return size[0], size[1]
+
+
+def _view_box_transform(
+    box: tuple[float, float, float, float], size: tuple[float, float], aspect: str | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(scale, offset)``: user units to mm on the page, ``mm = user * scale + offset``, for a viewBox
+    shown in a ``size`` (mm) viewport with ``preserveAspectRatio`` ``aspect`` (SVG 2, 8.2; an unreadable
+    value is the default, ``xMidYMid meet``)."""
+    (x, y, w, h), (width, height) = box, size
+    scale = np.array([width / w, height / h])
+    words = (aspect or "").replace(",", " ").split()
+    words = words[1:] if words[:1] == ["defer"] else words
+    align = words[0] if words else "xMidYMid"
+    aligns = [f"x{a}Y{b}" for a in ("Min", "Mid", "Max") for b in ("Min", "Mid", "Max")]
+    if align not in ("none", *aligns):
+        align, words = "xMidYMid", []
+    if align != "none":
+        scale[:] = scale.max() if words[1:2] == ["slice"] else scale.min()
+    offset = -np.array([x, y]) * scale
+    spare = np.array([width, height]) - np.array([w, h]) * scale
+    for axis, name in enumerate(("x", "Y")):
+        share = {"Min": 0.0, "Mid": 0.5, "Max": 1.0}.get(align.partition(name)[2][:3], 0.0)
+        offset[axis] += share * spare[axis]
+    return scale, offset
+
+
+def _check_path_data(where: str, d: str) -> None:
+    """Refuse malformed path data, which svgelements would cut short without a word: its own lexer, run
+    to the end of ``d``."""
+    import svgelements as se
+
+    text = d.strip(" \t\n\r\f")
+    if text[:1] not in ("M", "m", ""):
+        raise ContourError(f"{where}: path data must start with a moveto (M or m), not {text[:12]!r}")
+    lexer = se.SVGLexicalParser()
+    try:
+        lexer.parse(se.Path(), d)
+        failed = False
+    except Exception:  # svgelements' lexer raises ValueError, or worse on odd input: all are bad data
+        failed = True
+    rest = d[lexer.pos :]
+    if failed or rest.strip(" \t\n\r\f,"):
+        near = rest.lstrip(" \t\n\r\f,")[:16] or d[max(0, lexer.pos - 16) : lexer.pos]
+        raise ContourError(
+            f"{where}: cannot read the path data at character {lexer.pos} (near {near!r}): a command is cut "
+            "short or unknown; give SVG path commands (M, L, H, V, C, S, Q, T, A, Z) with their numbers"
+        )
+
+
+def _first_shape(where: str, root: ET.Element, ppi: float, viewport: tuple[float, float] | None):
+    """The first shape drawn (in document order, transforms applied, ``<use>`` instantiated), read by
+    svgelements from ``root``."""
+    import svgelements as se
+
+    source = io.BytesIO(ET.tostring(root))
+    extent = {} if viewport is None else {"width": viewport[0], "height": viewport[1]}
+    try:
+        svg = se.SVG.parse(source, reify=True, ppi=ppi, **extent)
+        shape = next((e for e in svg.elements() if isinstance(e, se.Shape)), None)
+    except Exception as exc:  # any failure of the third-party parser on this input: unreadable
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ContourError(f"{where}: cannot read the drawing ({reason})") from None
+    if shape is None:
+        raise ContourError(
+            f"{where}: no shape to read (<path>, <circle>, <ellipse>, <rect>, <polygon>, <polyline> or "
+            "<line>, drawn: not in <defs> nor hidden); draw the contour as one"
+        )
+    return shape
+
+
+def _shape_pieces(where: str, shape) -> tuple[list[np.ndarray], bool]:
+    """One subpath of ``shape`` (user units, y down) as pieces, and whether it is closed.
+
+    Each piece is a (1, 2) array, the next vertex, or the (3, 2) or (4, 2) control points of a quadratic or
+    cubic Bezier curve from the current point (arcs become cubic curves), flattened by the caller.
+    Coordinates may be infinite or NaN where the numbers are out of range.
+    """
+    import svgelements as se
+
+    path = se.Path(shape)
+    path.reify()  # a rect or an ellipse under a rotation keeps its transform until it is a path
+    pieces: list[np.ndarray] = []
+    closed = False
+    for segment in path:
+        if isinstance(segment, se.Close):
+            closed = bool(pieces)
+            continue
+        if closed or (isinstance(segment, se.Move) and pieces):
+            raise ContourError(
+                f"{where}: the path has several subpaths; give one contour per file (split the path)"
+            )
+        if isinstance(segment, se.Move | se.Line):
+            pieces.append(_xy([segment.end]))
+        elif isinstance(segment, se.QuadraticBezier):
+            pieces.append(_xy([segment.start, segment.control, segment.end]))
+        elif isinstance(segment, se.CubicBezier):
+            pieces.append(_xy([segment.start, segment.control1, segment.control2, segment.end]))
+        elif isinstance(segment, se.Arc):
+            pieces.extend(_arc_pieces(segment))
+    if not pieces:
+        raise ContourError(f"{where}: the path has no points")
+    return pieces, closed
+
+
+def _arc_pieces(arc) -> list[np.ndarray]:
+    """An elliptical arc as cubic Bezier pieces (at most 30 degrees each: a dozen for a whole ellipse), or
+    a straight line (SVG's rule for a zero radius); an arc whose parameters overflow (radii beyond about
+    1e150) is one non-finite piece, which the caller refuses as out of range."""
+    parameters = _xy([arc.start, arc.end, arc.center, arc.prx, arc.pry])
+    if not (np.isfinite(parameters).all() and math.isfinite(arc.sweep)):
+        return [np.full((4, 2), np.inf)]  # refused by the caller: a coordinate too large
+    curves = list(arc.as_cubic_curves())
+    if not curves:
+        return [_xy([arc.end])]
+    return [_xy([c.start, c.control1, c.control2, c.end]) for c in curves]
+
+
+def _xy(points) -> np.ndarray:
+    """svgelements points as an (N, 2) float64 array (None, a missing point, is NaN)."""
+    return np.array([(np.nan, np.nan) if p is None else (p.x, p.y) for p in points], dtype=np.float64)
+
+
+def _local_tag(tag: str) -> str:
+    return tag.rsplit("}", 1)[-1] if isinstance(tag, str) else ""
 
 
 def _check_curve_on_sheet(where: str, control: np.ndarray, width: float, height: float) -> None:
@@ -184,83 +353,6 @@ def _check_curve_on_sheet(where: str, control: np.ndarray, width: float, height:
             f"{where}: a curve of the path leaves the sheet by {outside[worst]:.3g} mm, reaching "
             f"({x:.6g}, {y:.6g}) mm; move it into [0, {width:g}] x [0, {height:g}] mm"
         )
-
-
-def _local_tag(tag: str) -> str:
-    return tag.rsplit("}", 1)[-1]
-
-
-_PATH_TOKEN = re.compile(r"[A-Za-z]|[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
-_PATH_ARGS = {"M": 2, "L": 2, "H": 1, "V": 1, "C": 6, "S": 4, "Q": 4, "T": 2, "Z": 0}
-
-
-def _parse_path(where: str, d: str) -> tuple[list[np.ndarray], bool]:
-    """One SVG subpath (SVG user units, y down) as pieces and whether it ends with Z.
-
-    Each piece is a (1, 2) array, the next vertex, or the (3, 2) or (4, 2) control points of a quadratic or
-    cubic Bezier curve from the current point, flattened by the caller. Coordinates may be infinite or NaN
-    where the numbers are out of range.
-    """
-    tokens = _PATH_TOKEN.findall(d)
-    pieces: list[np.ndarray] = []
-    closed = False
-    pos = np.zeros(2)
-    last_cubic = last_quad = None  # previous curve's last control point, reflected by S and T
-    command = ""
-    i = 0
-    while i < len(tokens):
-        if tokens[i].isalpha():
-            command = tokens[i]
-            i += 1
-        elif command in ("", "Z", "z"):
-            raise ContourError(f"{where}: path data has a number ({tokens[i]!r}) where a command is expected")
-        kind = command.upper()
-        if kind == "A":
-            raise ContourError(
-                f"{where}: SVG arcs (A/a commands) are unsupported; convert them to cubic Bezier curves "
-                "first (e.g. Inkscape: Path > Object to Path, or your editor's 'convert to cubic' option)"
-            )
-        if kind not in _PATH_ARGS:
-            raise ContourError(f"{where}: unknown SVG path command {command!r}")
-        if (kind == "M" and pieces) or (kind != "M" and closed):
-            raise ContourError(
-                f"{where}: the path has several subpaths; give one contour per file (split the path)"
-            )
-        if kind != "M" and not pieces:
-            raise ContourError(f"{where}: path data must start with a moveto (M or m)")
-        if kind == "Z":
-            closed = True
-            continue
-        count = _PATH_ARGS[kind]
-        numbers = tokens[i : i + count]
-        if len(numbers) != count or any(t.isalpha() for t in numbers):
-            raise ContourError(
-                f"{where}: command {command!r} needs {count} numbers; the path data is cut short"
-            )
-        i += count
-        with np.errstate(over="ignore", invalid="ignore"):  # out-of-range numbers: the caller refuses them
-            values = np.array(numbers, dtype=np.float64)
-            offset = pos if command.islower() else np.zeros(2)
-            if kind in ("H", "V"):
-                axis = int(kind == "V")
-                given = pos[None].copy()
-                given[0, axis] = values[0] + offset[axis]
-            else:
-                given = values.reshape(-1, 2) + offset
-            if kind == "S":
-                given = np.vstack([pos if last_cubic is None else 2 * pos - last_cubic, given])
-            elif kind == "T":
-                given = np.vstack([pos if last_quad is None else 2 * pos - last_quad, given])
-        pieces.append(np.vstack([pos, given]) if kind in ("C", "S", "Q", "T") else given[-1:])
-        if kind == "M":
-            # Pairs after a moveto are implicit linetos.
-            command = "l" if command.islower() else "L"
-        last_cubic = given[-2] if kind in ("C", "S") else None
-        last_quad = given[-2] if kind in ("Q", "T") else None
-        pos = given[-1]
-    if not pieces:
-        raise ContourError(f"{where}: the path has no points")
-    return pieces, closed
 
 
 def _bezier(control: np.ndarray) -> np.ndarray:

@@ -30,9 +30,42 @@ CUTTING_RGB, TRAVEL_RGB = (230, 40, 40), (150, 150, 150)
 """The scissor tip while it cuts, and while it travels."""
 VISIBLE_RGB, HIDDEN_RGB = (40, 200, 60), (110, 110, 110)
 """A fiducial the camera sees, and one it cannot (cut away or under the cutting arm's shaft)."""
+GRASP_RGB = (230, 0, 200)
+"""The grasp: the gripper's disc on the sheet."""
 CUTTING_RGBA, TRAVEL_RGBA, VISIBLE_RGBA, HIDDEN_RGBA = (
     (r << 24) | (g << 16) | (b << 8) | 0xFF for r, g, b in (CUTTING_RGB, TRAVEL_RGB, VISIBLE_RGB, HIDDEN_RGB)
 )
+
+
+def ramp_image(height: int = 16) -> np.ndarray:
+    """The colour ramp as a (height, 256, 3) uint8 RGB image, low (dark blue) on the left to high (yellow)
+    on the right: the colour bar of a recording (``/legend/colour_bar``)."""
+    return np.broadcast_to(_RAMP_RGB.astype(np.uint8)[None], (height, len(_RAMP_RGB), 3)).copy()
+
+
+def colour_legend(colour_by: str) -> str:
+    """What a recording's colours mean, as Markdown (``/legend/colour_scale``): the sheet's ramp for
+    ``colour_by`` (:data:`COLOUR_FIELDS`) with its ends, and the fixed colours."""
+    if colour_by == "strain":
+        scale = (
+            "**Sheet colour: strain.** Per vertex, the mean relative stretch |length / rest - 1| of its "
+            f"live springs, on the bar from **0%** (dark blue, left) to **{STRAIN_FULL_SCALE:.0%}** "
+            "(yellow, right) and above."
+        )
+    elif colour_by == "height":
+        scale = (
+            "**Sheet colour: height.** Per vertex, z from the env's lowest vertex (dark blue, left of the "
+            "bar) to its highest (yellow, right) at its first frame; each env's range (mm) is in its info."
+        )
+    else:
+        raise ValueError(f"colour_by: must be one of {', '.join(COLOUR_FIELDS)} (got {colour_by!r})")
+    return (
+        f"{scale}\n\n"
+        "**Fixed colours.** Scissor tip: red while it cuts, grey while it travels. Fiducials: green where "
+        "the camera sees them, grey where it cannot (cut away, or under the cutting arm). Grasp: the magenta "
+        "disc (the gripper's pad, of the grasp radius) and the arrow of its displacement. Black line: the "
+        "intended contour, flat at z = 0 (the sheet at rest), where the traced cut path is drawn too."
+    )
 
 
 def ramp_rgba(values: np.ndarray, low: float, high: float) -> np.ndarray:

@@ -1,5 +1,7 @@
-"""Figures of a run, as PNG and SVG written atomically: the Table I comparison, the cut regions, a
-training run's learning curve and a cut plan's pinch candidates.
+"""Figures of a run, as PNG and SVG written atomically: the Table I comparison (with rliable-style
+aggregates over contours), the cut regions, a training run's learning curve and a cut plan's pinch
+candidates. ``plot_improvements``, ``plot_learning_curve`` and ``plot_pinch_candidates`` save what
+``improvement_figure``, ``learning_curve_figure`` and ``pinch_candidates_figure`` draw.
 
 Figures are drawn on ``matplotlib.figure.Figure`` objects (Agg), never through pyplot, so plotting needs
 no display and leaves matplotlib's global state alone.
@@ -15,15 +17,17 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from matplotlib.colors import ListedColormap
+from matplotlib.cm import ScalarMappable
+from matplotlib.colors import ListedColormap, Normalize
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, Rectangle
+from matplotlib.ticker import MaxNLocator
 
 from warpcut.contours import Contour, ring
 from warpcut.io import DiskFull, safe_name, write_atomic
 from warpcut.planning import Plan, pinch_feasible
-from warpcut.scoring import Score
+from warpcut.scoring import Score, paired_improvement
 from warpcut.sim.config import SheetGrid, SimConfig
 from warpcut.task import CuttingTask
 
@@ -69,37 +73,206 @@ def save_figure(fig: Figure, out_dir: str | os.PathLike, name: str) -> list[Path
     return paths
 
 
-def plot_improvements(report: dict, methods: Sequence[str], out_dir: str | os.PathLike) -> list[Path]:
-    """Table I as grouped bars: per contour (and their mean) each method's improvement over no tension,
-    with its 95% confidence interval.
+BOOTSTRAP_RESAMPLES = 10_000
+"""Resamples of the percentile-bootstrap 95% confidence intervals the figures draw (seeded: a figure is the
+same every time)."""
+
+
+def plot_improvements(
+    report: dict, methods: Sequence[str], out_dir: str | os.PathLike, resamples: int = BOOTSTRAP_RESAMPLES
+) -> list[Path]:
+    """Table I as a figure: per contour, each method's mean improvement over no tension (bars) with a 95%
+    confidence interval; with two contours or more, beside it the aggregate over the contours (rliable
+    style, :func:`aggregate_improvements`): the mean (the table's mean row) and the interquartile mean.
+
+    Improvements are paired per trial (``100 (e_none - e) / e_none``), so they never exceed 100%, and
+    neither do the intervals: percentile bootstrap intervals of the mean over a contour's trials (none for
+    one trial). A report without per-trial errors gets the table's Student t interval, clipped at 100%.
+    The figure states which.
 
     Args:
         report: :func:`agents.evaluation.evaluate_suite`'s report.
         methods: The methods to show; ``none`` (the reference, 0 by definition) is left out.
         out_dir: Where ``improvement.png`` and ``improvement.svg`` go.
+        resamples: Bootstrap resamples.
 
     Returns:
         The paths written.
     """
+    return save_figure(improvement_figure(report, methods, resamples), out_dir, "improvement")
+
+
+def improvement_figure(report: dict, methods: Sequence[str], resamples: int = BOOTSTRAP_RESAMPLES) -> Figure:
+    """:func:`plot_improvements`' figure, unsaved."""
     shown = [m for m in methods if m != "none"]
-    groups = [*report["rows"], {"contour": "mean", **report["mean"]}]
+    rows = report["rows"]
+    colours = {m: f"C{k % 10}" for k, m in enumerate(shown)}
+    aggregate = len(rows) >= 2 and bool(shown)
     fig = Figure(
-        figsize=(max(6.0, 0.9 * len(groups) * max(1, len(shown)) ** 0.5 + 2), 4.5), layout="constrained"
+        figsize=(max(6.0, 0.9 * len(rows) * max(1, len(shown)) ** 0.5 + 2) + 3.6 * aggregate, 4.8),
+        layout="constrained",
     )
-    ax = fig.add_subplot()
-    x = np.arange(len(groups))
+    left, right = fig.subfigures(1, 2, width_ratios=[3, 1.5]) if aggregate else (fig, None)
+    ax = left.add_subplot()
+    x = np.arange(len(rows))
     width = 0.8 / max(1, len(shown))
+    how = set()
     for k, method in enumerate(shown):
-        values = [g[f"{method}_improvement_pct"] for g in groups]
-        ci = [g[f"{method}_ci95"] for g in groups]
-        ax.bar(x + (k - (len(shown) - 1) / 2) * width, values, width, yerr=ci, capsize=3, label=method)
+        values = np.array([r[f"{method}_improvement_pct"] for r in rows], dtype=np.float64)
+        cis = [_contour_ci(r, method, resamples) for r in rows]
+        how.update(c[2] for c in cis)
+        low, high = np.array([c[0] for c in cis]), np.array([c[1] for c in cis])
+        at = x + (k - (len(shown) - 1) / 2) * width
+        ax.bar(at, values, width, color=colours[method], label=method)
+        ok = np.isfinite(low) & np.isfinite(high) & np.isfinite(values)
+        ax.errorbar(
+            at[ok], values[ok], yerr=[values[ok] - low[ok], high[ok] - values[ok]], fmt="none",
+            ecolor="black", elinewidth=1.0, capsize=3,
+        )  # fmt: skip
     ax.axhline(0.0, color="black", linewidth=0.8)
-    ax.set_xticks(x, [g["contour"] for g in groups], rotation=45 if len(groups) > 4 else 0, ha="right")
+    ax.set_xticks(x, [r["contour"] for r in rows], rotation=45 if len(rows) > 4 else 0, ha="right")
     ax.set_ylabel("improvement over no tension (%)")
-    ax.set_title(f"Cut error reduction, {report['trials']} trial(s) per contour (95% CI)")
+    trials = f"{report['trials']} trial{'' if report['trials'] == 1 else 's'}"
+    ax.set_title(f"per contour, {trials} each\n{_ci_note(how, resamples)}", fontsize="small")
+    if aggregate:
+        _plot_aggregate(right, aggregate_improvements(report, shown, resamples), colours, resamples)
     if shown:
-        ax.legend()
-    return save_figure(fig, out_dir, "improvement")
+        handles = [Patch(color=colours[m], label=m) for m in shown]
+        fig.legend(handles=handles, loc="outside lower center", ncol=min(len(shown), 6), frameon=False)
+    fig.suptitle("Cut error reduction over no tension (100% = no error left)")
+    return fig
+
+
+def _trial_improvements(row: dict, method: str) -> np.ndarray | None:
+    """A contour's finite per-trial paired improvements (%) of ``method``; None where the row lacks the
+    trials' errors (of ``none`` or of the method)."""
+    none, errors = row.get("none_trials_error_vertices"), row.get(f"{method}_trials_error_vertices")
+    if none is None or errors is None or len(none) != len(errors):
+        return None
+    values = paired_improvement(np.asarray(none, dtype=np.float64), np.asarray(errors, dtype=np.float64))
+    return values[np.isfinite(values)]
+
+
+def bootstrap_mean_ci(
+    values: np.ndarray, resamples: int = BOOTSTRAP_RESAMPLES, seed: int = 0
+) -> tuple[float, float] | None:
+    """The 95% percentile-bootstrap confidence interval of the mean of the finite ``values``; None for
+    fewer than two. It lies within ``[min, max]`` of the values."""
+    values = np.asarray(values, dtype=np.float64)
+    values = values[np.isfinite(values)]
+    if values.size < 2:
+        return None
+    draws = np.random.default_rng(seed).integers(0, values.size, size=(resamples, values.size))
+    low, high = np.percentile(values[draws].mean(axis=1), [2.5, 97.5])
+    return float(low), float(high)
+
+
+def _contour_ci(row: dict, method: str, resamples: int) -> tuple[float, float, str]:
+    """``(low, high, how)``: the 95% interval of a contour's mean improvement (NaN where none), and how it
+    was made: ``"bootstrap"``, ``"single"`` (one trial) or ``"t-clipped"`` (no per-trial errors)."""
+    trials = _trial_improvements(row, method)
+    if trials is None:
+        mean, half = row[f"{method}_improvement_pct"], row[f"{method}_ci95"]
+        return mean - half, min(mean + half, 100.0), "t-clipped"
+    interval = bootstrap_mean_ci(trials, resamples)
+    return (np.nan, np.nan, "single") if interval is None else (*interval, "bootstrap")
+
+
+def _ci_note(how: set[str], resamples: int) -> str:
+    """The figure's statement of how its per-contour whiskers were made."""
+    notes = []
+    if "bootstrap" in how:
+        notes.append(
+            f"whiskers: 95% CI of the mean, percentile bootstrap over trials ({resamples:,} resamples)"
+        )
+    if "t-clipped" in how:
+        notes.append("whiskers: the table's 95% Student t interval, clipped at 100%")
+    if "single" in how:
+        notes.append("no whisker where a contour has one trial")
+    return "; ".join(notes)
+
+
+def aggregate_improvements(
+    report: dict, methods: Sequence[str], resamples: int = BOOTSTRAP_RESAMPLES, seed: int = 0
+) -> dict[str, dict]:
+    """Each method's improvement over the report's contours, as rliable aggregates it (Agarwal et al.,
+    NeurIPS 2021): the mean of the contours' mean improvements (the table's mean row) and the
+    interquartile mean (IQM) of every trial's improvement, each with a 95% percentile-bootstrap interval
+    from a two-level bootstrap: contours drawn with replacement, then each drawn contour's trials.
+
+    Without per-trial errors in the report, a contour's mean improvement stands for its trials.
+
+    Returns:
+        ``{method: {"mean": (point, low, high), "iqm": (point, low, high), "contours": int,
+        "scores": int}}`` (%); NaN where no contour has a defined improvement.
+    """
+    rng = np.random.default_rng(seed)
+    result = {}
+    for method in methods:
+        scores = []
+        for row in report["rows"]:
+            trials = _trial_improvements(row, method)
+            if trials is None:
+                trials = np.array([row[f"{method}_improvement_pct"]], dtype=np.float64)
+            if np.isfinite(trials).any():
+                scores.append(trials[np.isfinite(trials)])
+        if not scores:
+            nothing = (np.nan, np.nan, np.nan)
+            result[method] = {"mean": nothing, "iqm": nothing, "contours": 0, "scores": 0}
+            continue
+        counts = np.array([len(s) for s in scores])
+        table = np.full((len(scores), counts.max()), np.nan)
+        for c, s in enumerate(scores):
+            table[c, : len(s)] = s
+        chosen = rng.integers(0, len(scores), size=(resamples, len(scores)))  # contours
+        n = counts[chosen][..., None]
+        picks = (rng.random((*chosen.shape, table.shape[1])) * n).astype(np.intp)  # trials of each
+        sample = np.where(np.arange(table.shape[1]) < n, table[chosen[..., None], picks], np.nan)
+        means = np.nanmean(sample, axis=2).mean(axis=1)
+        iqms = _iqm(sample.reshape(resamples, -1))
+        point_mean = float(np.nanmean(table, axis=1).mean())
+        point_iqm = float(_iqm(table.reshape(1, -1))[0])
+        result[method] = {
+            "mean": (point_mean, *(float(v) for v in np.percentile(means, [2.5, 97.5]))),
+            "iqm": (point_iqm, *(float(v) for v in np.percentile(iqms, [2.5, 97.5]))),
+            "contours": len(scores),
+            "scores": int(counts.sum()),
+        }
+    return result
+
+
+def _iqm(rows: np.ndarray) -> np.ndarray:
+    """Per row, the interquartile mean of its finite values (NaN elsewhere): the mean after dropping the
+    lowest and highest quarter (``floor(n / 4)`` each, as ``scipy.stats.trim_mean(x, 0.25)``)."""
+    ordered = np.sort(rows, axis=1)  # NaN last
+    n = np.isfinite(ordered).sum(axis=1, keepdims=True)
+    cut = n // 4
+    position = np.arange(ordered.shape[1])
+    keep = (position >= cut) & (position < n - cut)
+    return np.where(keep, ordered, 0.0).sum(axis=1) / np.maximum(keep.sum(axis=1), 1)
+
+
+def _plot_aggregate(subfig, aggregates: dict[str, dict], colours: dict[str, str], resamples: int) -> None:
+    """rliable's interval estimates: per statistic, each method's 95% interval as a bar and its point
+    estimate as a black tick."""
+    methods = list(aggregates)
+    axes = subfig.subplots(1, 2, sharex=True, sharey=True)
+    y = np.arange(len(methods))[::-1]
+    for ax, (key, title) in zip(axes, (("mean", "mean"), ("iqm", "IQM")), strict=True):
+        for yi, method in zip(y, methods, strict=True):
+            point, low, high = aggregates[method][key]
+            ax.barh(yi, high - low, left=low, height=0.6, color=colours[method], alpha=0.75)
+            ax.plot([point, point], [yi - 0.3, yi + 0.3], color="black", linewidth=2)
+        ax.set_title(title, fontsize="medium")
+        ax.set_xlabel("improvement (%)")
+        ax.grid(axis="x", alpha=0.3)
+    axes[0].set_yticks(y, methods)
+    contours = max((a["contours"] for a in aggregates.values()), default=0)
+    subfig.suptitle(
+        f"over {contours} contours: 95% CI, bootstrap over\n"
+        f"contours and their trials ({resamples:,} resamples)",
+        fontsize="small",
+    )
 
 
 @dataclass
@@ -270,12 +443,13 @@ def plot_learning_curve(
     name: str = "learning_curve",
     title: str | None = None,
 ) -> list[Path]:
-    """A training run over its learning iterations: errors above, throughput below.
+    """A training run over its learning iterations, three panels on one iteration axis (whole numbers),
+    each in one unit: the training episodes' final error, the validation error, the throughput.
 
     Top: the mean final error of the training episodes that ended in each iteration (``final_error``,
-    error mm² / intended area; iterations where none ended are skipped) and, on its own y axis on the
-    right, the deterministic policy's validation error in vertices, with its minimum marked (the
-    policy kept as ``best.pt``). Bottom: env steps per second of each iteration.
+    error mm² / intended area; iterations where none ended are skipped). Middle: the deterministic
+    policy's validation error (vertices), its minimum marked (the policy kept as ``best.pt``). Bottom: env
+    steps per second of each iteration.
 
     Args:
         metrics: One dict per iteration: ``iteration`` (iterations done, from 1), ``final_error`` (float
@@ -289,54 +463,55 @@ def plot_learning_curve(
     Returns:
         The paths written.
     """
-    fig = Figure(figsize=(7.5, 6.0), layout="constrained")
-    top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=[2, 1])
+    return save_figure(learning_curve_figure(metrics, validation, title), out_dir, name)
+
+
+def learning_curve_figure(
+    metrics: Sequence[dict], validation: Sequence[dict], title: str | None = None
+) -> Figure:
+    """:func:`plot_learning_curve`'s figure, unsaved."""
+    fig = Figure(figsize=(7.5, 7.5), layout="constrained")
+    top, middle, bottom = fig.subplots(3, 1, sharex=True, height_ratios=[2, 2, 1.2])
     ended = [(m["iteration"], m["final_error"]) for m in metrics if m.get("final_error") is not None]
-    handles = []
     if ended:
         x, y = zip(*ended, strict=True)
-        marker = "o" if len(x) == 1 else None  # a line needs two points
-        handles += top.plot(
-            x, y, color="C0", linewidth=1.2, marker=marker, label="final error, training episodes"
-        )
+        top.plot(x, y, color="C0", linewidth=1.2, marker="o" if len(x) == 1 else None)  # a line needs two
     else:
         top.text(0.5, 0.5, "no training episode has ended", transform=top.transAxes, ha="center", color="C0")
-    top.set_ylabel("final error (error mm² / intended area)", color="C0")
-    top.tick_params(axis="y", colors="C0")
-    right = top.twinx()
+    top.set_title("training episodes: mean final error of those ending in the iteration", fontsize="medium")
+    top.set_ylabel("error mm² / intended area")
     if validation:
         x = [v["iterations"] for v in validation]
         y = [v["error"] for v in validation]
-        handles += right.plot(x, y, "o-", color="C1", markersize=4, label="validation error (vertices)")
+        middle.plot(x, y, "o-", color="C1", markersize=4, label="validation error")
         best = int(np.argmin(y))
-        handles.append(
-            right.scatter(
-                x[best],
-                y[best],
-                marker="*",
-                s=220,
-                color="C3",
-                zorder=5,
-                label=f"best validation: {y[best]:.1f} vertices at iteration {x[best]}",
-            )
-        )
+        middle.scatter(
+            x[best], y[best], marker="*", s=220, color="C3", zorder=5,
+            label=f"best: {y[best]:.1f} vertices at iteration {x[best]} (best.pt)",
+        )  # fmt: skip
+        middle.legend(loc="best", fontsize="small")
     else:
-        right.text(0.5, 0.4, "no validation yet", transform=top.transAxes, ha="center", color="C1")
-    right.set_ylabel("validation error (vertices)", color="C1")
-    right.tick_params(axis="y", colors="C1")
-    if handles:
-        top.legend(handles=handles, loc="upper right", fontsize="small")
+        middle.text(0.5, 0.5, "no validation yet", transform=middle.transAxes, ha="center", color="C1")
+    middle.set_title("deterministic policy on the validation envs", fontsize="medium")
+    middle.set_ylabel("error (vertices)")
     rates = [(m["iteration"], m["iteration_steps_per_s"]) for m in metrics if m.get("iteration_steps_per_s")]
     if rates:
         x, y = zip(*rates, strict=True)
         bottom.plot(x, y, color="C2", linewidth=1.2, marker="o" if len(x) == 1 else None)
         bottom.set_ylim(bottom=0.0)
+    bottom.set_title("throughput", fontsize="medium")
     bottom.set_ylabel("env steps/s")
     bottom.set_xlabel("learning iteration")
-    top.grid(alpha=0.3)
-    bottom.grid(alpha=0.3)
+    iterations = [m["iteration"] for m in metrics] + [v["iterations"] for v in validation]
+    if iterations:  # at least one whole number either side, or the locator falls back to fractions
+        low, high = min(iterations), max(iterations)
+        pad = max(1.0, 0.03 * (high - low))
+        bottom.set_xlim(low - pad, high + pad)
+    bottom.xaxis.set_major_locator(MaxNLocator(integer=True))
+    for ax in (top, middle, bottom):
+        ax.grid(alpha=0.3)
     fig.suptitle(title or "Learning curve")
-    return save_figure(fig, out_dir, name)
+    return fig
 
 
 def feasible_grid(
@@ -363,6 +538,28 @@ def feasible_grid(
     return xs, ys, feasible.reshape(len(ys), len(xs))
 
 
+def candidate_counts(plan: Plan) -> tuple[int, bool]:
+    """``(sampled, centroid)``: how many of ``plan.candidates`` were sampled from the feasible region, and
+    whether the contour's centroid is a candidate too (it is added, first, when feasible; otherwise it is
+    in ``plan.rejected``). ``plan_cut(num_candidates=N)`` scores ``N + 1`` candidates where the centroid is
+    feasible."""
+    centroid = np.asarray(plan.contour.centroid, dtype=np.float64)
+    included = any(
+        np.array_equal(np.asarray(c["point"], dtype=np.float64), centroid) for c in plan.candidates
+    )
+    return len(plan.candidates) - included, included
+
+
+def candidate_summary(plan: Plan) -> str:
+    """The candidates counted in words, as the map's title says it: "9 pinch candidates: 8 sampled + the
+    centroid", or "8 sampled pinch candidates; the centroid is infeasible"."""
+    sampled, centroid = candidate_counts(plan)
+    if centroid:
+        return f"{sampled + 1} pinch candidates: {sampled} sampled + the centroid"
+    text = f"{sampled} sampled pinch candidate{'' if sampled == 1 else 's'}"
+    return text + ("; the centroid is infeasible" if plan.rejected else "")
+
+
 def plot_pinch_candidates(
     plan: Plan, config: SimConfig, out_dir: str | os.PathLike, name: str = "pinch_candidates"
 ) -> list[Path]:
@@ -371,9 +568,10 @@ def plot_pinch_candidates(
 
     The feasible region is :func:`feasible_grid` at 1 mm (shaded green); segments are drawn in cutting
     order with their notch (circle, where the scissors enter) and termination (square); candidates are
-    coloured by ``error_vertices`` (their best order's, colour bar); rejected points (``plan.rejected``,
-    e.g. the centroid when infeasible) are crosses labelled with the rules they break; the chosen pinch
-    is ringed.
+    coloured by ``error_vertices`` (their best order's, colour bar), the sampled ones as dots and the
+    centroid (where feasible) as a diamond; rejected points (``plan.rejected``, the centroid when
+    infeasible) are crosses labelled with the rules they break; the chosen pinch is ringed. Every legend
+    entry is drawn as on the map. The title counts the candidates as :func:`candidate_counts` does.
 
     Args:
         plan: From :func:`~warpcut.planning.plan_cut`.
@@ -384,7 +582,12 @@ def plot_pinch_candidates(
     Returns:
         The paths written.
     """
-    fig = Figure(figsize=(7.2, 6.2), layout="constrained")
+    return save_figure(pinch_candidates_figure(plan, config), out_dir, name)
+
+
+def pinch_candidates_figure(plan: Plan, config: SimConfig) -> Figure:
+    """:func:`plot_pinch_candidates`' figure, unsaved."""
+    fig = Figure(figsize=(7.2, 6.6), layout="constrained")
     ax = fig.add_subplot()
     xs, ys, feasible = feasible_grid(plan, config)
     step = xs[1] - xs[0] if len(xs) > 1 else 1.0
@@ -406,64 +609,82 @@ def plot_pinch_candidates(
     handles += ax.plot(
         points[:, 0], points[:, 1], color="black", linewidth=0.8, linestyle="--", label="contour"
     )
-    for rank, k in enumerate(plan.order):
-        segment = plan.segments[k]
-        colour = f"C{rank % 10}"
-        handles += ax.plot(
-            segment.points[:, 0],
-            segment.points[:, 1],
-            color=colour,
-            linewidth=2.0,
-            label=f"segment {k}, cut {rank + 1}.",
-        )
-        ax.plot(*segment.notch, marker="o", color=colour, markersize=7, markeredgecolor="black")
-        ax.plot(*segment.termination, marker="s", color=colour, markersize=6, markeredgecolor="black")
-    handles.append(
-        Line2D([], [], marker="o", color="grey", markeredgecolor="black", linestyle="", label="notch")
-    )
-    handles.append(
-        Line2D([], [], marker="s", color="grey", markeredgecolor="black", linestyle="", label="termination")
-    )
-    if plan.candidates:
-        candidates = np.array([c["point"] for c in plan.candidates], dtype=np.float64)
-        errors = np.array([c["error_vertices"] for c in plan.candidates], dtype=np.float64)
-        dots = ax.scatter(
-            candidates[:, 0], candidates[:, 1], c=errors, cmap="viridis_r", s=40, edgecolors="black", zorder=4
-        )
-        fig.colorbar(dots, ax=ax, label="error with fixed tension (vertices)", shrink=0.8)
+    handles += _draw_segments(ax, plan)
+    handles += _draw_candidates(fig, ax, plan)
     for rejected in plan.rejected:
         violates = ", ".join(rejected.get("violates", [])) or "infeasible"
         handles += ax.plot(
-            *rejected["point"],
-            marker="x",
-            color="red",
-            markersize=10,
-            markeredgewidth=2,
-            linestyle="",
-            label=f"rejected ({violates})",
-            zorder=5,
-        )
+            *rejected["point"], marker="x", color="red", markersize=10, markeredgewidth=2, linestyle="",
+            label=f"centroid, infeasible ({violates})", zorder=5,
+        )  # fmt: skip
     pinch = np.asarray(plan.chosen["pinch"], dtype=np.float64)
     handles += ax.plot(
-        *pinch,
-        marker="o",
-        markersize=16,
-        markerfacecolor="none",
-        markeredgecolor="red",
-        markeredgewidth=2.5,
-        linestyle="",
+        *pinch, marker="o", markersize=16, markerfacecolor="none", markeredgecolor="red", markeredgewidth=2.5,
+        linestyle="", zorder=6,
         label=f"chosen ({pinch[0]:.1f}, {pinch[1]:.1f}): {plan.chosen['error_vertices']:.1f} vertices",
-        zorder=6,
-    )
+    )  # fmt: skip
     ax.set_xlim(-2.0, config.width_mm + 2.0)
     ax.set_ylim(-2.0, config.height_mm + 2.0)
     ax.set_aspect("equal")
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")
     length = "inf" if math.isinf(plan.arm.length_mm) else f"{plan.arm.length_mm:g} mm"
+    counted = candidate_summary(plan)
     ax.set_title(
-        f"{plan.contour.name}: {len(plan.candidates)} pinch candidate(s), "
-        f"arm radius {plan.arm.radius_mm:g} mm, length {length}"
+        f"{plan.contour.name}: {counted}\narm radius {plan.arm.radius_mm:g} mm, length {length}",
+        fontsize="medium",
     )
     fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize="small", frameon=False)
-    return save_figure(fig, out_dir, name)
+    return fig
+
+
+_NOTCH = {"marker": "o", "markersize": 7, "markerfacecolor": "white", "markeredgecolor": "black"}
+_TERMINATION = {"marker": "s", "markersize": 6, "markerfacecolor": "white", "markeredgecolor": "black"}
+
+
+def _draw_segments(ax, plan: Plan) -> list:
+    """The plan's segments in cutting order, each with its notch and termination; their legend handles."""
+    handles = []
+    for rank, k in enumerate(plan.order):
+        segment = plan.segments[k]
+        handles += ax.plot(
+            segment.points[:, 0], segment.points[:, 1], color=f"C{rank % 10}", linewidth=2.0,
+            label=f"segment {k}, cut {rank + 1}.",
+        )  # fmt: skip
+        ax.plot(*segment.notch, linestyle="", zorder=3, **_NOTCH)
+        ax.plot(*segment.termination, linestyle="", zorder=3, **_TERMINATION)
+    handles.append(Line2D([], [], linestyle="", label="notch (the scissors enter)", **_NOTCH))
+    handles.append(Line2D([], [], linestyle="", label="termination", **_TERMINATION))
+    return handles
+
+
+def _draw_candidates(fig: Figure, ax, plan: Plan) -> list:
+    """The candidates coloured by their error (one colour bar): sampled ones as dots, the centroid (if a
+    candidate) as a diamond; their legend handles (the drawn markers themselves)."""
+    if not plan.candidates:
+        return []
+    points = np.array([c["point"] for c in plan.candidates], dtype=np.float64)
+    errors = np.array([c["error_vertices"] for c in plan.candidates], dtype=np.float64)
+    is_centroid = np.all(points == np.asarray(plan.contour.centroid, dtype=np.float64), axis=1)
+    norm = Normalize(
+        vmin=float(errors.min()), vmax=float(errors.max()) + 1e-9 * (errors.min() == errors.max())
+    )
+    handles = []
+    for chosen, marker, size, label in (
+        (~is_centroid, "o", 40, "sampled candidate (fill: its error)"),
+        (is_centroid, "D", 60, "the centroid, a candidate (fill: its error)"),
+    ):
+        if chosen.any():
+            handles.append(
+                ax.scatter(
+                    points[chosen, 0], points[chosen, 1], c=errors[chosen], cmap="viridis_r", norm=norm,
+                    marker=marker, s=size, edgecolors="black", zorder=4, label=label,
+                )
+            )  # fmt: skip
+    fig.colorbar(
+        ScalarMappable(norm=norm, cmap="viridis_r"),
+        ax=ax,
+        label="error with fixed tension (vertices)",
+        shrink=0.8,
+    )
+    return handles

@@ -22,10 +22,13 @@ from warpcut.sim.config import SheetGrid, SimConfig
 from warpcut.sim.material import interpolate, material_cells
 from warpcut.viz.colours import (
     CUTTING_RGBA,
+    GRASP_RGB,
     HIDDEN_RGBA,
     STRAIN_FULL_SCALE,
     TRAVEL_RGBA,
     VISIBLE_RGBA,
+    colour_legend,
+    ramp_image,
     ramp_rgba,
     vertex_strain,
 )
@@ -43,6 +46,14 @@ from warpcut.viz.columns import (
 )
 from warpcut.viz.frames import EnvSetup, Frame, TaskSetup
 from warpcut.viz.process import place_file
+
+GRASP_DISC_MM = 1.0
+"""Thickness of the grasp's disc as drawn (mm): the gripper's pad, of the grasp radius, centred on the grasped
+vertices so that it shows above and below the sheet."""
+
+LEGEND = "/legend"
+"""Where a recording's colour bar (``/legend/colour_bar``, an image) and what its colours mean
+(``/legend/colour_scale``, Markdown) are, logged once."""
 
 Send = Callable[..., None]
 """``send(entity, columns, at=None)``: send one env's columns of ``entity`` at the batch's steps (or
@@ -136,6 +147,12 @@ class RerunWriter:
         self.stream = rr.RecordingStream(application_id)
         self.stream.save(tmp)
         self.stream.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        self.stream.log(f"{LEGEND}/colour_bar", rr.Image(ramp_image()), static=True)
+        self.stream.log(
+            f"{LEGEND}/colour_scale",
+            rr.TextDocument(colour_legend(colour_by), media_type=rr.MediaType.MARKDOWN),
+            static=True,
+        )
         self.episodes: dict[int, _TaskDrawing] = {}
         self._blueprint_roots: list[str] | None = None
 
@@ -192,14 +209,23 @@ class RerunWriter:
             fiducial_cells=material_cells(fiducials[None], grid),
             path=None if setup.arc is None else np.zeros((len(setup.arc), 3), dtype=np.float32),
         )
-        where = "none" if setup.disc is None else f"({setup.pinch[0]:.1f}, {setup.pinch[1]:.1f}) mm"
-        stream.log(
-            f"{root}/info",
-            rr.TextDocument(
-                f"contour {setup.contour.name}, pinch point {where}; vertex colours: {self.colour_by}"
-            ),
-            static=True,
-        )
+        stream.log(f"{root}/info", rr.TextDocument(self._info(setup)), static=True)
+        if setup.disc is not None:
+            stream.log(
+                f"{root}/grasp/disc",
+                rr.Cylinders3D.from_fields(
+                    lengths=[GRASP_DISC_MM],
+                    radii=[task_setup.config.grasp_radius],
+                    colors=[GRASP_RGB],
+                    fill_mode=rr.components.FillMode.Solid,
+                ),
+                static=True,
+            )
+            stream.log(
+                f"{root}/grasp/vertices",
+                rr.Points3D.from_fields(radii=[0.15 * min(grid.spacing_mm)], colors=[[110, 0, 95]]),
+                static=True,
+            )
         stream.log(f"{root}/action", rr.SeriesLines(names=["x", "y", "z"]), static=True)
         stream.log(
             f"{root}/separated_error_vertices",
@@ -216,6 +242,14 @@ class RerunWriter:
                 f"{root}/path_error_vertices", rr.SeriesLines(names="path error (vertices)"), static=True
             )
         return env
+
+    def _info(self, setup: EnvSetup, height_range: tuple[float, float] | None = None) -> str:
+        """An env's ``info`` text: its contour, pinch point and what its vertex colours show."""
+        where = "none" if setup.disc is None else f"({setup.pinch[0]:.1f}, {setup.pinch[1]:.1f}) mm"
+        scale = (
+            "" if height_range is None else f", from z = {height_range[0]:.1f} to {height_range[1]:.1f} mm"
+        )
+        return f"contour {setup.contour.name}, pinch point {where}; vertex colours: {self.colour_by}{scale}"
 
     def _send_blueprint(self) -> None:
         """Send the layout of the envs recorded so far, unless it was sent already."""
@@ -268,6 +302,9 @@ class RerunWriter:
             env.height_range = (float(z.min()), max(float(z.max()), float(z.min()) + 1.0))
             if env.setup.disc is not None:
                 env.disc_origin = batch.positions[0, env.setup.disc].mean(axis=0)
+            if self.colour_by == "height":  # the ramp's ends, now known
+                info = rr.TextDocument(self._info(env.setup, env.height_range))
+                self.stream.log(f"{env.root}/info", info, static=True)
         self._send_sheet(task, env, batch, send)
         if env.path is not None:
             _send_path(env, task.grid, batch.updates, send)
@@ -366,13 +403,15 @@ def _send_tip_and_fiducials(env: _EnvDrawing, batch: _EnvBatch, send: Send) -> N
 
 
 def _send_grasp_and_action(env: _EnvDrawing, batch: _EnvBatch, send: Send) -> None:
-    """The grasped vertices and the grasp's displacement (where the env is grasped), and the actions."""
+    """The grasp (where the env is grasped): its disc, centred on the grasped vertices, those vertices and
+    its displacement; and the actions."""
+    import rerun as rr
+
     disc, frames = env.setup.disc, len(batch.steps)
     if disc is not None:
-        send(
-            "grasp/disc",
-            [column("Points3D:positions", vec3_array(batch.positions[:, disc]), np.full(frames, disc.sum()))],
-        )
+        held = batch.positions[:, disc]
+        send("grasp/disc", rr.Cylinders3D.columns(centers=held.mean(axis=1)))
+        send("grasp/vertices", [column("Points3D:positions", vec3_array(held), np.full(frames, disc.sum()))])
         send(
             "grasp/displacement",
             [
@@ -410,6 +449,11 @@ def _blueprint(roots: list[str]):
 
     if not roots:
         return rrb.Blueprint(rrb.Spatial3DView(origin="/"))
+    legend = rrb.Vertical(
+        rrb.Spatial2DView(name="colour scale", origin=f"{LEGEND}/colour_bar"),
+        rrb.TextDocumentView(name="colours", origin=f"{LEGEND}/colour_scale"),
+        row_shares=[1, 3],
+    )
     return rrb.Blueprint(
         rrb.Vertical(
             rrb.Grid(*[rrb.Spatial3DView(origin=r, name=r.strip("/").replace("/", " ")) for r in roots]),
@@ -420,6 +464,8 @@ def _blueprint(roots: list[str]):
                     contents=[f"{r}/{e}_error_vertices" for r in roots for e in ("path", "separated")],
                 ),
                 rrb.TimeSeriesView(name="action (mm)", origin="/", contents=[f"{r}/action" for r in roots]),
+                legend,
+                column_shares=[2, 2, 1],
             ),
             row_shares=[3, 1],
         ),
