@@ -549,6 +549,7 @@ def evaluate_table(
     device: str | None = None,
     seed: int = 0,
     log: Callable[[str], None] = lambda _: None,
+    stages: Stages = lambda stage, done, total: None,
     step_callbacks: StepCallbacks | None = None,
 ) -> TableReport:
     """The paper's Table I protocol on ``contours``.
@@ -582,6 +583,7 @@ def evaluate_table(
         device: Warp device.
         seed: Seed of everything random.
         log: Called with each progress line.
+        stages: Called as each stage advances (:data:`Stages`: planning, training rl, evaluating).
         step_callbacks: Step callbacks of the batches (``("rl", k)``: contour k's rollout).
     """
     methods = check_methods(methods, "methods")
@@ -604,13 +606,9 @@ def evaluate_table(
         if [p.contour.name for p in plans] != [c.name for c in loaded]:
             raise ValueError("plan: give one Plan per contour, in the contours' order (or True / False)")
     elif plan:
-        plans, started = [], time.perf_counter()
-        for k, contour in enumerate(loaded):
-            log(f"  [{k + 1}/{len(loaded)}] planning {contour.name} ({candidates} candidates)")
-            settings = dict(num_candidates=candidates, seed=seed, device=device, arm=arm or ArmModel())
-            plans.append(plan_cut(contour, config.replace(noise_std=0.0), **settings))
+        settings = dict(num_candidates=candidates, seed=seed, device=device, arm=arm or ArmModel())
+        plans = _plan_all(loaded, config.replace(noise_std=0.0), settings, log, stages)
         write_json(out / "plans.json", {p.contour.name: p.to_json() for p in plans})
-        log(f"  planned {len(plans)} contour(s) in {time.perf_counter() - started:.0f} s")
     specs = [Method(m) for m in methods]
     runs: list[Path] = []
     kept: list[int | None] = []
@@ -621,9 +619,11 @@ def evaluate_table(
             spec.pinches = analytic_pinches(analytic_pinch, loaded, plans)
         elif spec.name == "rl":
             training = {"recipe": recipe, "iterations": iterations, "num_envs": num_envs, "resume": resume}
+            feedback = (log, step_callbacks, stages)
             spec.result, runs, kept = _rl_result(
-                named, plans, checkpoints, out, trials, config, training, device, seed, log, step_callbacks
+                named, plans, checkpoints, out, trials, config, training, device, seed, *feedback
             )
+    running = iter(range(1, len(specs) + 1))
     table = evaluate_suite(
         loaded,
         specs,
@@ -632,9 +632,10 @@ def evaluate_table(
         device=device,
         seed=seed,
         segments=None if plans is None else [p.ordered_segments() for p in plans],
-        progress=lambda what: log(f"  running {what}"),
+        progress=lambda what: (log(f"  running {what}"), stages("evaluating", next(running) - 1, len(specs))),
         step_callbacks=step_callbacks,
     )
+    stages("evaluating", len(specs), len(specs))
     log(f"  evaluated {len(methods)} method(s) x {len(loaded)} contour(s) x {trials} trials")
     for row, iteration in zip(table["rows"], kept, strict=False):
         row["rl_policy_iteration"] = iteration
@@ -645,6 +646,25 @@ def evaluate_table(
     )
     write_json(out / "results.json", report.to_json())
     return report
+
+
+Stages = Callable[[str, int, int], None]
+"""``stages(stage, done, total)``: a pipeline's stage (e.g. "planning") has ``done`` of ``total`` steps
+done (a progress bar per stage; ``warpcut evaluate`` draws them)."""
+
+
+def _plan_all(
+    contours: list[Contour], config: SimConfig, settings: dict, log: Callable[[str], None], stages: Stages
+) -> list[Plan]:
+    """Plan every contour (:func:`~warpcut.planning.plan_cut` with ``settings``), saying how far it got."""
+    plans, started = [], time.perf_counter()
+    for k, contour in enumerate(contours):
+        log(f"  [{k + 1}/{len(contours)}] planning {contour.name} ({settings['num_candidates']} candidates)")
+        stages("planning", k, len(contours))
+        plans.append(plan_cut(contour, config, **settings))
+    stages("planning", len(contours), len(contours))
+    log(f"  planned {len(plans)} contour(s) in {time.perf_counter() - started:.0f} s")
+    return plans
 
 
 def _rl_result(
@@ -659,6 +679,7 @@ def _rl_result(
     seed: int,
     log: Callable[[str], None],
     step_callbacks: StepCallbacks | None,
+    stages: Stages,
 ) -> tuple[MethodResult, list[Path], list[int | None]]:
     """The rl column: per contour a run (from ``checkpoints`` or trained now with ``training``'s
     ``recipe``, ``iterations`` and ``num_envs``, at the planned pinch and segments when planned) rolled out
@@ -696,6 +717,7 @@ def _rl_result(
                 run, trials, seed=seed + 1, device=device, on_step=callback, paired_noise=(seed, k * trials)
             )
         )
+        stages("training rl" if checkpoints is None else "rolling out rl", k + 1, len(named))
     what = "trained" if checkpoints is None else "rolled out"
     log(f"  rl: {what} {len(named)} policy(ies) in {time.perf_counter() - started:.0f} s")
     return MethodResult.from_rollouts(rollouts), runs, iterations

@@ -96,3 +96,20 @@ def test_evaluate_table_trains_with_the_papers_recipe_and_records_the_kept_itera
     assert np.isfinite(row["rl_improvement_pct"]) and report.policy_runs == [
         tmp_path / "policies/circle-small"
     ]
+
+
+def test_evaluate_table_reports_each_stage_as_it_advances(tmp_path):
+    seen = []
+
+    def stages(stage, done, total):
+        seen.append((stage, done, total))
+
+    evaluate_table(["circle-small", "wave-1"], tmp_path, methods=["none", "fixed"], trials=1, config=SMALL,
+                   candidates=2, stages=stages)  # fmt: skip
+    assert [s for s in seen if s[0] == "planning"] == [
+        ("planning", 0, 2),
+        ("planning", 1, 2),
+        ("planning", 2, 2),
+    ]
+    evaluating = [s for s in seen if s[0] == "evaluating"]
+    assert evaluating[0][1] == 0 and evaluating[-1] == ("evaluating", 2, 2)

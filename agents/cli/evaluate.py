@@ -119,7 +119,13 @@ def command(
     common.check_outputs({"--json": json_path, "--markdown": markdown_path}, list(contour_args))
     out, claim = common.claim(out, "evaluate", resume, overwrite)
     cuts = common.final_cuts(no_plots)
-    with claim, common.recorder(out, record_envs, colour_by) as rec, videos(out, video_envs) as vid:
+    bars = common.stage_bars()
+    with (
+        claim,
+        bars as stages,
+        common.recorder(out, record_envs, colour_by) as rec,
+        videos(out, video_envs) as vid,
+    ):
         report = evaluate_table(
             contour_args, out, resume=resume, methods=names, trials=trials,
             config=SimConfig(noise_std=noise, score=score),
@@ -128,7 +134,8 @@ def command(
             plan=plan,
             candidates=candidates,
             arm=ArmModel(length_mm=arm_length), analytic_pinch=analytic_pinch, device=device,
-            seed=seed, log=common.log, step_callbacks=with_videos(common.step_callbacks(rec, cuts), vid),
+            seed=seed, log=common.log, stages=stages,
+            step_callbacks=with_videos(common.step_callbacks(rec, cuts), vid),
         )  # fmt: skip
     table = report.markdown()
     click.echo(table)
