@@ -623,7 +623,8 @@ def evaluate_table(
             spec.result, runs, kept = _rl_result(
                 named, plans, checkpoints, out, trials, config, training, device, seed, *feedback
             )
-    running = iter(range(1, len(specs) + 1))
+    batches = len({spec.name for spec in specs} | {"none"})  # evaluate_suite also runs none, the baseline
+    running = iter(range(batches))
     table = evaluate_suite(
         loaded,
         specs,
@@ -632,10 +633,10 @@ def evaluate_table(
         device=device,
         seed=seed,
         segments=None if plans is None else [p.ordered_segments() for p in plans],
-        progress=lambda what: (log(f"  running {what}"), stages("evaluating", next(running) - 1, len(specs))),
+        progress=lambda what: (log(f"  running {what}"), stages("evaluating", next(running, 0), batches)),
         step_callbacks=step_callbacks,
     )
-    stages("evaluating", len(specs), len(specs))
+    stages("evaluating", batches, batches)
     log(f"  evaluated {len(methods)} method(s) x {len(loaded)} contour(s) x {trials} trials")
     for row, iteration in zip(table["rows"], kept, strict=False):
         row["rl_policy_iteration"] = iteration

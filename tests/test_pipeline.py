@@ -113,3 +113,8 @@ def test_evaluate_table_reports_each_stage_as_it_advances(tmp_path):
     ]
     evaluating = [s for s in seen if s[0] == "evaluating"]
     assert evaluating[0][1] == 0 and evaluating[-1] == ("evaluating", 2, 2)
+
+    seen.clear()  # without "none" listed, the suite runs it too: three batches
+    evaluate_table("circle-small", tmp_path / "b", methods=["fixed", "analytic"], trials=1, config=SMALL,
+                   plan=False, stages=stages)  # fmt: skip
+    assert [done for stage, done, _ in seen if stage == "evaluating"] == [0, 1, 2, 3]
