@@ -102,20 +102,8 @@ def command(
     from warpcut.planning import ArmModel
 
     names = common.parse_methods(methods, "--methods", tuple(METHODS))
-    if record_envs is not None and record_envs > trials:
-        click.echo(
-            f"warning: --record {record_envs}: the first contour has only {trials} env(s) per method "
-            f"(--trials); recording {trials}",
-            err=True,
-        )
-        record_envs = trials
-    if video_envs is not None and video_envs > trials:
-        click.echo(
-            f"warning: --video {video_envs}: the first contour has only {trials} env(s) per method "
-            f"(--trials); filming {trials}",
-            err=True,
-        )
-        video_envs = trials
+    record_envs = _first_contour_envs("--record", record_envs, trials, "recording")
+    video_envs = _first_contour_envs("--video", video_envs, trials, "filming")
     common.check_outputs({"--json": json_path, "--markdown": markdown_path}, list(contour_args))
     out, claim = common.claim(out, "evaluate", resume, overwrite)
     cuts = common.final_cuts(no_plots)
@@ -161,3 +149,15 @@ def command(
         common.plot_learning_curves({run: run.name for run in report.policy_runs})
     common.echo_recording(rec)
     click.echo(f"wrote {out}")
+
+
+def _first_contour_envs(option: str, envs: int | None, trials: int, doing: str) -> int | None:
+    """``envs`` to record or film of the first contour, at most its ``trials`` (with a warning)."""
+    if envs is None or envs <= trials:
+        return envs
+    click.echo(
+        f"warning: {option} {envs}: the first contour has only {trials} env(s) per method (--trials); "
+        f"{doing} {trials}",
+        err=True,
+    )
+    return trials
