@@ -52,6 +52,7 @@ SANE = {
     "damping": per_env(floats(0.0, 1.0)),
     "elasticity": per_env(floats(0.01, 1.99)),
     "sweeps": st.integers(1, 40),
+    "chebyshev_rho": st.sampled_from([0.0, 0.5, 0.9, SimConfig.chebyshev_rho]),
     "updates_per_step": st.integers(1, 4),
     "first_order_z": st.booleans(),
     "fixture": st.sampled_from(["corners", "rows"]),
@@ -65,6 +66,7 @@ ANY = {
     "damping": per_env(anything(0.0, 1.0), wrong_lengths=True),
     "elasticity": per_env(anything(0.01, 1.99), wrong_lengths=True),
     "sweeps": st.one_of(st.integers(-2, 60), st.sampled_from([0, 200, 201, 2.5, True])),
+    "chebyshev_rho": anything(0.0, 0.99),
     "updates_per_step": st.integers(-1, 4),
     "fixture": st.sampled_from(["corners", "rows", "clamps"]),
 }

@@ -20,7 +20,9 @@ class SimdDriver:
     def __init__(self, sim: Simulator, lanes: int):
         self.sim = sim
         self.model = SimdModel.from_config(sim.config, sim.grid, sim.device)
-        self.state = SimdState(sim.num_envs, sim.grid.num_vertices, lanes, sim.device)
+        self.state = SimdState(
+            sim.num_envs, sim.grid.num_vertices, lanes, sim.device, chebyshev=sim.config.chebyshev_rho > 0
+        )
         self.state.load(sim.x, sim.x_prev, sim.alive, sim.pin, sim.anchor)
         p = sim._wp_params
         self.state.load_params(p["damping"], p["dt"], p["gravity"], p["noise_std"], p["elasticity"])
@@ -57,6 +59,12 @@ def run_cut(config: SimConfig, lanes: int | None, updates: int = 30):
         (8, {"noise_std": 0.05}),
         (4, {}),
         (4, {"noise_std": 0.01, "first_order_z": True, "elasticity": [1.0, 0.8, 0.6, 0.9, 1.2]}),
+        # Chebyshev-accelerated sweeps off (plain Gauss-Seidel), and the short sweep counts whose
+        # extrapolation keeps fewer copies (sweeps 1-3: no copy, one, both).
+        (8, {"chebyshev_rho": 0.0}),
+        (8, {"sweeps": 1}),
+        (4, {"sweeps": 2, "chebyshev_rho": 0.6, "noise_std": 0.02}),
+        (8, {"sweeps": 3, "chebyshev_rho": 0.8}),
     ],
 )
 def test_simd_matches_colours_through_a_cut(lanes, changes):

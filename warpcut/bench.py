@@ -27,7 +27,7 @@ ROLLOUT_ENVS = 256
 """Batch of the fls-circle rollout measurements."""
 SIM_ENV_STEP_ENVS = 64
 """Batch of the ``sim_env_steps_per_s`` measurement: the envs a training run steps by default."""
-PAPER_SWEEPS = SimConfig(springs=("structural",), sweeps=5, noise_std=0.0)
+PAPER_SWEEPS = SimConfig(springs=("structural",), sweeps=5, chebyshev_rho=0.0, noise_std=0.0)
 """The issue's and the paper's unit of work: one update = integrate + 5 structural relaxation sweeps,
 without process noise (the authors' code had none)."""
 NOISE_FREE = SimConfig(noise_std=0.0)
@@ -179,10 +179,11 @@ def run_bench(
     batch_sizes: tuple[int, ...] = BATCH_SIZES,
     rollout_envs: int = ROLLOUT_ENVS,
     progress: Callable[[str], None] = lambda _: None,
-    extra: dict[str, Callable[[], float]] | None = None,
+    training: Callable[[int], dict[str, float]] | None = None,
 ) -> dict:
-    """Measure the simulator as ``warpcut bench`` reports it, then each of ``extra``: ``result[key] =
-    fn()`` in order (what lies above the simulator, e.g. ``{"train_steps_per_s": ...}``). Returns the
+    """Measure the simulator as ``warpcut bench`` reports it; then, if given, ``training(num_envs)`` (what
+    lies above the simulator: PPO's steady-state figures, ``train_steps_per_s`` among them) at the batch of
+    ``sim_env_steps_per_s``, with ``train_vs_sim_pct``, the one as a percentage of the other. Returns the
     JSON-ready dict."""
     from warpcut.sim._warp import wp
     from warpcut.sim.simulator import Simulator
@@ -227,7 +228,8 @@ def run_bench(
     result["numpy_updates_per_s"] = numpy_updates_per_second(repeats)
     best = max(ups.values())
     result["speedup_vs_numpy"] = best / result["numpy_updates_per_s"]
-    for key, measure in (extra or {}).items():
-        progress(key)
-        result[key] = measure()
+    if training is not None:
+        progress(f"PPO training at B={SIM_ENV_STEP_ENVS}")
+        result.update(training(SIM_ENV_STEP_ENVS))
+        result["train_vs_sim_pct"] = 100 * result["train_steps_per_s"] / result["sim_env_steps_per_s"]
     return result

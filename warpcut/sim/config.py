@@ -73,6 +73,18 @@ class SimulationDiverged(ValueError):
     line."""
 
 
+CHEBYSHEV_RHO_MAX = 0.99
+"""Largest ``SimConfig.chebyshev_rho`` accepted (exclusive): the weights approach 2 and the sweeps diverge."""
+
+CHEBYSHEV_ELASTICITY_MAX = 1.2
+"""Largest ``elasticity`` accepted with Chebyshev sweeps (``chebyshev_rho > 0``): over-relaxed sweeps
+(elasticity > 1) break the extrapolation's assumption. Measured on the default sheet: up to 1.2 it settles
+as 20 plain sweeps do (sag 15.8 vs 15.9 mm at 1.2); at 1.35 the stretch reaches 38% (9 x 9: at 1.3 already),
+at 1.4 174% (docs/physics.md, "Fewer sweeps")."""
+
+CHEBYSHEV_RESIDUAL_MAX = 0.3
+"""The largest Chebyshev residual factor ``1 / T_K(1 / rho)`` accepted (:func:`chebyshev_rho_limit`)."""
+
 RESOLUTION_RANGE = (5, 100)
 """The vertices per sheet side a simulation may have (``SimConfig.resolution``), coarsest and finest."""
 
@@ -108,10 +120,17 @@ class SimConfig:
     noise-free. Noise large enough to blow the sheet up (non-finite or runaway vertices) makes its env
     *diverge* (:data:`RUNAWAY_SHEETS`): flagged, never scored."""
 
-    sweeps: int = 20
+    sweeps: int = 7
     """Gauss-Seidel relaxation sweeps per update, each relaxing every spring colour once. The paper used 5
-    with structural springs and rows pinned; clipped corners need shear springs and ~20 sweeps to hang like
-    gauze (docs/physics.md)."""
+    with structural springs and rows pinned; clipped corners need shear springs and the stiffness of ~20
+    plain sweeps to hang like gauze, which 7 Chebyshev-accelerated sweeps reach (docs/physics.md)."""
+    chebyshev_rho: float = 0.94
+    """Chebyshev semi-iterative acceleration of the sweeps (Wang 2015, "A Chebyshev semi-iterative approach
+    for accelerating projective and position-based dynamics"): the spectral radius ``rho`` assumed for one
+    sweep, in [0, 1). After every sweep from the second on, each vertex is extrapolated to
+    ``older + w_k * (swept - older)``, ``older`` being its position two sweeps before and ``w_k`` the
+    Chebyshev weights (:func:`chebyshev_weights`). 0 turns it off: plain Gauss-Seidel, the paper's. The
+    default reaches the sheet of 20 plain sweeps from far fewer (docs/physics.md, "Fewer sweeps")."""
     springs: tuple[str, ...] = ("structural", "shear")
     """Spring families: ``structural`` (grid edges), ``shear`` (cell diagonals), ``bending`` (two apart)."""
     fixture: str = "corners"
@@ -193,6 +212,7 @@ class SimConfig:
             fixture="rows",
             springs=("structural",),
             sweeps=5,
+            chebyshev_rho=0.0,
             first_order_z=True,
             gravity=GRAVITY_MM_S2 / 2,
             cut_radius_mm=AUTHORS_CUT_RADIUS_MM,
@@ -200,6 +220,11 @@ class SimConfig:
         )
         base.update(changes)
         return cls(**base).validated()
+
+    @property
+    def sweep_weights(self) -> np.ndarray:
+        """The Chebyshev weight applied after each sweep (float32, one per sweep; all 1 when off)."""
+        return chebyshev_weights(self.sweeps, self.chebyshev_rho)
 
     def per_env(self, name: str, num_envs: int) -> np.ndarray:
         """The physical parameter ``name`` as a float32 array of length 1 or ``num_envs``."""
@@ -264,6 +289,28 @@ class SimConfig:
             "sweeps",
             "must be an integer in [1, 200]",
         )
+        _require(
+            isinstance(self.chebyshev_rho, int | float | np.number)
+            and not isinstance(self.chebyshev_rho, bool)
+            and 0 <= self.chebyshev_rho < CHEBYSHEV_RHO_MAX,
+            "chebyshev_rho",
+            f"must lie in [0, {CHEBYSHEV_RHO_MAX:g}): 0 is plain Gauss-Seidel, larger extrapolates further "
+            f"(default {SimConfig.chebyshev_rho:g})",
+        )
+        elasticity = np.asarray(self.elasticity, dtype=np.float32)  # (as the kernels read it)
+        if self.chebyshev_rho > 0 and np.any(elasticity > np.float32(CHEBYSHEV_ELASTICITY_MAX)):
+            raise ConfigError(
+                f"elasticity: above {CHEBYSHEV_ELASTICITY_MAX:g} the sweeps over-relax, and the Chebyshev "
+                f"extrapolation on top of that (chebyshev_rho {self.chebyshev_rho:g}) breaks the sheet; keep "
+                f"elasticity <= {CHEBYSHEV_ELASTICITY_MAX:g}, or set chebyshev_rho=0 (plain sweeps, "
+                "elasticity up to 2) and raise sweeps"
+            )
+        if self.sweeps >= 2 and self.chebyshev_rho > chebyshev_rho_limit(self.sweeps):
+            raise ConfigError(
+                f"chebyshev_rho: {self.chebyshev_rho:g} extrapolates too far for {self.sweeps} sweeps (the "
+                f"sheet would oscillate and blow up); give at most {chebyshev_rho_limit(self.sweeps):.3f}, "
+                "0 (plain Gauss-Seidel), or more sweeps"
+            )
         unknown = [s for s in self.springs if s not in SPRING_FAMILIES]
         _require(
             not unknown and "structural" in self.springs,
@@ -294,6 +341,30 @@ class SimConfig:
                 + (" (no limit)" if name == "cut_height_mm" else ""),
             )
         return self
+
+
+def chebyshev_weights(sweeps: int, rho: float) -> np.ndarray:
+    """Chebyshev weights ``w_1 .. w_sweeps`` (float32) for spectral radius ``rho`` (Wang 2015, eq. 12 with
+    the acceleration starting at the second sweep): ``w_1 = 1``, ``w_2 = 2 / (2 - rho^2)``,
+    ``w_k = 4 / (4 - rho^2 w_(k-1))``. They rise from 1 toward ``2 / (1 + sqrt(1 - rho^2))``; ``rho = 0``
+    gives all ones (no extrapolation). Every backend reads these float32 values, so all extrapolate alike."""
+    weights = np.ones(sweeps, dtype=np.float64)
+    r2 = float(rho) ** 2
+    for k in range(1, sweeps):
+        weights[k] = 2.0 / (2.0 - r2) if k == 1 else 4.0 / (4.0 - r2 * weights[k - 1])
+    return weights.astype(np.float32)
+
+
+def chebyshev_rho_limit(sweeps: int) -> float:
+    """The largest stable ``chebyshev_rho`` for ``sweeps`` sweeps (< 1; any for one sweep, which is never
+    extrapolated). After ``K`` sweeps the Chebyshev iteration leaves ``1 / T_K(1 / rho)`` of the error a
+    plain sweep removes at once (``T_K``: the Chebyshev polynomial), with alternating sign, and the Verlet
+    step carries it into the next update as velocity. On the default sheet every setting measured with that
+    factor at or below 0.33 settled and every one at 0.38 or above blew up, whatever the resolution
+    (docs/physics.md, "Fewer sweeps"): the limit keeps it at or below :data:`CHEBYSHEV_RESIDUAL_MAX`."""
+    if sweeps < 2:
+        return CHEBYSHEV_RHO_MAX
+    return min(CHEBYSHEV_RHO_MAX, 1.0 / math.cosh(math.acosh(1.0 / CHEBYSHEV_RESIDUAL_MAX) / sweeps))
 
 
 def _require(ok: bool, name: str, fix: str) -> None:

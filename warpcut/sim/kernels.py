@@ -20,8 +20,9 @@ PIN_GRASP = wp.constant(2)
 # Process noise is drawn from a counter-based integer hash, the same in every backend (bit for bit), and
 # cheaper than Warp's rand_init + randn (Box-Muller: logs and cosines per draw; docs/performance.md).
 
-NOISE_SCALE = wp.constant(0.0067658750867932)
+NOISE_SCALE_VALUE = 0.0067658750867932
 """1 / std of the sum of four uniform bytes: sqrt(4 * (256^2 - 1) / 12) = 147.8006."""
+NOISE_SCALE = wp.constant(NOISE_SCALE_VALUE)
 
 
 @wp.func
@@ -184,6 +185,32 @@ def relax_colour_kernel(
         share = 1.0
     k = elasticity[env % elasticity.shape[0]]
     x_out[i] = p + d * (k * share * (length - rest_length) / length)
+
+
+@wp.kernel
+def chebyshev_kernel(
+    weight: float,
+    first: int,
+    save: int,
+    # Data in:
+    x: wp.array(dtype=wp.vec3),
+    older: wp.array(dtype=wp.vec3),
+    # Data out:
+    x_out: wp.array(dtype=wp.vec3),
+    saved_out: wp.array(dtype=wp.vec3),
+):
+    """Chebyshev extrapolation after a sweep (``SimConfig.chebyshev_rho``), launched over all ``B * n``
+    vertices: ``older + (x - older) * weight``, ``older`` being the positions two sweeps back (``x`` as it
+    is when ``first``); a copy goes to ``saved_out`` when ``save``. Element-wise, so it may run in place.
+    Pinned and cut vertices do not move within an update (``x == older``), so they stay exactly put."""
+    i = wp.tid()
+    y = x[i]
+    if first == 0:
+        o = older[i]
+        y = o + (y - o) * weight
+    x_out[i] = y
+    if save != 0:
+        saved_out[i] = y
 
 
 @wp.kernel

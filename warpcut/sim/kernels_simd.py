@@ -37,7 +37,7 @@ import numpy as np
 
 from warpcut.sim._warp import launch, wp
 from warpcut.sim.config import SheetGrid, SimConfig
-from warpcut.sim.kernels import PIN_FREE, PIN_GRASP, TipSearch, process_noise, tip_locator
+from warpcut.sim.kernels import NOISE_SCALE_VALUE, PIN_FREE, PIN_GRASP, TipSearch, tip_locator
 from warpcut.sim.springs import colour_springs
 
 DEFAULT_LANES = 8
@@ -46,8 +46,17 @@ _RELAX_SOURCE = """
     typedef float vf __attribute__((ext_vector_type(LANES), aligned(4)));
     typedef int vi __attribute__((ext_vector_type(LANES), aligned(4)));
     struct V { vf x, y, z, alive, free; };
+    struct P { vf x, y, z; };
     static_assert(sizeof(V) == 5 * LANES * sizeof(float), "Vert layout");
+    static_assert(sizeof(P) == 3 * LANES * sizeof(float), "Prev layout");
     V* block = (V*)vert.data + base;
+    // Chebyshev: the positions two sweeps back, by sweep parity (two records per vertex of the block)
+    P* older[2] = {nullptr, nullptr};
+    const float* weight = (const float*)weights.data;
+    if (chebyshev) {  // the first record holds the integrated positions (the integration wrote them)
+        older[0] = (P*)older_data.data + 2 * base;
+        older[1] = older[0] + n;
+    }
     const int* pair = (const int*)pairs.data;
     const float* rest_of = (const float*)colour_rest.data;
     const int* start = (const int*)colour_start.data;
@@ -81,8 +90,138 @@ _RELAX_SOURCE = """
                 pb->z = bz + (az - bz) * sb;
             }
         }
+        if (chebyshev) {
+            // chebyshev_kernel's expression: older + (x - older) * w, kept for two sweeps on
+            const int done = sweep + 1;
+            const bool save = done < sweeps - 1;
+            P* o = older[done % 2];
+            if (done > 1) {
+                const vf w = weight[sweep];
+                for (int v = 0; v < n; ++v) {
+                    V* p = block + v;
+                    P* q = o + v;
+                    const vf x = q->x + (p->x - q->x) * w;
+                    const vf y = q->y + (p->y - q->y) * w;
+                    const vf z = q->z + (p->z - q->z) * w;
+                    p->x = x;
+                    p->y = y;
+                    p->z = z;
+                    if (save) {
+                        q->x = x;
+                        q->y = y;
+                        q->z = z;
+                    }
+                }
+            } else if (save) {
+                for (int v = 0; v < n; ++v) {
+                    o[v].x = block[v].x;
+                    o[v].y = block[v].y;
+                    o[v].z = block[v].z;
+                }
+            }
+        }
     }
 """
+
+
+_INTEGRATE_SOURCE = """
+    typedef float vf __attribute__((ext_vector_type(LANES), aligned(4)));
+    typedef int vi __attribute__((ext_vector_type(LANES), aligned(4)));
+    typedef unsigned int vu __attribute__((ext_vector_type(LANES), aligned(4)));
+    NOISE_HELPERS
+    struct V { vf x, y, z, alive, free; };
+    struct P { vf x, y, z; };
+    struct A { vf x, y, z, grasp; };
+    V* block = (V*)vert.data + base;
+    P* before = (P*)prev.data + base;
+    const A* held = (const A*)anchor.data + base;
+    P* older0 = chebyshev ? (P*)older.data + 2 * base : nullptr;
+    vf keep, fall, sigma, ux, uy, uz;
+    vi env;
+    for (int lane = 0; lane < LANES; ++lane) {
+        keep[lane] = keep_in.c[lane];
+        fall[lane] = fall_in.c[lane];
+        sigma[lane] = sigma_in.c[lane];
+        ux[lane] = ux_in.c[lane];
+        uy[lane] = uy_in.c[lane];
+        uz[lane] = uz_in.c[lane];
+        env[lane] = blk * LANES + lane;
+    }
+    const vf zero = 0.0f;
+    const vi noisy = (sigma > zero) & (env < num_envs);
+    // process_noise(seed, env * n + v + first_stream * n) of every lane, in 32-bit unsigned arithmetic
+    const unsigned seed_hash = HASH((unsigned)seed);
+    const vu first = (vu)env * (unsigned)n + (unsigned)first_stream * (unsigned)n;
+    #define SELECT(m, a, b) ((vf)(((vi)(a) & (m)) | ((vi)(b) & ~(m))))
+    for (int v = 0; v < n; ++v) {
+        V* vt = block + v;
+        P* q = before + v;
+        const A* a = held + v;
+        const vf x = vt->x, y = vt->y, z = vt->z;
+        const vf vx = (x - q->x) * keep;
+        const vf vy = (y - q->y) * keep;
+        const vf vz = first_order_z ? zero : (z - q->z) * keep;
+        const vf qx = x + vx, qy = y + vy, qz = (z + vz) - fall;
+        const vi free = vt->free != zero;
+        const vi moving = free & (vt->alive != zero);
+        const vi grasped = a->grasp != zero;
+        const vf px = SELECT(grasped, a->x + ux, a->x);
+        const vf py = SELECT(grasped, a->y + uy, a->y);
+        const vf pz = SELECT(grasped, a->z + uz, a->z);
+        vf nx = SELECT(moving, qx, SELECT(free, x, px));
+        vf ny = SELECT(moving, qy, SELECT(free, y, py));
+        vf nz = SELECT(moving, qz, SELECT(free, z, pz));
+        if (any_noise) {
+            const vi m = noisy & moving;
+            const vu key = seed_hash + (first + (unsigned)v) * 3u;
+            nx = SELECT(m, nx + sigma * NORMAL(HASH(key)), nx);
+            ny = SELECT(m, ny + sigma * NORMAL(HASH(key + 1u)), ny);
+            nz = SELECT(m, nz + sigma * NORMAL(HASH(key + 2u)), nz);
+        }
+        q->x = x;
+        q->y = y;
+        q->z = z;
+        vt->x = nx;
+        vt->y = ny;
+        vt->z = nz;
+        if (chebyshev) {
+            older0[v].x = nx;
+            older0[v].y = ny;
+            older0[v].z = nz;
+        }
+    }
+    #undef SELECT
+"""
+"""The integration of one block (``integrate_kernel``'s expressions, its branches as lane masks), with the
+process noise drawn for all lanes at once: ``HASH`` and ``NORMAL`` are ``kernels.hash32`` and
+``kernels.byte_sum_normal`` written for vectors of unsigned ints (:func:`_native_source`)."""
+
+
+def _native_source(source: str, lanes: int) -> str:
+    """A native snippet for ``lanes`` envs per block, with the lane-wise noise helpers in place of
+    ``NOISE_HELPERS`` (a lambda
+    per helper, generic over scalar and vector unsigned ints; :data:`kernels.NOISE_SCALE` as an exact
+    float32 hex literal, so both backends scale by the same float)."""
+    scale = float(np.float32(NOISE_SCALE_VALUE)).hex()
+    helpers = f"""
+    auto hash32_lanes = [](auto x) {{
+        x = x ^ (x >> 16u);
+        x = x * 0x7FEB352Du;
+        x = x ^ (x >> 15u);
+        x = x * 0x846CA68Bu;
+        x = x ^ (x >> 16u);
+        return x;
+    }};
+    auto byte_sum_normal_lanes = [](auto h) {{
+        auto total = (h & 255u) + ((h >> 8u) & 255u);
+        total = total + ((h >> 16u) & 255u) + (h >> 24u);
+        return (__builtin_convertvector(total, vf) - 510.0f) * {scale}f;
+    }};
+    #define HASH(h) hash32_lanes(h)
+    #define NORMAL(h) byte_sum_normal_lanes(h)
+"""
+    source = source.replace("NOISE_HELPERS", helpers) + "\n    #undef HASH\n    #undef NORMAL\n"
+    return source.replace("LANES", str(lanes))
 
 
 @functools.cache
@@ -144,7 +283,7 @@ def _lane_types(lanes: int) -> SimpleNamespace:
 
 def _relax_func(types: SimpleNamespace) -> wp.Function:
     """The native function that relaxes the springs of one block of ``L`` envs (:data:`_RELAX_SOURCE`)."""
-    vecL, Vert = types.vec, types.Vert  # noqa: N806 (types)
+    vecL, Vert, Prev = types.vec, types.Vert, types.Prev  # noqa: N806 (types)
 
     @wp.func_native(_RELAX_SOURCE.replace("LANES", str(types.lanes)))
     def relax(
@@ -153,12 +292,50 @@ def _relax_func(types: SimpleNamespace) -> wp.Function:
         colour_rest: wp.array(dtype=float),
         colour_start: wp.array(dtype=wp.int32),
         sweeps: int,
+        n: int,
         base: int,
         stiff: vecL,
+        chebyshev: int,
+        weights: wp.array(dtype=float),
+        older_data: wp.array(dtype=Prev),
     ):
-        """``sweeps`` Gauss-Seidel sweeps of one block, colour by colour, ``L`` envs per spring."""
+        """``sweeps`` Gauss-Seidel sweeps of one block, colour by colour, ``L`` envs per spring, each
+        followed by a Chebyshev extrapolation if ``chebyshev`` (``older_data``: two ``Prev`` records per
+        vertex of each block, scratch)."""
 
     return relax
+
+
+def _integrate_func(types: SimpleNamespace) -> wp.Function:
+    """The native function that integrates one block of ``L`` envs (:data:`_INTEGRATE_SOURCE`)."""
+    vecL, Vert, Prev, Anchor = types.vec, types.Vert, types.Prev, types.Anchor  # noqa: N806 (types)
+
+    @wp.func_native(_native_source(_INTEGRATE_SOURCE, types.lanes))
+    def integrate(
+        vert: wp.array(dtype=Vert),
+        prev: wp.array(dtype=Prev),
+        anchor: wp.array(dtype=Anchor),
+        n: int,
+        base: int,
+        blk: int,
+        num_envs: int,
+        first_order_z: int,
+        any_noise: int,
+        seed: int,
+        first_stream: int,
+        keep_in: vecL,
+        fall_in: vecL,
+        sigma_in: vecL,
+        ux_in: vecL,
+        uy_in: vecL,
+        uz_in: vecL,
+        chebyshev: int,
+        older: wp.array(dtype=Prev),
+    ):
+        """Damped Verlet of one block's free vertices, fixture and grasp pins, process noise; the new
+        positions also go to the Chebyshev scratch's first record if ``chebyshev``."""
+
+    return integrate
 
 
 def _update_kernel(types: SimpleNamespace, module: str) -> wp.Kernel:
@@ -166,6 +343,7 @@ def _update_kernel(types: SimpleNamespace, module: str) -> wp.Kernel:
     L, vecL = types.lanes, types.vec  # noqa: N806 (a constant and a type, as the kernel reads them)
     Vert, Prev, Anchor, Lanes = types.Vert, types.Prev, types.Anchor, types.Lanes  # noqa: N806
     relax = _relax_func(types)
+    integrate = _integrate_func(types)
 
     @wp.kernel(enable_backward=False, module=module)
     def update_kernel(
@@ -185,64 +363,43 @@ def _update_kernel(types: SimpleNamespace, module: str) -> wp.Kernel:
         pairs: wp.array(dtype=wp.vec2i),
         colour_rest: wp.array(dtype=float),
         colour_start: wp.array(dtype=wp.int32),
+        chebyshev: int,
+        weights: wp.array(dtype=float),
         lane_params: wp.array(dtype=Lanes),
         anchor: wp.array(dtype=Anchor),
         # Data in/out:
         vert: wp.array(dtype=Vert),
         prev: wp.array(dtype=Prev),
         status: wp.array2d(dtype=wp.int32),
+        older: wp.array(dtype=Prev),
     ):
         blk = wp.tid() + block_offset
         base = blk * n
         p = lane_params[blk]
-        # ---- integrate: integrate_kernel's expressions per lane, its branches as selects
-        for v in range(n):
-            i = base + v
-            vt = vert[i]
-            an = anchor[i]
-            pv = prev[i]
-            vx = wp.cw_mul(vt.x - pv.x, p.keep)
-            vy = wp.cw_mul(vt.y - pv.y, p.keep)
-            vz = wp.cw_mul(vt.z - pv.z, p.keep)
-            if first_order_z != 0:
-                vz = vecL()
-            qx = vt.x + vx
-            qy = vt.y + vy
-            qz = (vt.z + vz) - p.fall
-            gx = an.x + p.ux
-            gy = an.y + p.uy
-            gz = an.z + p.uz
-            nx = vecL()
-            ny = vecL()
-            nz = vecL()
-            for lane in range(L):
-                free = vt.free[lane] != 0.0
-                moving = free and vt.alive[lane] != 0.0
-                grasped = an.grasp[lane] != 0.0
-                # fixture: anchor; grasp: anchor + u; free and alive: Verlet; free and cut: frozen
-                px = wp.where(grasped, gx[lane], an.x[lane])
-                py = wp.where(grasped, gy[lane], an.y[lane])
-                pz = wp.where(grasped, gz[lane], an.z[lane])
-                nx[lane] = wp.where(moving, qx[lane], wp.where(free, vt.x[lane], px))
-                ny[lane] = wp.where(moving, qy[lane], wp.where(free, vt.y[lane], py))
-                nz[lane] = wp.where(moving, qz[lane], wp.where(free, vt.z[lane], pz))
-            if any_noise != 0:
-                for lane in range(L):
-                    env = blk * L + lane
-                    sigma = p.sigma[lane]
-                    if sigma > 0.0 and vt.free[lane] != 0.0 and vt.alive[lane] != 0.0 and env < num_envs:
-                        r = process_noise(seed, env * n + v + first_stream * n)
-                        nx[lane] = nx[lane] + sigma * r[0]
-                        ny[lane] = ny[lane] + sigma * r[1]
-                        nz[lane] = nz[lane] + sigma * r[2]
-            prev[i].x = vt.x
-            prev[i].y = vt.y
-            prev[i].z = vt.z
-            vert[i].x = nx
-            vert[i].y = ny
-            vert[i].z = nz
+        # ---- integrate: integrate_kernel's expressions per lane, its branches as lane masks
+        integrate(
+            vert,
+            prev,
+            anchor,
+            n,
+            base,
+            blk,
+            num_envs,
+            first_order_z,
+            any_noise,
+            seed,
+            first_stream,
+            p.keep,
+            p.fall,
+            p.sigma,
+            p.ux,
+            p.uy,
+            p.uz,
+            chebyshev,
+            older,
+        )
         # ---- relax
-        relax(vert, pairs, colour_rest, colour_start, sweeps, base, p.stiff)
+        relax(vert, pairs, colour_rest, colour_start, sweeps, n, base, p.stiff, chebyshev, weights, older)
         # ---- cut, and watch for divergence (cut_kernel's status, in whole-lane vector operations: x - x is
         # 0 for a finite x and NaN otherwise; ``beyond`` is the largest distance outside lower .. upper)
         r2 = cut_radius * cut_radius
@@ -450,6 +607,10 @@ class SimdModel:
 
     n: int
     sweeps: int
+    chebyshev: int
+    """1 if the sweeps are Chebyshev-accelerated (``SimConfig.chebyshev_rho > 0``)."""
+    weights: wp.array
+    """(sweeps,) float32 Chebyshev weight after each sweep (``SimConfig.sweep_weights``)."""
     pairs: wp.array
     """(num_springs,) ``vec2i``: each spring's two vertices, colour after colour."""
     colour_rest: wp.array
@@ -474,6 +635,8 @@ class SimdModel:
         return cls(
             n=grid.num_vertices,
             sweeps=config.sweeps,
+            chebyshev=int(config.chebyshev_rho > 0),
+            weights=wp.array(config.sweep_weights, dtype=float, device=device),
             pairs=wp.array(pairs.astype(np.int32), dtype=wp.vec2i, device=device),
             colour_rest=wp.array(
                 np.array([rest for _, _, rest in springs], dtype=np.float32), dtype=float, device=device
@@ -495,7 +658,9 @@ class SimdState:
     unpack is one pass over the batch's state.
     """
 
-    def __init__(self, num_envs: int, n: int, lanes: int = DEFAULT_LANES, device: str = "cpu"):
+    def __init__(
+        self, num_envs: int, n: int, lanes: int = DEFAULT_LANES, device: str = "cpu", chebyshev: bool = False
+    ):
         if not wp.get_device(device).is_cpu:
             raise ValueError("device: the SIMD kernels are CPU kernels; use the colours backend on CUDA")
         self.kernels = simd_kernels(lanes)
@@ -509,6 +674,8 @@ class SimdState:
         self.vert = wp.zeros(size, dtype=k.Vert, device=device)
         self.prev = wp.zeros(size, dtype=k.Prev, device=device)
         self.anchor = wp.zeros(size, dtype=k.Anchor, device=device)
+        self.older = wp.zeros(2 * size if chebyshev else 0, dtype=k.Prev, device=device)
+        """Scratch of the Chebyshev-accelerated sweeps (models with ``chebyshev``): two records per vertex."""
         self.lane_params = wp.zeros(self.blocks, dtype=k.Lanes, device=device)
         self.status = wp.zeros((2, self.num_envs), dtype=wp.int32, device=device)
         """(2, B) divergence flags of :meth:`step` without a ``status`` of the caller's: row 0 non-finite,
@@ -548,13 +715,19 @@ class SimdState:
         """Per env of ``envs`` (valid indices), a zero-copy (n, 4) float32 view of its x, y, z and alive
         (1.0 or 0.0) lanes in the packed blocks (CPU memory; valid as long as this state): copying one out
         reads that env and nothing else of the batch, one strided copy."""
+        view = self.packed_view()
+        return [view[env // self.lanes, :, :4, env % self.lanes] for env in envs]
+
+    def packed_view(self) -> np.ndarray:
+        """A zero-copy (blocks, n, 5, lanes) float32 view of the packed vertices (CPU memory; valid as long
+        as this state): field 0-4 are x, y, z, alive (1.0 or 0.0) and free; env ``e`` is lane ``e % lanes``
+        of block ``e // lanes``."""
         if self._lanes_view is None:
-            # (blocks, n, fields, lanes) over ``struct V`` (x, y, z, alive, free), made once.
             packed = self.vert.numpy()
             if packed.dtype.names[:4] != ("x", "y", "z", "alive") or packed.dtype.itemsize != 20 * self.lanes:
-                raise RuntimeError(f"lane_views: unexpected vertex layout {packed.dtype}")
+                raise RuntimeError(f"packed_view: unexpected vertex layout {packed.dtype}")
             self._lanes_view = packed.view(np.float32).reshape(self.blocks, self.n, 5, self.lanes)
-        return [self._lanes_view[env // self.lanes, :, :4, env % self.lanes] for env in envs]
+        return self._lanes_view
 
     def store(self, x: wp.array, x_prev: wp.array, alive: wp.array) -> None:
         """Blocks back into env-major arrays (padding lanes dropped)."""
@@ -582,6 +755,8 @@ class SimdState:
         releases the GIL), as ``Simulator`` does with env slices.
         """
         count = self.blocks - block_offset if block_count is None else block_count
+        if model.chebyshev and self.older.shape[0] < 2 * self.blocks * self.n:
+            raise ValueError("model: Chebyshev sweeps need SimdState(..., chebyshev=True)")
         launch(
             self.kernels.update,
             dim=count,
@@ -601,9 +776,11 @@ class SimdState:
                 model.pairs,
                 model.colour_rest,
                 model.colour_start,
+                model.chebyshev,
+                model.weights,
                 self.lane_params,
                 self.anchor,
             ],
-            outputs=[self.vert, self.prev, self.status if status is None else status],
+            outputs=[self.vert, self.prev, self.status if status is None else status, self.older],
             device=self.device,
         )

@@ -38,6 +38,12 @@ def interpolate(positions: np.ndarray, vertices: np.ndarray, weights: np.ndarray
     """World positions (B, K, 3) of material points whose cells are ``vertices``/``weights`` (B, K, 4)
     on sheets at ``positions`` (B, N, 3)."""
     corners = np.take_along_axis(positions[:, None], vertices[..., None], axis=2)  # (B, K, 4, 3)
+    return interpolate_corners(corners, weights)
+
+
+def interpolate_corners(corners: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """World positions (B, K, 3) of material points from their cells' corner positions (B, K, 4, 3) (e.g.
+    :meth:`warpcut.Simulator.gather` of the ``vertices`` of :func:`material_cells`) and ``weights``."""
     return np.einsum("bkc,bkcd->bkd", weights, corners)
 
 

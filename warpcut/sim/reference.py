@@ -1,9 +1,10 @@
 """Plain NumPy implementation of the simulator's physics: the correctness oracle and the speed baseline.
 
 It is written independently of the Warp kernels: springs are enumerated explicitly as index pairs per
-colour (the kernels derive a vertex's partner from its grid position), and all arithmetic is float32 so
-the two agree to rounding. Process noise is not reproduced (Warp's random stream is its own); compare
-the two noise-free.
+colour (the kernels derive a vertex's partner from its grid position). All arithmetic is float32 in the
+kernels' order of operations, so on the CPU the two agree bit for bit (a cut sheet amplifies any rounding
+difference, Chebyshev sweeps more than plain ones: tests/test_reference.py). Process noise is not
+reproduced (Warp's random stream is its own); compare the two noise-free.
 """
 
 from __future__ import annotations
@@ -51,13 +52,13 @@ class ReferenceSheet:
     def move_grasp(self, action: np.ndarray) -> None:
         if not self.grasp.any():
             return
-        step = np.clip(
-            np.asarray(action, dtype=np.float32), -self.config.max_step_mm, self.config.max_step_mm
-        )
+        limit = np.float32(self.config.max_step_mm)
+        step = np.clip(np.asarray(action, dtype=np.float32), -limit, limit)
         u = self.displacement + step
-        norm = np.linalg.norm(u)
-        if norm > self.config.max_displacement_mm:
-            u = u * np.float32(self.config.max_displacement_mm / norm)
+        norm = np.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])  # float32, in the kernel's order
+        cap = np.float32(self.config.max_displacement_mm)
+        if norm > cap:
+            u = u * (cap / norm)
         self.displacement = u.astype(np.float32)
 
     def update(self, tip: np.ndarray | None = None) -> None:
@@ -72,9 +73,14 @@ class ReferenceSheet:
         new[self.grasp] = self.anchor[self.grasp] + self.displacement
         self.x_prev, self.x = self.x, new
         movable = self.alive & ~self.fixed & ~self.grasp
-        for _ in range(self.config.sweeps):
+        older = [self.x.copy(), None]  # the positions two sweeps back, by sweep parity (Chebyshev)
+        for k, weight in enumerate(self.config.sweep_weights, start=1):
             for starts, ends, rest in self.springs:
                 self._relax(starts, ends, rest, movable)
+            if self.config.chebyshev_rho > 0:
+                if k > 1:
+                    self.x = older[k % 2] + (self.x - older[k % 2]) * weight
+                older[k % 2] = self.x.copy()
         if tip is not None and tip[3] > 0.5:
             d2 = (self.x[:, 0] - tip[0]) ** 2 + (self.x[:, 1] - tip[1]) ** 2
             hit = (d2 <= np.float32(self.config.cut_radius) ** 2) & (
@@ -86,13 +92,13 @@ class ReferenceSheet:
         live = self.alive[starts] & self.alive[ends]
         a, b = starts[live], ends[live]
         d = self.x[b] - self.x[a]
-        length = np.sqrt(np.sum(d * d, axis=1))
+        length = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
         ok = length >= 1e-9
         a, b, d, length = a[ok], b[ok], d[ok], length[ok]
         ma, mb = movable[a], movable[b]
-        share_a = np.where(mb, np.float32(0.5), np.float32(1.0)) * ma
-        share_b = np.where(ma, np.float32(0.5), np.float32(1.0)) * mb
-        scale = (self.elasticity * (length - np.float32(rest)) / length)[:, None]
-        correction = d * scale
-        self.x[a] = self.x[a] + correction * share_a[:, None].astype(np.float32)
-        self.x[b] = self.x[b] - correction * share_b[:, None].astype(np.float32)
+        # Each free end moves toward the other by its share (half, or all of it when the other is pinned),
+        # in the kernels' float order (the Chebyshev extrapolation would amplify a difference in rounding).
+        for ends_, toward, moves, other_moves in ((a, d, ma, mb), (b, -d, mb, ma)):
+            share = np.where(other_moves, np.float32(0.5), np.float32(1.0))
+            scale = self.elasticity * share * (length - np.float32(rest)) / length
+            self.x[ends_[moves]] = self.x[ends_[moves]] + toward[moves] * scale[moves, None]

@@ -149,11 +149,17 @@ class Simulator:
         if self.backend == "simd" and not is_cpu:
             raise ValueError(f"backend: 'simd' runs on the CPU only; use 'colours' on {self.device}")
         self._simd: SimdState | None = None
+        chebyshev = self.config.chebyshev_rho > 0
+        colours_chebyshev = chebyshev and self.backend == "colours"
+        self._older = [wp.zeros(n, dtype=wp.vec3, device=self.device) if colours_chebyshev else None] * 2
+        if colours_chebyshev:
+            self._older[1] = wp.zeros(n, dtype=wp.vec3, device=self.device)
+        """The colours path's positions two sweeps back, by parity (Chebyshev sweeps only)."""
         # Which copy of the state is current: the env-major arrays (``x``...) and/or the SIMD blocks.
         self._flat_current, self._packed_current = True, False
         blocks = 1
         if self.backend == "simd":
-            self._simd = SimdState(num_envs, self.grid.num_vertices, device=self.device)
+            self._simd = SimdState(num_envs, self.grid.num_vertices, device=self.device, chebyshev=chebyshev)
             self._simd_model = SimdModel.from_config(self.config, self.grid, self.device)
             blocks = self._simd.blocks
         if capture is None:
@@ -536,7 +542,14 @@ class Simulator:
         )
         new_prev, work = self.x, out
         spare = None if tape_mode else self.x_prev
-        for _ in range(self.config.sweeps):
+        weights = self.config.sweep_weights
+        chebyshev = self.config.chebyshev_rho > 0
+        # The positions two sweeps back, by sweep parity: under the tape the (never overwritten) arrays
+        # themselves; otherwise copies in two buffers of their own, as the sweeps ping-pong theirs.
+        older = [work, None] if tape_mode else self._older
+        if chebyshev and not tape_mode:
+            self._chebyshev(1.0, True, True, work, work, work, older[0])
+        for k, weight in enumerate(weights, start=1):
             for colour in self.colours:
                 dest = _fresh(work) if tape_mode else spare
                 launch(
@@ -560,6 +573,18 @@ class Simulator:
                     device=self.device,
                 )
                 work, spare = dest, work
+            if not chebyshev:
+                continue
+            if tape_mode:
+                if k > 1:
+                    extrapolated = _fresh(work)
+                    self._chebyshev(weight, False, False, work, older[k % 2], extrapolated, extrapolated)
+                    work = extrapolated
+                older[k % 2] = work
+            else:
+                save = k < len(weights) - 1  # the last two sweeps' positions are never read back
+                if k > 1 or save:
+                    self._chebyshev(weight, k == 1, save, work, older[k % 2], work, older[k % 2])
         if tape_mode:
             alive_out = wp.empty_like(self.alive)
         else:
@@ -584,6 +609,16 @@ class Simulator:
         self.x_prev, self.x, self.alive = new_prev, work, alive_out
         if not tape_mode:
             self._spare = spare
+
+    def _chebyshev(self, weight, first: bool, save: bool, x, older, x_out, saved_out) -> None:
+        """One Chebyshev extrapolation of the whole batch (:func:`kernels.chebyshev_kernel`)."""
+        launch(
+            kernels.chebyshev_kernel,
+            dim=self.num_envs * self.grid.num_vertices,
+            inputs=[float(weight), int(first), int(save), x, older],
+            outputs=[x_out, saved_out],
+            device=self.device,
+        )
 
     # ------------------------------------------------------------------ read-back
     def positions(self) -> np.ndarray:
@@ -652,6 +687,31 @@ class Simulator:
             return out
 
         return read
+
+    def gather(self, vertices: np.ndarray) -> np.ndarray:
+        """(B, K, 4) float32 state of K vertices per env, ``vertices`` (B, K) indices: x, y, z (mm) and alive
+        (1.0, or 0.0 where the scissors removed the vertex).
+
+        The same values as ``positions()`` and ``alive_mask()`` at those indices, without reading the rest:
+        the ``simd`` backend indexes its packed blocks in place instead of unpacking the batch (what the
+        envs' observations read every step: fiducials, the scissors' target; docs/performance.md)."""
+        vertices = np.asarray(vertices, dtype=np.intp)
+        n = self.grid.num_vertices
+        if vertices.ndim != 2 or vertices.shape[0] != self.num_envs:
+            raise ValueError(f"vertices: expected ({self.num_envs}, K) indices, got shape {vertices.shape}")
+        if vertices.size and (vertices.min() < 0 or vertices.max() >= n):
+            raise ValueError(f"vertices: indices must lie in [0, {n})")
+        if not self._flat_current and self._simd is not None and self._is_cpu:
+            lanes = self._simd.lanes
+            envs = np.arange(self.num_envs)[:, None]
+            return self._simd.packed_view()[envs // lanes, vertices, :4, envs % lanes].astype(np.float32)
+        self._sync_flat()
+        x = self.x.numpy().reshape(self.num_envs, n, 3)
+        alive = self.alive.numpy().reshape(self.num_envs, n)
+        out = np.empty(vertices.shape + (4,), dtype=np.float32)
+        out[..., :3] = np.take_along_axis(x, vertices[..., None], axis=1)
+        out[..., 3] = np.take_along_axis(alive, vertices, axis=1) != 0
+        return out
 
     def displacements(self) -> np.ndarray:
         """(B, 3) grasp displacement from where it pinched (mm)."""
