@@ -419,6 +419,30 @@ class Runner(OnPolicyRunner):
         scores = means + self.selection_margin * se
         return float(means.min()), float(scores.min())
 
+    def learn(self, num_learning_iterations: int, init_at_random_ep_len: bool = False) -> None:
+        """rsl-rl's learning loop, with torch on one thread while it collects rollouts and on all of its
+        threads for the PPO update (on a CPU): the simulator steps the envs on threads of its own, and torch
+        threads spinning beside them cost more than they gain (docs/performance.md, "PPO")."""
+        if self.device != "cpu":
+            return super().learn(num_learning_iterations, init_at_random_ep_len)
+        threads = torch.get_num_threads()
+        update = self.alg.update
+
+        def update_on_all_threads(*args, **kwargs):
+            torch.set_num_threads(threads)
+            try:
+                return update(*args, **kwargs)
+            finally:
+                torch.set_num_threads(1)
+
+        torch.set_num_threads(1)
+        self.alg.update = update_on_all_threads
+        try:
+            return super().learn(num_learning_iterations, init_at_random_ep_len)
+        finally:
+            self.alg.update = update
+            torch.set_num_threads(threads)
+
     def save_interrupted(self) -> None:
         """Save the current state after a Ctrl-C, as the checkpoint of the last completed iteration."""
         self.current_learning_iteration = self.iterations_done - 1
@@ -494,6 +518,7 @@ class _QuietLogger(Logger):
                 "mean_return": statistics.mean(self.rewbuffer) if self.rewbuffer else None,
                 "mean_episode_length": statistics.mean(self.lenbuffer) if self.lenbuffer else None,
                 "iteration_steps_per_s": steps / (collect_time + learn_time),
+                "collection_steps_per_s": steps / collect_time,
             },
         )
 

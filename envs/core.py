@@ -223,7 +223,8 @@ class PatternCut:
         """(B, D) float32 observations of the current state (layout: :mod:`envs.observations`)."""
         u = self.task.update_index
         tip = self.task.tip_positions(max(u - 1, 0))  # where the scissors are now
-        fiducials = self.fiducials.track(self.task.sim.positions(), self.task.sim.alive_mask(), tip)
+        corners = self.task.sim.gather(self.fiducials.cell_vertices)  # the fiducials' cells only
+        fiducials = self.fiducials.track_corners(corners.reshape(self.num_envs, -1, 4, 4), tip)
         parts = [
             np.full((self.num_envs, 1), self.step_index / self.task.num_steps),
             self.task.sim.displacements() / self.config.max_displacement_mm,

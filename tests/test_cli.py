@@ -206,9 +206,16 @@ def test_bench_writes_the_documented_json(tmp_path):
         "speedup_vs_numpy",
         "cold_start_s",
         "warm_start_s",
+        "sim_env_steps_per_s",
         "train_steps_per_s",
+        "train_collection_steps_per_s",
+        "train_overall_steps_per_s",
     ):
         assert result[key] > 0, key
+    assert result["train_vs_sim_pct"] == pytest.approx(
+        100 * result["train_steps_per_s"] / result["sim_env_steps_per_s"]
+    )
+    assert result["train_collection_steps_per_s"] > result["train_steps_per_s"]  # collection + update
     assert result["speedup_vs_numpy"] == pytest.approx(
         max(result["updates_per_s"].values()) / result["numpy_updates_per_s"]
     )

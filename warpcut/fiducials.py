@@ -20,7 +20,7 @@ import shapely
 
 from warpcut.contours import Contour
 from warpcut.sim.config import SheetGrid, SimConfig
-from warpcut.sim.material import interpolate, material_cells
+from warpcut.sim.material import interpolate, interpolate_corners, material_cells
 
 NUM_FIDUCIALS = 12
 """Fiducials per sheet (the paper's 12)."""
@@ -46,9 +46,14 @@ def visible(
     """
     cells = np.broadcast_to(cells, world.shape[:2] + (4,))
     uncut = np.all(np.take_along_axis(alive[:, None], cells, axis=2), axis=2)
+    return uncut & ~shaded(world, tip, shaft_radius_mm)
+
+
+def shaded(world: np.ndarray, tip: np.ndarray, shaft_radius_mm: float) -> np.ndarray:
+    """(B, K) bool: which points ``world`` (B, K, 3) the cutting arm's shaft covers (a cylinder of radius
+    ``shaft_radius_mm`` from each ``tip`` (B, 3 or 4) toward +x)."""
     off_axis = np.linalg.norm(world[..., 1:] - tip[:, None, 1:3], axis=2)
-    shaded = (world[..., 0] > tip[:, None, 0]) & (off_axis < shaft_radius_mm)
-    return uncut & ~shaded
+    return (world[..., 0] > tip[:, None, 0]) & (off_axis < shaft_radius_mm)
 
 
 def sample_fiducials(
@@ -131,7 +136,20 @@ class Fiducials:
         Returns:
             (B, K, 3) last visible world positions (mm), a copy.
         """
-        world = self.world(positions)
-        self.visible = visible(world, alive, self._cells[0], tip, self.shaft_radius_mm)
+        corners = np.take_along_axis(positions[:, None], self._cells[0][..., None], axis=2)
+        corner_alive = np.take_along_axis(alive[:, None], self._cells[0], axis=2)
+        return self.track_corners(np.concatenate([corners, corner_alive[..., None]], axis=3), tip)
+
+    @property
+    def cell_vertices(self) -> np.ndarray:
+        """(B, 4K) the corner vertices of every fiducial's cell, fiducial by fiducial: the vertices whose
+        state :meth:`track_corners` takes (e.g. from :meth:`warpcut.Simulator.gather`)."""
+        return self._cells[0].reshape(len(self._cells[0]), -1)
+
+    def track_corners(self, state: np.ndarray, tip: np.ndarray) -> np.ndarray:
+        """:meth:`track` from the state (B, K, 4, 4) of each fiducial's cell corners only: x, y, z (mm) and
+        alive (non-zero where uncut); ``Simulator.gather(cell_vertices)`` reshaped."""
+        world = interpolate_corners(state[..., :3], self._cells[1])
+        self.visible = np.all(state[..., 3] != 0, axis=2) & ~shaded(world, tip, self.shaft_radius_mm)
         self.last_visible = np.where(self.visible[..., None], world, self.last_visible)
         return self.last_visible.copy()

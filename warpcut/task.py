@@ -18,7 +18,7 @@ import shapely
 from warpcut.contours import Contour, arc_lengths, check_resolution, resample_polyline, ring
 from warpcut.scoring import Score, score_cut
 from warpcut.sim.config import SheetGrid, SimConfig, SimulationDiverged
-from warpcut.sim.material import interpolate, material_cells, material_to_world
+from warpcut.sim.material import interpolate, interpolate_corners, material_cells, material_to_world
 from warpcut.sim.memory import check_batch_memory
 from warpcut.sim.simulator import DIVERGENCE_REASONS, Simulator, check_pinch_points, resolve_device
 
@@ -337,7 +337,8 @@ class CuttingTask:
         targets = self._targets[:, t]
         active = np.all(np.isfinite(targets), axis=1) & (self.update_index < self.horizon_updates)
         vertices, weights = material_cells(np.nan_to_num(targets)[:, None], self.grid)
-        world = interpolate(self.sim.positions(), vertices, weights)[:, 0]
+        corners = self.sim.gather(vertices[:, 0])[:, None, :, :3]  # (B, 1, 4, 3): the cells' corners only
+        world = interpolate_corners(corners, weights)[:, 0]
         return np.where(active[:, None], world, np.nan)
 
     def cut_path(self) -> np.ndarray | None:
