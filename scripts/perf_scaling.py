@@ -53,7 +53,7 @@ def breakdown(device: str, repeats: int) -> list[tuple[str, float]]:
     step_time = sorted(times[1:])[len(times[1:]) // 2]
     kernel_b1 = 1 / updates_per_second(SimConfig(), 1, device, repeats)
     return [
-        (f"relaxation, {sweeps} sweeps (B=1024, per update)", sweeps * per_sweep),
+        (f"relaxation, {sweeps} sweeps with their Chebyshev steps (B=1024, per update)", sweeps * per_sweep),
         ("integrate + cut (B=1024, per update)", integrate_cut),
         ("whole update (B=1024)", full),
         ("kernel launch + update (B=1)", kernel_b1),

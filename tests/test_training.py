@@ -289,3 +289,34 @@ def test_the_run_logs_its_hyperparameters_for_tensorboard(tmp_path):
     events.Reload()
     assert events.PluginTagToContent("hparams")  # the HPARAMS tab's experiment and session
     assert [e.value for e in events.Scalars("hparam/validation_error")] == [2.5]
+
+
+def test_collection_runs_on_one_torch_thread_and_the_update_on_all(tmp_path, monkeypatch):
+    """On a CPU, rsl-rl's collection shares the cores with the simulator's threads, so it runs torch on one
+    thread; the PPO update gets every thread torch had; both are restored afterwards
+    (docs/performance.md §6)."""
+    seen = {"step": set(), "update": set()}
+    env = ReachEnv(NUM_ENVS)
+    step = env.step
+
+    def counting_step(actions):
+        seen["step"].add(torch.get_num_threads())
+        return step(actions)
+
+    monkeypatch.setattr(env, "step", counting_step)
+    from rsl_rl.algorithms import PPO
+
+    update = PPO.update
+
+    def counting_update(self, *args, **kwargs):
+        seen["update"].add(torch.get_num_threads())
+        return update(self, *args, **kwargs)
+
+    monkeypatch.setattr(PPO, "update", counting_update)
+    torch.set_num_threads(2)
+    try:
+        train(env, tiny_config(iterations=2), tmp_path, progress=False)
+        assert seen == {"step": {1}, "update": {2}}
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(1)  # the module's fixture's setting
