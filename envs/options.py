@@ -210,6 +210,10 @@ class PatternCutOptions:
                         f"options: sim_config: unknown field(s) {', '.join(unknown)}; known: "
                         f"{', '.join(sorted(known))}"
                     )
+                if "sweeps" in sim and "chebyshev_rho" not in sim:
+                    # Written before issue 21 (a run directory's options.json holds every field): its
+                    # sweeps were plain Gauss-Seidel sweeps; keep the physics its policy was trained in.
+                    sim = {**sim, "chebyshev_rho": 0.0}
                 sim = SimConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in sim.items()})
             fields["sim_config"] = sim
         sim = fields.get("sim_config", SimConfig())

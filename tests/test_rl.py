@@ -66,6 +66,15 @@ def test_options_round_trip_through_json():
     assert again.sim_config == options.sim_config and again.allow_z and again.to_dict() == data
     with pytest.raises(ValueError, match="options: unknown field"):
         PatternCutOptions.from_dict({"contour": "fls-circle", "pinch": [1, 2]})
+    # Options written before issue 21 hold every SimConfig field but chebyshev_rho: their sweeps were plain
+    # Gauss-Seidel (20 by default), and so they stay; a partial sim_config keeps today's defaults.
+    old = dict(data, sim_config={k: v for k, v in data["sim_config"].items() if k != "chebyshev_rho"})
+    old["sim_config"]["sweeps"] = 20
+    assert PatternCutOptions.from_dict(old).sim_config == options.sim_config.replace(
+        sweeps=20, chebyshev_rho=0
+    )
+    partial = PatternCutOptions.from_dict({"contour": "fls-circle", "sim_config": {"noise_std": 0.0}})
+    assert partial.sim_config == SimConfig(noise_std=0.0)
 
 
 def test_a_run_written_before_options_json_still_loads(run_dir, tmp_path):

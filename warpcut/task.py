@@ -17,10 +17,11 @@ import shapely
 
 from warpcut.contours import Contour, arc_lengths, check_resolution, resample_polyline, ring
 from warpcut.scoring import Score, score_cut
+from warpcut.sim.checks import DIVERGENCE_REASONS, check_pinch_points
 from warpcut.sim.config import SheetGrid, SimConfig, SimulationDiverged
 from warpcut.sim.material import interpolate, interpolate_corners, material_cells, material_to_world
 from warpcut.sim.memory import check_batch_memory
-from warpcut.sim.simulator import DIVERGENCE_REASONS, Simulator, check_pinch_points, resolve_device
+from warpcut.sim.simulator import Simulator, resolve_device
 
 if TYPE_CHECKING:
     from warpcut.fiducials import Fiducials

@@ -16,13 +16,8 @@ import numpy as np
 
 from warpcut.sim import kernels
 from warpcut.sim._warp import launch, wp
-from warpcut.sim.config import (
-    PHYSICAL_PARAMETERS,
-    SETTLED_REACH_SHEETS,
-    SheetGrid,
-    SimConfig,
-    SimulationDiverged,
-)
+from warpcut.sim.checks import DIVERGENCE_REASONS, check_pinch_points, check_settled
+from warpcut.sim.config import PHYSICAL_PARAMETERS, SheetGrid, SimConfig, SimulationDiverged
 from warpcut.sim.kernels_simd import SimdModel, SimdState
 from warpcut.sim.memory import check_batch_memory
 from warpcut.sim.springs import spring_colours
@@ -235,7 +230,7 @@ class Simulator:
             for _ in range(self.config.settle_updates):
                 sheet.update()
             settled = sheet.positions()
-            _check_settled(settled, sheet.divergence(), group_params, self.config)
+            check_settled(settled, sheet.divergence(), group_params, self.config)
             self._settled = settled[env_group]
         return self._settled
 
@@ -741,53 +736,6 @@ class Simulator:
         coordinate (:data:`DIVERGENCE_REASONS`), 2 a vertex flung beyond the bounds."""
         status = self._status.numpy()
         return np.where(status[0] != 0, 1, np.where(status[1] != 0, 2, 0)).astype(np.int8)
-
-
-def check_pinch_points(points: np.ndarray) -> None:
-    """Raise ``ValueError`` naming the env unless each row of the (B, 2) ``points`` is finite or all NaN
-    (no grasp): an infinite or half-NaN pinch point is a mistake, never a silent "no grasp"."""
-    finite = np.isfinite(points)
-    bad = ~(finite.all(axis=1) | np.isnan(points).all(axis=1))
-    if bad.any():
-        env = int(np.argmax(bad))
-        raise ValueError(
-            f"pinch_points: env {env}'s pinch point {points[env].tolist()} is not finite; give material "
-            "coordinates (mm), or a row of NaN (None for all envs) for no grasp"
-        )
-
-
-DIVERGENCE_REASONS = {
-    1: "non-finite vertex positions",
-    2: "vertices flung far from the sheet",
-}
-"""What :meth:`Simulator.divergence` codes mean, in words."""
-
-
-def _check_settled(settled: np.ndarray, divergence: np.ndarray, group_params: np.ndarray, config: SimConfig):
-    """Raise :class:`SimulationDiverged` if a settled sheet (G, N, 3), one per parameter group, diverged
-    or hangs farther than :data:`SETTLED_REACH_SHEETS` sheet sizes from its rest outline."""
-    size = max(config.width_mm, config.height_mm)
-    rest_high = np.array([config.width_mm, config.height_mm, 0.0])
-    with np.errstate(invalid="ignore"):
-        outside = np.maximum(-settled, 0.0) + np.maximum(settled - rest_high, 0.0)
-        reach = np.linalg.norm(outside, axis=-1).max(axis=1)
-    bad = (divergence != 0) | ~np.isfinite(reach) | (reach > SETTLED_REACH_SHEETS * size)
-    if not bad.any():
-        return
-    g = int(np.argmax(bad))
-    default = SimConfig()
-    damping, dt, gravity, elasticity = (float(v) for v in group_params[g])
-    if divergence[g] == 1 or not np.isfinite(reach[g]):
-        what = "its vertex positions became non-finite"
-    else:
-        what = f"it hangs {reach[g]:.3g} mm from its rest outline, more than its size ({size:g} mm)"
-    raise SimulationDiverged(
-        f"simulation diverged while settling the sheet (gravity {gravity:g} mm/s^2, dt {dt:g} s, damping "
-        f"{damping:g}, elasticity {elasticity:g}): {what}, the springs cannot hold a fall of "
-        f"gravity * dt^2 = {gravity * dt * dt:.3g} mm per update; lower gravity or dt (defaults "
-        f"{default.gravity:g} mm/s^2 and {default.dt:g} s: {default.gravity * default.dt**2:.2g} mm per "
-        "update), or raise sweeps"
-    )
 
 
 def settled_figures(sim: Simulator) -> tuple[float, float, float]:

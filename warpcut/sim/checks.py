@@ -1,0 +1,54 @@
+"""Checks of a simulator's inputs and of its settled sheets, with messages that name the field and the fix."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from warpcut.sim.config import SETTLED_REACH_SHEETS, SimConfig, SimulationDiverged
+
+
+def check_pinch_points(points: np.ndarray) -> None:
+    """Raise ``ValueError`` naming the env unless each row of the (B, 2) ``points`` is finite or all NaN
+    (no grasp): an infinite or half-NaN pinch point is a mistake, never a silent "no grasp"."""
+    finite = np.isfinite(points)
+    bad = ~(finite.all(axis=1) | np.isnan(points).all(axis=1))
+    if bad.any():
+        env = int(np.argmax(bad))
+        raise ValueError(
+            f"pinch_points: env {env}'s pinch point {points[env].tolist()} is not finite; give material "
+            "coordinates (mm), or a row of NaN (None for all envs) for no grasp"
+        )
+
+
+DIVERGENCE_REASONS = {
+    1: "non-finite vertex positions",
+    2: "vertices flung far from the sheet",
+}
+"""What :meth:`Simulator.divergence` codes mean, in words."""
+
+
+def check_settled(settled: np.ndarray, divergence: np.ndarray, group_params: np.ndarray, config: SimConfig):
+    """Raise :class:`SimulationDiverged` if a settled sheet (G, N, 3), one per parameter group, diverged
+    or hangs farther than :data:`SETTLED_REACH_SHEETS` sheet sizes from its rest outline."""
+    size = max(config.width_mm, config.height_mm)
+    rest_high = np.array([config.width_mm, config.height_mm, 0.0])
+    with np.errstate(invalid="ignore"):
+        outside = np.maximum(-settled, 0.0) + np.maximum(settled - rest_high, 0.0)
+        reach = np.linalg.norm(outside, axis=-1).max(axis=1)
+    bad = (divergence != 0) | ~np.isfinite(reach) | (reach > SETTLED_REACH_SHEETS * size)
+    if not bad.any():
+        return
+    g = int(np.argmax(bad))
+    default = SimConfig()
+    damping, dt, gravity, elasticity = (float(v) for v in group_params[g])
+    if divergence[g] == 1 or not np.isfinite(reach[g]):
+        what = "its vertex positions became non-finite"
+    else:
+        what = f"it hangs {reach[g]:.3g} mm from its rest outline, more than its size ({size:g} mm)"
+    raise SimulationDiverged(
+        f"simulation diverged while settling the sheet (gravity {gravity:g} mm/s^2, dt {dt:g} s, damping "
+        f"{damping:g}, elasticity {elasticity:g}): {what}, the springs cannot hold a fall of "
+        f"gravity * dt^2 = {gravity * dt * dt:.3g} mm per update; lower gravity or dt (defaults "
+        f"{default.gravity:g} mm/s^2 and {default.dt:g} s: {default.gravity * default.dt**2:.2g} mm per "
+        "update), or raise sweeps"
+    )
