@@ -6,7 +6,7 @@ import shapely
 
 from warpcut import SimConfig, Simulator
 from warpcut.contours import load_contour, validate
-from warpcut.scoring import order_cut_path, path_region
+from warpcut.scoring import order_cut_path, path_region, path_regions
 from warpcut.sim.kernels import PATH_DROPPED, PATH_IDLE, PATH_MAPPED
 from warpcut.task import CuttingTask, default_segments
 
@@ -111,3 +111,27 @@ def test_order_cut_path_sorts_by_arc_and_counts_drops():
     points, dropped = order_cut_path(path, arc)
     np.testing.assert_array_equal(points, [[3.0, 3.0], [1.0, 1.0]])
     assert dropped == pytest.approx(1 / 3)
+
+
+def test_a_batch_of_path_regions_is_each_env_alone():
+    """:func:`path_regions` closes the closed contours' rings in one vectorised call: the same geometry as
+    one env at a time, closed and open contours, self-crossing and too-short paths mixed."""
+    closed, wavy = load_contour("kidney"), load_contour("wave-2")
+    crossing = np.array([[30.0, 30.0], [70.0, 70.0], [70.0, 30.0], [30.0, 70.0]])  # a bow tie
+    points = [
+        circle(20.0),
+        wavy.points + [0.0, 1.5],
+        crossing,
+        circle(20.0)[:2],
+        wavy.points[:1],
+        circle(30.0),
+    ]
+    contours = [closed, wavy, closed, closed, wavy, closed]
+    batch = path_regions(points, contours)
+    for region, p, c in zip(batch, points, contours, strict=True):
+        alone = path_region(p, c)
+        assert region.equals(alone) or (region.is_empty and alone.is_empty)
+        if c.closed and len(p) >= 3:  # ... and what one polygon made valid gives
+            one = shapely.make_valid(shapely.Polygon(p), method="structure", keep_collapsed=False)
+            assert region.equals(one)
+    assert batch[2].area > 0 and batch[3].is_empty and batch[4].is_empty

@@ -433,27 +433,48 @@ def path_region(points: np.ndarray, contour) -> shapely.Geometry:
         ring through the points. Open: the path, its ends carried straight onto the sheet edges the
         contour's ends lie on, closed along the sheet's edges on the intended side.
     """
-    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    if contour.closed:
-        if len(points) < 3:
-            return shapely.Polygon()
-        ring = points
-    else:
-        if len(points) < 2:
-            return shapely.Polygon()
-        width, height = contour.sheet_size
-        ends = np.asarray(contour.points)[[0, -1]]
-        start = _onto_edge(points[0], ends[0], width, height)
-        stop = _onto_edge(points[-1], ends[1], width, height)
-        ccw = _intended_side_ccw(contour)
-        chain = _boundary_corners(
-            _perimeter(stop, width, height), _perimeter(start, width, height), ccw, width, height
-        )
-        ring = np.vstack([start, points, stop, *chain]) if chain else np.vstack([start, points, stop])
+    return path_regions([points], [contour])[0]
+
+
+def path_regions(points: Sequence[np.ndarray], contours: Sequence) -> list[shapely.Geometry]:
+    """:func:`path_region` of each env, ``points[k]`` cut along ``contours[k]``; the closed contours' rings
+    are made valid in one vectorised shapely call (a scored batch's cost, docs/performance.md)."""
+    regions: list = [None] * len(points)
+    rings, closed = [], []
+    for k, (env_points, contour) in enumerate(zip(points, contours, strict=True)):
+        env_points = np.asarray(env_points, dtype=np.float64).reshape(-1, 2)
+        if not contour.closed:
+            regions[k] = _open_path_region(env_points, contour)
+        elif len(env_points) < 3:
+            regions[k] = shapely.Polygon()
+        else:
+            rings.append(env_points)
+            closed.append(k)
+    if rings:
+        owner = np.repeat(np.arange(len(rings)), [len(r) for r in rings])
+        polygons = shapely.polygons(shapely.linearrings(np.concatenate(rings), indices=owner))
+        valid = shapely.make_valid(polygons, method="structure", keep_collapsed=False)
+        for k, region in zip(closed, valid, strict=True):
+            regions[k] = region
+    return regions
+
+
+def _open_path_region(points: np.ndarray, contour) -> shapely.Geometry:
+    """:func:`path_region` of an open contour: the path carried onto the sheet's edges and closed along
+    them on the intended side."""
+    if len(points) < 2:
+        return shapely.Polygon()
+    width, height = contour.sheet_size
+    ends = np.asarray(contour.points)[[0, -1]]
+    start = _onto_edge(points[0], ends[0], width, height)
+    stop = _onto_edge(points[-1], ends[1], width, height)
+    ccw = _intended_side_ccw(contour)
+    chain = _boundary_corners(
+        _perimeter(stop, width, height), _perimeter(start, width, height), ccw, width, height
+    )
+    ring = np.vstack([start, points, stop, *chain]) if chain else np.vstack([start, points, stop])
     polygon = shapely.make_valid(shapely.Polygon(ring), method="structure", keep_collapsed=False)
-    if not contour.closed:
-        polygon = shapely.intersection(polygon, shapely.box(0.0, 0.0, *contour.sheet_size))
-    return polygon
+    return shapely.intersection(polygon, shapely.box(0.0, 0.0, width, height))
 
 
 def path_errors(
@@ -466,7 +487,7 @@ def path_errors(
         contours: Per env, the contour being cut.
         grid: The sheet's rest layout (for the vertex area).
     """
-    regions = [path_region(p, c) for p, c in zip(points, contours, strict=True)]
+    regions = path_regions(points, contours)
     intended = np.array([c.intended_region() for c in contours], dtype=object)
     error = shapely.area(shapely.symmetric_difference(np.array(regions, dtype=object), intended))
     error = np.asarray(error, dtype=np.float64)
