@@ -45,15 +45,18 @@ def visible(
         (B, K) bool.
     """
     cells = np.broadcast_to(cells, world.shape[:2] + (4,))
-    uncut = np.all(np.take_along_axis(alive[:, None], cells, axis=2), axis=2)
-    return uncut & ~shaded(world, tip, shaft_radius_mm)
+    return visible_corners(world, np.take_along_axis(alive[:, None], cells, axis=2), tip, shaft_radius_mm)
 
 
-def shaded(world: np.ndarray, tip: np.ndarray, shaft_radius_mm: float) -> np.ndarray:
-    """(B, K) bool: which points ``world`` (B, K, 3) the cutting arm's shaft covers (a cylinder of radius
-    ``shaft_radius_mm`` from each ``tip`` (B, 3 or 4) toward +x)."""
+def visible_corners(
+    world: np.ndarray, corner_alive: np.ndarray, tip: np.ndarray, shaft_radius_mm: float
+) -> np.ndarray:
+    """:func:`visible` from each fiducial's cell corners' alive flags ``corner_alive`` (B, K, 4) (non-zero
+    where uncut) instead of the whole sheet's: the cell is whole and the shaft (a cylinder of radius
+    ``shaft_radius_mm`` from each ``tip`` toward +x) does not cover the point."""
     off_axis = np.linalg.norm(world[..., 1:] - tip[:, None, 1:3], axis=2)
-    return (world[..., 0] > tip[:, None, 0]) & (off_axis < shaft_radius_mm)
+    shaded = (world[..., 0] > tip[:, None, 0]) & (off_axis < shaft_radius_mm)
+    return np.all(corner_alive != 0, axis=2) & ~shaded
 
 
 def sample_fiducials(
@@ -150,6 +153,6 @@ class Fiducials:
         """:meth:`track` from the state (B, K, 4, 4) of each fiducial's cell corners only: x, y, z (mm) and
         alive (non-zero where uncut); ``Simulator.gather(cell_vertices)`` reshaped."""
         world = interpolate_corners(state[..., :3], self._cells[1])
-        self.visible = np.all(state[..., 3] != 0, axis=2) & ~shaded(world, tip, self.shaft_radius_mm)
+        self.visible = visible_corners(world, state[..., 3], tip, self.shaft_radius_mm)
         self.last_visible = np.where(self.visible[..., None], world, self.last_visible)
         return self.last_visible.copy()

@@ -147,9 +147,9 @@ class Simulator:
         self._simd: SimdState | None = None
         chebyshev = self.config.chebyshev_rho > 0
         colours_chebyshev = chebyshev and self.backend == "colours"
-        self._older = [wp.zeros(n, dtype=wp.vec3, device=self.device) if colours_chebyshev else None] * 2
-        if colours_chebyshev:
-            self._older[1] = wp.zeros(n, dtype=wp.vec3, device=self.device)
+        self._older = [
+            wp.zeros(n, dtype=wp.vec3, device=self.device) if colours_chebyshev else None for _ in range(2)
+        ]
         """The colours path's positions two sweeps back, by parity (Chebyshev sweeps only)."""
         # Which copy of the state is current: the env-major arrays (``x``...) and/or the SIMD blocks.
         self._flat_current, self._packed_current = True, False
@@ -711,7 +711,7 @@ class Simulator:
         if not self._flat_current and self._simd is not None and self._is_cpu:
             lanes = self._simd.lanes
             envs = np.arange(self.num_envs)[:, None]
-            return self._simd.packed_view()[envs // lanes, vertices, :4, envs % lanes].astype(np.float32)
+            return self._simd.packed_view()[envs // lanes, vertices, :4, envs % lanes]  # a float32 copy
         self._sync_flat()
         x = self.x.numpy().reshape(self.num_envs, n, 3)
         alive = self.alive.numpy().reshape(self.num_envs, n)
