@@ -199,3 +199,41 @@ ANALYTIC_PINCHES = ("feasible", "centroid")
 
 EVALUATION_CANDIDATES = PINCH_CANDIDATES
 """Pinch candidates per plan in :func:`evaluate_table` (the paper's 30)."""
+
+
+@dataclass(frozen=True)
+class GradConfig:
+    """Gradient-based tensioning (:mod:`agents.gradient`): Adam on an open-loop plan of grasp moves (and
+    optionally the pinch point) through the differentiable simulator (:mod:`warpcut.gradients`)."""
+
+    iterations: int = 20
+    """Adam steps (each one forward and one backward pass of ``trials`` episodes)."""
+    trials: int = 8
+    """Noisy episodes per step, the same seeds every step (the expected surrogate over them is minimised);
+    their noise is not the evaluation's (seed ``seed + GRAD_SEED_OFFSET``)."""
+    learning_rate: float = 0.1
+    """Adam's step (mm per grasp move); moves are projected back onto ``max_step_mm`` per axis."""
+    optimize_pinch: bool = False
+    """Also move the pinch point along its gradient (the grasped set held fixed per step), staying
+    feasible."""
+    pinch_learning_rate: float = 1.0
+    """Adam's step for the pinch point (mm)."""
+
+    def validated(self) -> GradConfig:
+        """Itself, or ``ValueError`` naming the field and the fix."""
+        for name in ("iterations", "trials"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise ValueError(f"{name}: must be a positive integer (got {value!r})")
+        for name in ("learning_rate", "pinch_learning_rate"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and 0 < value < float("inf")):
+                raise ValueError(f"{name}: must be a positive number of mm (got {value!r})")
+        return self
+
+
+GRAD_CONFIG = GradConfig()
+"""The optimiser's defaults (library and command line)."""
+
+GRAD_SEED_OFFSET = 4241
+"""The gradient optimiser's episodes use seed ``seed + GRAD_SEED_OFFSET``: never the evaluation's noise."""

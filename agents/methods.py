@@ -14,13 +14,19 @@ METHODS = {
     "fixed": "pinch at the planned (or best searched) point and hold still",
     "analytic": "pinch at the (feasible) centroid and move against the tracking error",
     "rl": "a PPO policy trained for the contour (agents.rl)",
+    "grad": "an open-loop plan of grasp moves optimised by Adam through the differentiable simulator, at "
+    "fixed's pinch point (agents.gradient)",
 }
 """Every method, in the order tables show them, with what it does."""
+
+TABLE_METHODS = ("none", "fixed", "analytic", "rl")
+"""The paper's Table I columns: what ``warpcut evaluate`` runs unless told otherwise (``grad`` is added with
+``--methods``)."""
 
 BASELINES = ("none", "fixed", "analytic")
 """The methods that need no training (:mod:`agents.baselines`, :func:`tensioner`)."""
 
-SELECTORS = tuple(m for m in METHODS if m != "none")
+SELECTORS = ("fixed", "analytic", "rl")
 """The methods that can choose a plan's pinch candidate (``warpcut run --policy``)."""
 
 StepCallbacks = Callable[[str, int], "StepCallback | None"]

@@ -33,12 +33,14 @@ from agents.config import (
     DEFAULT_SELECTOR,
     EVALUATION_CANDIDATES,
     EVALUATION_TRIALS,
+    GRAD_CONFIG,
     RECIPES,
+    GradConfig,
     Recipe,
     TrainConfig,
 )
 from agents.evaluation import Method, MethodResult, evaluate_suite, run_method
-from agents.methods import METHODS, SELECTORS, StepCallbacks, check_methods, point_text
+from agents.methods import SELECTORS, TABLE_METHODS, StepCallbacks, check_methods, point_text
 from agents.rl import check_policy_run, is_run, rollout_errors, train_contour
 from envs.options import PatternCutOptions
 from warpcut.contours import Contour, builtin_names, load_contour
@@ -276,6 +278,9 @@ def run_pipeline(
         config: Simulation settings (default: ``SimConfig()``).
         arm: The cutting arm's footprint for pinch feasibility (default: the paper's).
         analytic_pinch: :data:`ANALYTIC_PINCHES`.
+        grad: The ``grad`` column's optimiser (:class:`~agents.config.GradConfig`): a plan per contour at
+            the planned pinch (unplanned: the feasible centroid), saved in ``out/grad/NAME.json`` (kept on
+            resume).
         device: Warp device.
         seed: Seed of everything random.
         log: Called with each progress line.
@@ -534,7 +539,7 @@ def evaluate_table(
     *,
     resume: bool = False,
     overwrite: bool = False,
-    methods: Sequence[str] = tuple(METHODS),
+    methods: Sequence[str] = TABLE_METHODS,
     trials: int = EVALUATION_TRIALS,
     config: SimConfig | None = None,
     checkpoints: str | Path | None = None,
@@ -546,6 +551,7 @@ def evaluate_table(
     candidates: int = EVALUATION_CANDIDATES,
     arm: ArmModel | None = None,
     analytic_pinch: str = ANALYTIC_PINCHES[0],
+    grad: GradConfig = GRAD_CONFIG,
     device: str | None = None,
     seed: int = 0,
     log: Callable[[str], None] = lambda _: None,
@@ -580,6 +586,9 @@ def evaluate_table(
         candidates: Pinch candidates per plan.
         arm: The cutting arm's footprint for pinch feasibility (default: the paper's).
         analytic_pinch: :data:`ANALYTIC_PINCHES`.
+        grad: The ``grad`` column's optimiser (:class:`~agents.config.GradConfig`): a plan per contour at
+            the planned pinch (unplanned: the feasible centroid), saved in ``out/grad/NAME.json`` (kept on
+            resume).
         device: Warp device.
         seed: Seed of everything random.
         log: Called with each progress line.
@@ -598,6 +607,7 @@ def evaluate_table(
         trials=trials, config=config, checkpoints=checkpoints, recipe=recipe, iterations=iterations,
         num_envs=num_envs, plan=plan if isinstance(plan, bool) else [p.contour.name for p in plan],
         candidates=candidates, arm=arm or ArmModel(), analytic_pinch=analytic_pinch, seed=seed,
+        **({"grad": grad} if "grad" in methods else {}),
     )  # fmt: skip
     start = time.perf_counter()
     plans = None
@@ -623,6 +633,13 @@ def evaluate_table(
             spec.result, runs, kept = _rl_result(
                 named, plans, checkpoints, out, trials, config, training, device, seed, *feedback
             )
+        elif spec.name == "grad":
+            from agents.gradient import grad_column
+
+            settings = (grad, arm or ArmModel())
+            spec.result, optimized = grad_column(
+                loaded, plans, out, trials, config, settings, device, seed, log
+            )
     batches = len({spec.name for spec in specs} | {"none"})  # evaluate_suite also runs none, the baseline
     running = iter(range(batches))
     table = evaluate_suite(
@@ -642,6 +659,11 @@ def evaluate_table(
         row["rl_policy_iteration"] = iteration
     if kept:  # how often model selection kept the initial policy (it holds still under the warpcut recipe)
         table["rl_initial_policy_contours"] = sum(1 for it in kept if it == 0)
+    if "grad" in methods:
+        for row, result in zip(table["rows"], optimized, strict=True):
+            row["grad_best_iteration"], row["grad_seconds"] = result.best_iteration, result.seconds
+            row["grad_env_steps"] = result.env_steps
+        table["grad_initial_plan_contours"] = sum(1 for r in optimized if r.best_iteration == 0)
     report = TableReport(
         loaded, methods, config, table, plans, analytic_pinch, time.perf_counter() - start, runs
     )

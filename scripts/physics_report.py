@@ -15,7 +15,7 @@ import numpy as np
 from warpcut import SimConfig, Simulator
 from warpcut.contours import builtin_contours
 from warpcut.scoring import ci95
-from warpcut.sim.simulator import settled_figures
+from warpcut.sim.checks import settled_figures
 from warpcut.task import CuttingTask
 
 

@@ -58,3 +58,120 @@ def test_tape_gradient_matches_finite_differences(device):
         fd[axis] = (values[0] - values[1]) / (2 * eps)
     assert np.abs(grad[2]) > 1e-3  # lifting the grasp lifts the sheet: a gradient worth checking
     np.testing.assert_allclose(grad, fd, rtol=0.05, atol=2e-4)
+
+
+# ------------------------------------------------------------------ differentiable cutting rollouts
+# A small, smooth case: circle-small on a 13 x 13 sheet without noise, a random plan of moves. Its path
+# surrogate is differentiable around this plan (no cut or tip-search decision flips within the steps used),
+# so central differences check the tape.
+
+
+def _small_rollout(device, num_envs=1, noise_std=0.0, **kwargs):
+    from warpcut import CuttingTask, load_contour
+    from warpcut.gradients import DifferentiableRollout
+
+    config = SimConfig(resolution=13, noise_std=noise_std)
+    contour = load_contour("circle-small")
+    task = CuttingTask(config, [contour] * num_envs, pinch_points=[[68.8, 38.9]] * num_envs, device=device)
+    rollout = DifferentiableRollout(task, **kwargs)
+    plan = np.random.default_rng(1).uniform(-0.3, 0.3, (num_envs, task.num_steps, 3)).astype(np.float32)
+    return rollout, plan
+
+
+def test_plan_gradient_matches_finite_differences(device):
+    rollout, plan = _small_rollout(device)
+    forward, grads = rollout.value_and_grad(plan)
+    assert forward.mapped[0] > 40 and np.isfinite(forward.surrogate[0])
+    steps = [0, 6, 13, 20, 26, 33]
+    tape, fd = [], []
+    eps = 1e-2
+    for t in steps:
+        for axis in range(3):
+            values = []
+            for sign in (1.0, -1.0):
+                shifted = plan.copy()
+                shifted[0, t, axis] += sign * eps
+                values.append(rollout.forward(shifted).surrogate[0])
+            fd.append((values[0] - values[1]) / (2 * eps))
+            tape.append(grads.actions[0, t, axis])
+    assert np.max(np.abs(tape)) > 0.3  # the moves checked matter
+    np.testing.assert_allclose(tape, fd, rtol=0.05, atol=0.01)
+    # Moves after the last cutting update change nothing.
+    assert np.all(grads.actions[0, -1] == 0.0)
+
+
+def test_pinch_gradient_matches_finite_differences(device):
+    rollout, plan = _small_rollout(device)
+    _, grads = rollout.value_and_grad(plan)
+    eps = 1e-2
+    fd = []
+    for axis in range(2):
+        values = []
+        for sign in (1.0, -1.0):
+            shift = np.zeros((1, 2))
+            shift[0, axis] = sign * eps
+            values.append(rollout.forward(plan, pinch_shift=shift).surrogate[0])
+        fd.append((values[0] - values[1]) / (2 * eps))
+    assert np.max(np.abs(grads.pinch[0])) > 0.1
+    np.testing.assert_allclose(grads.pinch[0], fd, rtol=0.05, atol=0.01)
+
+
+def test_replay_threads_and_capture_agree_bit_for_bit():
+    """The backward pass is the same numbers however it is replayed: one thread or two (each env's noise
+    stream follows it into its slice of the batch), recorded into a graph or launched kernel by kernel."""
+    results = []
+    for kwargs in ({"threads": 1, "capture": False}, {"threads": 2, "capture": True}):
+        rollout, plan = _small_rollout("cpu", num_envs=3, noise_std=0.03, **kwargs)
+        forward, grads = rollout.value_and_grad(plan, seed=5)
+        results.append((forward.surrogate, grads.actions, grads.pinch))
+    for a, b in zip(*results, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert len(set(np.round(results[0][0], 6))) == 3  # the envs' noise differs
+
+
+def test_surrogate_is_the_mean_squared_path_deviation():
+    from warpcut.gradients import path_surrogate
+
+    rollout, plan = _small_rollout("cpu")
+    forward = rollout.forward(plan)
+    task = rollout.task
+    path, target = task.cut_path(), task.target_points()
+    mapped = (path[0, :, 2] == 1.0) & np.all(np.isfinite(target[0]), axis=1)
+    expected = np.mean(np.sum((path[0, mapped, :2] - target[0, mapped]) ** 2, axis=1))
+    assert forward.mapped[0] == mapped.sum()
+    np.testing.assert_allclose(forward.surrogate[0], expected, rtol=1e-9)
+    value, count = path_surrogate(np.zeros((1, 4, 3)), np.zeros((1, 4, 2)))  # nothing mapped
+    assert np.isnan(value[0]) and count[0] == 0
+
+
+def test_differentiable_rollout_refuses_bad_input():
+    import pytest
+
+    from warpcut import CuttingTask, load_contour
+    from warpcut.gradients import DifferentiableRollout
+
+    rollout, plan = _small_rollout("cpu")
+    with pytest.raises(ValueError, match="actions: expected"):
+        rollout.forward(plan[:, :-1])
+    with pytest.raises(ValueError, match="actions: contains NaN"):
+        rollout.forward(np.full_like(plan, np.nan))
+    with pytest.raises(ValueError, match="pinch_shift"):
+        rollout.forward(plan, pinch_shift=np.zeros(3))
+    with pytest.raises(ValueError, match="reset: False"):
+        rollout.task.step()
+        rollout.forward(plan, reset=False)
+    untraced = CuttingTask(
+        SimConfig(resolution=13, score="separated"), load_contour("circle-small"), trace_path=False
+    )
+    with pytest.raises(ValueError, match="trace_path=True"):
+        DifferentiableRollout(untraced)
+
+
+def test_rollout_memory_grows_with_the_checkpoints_only():
+    from warpcut.gradients import rollout_memory
+
+    short = rollout_memory(64, 625, 40, 2, 7)
+    long = rollout_memory(64, 625, 80, 2, 7)
+    assert long["tape"] == short["tape"]
+    assert long["checkpoints"] == 2 * short["checkpoints"]
+    assert long["total"] < 2**30  # a default-length B = 64 rollout: well under a GiB

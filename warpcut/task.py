@@ -199,6 +199,7 @@ class CuttingTask:
             self._tips[env, :t] = trajectory.tip
             self._tips[env, t:, :3] = trajectory.tip[-1, :3]  # parked, not cutting, once done
             self._targets[env, :t] = trajectory.material
+        self._targets.flags.writeable = False
         self._arc_mm = self._compute_target_arcs()
         if trace_path:
             self.sim.trace_path(self.horizon_updates)
@@ -283,6 +284,11 @@ class CuttingTask:
         """(B, horizon) arc length along each env's contour of the point each update meant to cut (NaN
         while travelling or parked): the order in which the cut path is closed (read-only)."""
         return self._arc_mm
+
+    def target_points(self) -> np.ndarray:
+        """(B, horizon, 2) the material point each update meant to cut (NaN while travelling or parked):
+        what the cut path is compared with (read-only)."""
+        return self._targets
 
     def _compute_target_arcs(self) -> np.ndarray:
         arcs = np.full(self._targets.shape[:2], np.nan)

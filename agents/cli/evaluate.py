@@ -2,14 +2,15 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import click
 
 from agents.cli import common
 from agents.cli.video import video_option, videos, with_videos
-from agents.config import EVALUATION_CANDIDATES, EVALUATION_TRIALS, RECIPES, TrainConfig
-from agents.methods import METHODS
+from agents.config import EVALUATION_CANDIDATES, EVALUATION_TRIALS, GRAD_CONFIG, RECIPES, TrainConfig
+from agents.methods import METHODS, TABLE_METHODS
 from warpcut.sim.config import SimConfig
 
 
@@ -22,7 +23,13 @@ from warpcut.sim.config import SimConfig
     show_default=True,
     help="'all' (the built-in suite), names or contour files; repeat or comma-separate.",
 )
-@click.option("--methods", default=",".join(METHODS), show_default=True, help="Comma-separated methods.")
+@click.option(
+    "--methods",
+    default=",".join(TABLE_METHODS),
+    show_default=True,
+    help=f"Comma-separated methods, of {','.join(METHODS)} (grad: an open-loop plan optimised through the "
+    "differentiable simulator, per contour).",
+)
 @common.count_option("trials", EVALUATION_TRIALS, "Trials per contour.")
 @common.noise_option
 @common.score_option
@@ -41,6 +48,9 @@ from warpcut.sim.config import SimConfig
 @common.recipe_option
 @common.count_option("iterations", TrainConfig.iterations, "PPO iterations per contour when training.")
 @common.count_option("num-envs", TrainConfig.num_envs, "Envs when training.")
+@common.count_option(
+    "grad-iterations", GRAD_CONFIG.iterations, "Adam steps per contour of the grad column's optimiser."
+)
 @common.device_option
 @common.seed_option
 @common.out_option("logs/evaluate-TIMESTAMP; results and trained policies")
@@ -80,6 +90,7 @@ def command(
     recipe: str,
     iterations: int,
     num_envs: int,
+    grad_iterations: int,
     plan: bool,
     candidates: int,
     arm_length: float,
@@ -121,13 +132,19 @@ def command(
             iterations=iterations, num_envs=num_envs,
             plan=plan,
             candidates=candidates,
-            arm=ArmModel(length_mm=arm_length), analytic_pinch=analytic_pinch, device=device,
+            arm=ArmModel(length_mm=arm_length), analytic_pinch=analytic_pinch,
+            grad=dataclasses.replace(GRAD_CONFIG, iterations=grad_iterations), device=device,
             seed=seed, log=common.log, stages=stages,
             step_callbacks=with_videos(common.step_callbacks(rec, cuts), vid),
         )  # fmt: skip
     table = report.markdown()
     click.echo(table)
     click.echo(f"({len(report.contours)} contours x {trials} trials in {report.seconds:.0f} s)")
+    if "grad_initial_plan_contours" in report.table:
+        click.echo(
+            f"grad kept its initial plan (hold still) on {report.table['grad_initial_plan_contours']} of "
+            f"{len(report.contours)} contours"
+        )
     if "rl_initial_policy_contours" in report.table:
         click.echo(
             f"rl kept its initial policy on {report.table['rl_initial_policy_contours']} of "

@@ -52,3 +52,19 @@ def check_settled(settled: np.ndarray, divergence: np.ndarray, group_params: np.
         f"{default.gravity:g} mm/s^2 and {default.dt:g} s: {default.gravity * default.dt**2:.2g} mm per "
         "update), or raise sweeps"
     )
+
+
+def settled_figures(sim) -> tuple[float, float, float]:
+    """The settled sheet of env 0 in the figures docs/physics.md compares: the sag at the centre vertex
+    (mm, below the rest plane) and the largest and mean relative stretch of the structural springs (%)."""
+    grid = sim.grid
+    p = sim.settled_positions()[0].reshape(grid.ny, grid.nx, 3)
+    hx, hy = grid.spacing_mm
+    stretch = np.concatenate(
+        [
+            (np.linalg.norm(p[:, 1:] - p[:, :-1], axis=-1) / hx - 1).ravel(),
+            (np.linalg.norm(p[1:] - p[:-1], axis=-1) / hy - 1).ravel(),
+        ]
+    )
+    centre = p[grid.ny // 2, grid.nx // 2]
+    return float(-centre[2]), float(100 * stretch.max()), float(100 * stretch.mean())

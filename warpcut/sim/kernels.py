@@ -266,19 +266,25 @@ def move_grasp_kernel(
     # Data out:
     displacement_out: wp.array(dtype=wp.vec3),
 ):
-    """Move each grasp by its action, clipped to ``max_step`` per axis and ``max_displacement`` in norm."""
+    """Move each grasp by its action (:func:`grasp_move`)."""
     env = wp.tid()
-    a = action[env]
+    displacement_out[env] = grasp_move(displacement[env], action[env], max_step, max_displacement)
+
+
+@wp.func
+def grasp_move(displacement: wp.vec3, action: wp.vec3, max_step: float, max_displacement: float) -> wp.vec3:
+    """The grasp's displacement after ``action``: clipped to ``max_step`` per axis, the total to
+    ``max_displacement`` in norm (differentiable where neither clip binds)."""
     step = wp.vec3(
-        wp.clamp(a[0], -max_step, max_step),
-        wp.clamp(a[1], -max_step, max_step),
-        wp.clamp(a[2], -max_step, max_step),
+        wp.clamp(action[0], -max_step, max_step),
+        wp.clamp(action[1], -max_step, max_step),
+        wp.clamp(action[2], -max_step, max_step),
     )
-    u = displacement[env] + step
+    u = displacement + step
     norm = wp.length(u)
     if norm > max_displacement:
         u = u * (max_displacement / norm)
-    displacement_out[env] = u
+    return u
 
 
 # ---------------------------------------------------------------------------------------------- path
@@ -507,3 +513,85 @@ def map_tip_kernel(
         if alive[base + v] == 0 and removed_at[base + v] < 0:
             removed_at[base + v] = update
     path[env, update] = locate_tip_flat(x, alive, base, env, update, tip[env], removed_at, path, search)
+
+
+# ----------------------------------------------------------------------------------------- gradients
+# What a differentiable rollout (:mod:`warpcut.gradients`) adds under ``wp.Tape``: the grasp's hold
+# shifted with the pinch point, and the path surrogate. The search for the
+# tip is not differentiated: the surrogate re-reads the triangle the traced path found and differentiates
+# the barycentric map inside it.
+
+
+@wp.kernel
+def grasp_anchor_kernel(
+    n: int,
+    anchor: wp.array(dtype=wp.vec3),
+    pin: wp.array(dtype=wp.int32),
+    jacobian_x: wp.array(dtype=wp.vec3),
+    jacobian_y: wp.array(dtype=wp.vec3),
+    shift: wp.array(dtype=wp.vec2),
+    anchor_out: wp.array(dtype=wp.vec3),
+):
+    """Grasped vertices hold the material ``shift[env]`` (mm) away: their anchors move by the settled
+    sheet's deformation gradient ``(jacobian_x, jacobian_y)`` times the shift; other anchors stay."""
+    env, v = wp.tid()
+    i = env * n + v
+    a = anchor[i]
+    if pin[i] == PIN_GRASP:
+        s = shift[env]
+        a = a + jacobian_x[i] * s[0] + jacobian_y[i] * s[1]
+    anchor_out[i] = a
+
+
+@wp.kernel
+def path_surrogate_kernel(
+    search: TipSearch,
+    update: int,
+    x: wp.array(dtype=wp.vec3),
+    tip: wp.array(dtype=wp.vec4),
+    path: wp.array2d(dtype=wp.vec3),
+    target: wp.array2d(dtype=wp.vec2),
+    weight: wp.array(dtype=float),
+    loss: wp.array(dtype=float),
+):
+    """Add ``weight[env] * |m - target|^2`` to ``loss[env]``: ``m`` the tip of update ``update`` mapped
+    through the deformed mesh ``x`` into material coordinates, in the triangle the traced ``path`` found
+    (its cell and half by the material point); nothing where the path was not mapped or there is no
+    target. ``m`` is the same barycentric map as :func:`locate_in_cell`, without its inside test."""
+    env = wp.tid()
+    p = path[env, update]
+    t = target[env, update]
+    if p[2] != PATH_MAPPED or not wp.isfinite(t):
+        return
+    nx = search.nx
+    hx = search.hx
+    hy = search.hy
+    c = wp.clamp(int(p[0] / hx), 0, nx - 2)
+    r = wp.clamp(int(p[1] / hy), 0, search.ny - 2)
+    fx = p[0] / hx - float(c)
+    fy = p[1] / hy - float(r)
+    base = env * nx * search.ny + r * nx + c
+    a = x[base]
+    b = x[base + 1]
+    d = x[base + nx + 1]
+    if fy > fx:  # the upper-left half (00, 11, 01)
+        b = x[base + nx + 1]
+        d = x[base + nx]
+    q = tip[env]
+    e1x = b[0] - a[0]
+    e1y = b[1] - a[1]
+    e2x = d[0] - a[0]
+    e2y = d[1] - a[1]
+    det = e1x * e2y - e2x * e1y
+    px = q[0] - a[0]
+    py = q[1] - a[1]
+    wb = (px * e2y - e2x * py) / det
+    wc = (e1x * py - px * e1y) / det
+    mx = float(c) * hx + (wb + wc) * hx
+    my = float(r) * hy + wc * hy
+    if fy > fx:
+        mx = float(c) * hx + wb * hx
+        my = float(r) * hy + (wb + wc) * hy
+    dx = mx - t[0]
+    dy = my - t[1]
+    wp.atomic_add(loss, env, weight[env] * (dx * dx + dy * dy))

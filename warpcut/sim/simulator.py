@@ -29,7 +29,6 @@ __all__ = [
     "check_pinch_points",
     "default_device",
     "resolve_device",
-    "settled_figures",
 ]
 
 BACKENDS = ("auto", "simd", "colours")
@@ -307,7 +306,7 @@ class Simulator:
         if not isinstance(horizon, int) or horizon < 1:
             raise ValueError(f"horizon: must be a positive number of updates (got {horizon!r})")
         b, n = self.num_envs, self.grid.num_vertices
-        self._search = self._tip_search()
+        self._search = self.tip_search()
         self.path = wp.full(
             (b, horizon), wp.vec3(0.0, 0.0, kernels.PATH_IDLE), dtype=wp.vec3, device=self.device
         )
@@ -340,7 +339,7 @@ class Simulator:
             return lambda start, stop: view[:, start:stop].copy()
         return lambda start, stop: np.array(path[:count, start:stop].numpy())
 
-    def _tip_search(self) -> kernels.TipSearch:
+    def tip_search(self) -> kernels.TipSearch:
         """What the tip search needs to know of the sheet (made once per :meth:`trace_path`)."""
         search = kernels.TipSearch()
         search.nx, search.ny = self.grid.nx, self.grid.ny
@@ -423,8 +422,7 @@ class Simulator:
         else:
             self._sync_flat()
             if not self._counter_synced:
-                self._update_counter.assign(np.array([self.update_count], dtype=np.int32))
-                self._counter_synced = True
+                self.sync_update_counter()
             if self.capture and not tape_mode and self._own_arrays():
                 self._update_captured()
             else:
@@ -433,6 +431,12 @@ class Simulator:
                 self._map_flat()
             self._packed_current = False
         self.update_count += 1
+
+    def sync_update_counter(self) -> None:
+        """Copy :attr:`update_count` to the device counter the ``colours`` kernels draw their noise stream
+        from (:meth:`update` does it when needed; a recorded graph that replays updates needs it before)."""
+        self._update_counter.assign(np.array([self.update_count], dtype=np.int32))
+        self._counter_synced = True
 
     def _update_simd(self) -> None:
         state = self._simd
@@ -720,6 +724,32 @@ class Simulator:
         out[..., 3] = np.take_along_axis(alive, vertices, axis=1) != 0
         return out
 
+    def state(self) -> dict:
+        """A copy of what the next updates start from: ``x``, ``x_prev`` (B * N, 3), ``alive`` (B * N,),
+        ``displacement`` (B, 3) and ``update_count`` (the noise stream): a checkpoint for :meth:`load_state`
+        (pins, anchors, seed and tips are the caller's to keep; the traced path is not part of it)."""
+        self._sync_flat()
+        arrays = {k: getattr(self, k).numpy().copy() for k in ("x", "x_prev", "alive", "displacement")}
+        return {**arrays, "update_count": self.update_count}
+
+    def load_state(self, state: dict, requires_grad: bool = False) -> None:
+        """Continue from a :meth:`state`, of this simulator or another of the same shape; with
+        ``requires_grad`` into fresh arrays that record gradients, as the start of a taped replay."""
+        if requires_grad:
+            for k in ("x", "x_prev", "alive", "displacement"):
+                dtype = wp.int32 if k == "alive" else wp.vec3
+                setattr(
+                    self, k, wp.array(state[k], dtype=dtype, device=self.device, requires_grad=k != "alive")
+                )
+        else:
+            self.x, self.x_prev, self._spare = self._buffers
+            self.alive, self.displacement = self._alive[0], self._displacement_own
+            for k in ("x", "x_prev", "alive", "displacement"):
+                getattr(self, k).assign(state[k])
+        self.update_count = int(state["update_count"])
+        self._counter_synced = False
+        self._flat_current, self._packed_current = True, False
+
     def displacements(self) -> np.ndarray:
         """(B, 3) grasp displacement from where it pinched (mm)."""
         return self.displacement.numpy().copy()
@@ -736,22 +766,6 @@ class Simulator:
         coordinate (:data:`DIVERGENCE_REASONS`), 2 a vertex flung beyond the bounds."""
         status = self._status.numpy()
         return np.where(status[0] != 0, 1, np.where(status[1] != 0, 2, 0)).astype(np.int8)
-
-
-def settled_figures(sim: Simulator) -> tuple[float, float, float]:
-    """The settled sheet of env 0 in the figures docs/physics.md compares: the sag at the centre vertex
-    (mm, below the rest plane) and the largest and mean relative stretch of the structural springs (%)."""
-    grid = sim.grid
-    p = sim.settled_positions()[0].reshape(grid.ny, grid.nx, 3)
-    hx, hy = grid.spacing_mm
-    stretch = np.concatenate(
-        [
-            (np.linalg.norm(p[:, 1:] - p[:, :-1], axis=-1) / hx - 1).ravel(),
-            (np.linalg.norm(p[1:] - p[:-1], axis=-1) / hy - 1).ravel(),
-        ]
-    )
-    centre = p[grid.ny // 2, grid.nx // 2]
-    return float(-centre[2]), float(100 * stretch.max()), float(100 * stretch.mean())
 
 
 def _fresh(like: wp.array) -> wp.array:

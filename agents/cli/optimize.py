@@ -1,0 +1,98 @@
+"""``warpcut optimize``: an open-loop tension plan optimised through the differentiable simulator
+(:func:`agents.gradient.optimize_contour`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from agents.cli import common
+from agents.config import EVALUATION_CANDIDATES, EVALUATION_TRIALS, GRAD_CONFIG, GradConfig
+from agents.methods import point_text
+from warpcut.sim.config import SimConfig
+
+
+@click.command("optimize")
+@common.contour_option
+@click.option(
+    "--pinch",
+    default=None,
+    help="Pinch point X,Y (mm); default: the plan's (fixed tension's best candidate).",
+)
+@common.count_option("iterations", GRAD_CONFIG.iterations, "Adam steps (a forward and a backward pass each).")
+@common.count_option(
+    "episodes", GRAD_CONFIG.trials, "Noisy episodes per step (their noise is not the evaluation's)."
+)
+@click.option(
+    "--lr",
+    "learning_rate",
+    default=GRAD_CONFIG.learning_rate,
+    show_default=True,
+    type=click.FloatRange(min=0.0, min_open=True),
+    help="Adam's step (mm per grasp move).",
+)
+@click.option(
+    "--optimize-pinch",
+    is_flag=True,
+    help="Also move the pinch point along its gradient (kept feasible).",
+)
+@common.count_option("trials", EVALUATION_TRIALS, "Evaluation trials (none, fixed and grad, paired).")
+@common.count_option("candidates", EVALUATION_CANDIDATES, "Pinch candidates of the plan.")
+@common.noise_option
+@common.score_option
+@common.arm_length_option
+@common.device_option
+@common.seed_option
+@common.out_option("logs/optimize-TIMESTAMP; the plan, the optimiser's state and results.json")
+@common.run_dir_options
+@common.json_option
+def command(
+    contour_name: str,
+    pinch: str | None,
+    iterations: int,
+    episodes: int,
+    learning_rate: float,
+    optimize_pinch: bool,
+    trials: int,
+    candidates: int,
+    noise: float,
+    score: str,
+    arm_length: float,
+    device: str | None,
+    seed: int,
+    out: Path | None,
+    resume: bool,
+    overwrite: bool,
+    json_path: Path | None,
+) -> None:
+    """Optimise grasp moves by gradient descent through the simulator, then evaluate them."""
+    from agents.gradient import optimize_contour
+    from warpcut.io import write_json
+    from warpcut.planning import ArmModel
+
+    point = common.parse_point(pinch, "--pinch")
+    common.check_outputs({"--json": json_path}, [contour_name])
+    settings = GradConfig(
+        iterations=iterations, trials=episodes, learning_rate=learning_rate, optimize_pinch=optimize_pinch
+    )
+    out, claim = common.claim(out, "optimize", resume, overwrite)
+    with claim:
+        report = optimize_contour(
+            contour_name, out, pinch=point, settings=settings, trials=trials,
+            config=SimConfig(noise_std=noise, score=score), candidates=candidates,
+            arm=ArmModel(length_mm=arm_length), device=device, seed=seed, log=common.log,
+        )  # fmt: skip
+    optimized = report["optimized"]
+    click.echo(
+        f"{report['contour']}: pinch {point_text(optimized['pinch'])}, kept iteration "
+        f"{optimized['best_iteration']} of {iterations}, {optimized['seconds']:.0f} s, "
+        f"{optimized['env_steps']} env steps"
+    )
+    click.echo(f"{'method':<8} {'error (vertices)':>16} {'improvement':>12}")
+    for name, row in report["evaluation"].items():
+        improvement = f"{row['improvement_pct']:>+11.1f}% ±{row['ci95_pct']:.1f}"
+        click.echo(f"{name:<8} {row['error_vertices']:>16.1f} {improvement}")
+    if json_path:
+        write_json(json_path, report)
+    click.echo(f"wrote {out}")

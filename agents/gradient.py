@@ -1,0 +1,389 @@
+"""Gradient-based tensioning: an open-loop plan of grasp moves, optimised by Adam through the differentiable
+simulator (:mod:`warpcut.gradients`), and the ``grad`` method that plays it.
+
+The objective is the path surrogate (the mean squared distance between where the scissors cut and where
+they meant to, in material coordinates), averaged over ``GradConfig.trials`` noisy episodes whose seeds
+stay the same from step to step (common random numbers) and differ from the evaluation's. Every move is
+projected back onto ``max_step_mm`` per axis after each step; the simulator applies the displacement cap.
+Each forward pass also scores its episodes with the path score: the iterate with the lowest mean error,
+the initial still grasp (iteration 0, fixed tensioning) included, is the result (model selection on the
+optimiser's own episodes; the evaluation uses others).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from agents.config import (
+    EVALUATION_CANDIDATES,
+    EVALUATION_TRIALS,
+    GRAD_CONFIG,
+    GRAD_SEED_OFFSET,
+    GradConfig,
+)
+from warpcut.contours import Contour
+from warpcut.planning import ArmModel
+from warpcut.planning.feasibility import pinch_feasible
+from warpcut.sim.config import SimConfig
+from warpcut.task import CuttingTask
+
+if TYPE_CHECKING:
+    from agents.evaluation import MethodResult
+    from warpcut.planning import Plan
+
+
+@dataclass
+class PlanResult:
+    """An optimised plan and how it was found."""
+
+    contour: str
+    pinch: list[float]
+    """The pinch point (material mm) the plan is played at (the optimiser moves it with
+    ``optimize_pinch``)."""
+    plan: np.ndarray
+    """(T, 3) grasp moves (mm), one per env step."""
+    best_iteration: int
+    """The iterate kept (0: the initial still grasp)."""
+    history: list[dict] = field(default_factory=list)
+    """Per iterate: ``iteration``, ``surrogate`` (mm^2) and ``error_vertices`` (mean over the episodes),
+    ``pinch``, ``seconds`` since the start."""
+    seconds: float = 0.0
+    """Wall time of the optimisation."""
+    env_steps: int = 0
+    """Env steps simulated forward (episodes x steps); each backward pass replays as many again."""
+
+    def to_json(self) -> dict:
+        return {
+            "contour": self.contour,
+            "pinch": [float(v) for v in self.pinch],
+            "plan": np.asarray(self.plan, dtype=np.float64).round(6).tolist(),
+            "best_iteration": self.best_iteration,
+            "history": self.history,
+            "seconds": self.seconds,
+            "env_steps": self.env_steps,
+        }
+
+    @classmethod
+    def from_json(cls, data: dict) -> PlanResult:
+        plan = np.asarray(data["plan"], dtype=np.float32).reshape(-1, 3)
+        return cls(
+            data["contour"], list(data["pinch"]), plan, int(data["best_iteration"]), list(data["history"]),
+            float(data["seconds"]), int(data["env_steps"]),
+        )  # fmt: skip
+
+
+class PlanPolicy:
+    """The ``grad`` tensioner: plays open-loop plans, env ``e`` the plan of contour ``e // trials`` (the
+    layout of :func:`agents.evaluation.run_method`); a plan shorter than the episode holds still after it."""
+
+    def __init__(self, plans: Sequence[np.ndarray], trials: int = 1):
+        self.plans = [np.asarray(p, dtype=np.float32).reshape(-1, 3) for p in plans]
+        self.trials = int(trials)
+
+    def __call__(self, task: CuttingTask) -> np.ndarray:
+        if task.num_envs != len(self.plans) * self.trials:
+            raise ValueError(
+                f"plans: {len(self.plans)} plan(s) x {self.trials} trial(s) for a batch of "
+                f"{task.num_envs} envs"
+            )
+        t = task.step_index
+        moves = [p[t] if t < len(p) else np.zeros(3, np.float32) for p in self.plans]
+        return np.repeat(np.asarray(moves, dtype=np.float32), self.trials, axis=0)
+
+
+class Adam:
+    """Adam on a NumPy array (minimising), with the usual bias correction."""
+
+    def __init__(self, shape: tuple[int, ...], learning_rate: float, betas=(0.9, 0.999), eps: float = 1e-8):
+        self.m, self.v = np.zeros(shape), np.zeros(shape)
+        self.learning_rate, self.betas, self.eps, self.steps = learning_rate, betas, eps, 0
+
+    def state(self) -> dict:
+        return {"m": self.m.tolist(), "v": self.v.tolist(), "steps": self.steps}
+
+    def load(self, state: dict) -> None:
+        self.m, self.v = np.asarray(state["m"]), np.asarray(state["v"])
+        self.steps = int(state["steps"])
+
+    def step(self, grad: np.ndarray) -> np.ndarray:
+        """The change to add to the parameters for ``grad``."""
+        b1, b2 = self.betas
+        self.steps += 1
+        self.m = b1 * self.m + (1 - b1) * grad
+        self.v = b2 * self.v + (1 - b2) * grad * grad
+        m_hat, v_hat = self.m / (1 - b1**self.steps), self.v / (1 - b2**self.steps)
+        return -self.learning_rate * m_hat / (np.sqrt(v_hat) + self.eps)
+
+
+def optimize_plan(
+    contour: Contour,
+    pinch: np.ndarray,
+    segments: list[np.ndarray] | None = None,
+    config: SimConfig | None = None,
+    settings: GradConfig = GRAD_CONFIG,
+    device: str | None = None,
+    seed: int = 0,
+    arm: ArmModel | None = None,
+    log: Callable[[str], None] = lambda _: None,
+    state_file: Path | None = None,
+) -> PlanResult:
+    """Optimise an open-loop plan for cutting ``contour`` with the grasp at ``pinch`` (see the module).
+
+    Args:
+        contour: The contour.
+        pinch: The pinch point (material mm), e.g. the plan's chosen one.
+        segments: The polylines cut in order (default: the contour as one segment).
+        config: Simulation settings (default ``SimConfig()``), with the evaluation's noise.
+        settings: The optimiser's (:class:`~agents.config.GradConfig`).
+        device: Warp device.
+        seed: Seed; the episodes use ``seed + GRAD_SEED_OFFSET``.
+        arm: The cutting arm whose footprint a moved pinch point must avoid (default: the paper's).
+        log: Called with a progress line every few iterations.
+        state_file: The optimiser's state is written here (atomically) after every iteration, and an
+            optimisation interrupted (Ctrl-C, a crash) continues from it when it exists (it must be of
+            the same contour, pinch point and settings).
+    """
+    from warpcut.gradients import DifferentiableRollout
+    from warpcut.io import read_json, write_json
+
+    settings = settings.validated()
+    config = (config or SimConfig()).validated()
+    arm = arm or ArmModel()
+    pinch = np.asarray(pinch, dtype=np.float64).reshape(2)
+    b = settings.trials
+
+    def engine(point: np.ndarray) -> DifferentiableRollout:
+        task = CuttingTask(
+            config, [contour] * b, pinch_points=np.tile(point, (b, 1)),
+            segments=None if segments is None else [segments] * b,
+            device=device, seed=seed + GRAD_SEED_OFFSET,
+        )  # fmt: skip
+        return DifferentiableRollout(task)
+
+    rollout = engine(pinch)
+    steps = rollout.num_steps
+    max_step = config.max_step_mm
+    plan = np.zeros((steps, 3), dtype=np.float32)
+    moves, pinch_moves = Adam(plan.shape, settings.learning_rate), Adam((2,), settings.pinch_learning_rate)
+    history, best, first, elapsed = [], None, 0, 0.0
+    identity = {
+        "contour": contour.name,
+        "pinch": pinch.tolist(),
+        "steps": steps,
+        **dataclasses.asdict(settings),
+    }
+    if state_file is not None and Path(state_file).is_file():
+        state = read_json(state_file)
+        if state.get("identity") != identity:
+            raise ValueError(
+                f"{state_file}: an optimisation of other settings ({state.get('identity')}); delete it, or "
+                "start a new run"
+            )
+        first, history, elapsed = state["iteration"], state["history"], state["seconds"]
+        plan, pinch = np.asarray(state["plan"], np.float32), np.asarray(state["pinch"])
+        moves.load(state["moves"]), pinch_moves.load(state["pinch_moves"])
+        error, it, best_plan, best_pinch = state["best"]
+        best = (error, it, np.asarray(best_plan, np.float32), np.asarray(best_pinch))
+        if not np.allclose(pinch, identity["pinch"]):
+            rollout = engine(pinch)
+        log(f"  continuing from iteration {first} ({state_file})")
+    start = time.perf_counter() - elapsed
+    for iteration in range(first, settings.iterations + 1):
+        last = iteration == settings.iterations
+        batch = np.broadcast_to(plan, (b, steps, 3))
+        if last:
+            forward, grads = rollout.forward(batch, seed=seed + GRAD_SEED_OFFSET), None
+        else:
+            forward, grads = rollout.value_and_grad(batch, seed=seed + GRAD_SEED_OFFSET)
+        error = float(np.mean(forward.score.error_vertices))
+        record = {
+            "iteration": iteration,
+            "surrogate": float(np.nanmean(forward.surrogate)),
+            "error_vertices": error,
+            "pinch": [float(v) for v in pinch],
+            "seconds": time.perf_counter() - start,
+        }
+        history.append(record)
+        if best is None or error < best[0]:
+            best = (error, iteration, plan.copy(), pinch.copy())
+        if iteration % 5 == 0 or last:
+            log(
+                f"  iteration {iteration}: surrogate {record['surrogate']:.2f} mm^2, error {error:.2f} "
+                "vertices "
+                f"({record['seconds']:.0f} s)"
+            )
+        if last:
+            break
+        plan = np.clip(plan + moves.step(grads.actions.mean(axis=0)), -max_step, max_step).astype(np.float32)
+        if settings.optimize_pinch:
+            moved = pinch + pinch_moves.step(grads.pinch.mean(axis=0))
+            segments_path = None if segments is None else [np.asarray(s) for s in segments]
+            if pinch_feasible(moved[None], contour, config, segments_path, arm)[0]:
+                pinch = moved
+                rollout = engine(pinch)
+        if state_file is not None:
+            error, it, best_plan, best_pinch = best
+            state = {
+                "identity": identity, "iteration": iteration + 1, "history": history,
+                "seconds": time.perf_counter() - start, "plan": plan.tolist(), "pinch": pinch.tolist(),
+                "moves": moves.state(), "pinch_moves": pinch_moves.state(),
+                "best": [error, it, best_plan.tolist(), best_pinch.tolist()],
+            }  # fmt: skip
+            write_json(state_file, state)
+    _, best_iteration, best_plan, best_pinch = best
+    return PlanResult(
+        contour.name, [float(v) for v in best_pinch], best_plan, best_iteration, history,
+        time.perf_counter() - start, (settings.iterations + 1) * b * steps,
+    )  # fmt: skip
+
+
+def grad_result(
+    contours: Sequence[Contour],
+    pinches: Sequence[np.ndarray],
+    segments: Sequence[list[np.ndarray] | None],
+    trials: int,
+    config: SimConfig,
+    settings: GradConfig = GRAD_CONFIG,
+    device: str | None = None,
+    seed: int = 0,
+    folder: Path | None = None,
+    log: Callable[[str], None] = lambda _: None,
+    arm: ArmModel | None = None,
+) -> tuple[MethodResult, list[PlanResult]]:
+    """The ``grad`` method on a suite: a plan per contour, then every (contour, trial) played in one batch
+    with the evaluation's noise (paired with the baselines'); ``(MethodResult, [PlanResult])``.
+
+    ``folder``: each contour's plan is kept in ``NAME.json`` (a plan found there is used as it is) and its
+    optimiser's state in ``NAME.state.json`` while it runs (an interrupted optimisation continues)."""
+    from agents.evaluation import run_method
+    from warpcut.io import read_json, safe_name, write_json
+
+    results = []
+    for k, (contour, pinch, cut) in enumerate(zip(contours, pinches, segments, strict=True)):
+        done = state = None
+        if folder is not None:
+            done = Path(folder) / f"{safe_name(contour.name)}.json"
+            state = done.with_suffix(".state.json")
+        if done is not None and done.is_file():
+            results.append(PlanResult.from_json(read_json(done)))
+            continue
+        log(
+            f"  [{k + 1}/{len(contours)}] optimising a plan for {contour.name} "
+            f"({settings.iterations} iterations)"
+        )
+        result = optimize_plan(contour, pinch, cut, config, settings, device, seed, arm, log, state)
+        if done is not None:
+            write_json(done, result.to_json())
+            state.unlink(missing_ok=True)
+        results.append(result)
+    method = run_method(
+        contours, [np.asarray(r.pinch) for r in results], PlanPolicy([r.plan for r in results], trials),
+        trials, config, device, seed, segments=list(segments),
+    )  # fmt: skip
+    return method, results
+
+
+def optimize_contour(
+    contour: str | Contour,
+    out: Path | None = None,
+    *,
+    pinch: Sequence[float] | None = None,
+    settings: GradConfig = GRAD_CONFIG,
+    trials: int = EVALUATION_TRIALS,
+    config: SimConfig | None = None,
+    candidates: int = EVALUATION_CANDIDATES,
+    arm: ArmModel | None = None,
+    device: str | None = None,
+    seed: int = 0,
+    log: Callable[[str], None] = lambda _: None,
+) -> dict:
+    """``warpcut optimize``: plan the cut (segments, order and, unless ``pinch`` is given, the pinch point:
+    fixed tension's best candidate), optimise an open-loop plan there (:func:`optimize_plan`), and evaluate
+    it against no tension and fixed tension at the same pinch point on the default protocol (``trials``
+    seeded noisy trials, paired). ``out``: the run directory, where the plan (``NAME.json``), the
+    optimiser's state while it runs (an interrupted optimisation continues) and ``results.json`` go.
+
+    Returns:
+        ``{"contour", "pinch", "settings", "optimized": PlanResult.to_json(), "evaluation": {METHOD:
+        {"error_vertices", "improvement_pct", "ci95_pct"}}, "seconds"}``.
+    """
+    from agents.evaluation import Method, evaluate_suite
+    from warpcut.contours import load_contour
+    from warpcut.planning import plan_cut
+
+    start = time.perf_counter()
+    config = (config or SimConfig()).validated()
+    contour = load_contour(contour) if isinstance(contour, str) else contour
+    arm = arm or ArmModel()
+    log(f"  planning {contour.name} ({candidates} candidates)")
+    plan = plan_cut(
+        contour, config.replace(noise_std=0.0), num_candidates=candidates, seed=seed, device=device, arm=arm
+    )
+    point = np.asarray(plan.chosen["pinch"] if pinch is None else pinch, dtype=np.float64)
+    segments = plan.ordered_segments()
+    method, (result,) = grad_result(
+        [contour], [point], [segments], trials, config, settings, device, seed, out, log, arm
+    )
+    table = evaluate_suite(
+        [contour], [Method("fixed", pinches=[point]), Method("grad", result=method)], trials, config, device,
+        seed, segments=[segments],
+    )  # fmt: skip
+    row = table["rows"][0]
+    evaluation = {
+        m: {
+            "error_vertices": row[f"{m}_error_vertices"],
+            "improvement_pct": row.get(f"{m}_improvement_pct", 0.0),
+            "ci95_pct": row.get(f"{m}_ci95", 0.0),
+        }
+        for m in ("none", "fixed", "grad")
+    }
+    report = {
+        "contour": contour.name,
+        "pinch": [float(v) for v in point],
+        "settings": dataclasses.asdict(settings),
+        "trials": trials,
+        "optimized": result.to_json(),
+        "evaluation": evaluation,
+        "seconds": time.perf_counter() - start,
+    }
+    if out is not None:
+        from warpcut.io import write_json
+
+        write_json(Path(out) / "results.json", report)
+    return report
+
+
+def grad_column(
+    contours: list[Contour],
+    plans: list[Plan] | None,
+    out: Path,
+    trials: int,
+    config: SimConfig,
+    settings: tuple[GradConfig, ArmModel],
+    device: str | None,
+    seed: int,
+    log: Callable[[str], None],
+) -> tuple[MethodResult, list[PlanResult]]:
+    """:func:`agents.pipeline.evaluate_table`'s grad column (:func:`grad_result`, kept in ``out/grad``) at
+    the planned pinch points and segments (unplanned: the feasible centroid, the contour as one loop);
+    ``settings`` is the optimiser's config and the cutting arm."""
+    from warpcut.planning.feasibility import default_pinch
+
+    grad, arm = settings
+    if plans is not None:
+        pinches, segments = [p.chosen["pinch"] for p in plans], [p.ordered_segments() for p in plans]
+    else:
+        pinches, segments = [default_pinch(c, config, arm) for c in contours], [None] * len(contours)
+    started = time.perf_counter()
+    method, optimized = grad_result(
+        contours, pinches, segments, trials, config, grad, device, seed, out / "grad", log, arm
+    )
+    log(f"  grad: {len(contours)} plan(s) in {time.perf_counter() - started:.0f} s")
+    return method, optimized
