@@ -7,6 +7,9 @@ from dataclasses import dataclass, field
 
 from warpcut.sim.config import PINCH_CANDIDATES
 
+ALGORITHMS = ("ppo", "apg")
+"""How ``warpcut train`` learns: PPO (rsl-rl) or analytic policy gradients through the simulator."""
+
 
 @dataclass
 class TrainConfig:
@@ -14,6 +17,10 @@ class TrainConfig:
 
     num_envs: int = 64
     """Parallel envs; must equal the env's ``num_envs`` (the caller builds the env with it)."""
+    algorithm: str = "ppo"
+    """"ppo" (rsl-rl's PPO) or "apg": analytic policy gradients through the differentiable simulator
+    (:mod:`agents.apg`; continuous actions; one whole episode per env and iteration, so
+    ``num_steps_per_env`` does not apply)."""
     iterations: int = 100
     """Total learning iterations of the run, counting those done before a resume."""
     seed: int = 0

@@ -370,10 +370,12 @@ def grad_column(
     device: str | None,
     seed: int,
     log: Callable[[str], None],
-) -> tuple[MethodResult, list[PlanResult]]:
+) -> tuple[MethodResult, Callable[[dict], None]]:
     """:func:`agents.pipeline.evaluate_table`'s grad column (:func:`grad_result`, kept in ``out/grad``) at
     the planned pinch points and segments (unplanned: the feasible centroid, the contour as one loop);
-    ``settings`` is the optimiser's config and the cutting arm."""
+    ``settings`` is the optimiser's config and the cutting arm. Returns the result and ``note(table)``,
+    which adds each row's ``grad_best_iteration``, ``grad_seconds`` and ``grad_env_steps``, and how many
+    contours kept the initial plan (``grad_initial_plan_contours``)."""
     from warpcut.planning.feasibility import default_pinch
 
     grad, arm = settings
@@ -386,4 +388,11 @@ def grad_column(
         contours, pinches, segments, trials, config, grad, device, seed, out / "grad", log, arm
     )
     log(f"  grad: {len(contours)} plan(s) in {time.perf_counter() - started:.0f} s")
-    return method, optimized
+
+    def note(table: dict) -> None:
+        for row, result in zip(table["rows"], optimized, strict=True):
+            row["grad_best_iteration"], row["grad_seconds"] = result.best_iteration, result.seconds
+            row["grad_env_steps"] = result.env_steps
+        table["grad_initial_plan_contours"] = sum(1 for r in optimized if r.best_iteration == 0)
+
+    return method, note

@@ -40,6 +40,7 @@ from agents.config import (
     TrainConfig,
 )
 from agents.evaluation import Method, MethodResult, evaluate_suite, run_method
+from agents.gradient import grad_column
 from agents.methods import SELECTORS, TABLE_METHODS, StepCallbacks, check_methods, point_text
 from agents.rl import check_policy_run, is_run, rollout_errors, train_contour
 from envs.options import PatternCutOptions
@@ -278,9 +279,6 @@ def run_pipeline(
         config: Simulation settings (default: ``SimConfig()``).
         arm: The cutting arm's footprint for pinch feasibility (default: the paper's).
         analytic_pinch: :data:`ANALYTIC_PINCHES`.
-        grad: The ``grad`` column's optimiser (:class:`~agents.config.GradConfig`): a plan per contour at
-            the planned pinch (unplanned: the feasible centroid), saved in ``out/grad/NAME.json`` (kept on
-            resume).
         device: Warp device.
         seed: Seed of everything random.
         log: Called with each progress line.
@@ -610,18 +608,9 @@ def evaluate_table(
         **({"grad": grad} if "grad" in methods else {}),
     )  # fmt: skip
     start = time.perf_counter()
-    plans = None
-    if isinstance(plan, list | tuple):  # plans made already, one per contour
-        plans = list(plan)
-        if [p.contour.name for p in plans] != [c.name for c in loaded]:
-            raise ValueError("plan: give one Plan per contour, in the contours' order (or True / False)")
-    elif plan:
-        settings = dict(num_candidates=candidates, seed=seed, device=device, arm=arm or ArmModel())
-        plans = _plan_all(loaded, config.replace(noise_std=0.0), settings, log, stages)
-        write_json(out / "plans.json", {p.contour.name: p.to_json() for p in plans})
-    specs = [Method(m) for m in methods]
-    runs: list[Path] = []
-    kept: list[int | None] = []
+    settings = dict(num_candidates=candidates, seed=seed, device=device, arm=arm or ArmModel())
+    plans = _table_plans(plan, loaded, config, settings, out, log, stages)
+    specs, runs, notes = [Method(m) for m in methods], [], []  # notes: add a column's own fields to the table
     for spec in specs:
         if spec.name == "fixed" and plans is not None:
             spec.pinches = [p.chosen["pinch"] for p in plans]
@@ -633,13 +622,11 @@ def evaluate_table(
             spec.result, runs, kept = _rl_result(
                 named, plans, checkpoints, out, trials, config, training, device, seed, *feedback
             )
+            notes.append(functools.partial(_note_rl_iterations, kept))
         elif spec.name == "grad":
-            from agents.gradient import grad_column
-
             settings = (grad, arm or ArmModel())
-            spec.result, optimized = grad_column(
-                loaded, plans, out, trials, config, settings, device, seed, log
-            )
+            spec.result, note = grad_column(loaded, plans, out, trials, config, settings, device, seed, log)
+            notes.append(note)
     batches = len({spec.name for spec in specs} | {"none"})  # evaluate_suite also runs none, the baseline
     running = iter(range(batches))
     table = evaluate_suite(
@@ -655,15 +642,8 @@ def evaluate_table(
     )
     stages("evaluating", batches, batches)
     log(f"  evaluated {len(methods)} method(s) x {len(loaded)} contour(s) x {trials} trials")
-    for row, iteration in zip(table["rows"], kept, strict=False):
-        row["rl_policy_iteration"] = iteration
-    if kept:  # how often model selection kept the initial policy (it holds still under the warpcut recipe)
-        table["rl_initial_policy_contours"] = sum(1 for it in kept if it == 0)
-    if "grad" in methods:
-        for row, result in zip(table["rows"], optimized, strict=True):
-            row["grad_best_iteration"], row["grad_seconds"] = result.best_iteration, result.seconds
-            row["grad_env_steps"] = result.env_steps
-        table["grad_initial_plan_contours"] = sum(1 for r in optimized if r.best_iteration == 0)
+    for note in notes:
+        note(table)
     report = TableReport(
         loaded, methods, config, table, plans, analytic_pinch, time.perf_counter() - start, runs
     )
@@ -674,6 +654,38 @@ def evaluate_table(
 Stages = Callable[[str, int, int], None]
 """``stages(stage, done, total)``: a pipeline's stage (e.g. "planning") has ``done`` of ``total`` steps
 done (a progress bar per stage; ``warpcut evaluate`` draws them)."""
+
+
+def _note_rl_iterations(kept: list[int | None], table: dict) -> None:
+    """Which PPO iteration each contour's policy kept (``rl_policy_iteration``), and on how many contours
+    model selection kept the initial policy (it holds still under the warpcut recipe)."""
+    for row, iteration in zip(table["rows"], kept, strict=False):
+        row["rl_policy_iteration"] = iteration
+    if kept:
+        table["rl_initial_policy_contours"] = sum(1 for it in kept if it == 0)
+
+
+def _table_plans(
+    plan: bool | Sequence[Plan],
+    contours: list[Contour],
+    config: SimConfig,
+    settings: dict,
+    out: Path,
+    log: Callable[[str], None],
+    stages: Stages,
+) -> list[Plan] | None:
+    """:func:`evaluate_table`'s plans: the ones given (checked against the contours), or made now with the
+    plan search's ``settings`` (noise-free; written to ``out/plans.json``), or None (``plan`` False)."""
+    if isinstance(plan, list | tuple):  # plans made already, one per contour
+        plans = list(plan)
+        if [p.contour.name for p in plans] != [c.name for c in contours]:
+            raise ValueError("plan: give one Plan per contour, in the contours' order (or True / False)")
+        return plans
+    if not plan:
+        return None
+    plans = _plan_all(contours, config.replace(noise_std=0.0), settings, log, stages)
+    write_json(out / "plans.json", {p.contour.name: p.to_json() for p in plans})
+    return plans
 
 
 def _plan_all(

@@ -175,9 +175,9 @@ def resume_settings(resume: str | Path) -> dict:
     return {**fixed, "seed": train.get("seed"), "validation_trials": len(baseline) * len(baseline[0])}
 
 
-RESUMED_TRAIN_FIELDS = ("num_envs", "num_steps_per_env", "stay_prior")
-"""The :class:`~agents.config.TrainConfig` fields a resumed run keeps (its batch, and the prior its policy
-was initialised with), besides the seed."""
+RESUMED_TRAIN_FIELDS = ("num_envs", "num_steps_per_env", "stay_prior", "algorithm")
+"""The :class:`~agents.config.TrainConfig` fields a resumed run keeps (its batch, the prior its policy
+was initialised with, and how it learns), besides the seed."""
 
 
 def _run_train_config(run_dir: Path) -> dict:

@@ -1,4 +1,5 @@
-"""PPO training on rsl-rl's ``OnPolicyRunner``, with a run directory that survives Ctrl-C.
+"""PPO training on rsl-rl's ``OnPolicyRunner``, with a run directory that survives Ctrl-C; the same run
+directory and loop for analytic policy gradients (``TrainConfig.algorithm = "apg"``, :mod:`agents.apg`).
 
 A run directory holds::
 
@@ -68,7 +69,7 @@ from rsl_rl.env import VecEnv
 from rsl_rl.runners import OnPolicyRunner
 from rsl_rl.utils.logger import Logger
 
-from agents.config import TrainConfig
+from agents.config import ALGORITHMS, TrainConfig
 from envs.rsl import FINAL_ERROR_KEY
 from warpcut.io import DiskFull, write_atomic, write_json
 
@@ -115,6 +116,7 @@ def train(
         The summary also written to ``out_dir/summary.json``.
     """
     cfg = cfg if isinstance(cfg, TrainConfig) else TrainConfig(**cfg)
+    _check_algorithm(cfg)
     if not cfg.selection_margin >= 0:
         raise ValueError(f"selection_margin: must be >= 0 standard errors, got {cfg.selection_margin}")
     if env.num_envs != cfg.num_envs:
@@ -125,7 +127,7 @@ def train(
     if hasattr(env, "seed"):
         env.seed(cfg.seed)
     num_action_choices = getattr(env, "num_action_choices", None) if cfg.discrete else None
-    runner = Runner(env, cfg.to_rsl_rl(num_action_choices), out_dir, cfg.torch_device)
+    runner = _runner_class(cfg)(env, cfg.to_rsl_rl(num_action_choices), out_dir, cfg.torch_device)
     runner.selection_margin = cfg.selection_margin
     checkpoint, note = None, None
     if resume is not None:
@@ -138,7 +140,7 @@ def train(
 
     start_iterations, start_time, status = runner.iterations_done, time.monotonic(), "failed"
     try:
-        steps = cfg.num_steps_per_env * cfg.num_envs
+        steps = runner.steps_per_iteration
         with _progress_display(bool(progress), cfg.iterations, start_iterations, steps, label) as report:
             if validate is None:
                 runner.on_iteration = report
@@ -165,7 +167,7 @@ def train(
             _log_hparams(runner.logger.writer, cfg, runner)
             runner.logger.writer.close()
         wall_time = time.monotonic() - start_time
-        steps_per_iteration = cfg.num_steps_per_env * cfg.num_envs
+        steps_per_iteration = runner.steps_per_iteration
         new_steps = (runner.iterations_done - start_iterations) * steps_per_iteration
         summary = {
             "status": status,
@@ -190,6 +192,25 @@ def train(
         }
         _write_summary(out_dir / "summary.json", summary, runner.checkpoint, ending)
     return summary
+
+
+def _check_algorithm(cfg: TrainConfig) -> None:
+    """``ValueError`` naming ``algorithm`` unless it is known and fits the actions."""
+    if cfg.algorithm not in ALGORITHMS:
+        raise ValueError(f"algorithm: choose one of {', '.join(ALGORITHMS)} (got {cfg.algorithm!r})")
+    if cfg.algorithm == "apg" and cfg.discrete:
+        raise ValueError(
+            "algorithm: apg differentiates continuous moves; set discrete=False (--actions continuous)"
+        )
+
+
+def _runner_class(cfg: TrainConfig) -> type[Runner]:
+    """PPO's :class:`Runner`, or APG's (:class:`agents.apg.ApgRunner`)."""
+    if cfg.algorithm == "apg":
+        from agents.apg import ApgRunner
+
+        return ApgRunner
+    return Runner
 
 
 def _write_config(
@@ -320,6 +341,8 @@ class Runner(OnPolicyRunner):
             device=self.device,
         )
         self.iterations_done = 0
+        self.steps_per_iteration = self.cfg["num_steps_per_env"] * self.env.num_envs
+        """Env steps one learning iteration simulates."""
         self.metrics: dict[str, float | None] = dict.fromkeys(
             ("final_error", "mean_return", "mean_episode_length", "iteration_steps_per_s")
         )

@@ -567,7 +567,15 @@ def test_cli_defaults_are_the_library_defaults():
     """One set of defaults: every command's options show what the library uses (its presets)."""
     import inspect
 
-    from agents.config import EVALUATION_CANDIDATES, EVALUATION_TRIALS, RECIPE, VALIDATION_TRIALS, TrainConfig
+    from agents.config import (
+        EVALUATION_CANDIDATES,
+        EVALUATION_TRIALS,
+        RECIPE,
+        VALIDATION_TRIALS,
+        GradConfig,
+        TrainConfig,
+    )
+    from agents.gradient import optimize_contour
     from agents.pipeline import evaluate_table
     from agents.rl import train_contour
     from warpcut.planning import ArmModel, plan_cut
@@ -610,6 +618,16 @@ def test_cli_defaults_are_the_library_defaults():
             for key in ("trials", "candidates", "num_envs", "plan", "analytic_pinch", "iterations"):
                 expected[key] = evaluate[key].default
             assert expected["candidates"] == EVALUATION_CANDIDATES
+            expected["grad_iterations"] = evaluate["grad"].default.iterations
+        if name == "train":
+            expected["algo"] = train.algorithm
+        if name == "optimize":
+            grad = GradConfig()
+            optimize = inspect.signature(optimize_contour).parameters
+            expected.update(
+                iterations=grad.iterations, episodes=grad.trials, learning_rate=grad.learning_rate
+            )
+            expected.update(trials=optimize["trials"].default, candidates=optimize["candidates"].default)
         for param in command.params:
             if param.name in expected:
                 assert param.default == expected[param.name], (name, param.name)
@@ -619,7 +637,13 @@ def test_cli_defaults_are_the_library_defaults():
     assert {
         ("train", "stay_prior"),
         ("train", "iterations"),
+        ("train", "algo"),
         ("evaluate", "trials"),
+        ("evaluate", "grad_iterations"),
+        ("optimize", "iterations"),
+        ("optimize", "episodes"),
+        ("optimize", "learning_rate"),
+        ("optimize", "trials"),
         ("plan", "tolerance"),
     } <= seen
     for command in ("plan", "evaluate", "run"):
@@ -629,3 +653,48 @@ def test_cli_defaults_are_the_library_defaults():
 def test_no_command_prints_the_help():
     code, stdout, _ = invoke([])
     assert code == 0 and stdout.startswith("Usage: ") and "evaluate" in stdout
+
+
+def test_optimize_writes_the_plan_and_its_evaluation(tmp_path):
+    out, report_path = tmp_path / "run", tmp_path / "optimize.json"
+    args = ["optimize", "--contour", "circle-small", "--iterations", "2", "--episodes", "2", "--trials", "2"]
+    args += ["--candidates", "2", "--out", str(out), "--json", str(report_path)]
+    code, stdout, _ = invoke(args)
+    assert code == 0, stdout
+    report = json.loads(report_path.read_text())
+    assert set(report["evaluation"]) == {"none", "fixed", "grad"}
+    assert report["optimized"]["best_iteration"] in (0, 1, 2)
+    assert len(report["optimized"]["plan"]) > 0 and (out / "circle-small.json").is_file()
+    assert not (out / "circle-small.state.json").exists()  # finished: the state is gone, the plan kept
+    assert json.loads((out / "results.json").read_text())["contour"] == "circle-small"
+    assert "grad" in stdout and "kept iteration" in stdout
+    code, _, stderr = invoke(args[:-4] + ["--out", str(out)])  # a finished run directory is not overwritten
+    assert code != 0 and "--overwrite" in stderr
+
+
+def test_train_apg_runs_and_refuses_discrete_actions(tmp_path):
+    run = tmp_path / "apg"
+    args = ["train", "--contour", "circle-small", "--algo", "apg", "--iterations", "1", "--num-envs", "2"]
+    code, stdout, _ = invoke(
+        args + ["--eval-trials", "2", "--validation-trials", "2", "--no-progress", "--out", str(run)]
+    )
+    assert code == 0, stdout
+    config = json.loads((run / "config.json").read_text())["train"]
+    assert config["algorithm"] == "apg" and config["discrete"] is False
+    assert json.loads((run / "options.json").read_text())["action_type"] == "continuous"
+    code, _, stderr = invoke(args + ["--actions", "discrete", "--out", str(tmp_path / "other")])
+    assert code == 2 and "--actions continuous" in stderr
+
+
+def test_evaluate_with_the_grad_column(tmp_path):
+    out = tmp_path / "run"
+    args = ["evaluate", "--contours", "circle-small", "--methods", "none,fixed,grad", "--trials", "2"]
+    args += ["--grad-iterations", "1", "--candidates", "2", "--no-plots", "--out", str(out)]
+    code, stdout, _ = invoke(args)
+    assert code == 0, stdout
+    table = json.loads((out / "results.json").read_text())
+    row = table["rows"][0]
+    assert "grad_improvement_pct" in row and row["grad_best_iteration"] in (0, 1)
+    assert table["grad_initial_plan_contours"] in (0, 1)
+    assert (out / "grad" / "circle-small.json").is_file()
+    assert "grad kept its initial plan" in stdout

@@ -179,8 +179,17 @@ class DifferentiableRollout:
         surrogate, mapped = path_surrogate(path, task.target_points())
         return Rollout(applied, surrogate, task.score(), mapped, shift, task.sim.seed, states, path)
 
-    def backward(self, rollout: Rollout) -> Gradients:
-        """The gradients of ``rollout.surrogate.sum()``, replaying the episode one step at a time."""
+    def backward(self, rollout: Rollout, window: int | None = None) -> Gradients:
+        """The gradients of ``rollout.surrogate.sum()``, replaying the episode one step at a time.
+
+        Args:
+            rollout: A :meth:`forward` pass of this rollout.
+            window: Truncate the gradient to windows of this many steps: a move then only answers for the
+                surrogate's terms up to the end of its window (truncated backpropagation through time;
+                lower variance on chaotic sheets, some bias). None: the whole episode's gradient.
+        """
+        if window is not None and (not isinstance(window, int) or window < 1):
+            raise ValueError(f"window: must be a positive number of steps or None (got {window!r})")
         task = self.task
         if self._steps is None:
             self._steps = [_StepTape(self, lo, hi, self.capture) for lo, hi in self._parts]
@@ -195,6 +204,9 @@ class DifferentiableRollout:
         target = np.full((task.num_envs, ups, 2), np.nan, np.float32)
         grad = np.zeros(actions.shape)
         for t in reversed(range(len(rollout.states))):
+            if window is not None and (t + 1) % window == 0:
+                for step in self._steps:
+                    step.cut_adjoint()
             updates = range(t * ups, (t + 1) * ups)
             path[:] = (0.0, 0.0, float(kernels.PATH_IDLE))
             target[:] = np.nan
@@ -217,10 +229,11 @@ class DifferentiableRollout:
         actions: np.ndarray | Policy | None,
         pinch_shift: np.ndarray | None = None,
         seed: int | None = None,
+        window: int | None = None,
     ) -> tuple[Rollout, Gradients]:
         """:meth:`forward`, then :meth:`backward`."""
         rollout = self.forward(actions, pinch_shift, seed)
-        return rollout, self.backward(rollout)
+        return rollout, self.backward(rollout, window)
 
     # ------------------------------------------------------------------ helpers
     def _plan_array(self, actions: np.ndarray) -> np.ndarray:
@@ -370,6 +383,10 @@ class _StepTape:
         self.shift.assign(shift[self.lo : self.hi].astype(np.float32))
         self.shift.grad.zero_()
         self.weight.assign(weight[self.lo : self.hi].astype(np.float32))
+        self.cut_adjoint()
+
+    def cut_adjoint(self) -> None:
+        """Forget what later steps' surrogate terms ask of the state (a window's end)."""
         for adjoint in self.adjoint:
             adjoint.zero_()
 

@@ -8,7 +8,7 @@ import click
 
 from agents.cli import common
 from agents.cli.video import video_option, videos, with_videos
-from agents.config import EVALUATION_TRIALS, RECIPE, VALIDATION_TRIALS, TrainConfig
+from agents.config import ALGORITHMS, EVALUATION_TRIALS, RECIPE, VALIDATION_TRIALS, TrainConfig
 from warpcut.sim.config import SimConfig
 
 TRAIN = TrainConfig()
@@ -37,6 +37,14 @@ RESUMED_FLAGS = {
 )
 @click.option(
     "--pinch", default=None, help="Pinch point X,Y (mm); default: centroid or nearest feasible point."
+)
+@click.option(
+    "--algo",
+    default=TRAIN.algorithm,
+    show_default=True,
+    type=click.Choice(ALGORITHMS),
+    help="ppo (rsl-rl) or apg: analytic policy gradients through the differentiable simulator (continuous "
+    "moves; one whole episode per env and iteration; docs/learning.md).",
 )
 @common.count_option("num-envs", TRAIN.num_envs, "Parallel envs.")
 @common.count_option(
@@ -114,6 +122,7 @@ RESUMED_FLAGS = {
 def command(
     contour_name: str | None,
     pinch: str | None,
+    algo: str,
     num_envs: int,
     iterations: int,
     steps_per_env: int,
@@ -137,13 +146,14 @@ def command(
     no_plots: bool,
     no_progress: bool,
 ) -> None:
-    """Train a PPO tensioning policy (rsl-rl, 2x32 MLP, 1 mm moves) for one contour."""
+    """Train a tensioning policy (2x32 MLP, 1 mm moves) for one contour: PPO, or APG through the simulator."""
     from agents.rl import load_options, train_contour
     from envs.options import PatternCutOptions
     from warpcut.contours import load_contour
     from warpcut.io import safe_name
 
     point = common.parse_point(pinch, "--pinch")
+    action_type = _actions_for(algo, action_type)
     if resume is not None:
         if not resume.is_dir():
             from agents.train import read_checkpoint
@@ -158,9 +168,10 @@ def command(
         _check_resumed_flags(run, options, given)
         kept = _resumed_settings(
             resume, seed=seed, validation_trials=validation_trials, num_envs=num_envs,
-            num_steps_per_env=steps_per_env, stay_prior=stay_prior,
+            num_steps_per_env=steps_per_env, stay_prior=stay_prior, algorithm=algo,
         )  # fmt: skip
         seed, validation_trials, num_envs = kept["seed"], kept["validation_trials"], kept["num_envs"]
+        algo = kept["algorithm"]
         steps_per_env, stay_prior = kept["num_steps_per_env"], kept["stay_prior"]
     else:
         if contour_name is None:
@@ -180,10 +191,10 @@ def command(
     name, discrete = options.contours(1)[0].name, options.action_type == "discrete"
     cfg = TrainConfig(
         num_envs=num_envs, iterations=iterations, num_steps_per_env=steps_per_env, seed=seed,
-        discrete=discrete, stay_prior=stay_prior if discrete else 0.0,
+        discrete=discrete, stay_prior=stay_prior if discrete else 0.0, algorithm=algo,
     )  # fmt: skip
     out, claim = common.claim(out, "train", resume is not None, overwrite)
-    click.echo(f"training {name} into {out} ({num_envs} envs, {iterations} iterations, {device})")
+    click.echo(f"training {name} with {algo} into {out} ({num_envs} envs, {iterations} iterations, {device})")
     try:
         with claim, common.recorder(out, record_envs, colour_by) as rec, videos(out, video_envs) as vid:
             result = train_contour(
@@ -211,6 +222,18 @@ def command(
         common.echo_written(plot_learning_curve(s["history"], s["validation"], out, title=name))
     common.echo_recording(rec)
     click.echo(f"wrote {out}")
+
+
+def _actions_for(algo: str, action_type: str) -> str:
+    """The action type ``algo`` trains: APG needs continuous moves, and takes them by default."""
+    if algo != "apg" or action_type == "continuous":
+        return action_type
+    if (
+        click.get_current_context().get_parameter_source("action_type")
+        == click.core.ParameterSource.COMMANDLINE
+    ):
+        raise click.UsageError("--algo apg: differentiates continuous moves; use --actions continuous")
+    return "continuous"
 
 
 def _check_resumed_flags(run: Path, options, given: dict) -> None:
@@ -258,6 +281,7 @@ def _check_resumed_flags(run: Path, options, given: dict) -> None:
 
 
 RESUMED_SETTINGS = {
+    "algorithm": ("algo", "--algo"),
     "seed": ("seed", "--seed"),
     "validation_trials": ("validation_trials", "--validation-trials"),
     "num_envs": ("num_envs", "--num-envs"),

@@ -1,0 +1,141 @@
+"""Analytic policy gradients (APG): the tensioning policy trained by backpropagating the path surrogate
+through the differentiable simulator (:mod:`warpcut.gradients`), an alternative to PPO
+(``warpcut train --algo apg``).
+
+Each iteration runs one episode in every env with the policy's deterministic action (its Gaussian's mean),
+replays it backward for the surrogate's gradient with respect to every step's grasp move, and chains that
+through the policy's moves into its weights (Adam, gradient-norm clipping). The observations are taken as
+given: the gradient does not flow from a move through the sheet into later observations (the usual
+truncation of APG through a non-differentiable observer; the fiducials' tracking is not differentiable).
+
+The policy is rsl-rl's actor, as PPO's (an MLP with observation normalisation and a Gaussian head over
+continuous moves): :class:`ApgRunner` is PPO's runner with the learning iteration replaced, so checkpoints,
+validation, model selection, resume, evaluation and export are the same; its critic and the action noise
+are not trained.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from rsl_rl.env import VecEnv
+
+from agents.train import Runner
+
+
+class ApgRunner(Runner):
+    """:class:`~agents.train.Runner` whose learning iteration is an APG step (see the module)."""
+
+    def __init__(self, env: VecEnv, train_cfg: dict, log_dir: str | Path | None, device: str = "cpu") -> None:
+        from warpcut.gradients import DifferentiableRollout
+
+        super().__init__(env, train_cfg, log_dir, device)
+        vector = getattr(env, "env", None)
+        scene = getattr(vector, "scene", None)
+        if scene is None:
+            raise ValueError("env: APG needs warpcut's env (envs.rsl.PatternCutRslEnv over PatternCutVecEnv)")
+        options = scene.options
+        if options.action_type != "continuous":
+            raise ValueError("action_type: APG differentiates continuous moves; use --actions continuous")
+        if scene.episode_steps < scene.task.num_steps:
+            raise ValueError(
+                f"max_episode_steps: APG runs whole cuts ({scene.task.num_steps} steps), not "
+                f"{scene.episode_steps}; leave max_episode_steps unset"
+            )
+        self.scene = scene
+        self.engine = DifferentiableRollout(scene.task)
+        self.steps_per_iteration = env.num_envs * scene.task.num_steps
+        # Start from holding still (fixed tensioning), as PPO's recipe does with its stay prior: the output
+        # layer is zeroed, so the initial mean move is 0 everywhere (a resume loads its own weights).
+        output = [m for m in self.alg.actor.mlp.modules() if isinstance(m, torch.nn.Linear)][-1]
+        with torch.no_grad():
+            output.weight.zero_()
+            output.bias.zero_()
+        algorithm = train_cfg["algorithm"]
+        self.apg_optimizer = torch.optim.Adam(self.alg.actor.parameters(), lr=algorithm["learning_rate"])
+        self.max_grad_norm = algorithm["max_grad_norm"]
+        self.episode_rng = vector.np_random  # seeded by train() (env.seed): episodes follow the run's seed
+
+    def _state_bytes(self, infos: dict | None = None) -> bytes:
+        extra = {
+            "apg_optimizer": self.apg_optimizer.state_dict(),
+            "apg_rng": self.episode_rng.bit_generator.state,
+        }
+        return super()._state_bytes({**extra, **(infos or {})})
+
+    def load_checkpoint(self, path: str | Path, state: dict | None = None) -> None:
+        from agents.train import read_checkpoint
+
+        state = read_checkpoint(path, map_location=self.device) if state is None else state
+        super().load_checkpoint(path, state)
+        infos = state.get("infos") or {}
+        if "apg_optimizer" not in infos:
+            raise ValueError(f"{path}: not an APG run's checkpoint; resume it with its own --algo")
+        self.apg_optimizer.load_state_dict(infos["apg_optimizer"])
+        self.episode_rng.bit_generator.state = infos["apg_rng"]
+
+    def learn(self, num_learning_iterations: int, init_at_random_ep_len: bool = False) -> None:
+        """``num_learning_iterations`` APG steps, saving checkpoints as PPO's loop does."""
+        self.logger.init_logging_writer()
+        self.alg.train_mode()
+        start = self.current_learning_iteration
+        for it in range(start, start + num_learning_iterations):
+            metrics = self._iteration()
+            self.current_learning_iteration = it
+            if self.logger.writer is not None:
+                for key in ("final_error", "surrogate", "grad_norm"):
+                    self.logger.writer.add_scalar(f"Apg/{key}", metrics[key], it)
+            self._end_iteration(it, metrics)
+            if self.logger.writer is not None and it % self.cfg["save_interval"] == 0:
+                self.save(os.path.join(self.logger.log_dir, f"model_{it}.pt"))
+        if self.logger.writer is not None:
+            self.save(os.path.join(self.logger.log_dir, f"model_{self.current_learning_iteration}.pt"))
+            self.logger.stop_logging_writer()
+
+    def _iteration(self) -> dict:
+        """One episode per env, its backward pass, one Adam step; the iteration's metrics."""
+        from tensordict import TensorDict
+
+        scene, actor = self.scene, self.alg.actor
+        b, axes = self.env.num_envs, self.env.num_actions
+        max_step = scene.config.max_step_mm
+        start = time.perf_counter()
+        scene.reset(self.episode_rng, resample_fiducials=scene.options.resample_fiducials)
+        moves: list[torch.Tensor] = []
+
+        def policy(task) -> np.ndarray:
+            obs = TensorDict({"policy": torch.as_tensor(scene.observe(), device=self.device)}, batch_size=[b])
+            actor.update_normalization(obs)
+            move = torch.clamp(actor(obs), -1.0, 1.0) * max_step
+            moves.append(move)
+            applied = np.zeros((b, 3), dtype=np.float32)
+            applied[:, :axes] = move.detach().cpu().numpy()
+            if scene.options.residual_gain:  # the residual controller's part does not depend on the policy
+                tracking = np.nan_to_num(scene.tracking_error()[:, :2], nan=0.0)
+                applied[:, :2] -= scene.options.residual_gain * tracking
+            return applied
+
+        rollout = self.engine.forward(policy, reset=False)
+        collected = time.perf_counter()
+        grads = self.engine.backward(rollout)
+        g = torch.as_tensor(grads.actions[:, :, :axes], dtype=torch.float32, device=self.device)
+        proxy = sum((g[:, t] * move).sum() for t, move in enumerate(moves)) / b
+        self.apg_optimizer.zero_grad()
+        proxy.backward()
+        norm = torch.nn.utils.clip_grad_norm_(actor.parameters(), self.max_grad_norm)
+        self.apg_optimizer.step()
+        elapsed = time.perf_counter() - start
+        steps = b * len(moves)
+        return {
+            "final_error": float(np.nanmean(rollout.score.error_vertices)),
+            "surrogate": float(np.nanmean(rollout.surrogate)),
+            "grad_norm": float(norm),
+            "mean_return": None,
+            "mean_episode_length": float(len(moves)),
+            "iteration_steps_per_s": steps / elapsed,
+            "collection_steps_per_s": steps / (collected - start),
+        }
