@@ -58,6 +58,7 @@ class ApgRunner(Runner):
         algorithm = train_cfg["algorithm"]
         self.apg_optimizer = torch.optim.Adam(self.alg.actor.parameters(), lr=algorithm["learning_rate"])
         self.max_grad_norm = algorithm["max_grad_norm"]
+        self.window = train_cfg.get("apg", {}).get("window")
         self.episode_rng = vector.np_random  # seeded by train() (env.seed): episodes follow the run's seed
 
     def _state_bytes(self, infos: dict | None = None) -> bytes:
@@ -121,7 +122,7 @@ class ApgRunner(Runner):
 
         rollout = self.engine.forward(policy, reset=False)
         collected = time.perf_counter()
-        grads = self.engine.backward(rollout)
+        grads = self.engine.backward(rollout, self.window)
         g = torch.as_tensor(grads.actions[:, :, :axes], dtype=torch.float32, device=self.device)
         proxy = sum((g[:, t] * move).sum() for t, move in enumerate(moves)) / b
         self.apg_optimizer.zero_grad()

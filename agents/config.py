@@ -21,6 +21,9 @@ class TrainConfig:
     """"ppo" (rsl-rl's PPO) or "apg": analytic policy gradients through the differentiable simulator
     (:mod:`agents.apg`; continuous actions; one whole episode per env and iteration, so
     ``num_steps_per_env`` does not apply)."""
+    apg_window: int | None = 5
+    """APG only: truncate the gradient to windows of this many env steps (:meth:`~warpcut.gradients.
+    DifferentiableRollout.backward`); None: through the whole episode (docs/learning.md, "APG")."""
     iterations: int = 100
     """Total learning iterations of the run, counting those done before a resume."""
     seed: int = 0
@@ -109,7 +112,9 @@ class TrainConfig:
                 "init_std": self.init_noise_std,
             }
         model = {"class_name": "rsl_rl.models:MLPModel", "activation": self.activation}
+        apg = {"apg": {"window": self.apg_window}} if self.algorithm == "apg" else {}
         return {
+            **apg,
             "num_steps_per_env": self.num_steps_per_env,
             "save_interval": self.save_interval,
             "obs_groups": {name: list(groups) for name, groups in self.obs_groups.items()},
@@ -170,6 +175,9 @@ class Recipe:
     """Held-out episodes per validation; 0: no validation, the last policy is the run's."""
 
 
+APG_LEARNING_RATE = 3e-3
+"""Adam's step of the ``apg`` recipe (APG's gradients are clipped to ``max_grad_norm``; docs/learning.md)."""
+
 RECIPES = {
     "warpcut": Recipe(
         RECIPE, {"stay_prior": TrainConfig.stay_prior, "entropy_coef": TrainConfig.entropy_coef}
@@ -178,6 +186,9 @@ RECIPES = {
         {"dense_reward": False, "contour_features": False, "allow_z": False, "action_type": "discrete"},
         {"stay_prior": 0.0},
         validation_trials=0,
+    ),
+    "apg": Recipe(
+        {**RECIPE, "action_type": "continuous"}, {"algorithm": "apg", "learning_rate": APG_LEARNING_RATE}
     ),
 }
 """``--recipe``: warpcut's (:data:`RECIPE`, the default) or the paper's setting (sparse reward, 12
@@ -220,6 +231,9 @@ class GradConfig:
     their noise is not the evaluation's (seed ``seed + GRAD_SEED_OFFSET``)."""
     learning_rate: float = 0.1
     """Adam's step (mm per grasp move); moves are projected back onto ``max_step_mm`` per axis."""
+    window: int | None = None
+    """Truncate the gradient to windows of this many env steps (a move answers only for the surrogate's
+    terms up to its window's end: lower variance on a chaotic sheet, some bias); None: the whole episode."""
     optimize_pinch: bool = False
     """Also move the pinch point along its gradient (the grasped set held fixed per step), staying
     feasible."""
@@ -232,6 +246,8 @@ class GradConfig:
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ValueError(f"{name}: must be a positive integer (got {value!r})")
+        if self.window is not None and (not isinstance(self.window, int) or self.window < 1):
+            raise ValueError(f"window: must be a positive number of steps or None (got {self.window!r})")
         for name in ("learning_rate", "pinch_learning_rate"):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and 0 < value < float("inf")):

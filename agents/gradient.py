@@ -201,8 +201,10 @@ def optimize_plan(
         if last:
             forward, grads = rollout.forward(batch, seed=seed + GRAD_SEED_OFFSET), None
         else:
-            forward, grads = rollout.value_and_grad(batch, seed=seed + GRAD_SEED_OFFSET)
-        error = float(np.mean(forward.score.error_vertices))
+            forward, grads = rollout.value_and_grad(
+                batch, seed=seed + GRAD_SEED_OFFSET, window=settings.window
+            )
+        error = float(np.nanmean(forward.score.error_vertices))  # a diverged episode is NaN (and no gradient)
         record = {
             "iteration": iteration,
             "surrogate": float(np.nanmean(forward.surrogate)),

@@ -56,7 +56,8 @@ class Rollout:
     actions: np.ndarray
     """(B, T, 3) float32 grasp moves as given (mm; the simulator clips them), one per env step."""
     surrogate: np.ndarray
-    """(B,) the path surrogate (mm^2): mean squared material distance over the mapped cutting updates."""
+    """(B,) the path surrogate (mm^2): mean squared material distance over the mapped cutting updates
+    (NaN where none was mapped, or the env diverged; such an env's gradients are 0)."""
     score: Score
     """The episode's score under the task's ``config.score``."""
     mapped: np.ndarray
@@ -173,11 +174,20 @@ class DifferentiableRollout:
             else:
                 move = actions(task) if callable(actions) else None
                 move = np.zeros((b, 3), np.float32) if move is None else np.asarray(move, np.float32)
-            applied[:, t] = move.reshape(b, 3)
+                if move.shape != (b, 3) or not np.all(np.isfinite(move)):
+                    raise ValueError(
+                        f"actions: the policy returned {move.shape} moves at step {t}; give finite (B, 3) = "
+                        f"({b}, 3) grasp moves in mm"
+                    )
+            applied[:, t] = move
             task.step(applied[:, t])
         path = task.cut_path().copy()
         surrogate, mapped = path_surrogate(path, task.target_points())
-        return Rollout(applied, surrogate, task.score(), mapped, shift, task.sim.seed, states, path)
+        score = task.score()
+        diverged = np.zeros(b, bool) if score.diverged is None else np.asarray(score.diverged, bool)
+        surrogate[diverged] = np.nan  # a diverged env's path means nothing; its gradient is 0
+        mapped[diverged] = 0
+        return Rollout(applied, surrogate, score, mapped, shift, task.sim.seed, states, path)
 
     def backward(self, rollout: Rollout, window: int | None = None) -> Gradients:
         """The gradients of ``rollout.surrogate.sum()``, replaying the episode one step at a time.
@@ -221,8 +231,10 @@ class DifferentiableRollout:
 
             parts = map(run, self._steps) if self._pool is None else self._pool.map(run, self._steps)
             grad[:, t] = np.concatenate(list(parts))
-        pinch = np.concatenate([step.shift.grad.numpy() for step in self._steps])
-        return Gradients(grad, pinch.astype(np.float64))
+        pinch = np.concatenate([step.shift.grad.numpy() for step in self._steps]).astype(np.float64)
+        diverged = rollout.mapped == 0  # diverged, or nothing mapped: no surrogate, no gradient
+        grad[diverged], pinch[diverged] = 0.0, 0.0
+        return Gradients(grad, pinch)
 
     def value_and_grad(
         self,

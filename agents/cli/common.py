@@ -228,8 +228,10 @@ recipe_option = click.option(
     show_default=True,
     type=click.Choice(list(RECIPES)),
     help="How RL policies are trained: warpcut (dense path-deviation reward, contour-aware observations, "
-    "x-y-z moves, a 'hold still' prior, validation-based model selection; docs/learning.md) or paper "
-    "(sparse reward, 12 fiducials, x-y moves, a uniform start, the last policy kept).",
+    "x-y-z moves, a 'hold still' prior, validation-based model selection; docs/learning.md), paper "
+    "(sparse reward, 12 fiducials, x-y moves, a uniform start, the last policy kept) or apg (warpcut's "
+    "observations, continuous moves learnt by analytic policy gradients through the simulator, starting "
+    "from holding still).",
 )
 
 
