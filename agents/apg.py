@@ -84,6 +84,17 @@ class ApgRunner(Runner):
         self.logger.init_logging_writer()
         self.alg.train_mode()
         start = self.current_learning_iteration
+        threads = torch.get_num_threads()
+        torch.set_num_threads(1)  # a 2 x 32 MLP gains nothing from threads; the simulator's replay uses them
+        try:
+            self._learn(start, num_learning_iterations)
+        finally:
+            torch.set_num_threads(threads)
+        if self.logger.writer is not None:
+            self.save(os.path.join(self.logger.log_dir, f"model_{self.current_learning_iteration}.pt"))
+            self.logger.stop_logging_writer()
+
+    def _learn(self, start: int, num_learning_iterations: int) -> None:
         for it in range(start, start + num_learning_iterations):
             metrics = self._iteration()
             self.current_learning_iteration = it
@@ -93,9 +104,6 @@ class ApgRunner(Runner):
             self._end_iteration(it, metrics)
             if self.logger.writer is not None and it % self.cfg["save_interval"] == 0:
                 self.save(os.path.join(self.logger.log_dir, f"model_{it}.pt"))
-        if self.logger.writer is not None:
-            self.save(os.path.join(self.logger.log_dir, f"model_{self.current_learning_iteration}.pt"))
-            self.logger.stop_logging_writer()
 
     def _iteration(self) -> dict:
         """One episode per env, its backward pass, one Adam step; the iteration's metrics."""

@@ -5,9 +5,10 @@ The objective is the path surrogate (the mean squared distance between where the
 they meant to, in material coordinates), averaged over ``GradConfig.trials`` noisy episodes whose seeds
 stay the same from step to step (common random numbers) and differ from the evaluation's. Every move is
 projected back onto ``max_step_mm`` per axis after each step; the simulator applies the displacement cap.
-Each forward pass also scores its episodes with the path score: the iterate with the lowest mean error,
-the initial still grasp (iteration 0, fixed tensioning) included, is the result (model selection on the
-optimiser's own episodes; the evaluation uses others).
+Every iterate is also played on ``GradConfig.validation_trials`` held-out episodes (other seeds again) and
+scored with the path score: the iterate with the lowest mean validation error, the initial still grasp
+(iteration 0, fixed tensioning) included, is the result (without validation episodes: the lowest error
+on the optimiser's own episodes).
 """
 
 from __future__ import annotations
@@ -167,7 +168,17 @@ def optimize_plan(
         )  # fmt: skip
         return DifferentiableRollout(task)
 
-    rollout = engine(pinch)
+    def checker(point: np.ndarray) -> CuttingTask | None:
+        if not settings.validation_trials:
+            return None
+        v = settings.validation_trials
+        return CuttingTask(
+            config, [contour] * v, pinch_points=np.tile(point, (v, 1)),
+            segments=None if segments is None else [segments] * v,
+            device=device, seed=seed + GRAD_SEED_OFFSET + 1,
+        )  # fmt: skip
+
+    rollout, validation = engine(pinch), checker(pinch)
     steps = rollout.num_steps
     max_step = config.max_step_mm
     plan = np.zeros((steps, 3), dtype=np.float32)
@@ -192,7 +203,7 @@ def optimize_plan(
         error, it, best_plan, best_pinch = state["best"]
         best = (error, it, np.asarray(best_plan, np.float32), np.asarray(best_pinch))
         if not np.allclose(pinch, identity["pinch"]):
-            rollout = engine(pinch)
+            rollout, validation = engine(pinch), checker(pinch)
         log(f"  continuing from iteration {first} ({state_file})")
     start = time.perf_counter() - elapsed
     for iteration in range(first, settings.iterations + 1):
@@ -210,8 +221,11 @@ def optimize_plan(
             "surrogate": float(np.nanmean(forward.surrogate)),
             "error_vertices": error,
             "pinch": [float(v) for v in pinch],
-            "seconds": time.perf_counter() - start,
         }
+        if validation is not None:  # model selection on held-out episodes
+            held_out = validation.run(PlanPolicy([plan], settings.validation_trials)).error_vertices
+            error = record["validation_error_vertices"] = float(np.nanmean(held_out))
+        record["seconds"] = time.perf_counter() - start
         history.append(record)
         if best is None or error < best[0]:
             best = (error, iteration, plan.copy(), pinch.copy())
@@ -229,7 +243,7 @@ def optimize_plan(
             segments_path = None if segments is None else [np.asarray(s) for s in segments]
             if pinch_feasible(moved[None], contour, config, segments_path, arm)[0]:
                 pinch = moved
-                rollout = engine(pinch)
+                rollout, validation = engine(pinch), checker(pinch)
         if state_file is not None:
             error, it, best_plan, best_pinch = best
             state = {
