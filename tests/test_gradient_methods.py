@@ -120,3 +120,15 @@ def test_apg_refuses_discrete_actions():
         train(env, TrainConfig(num_envs=2, algorithm="apg", discrete=True), "unused", progress=False)
     with pytest.raises(ValueError, match="algorithm: choose one of"):
         train(env, TrainConfig(num_envs=2, algorithm="sac", discrete=False), "unused", progress=False)
+
+
+def test_optimize_pinch_moves_the_pinch_point_and_keeps_it_feasible():
+    from warpcut.planning.feasibility import pinch_feasible
+
+    contour = load_contour("circle-small")
+    settings = GradConfig(iterations=3, trials=2, optimize_pinch=True, pinch_learning_rate=2.0)
+    result = optimize_plan(contour, PINCH, config=SMALL, settings=settings)
+    pinches = np.array([h["pinch"] for h in result.history])
+    assert np.linalg.norm(pinches[-1] - PINCH) > 0.5  # it moved along its gradient
+    assert pinch_feasible(pinches, contour, SMALL).all()
+    np.testing.assert_allclose(result.pinch, pinches[result.best_iteration])
