@@ -99,6 +99,28 @@ class PlanPolicy:
         return np.repeat(np.asarray(moves, dtype=np.float32), self.trials, axis=0)
 
 
+def _read_state(state_file: Path | None, identity: dict) -> dict | None:
+    """The optimiser's saved state if ``state_file`` exists; ``ValueError`` if it is another run's."""
+    from warpcut.io import read_json
+
+    if state_file is None or not Path(state_file).is_file():
+        return None
+    state = read_json(state_file)
+    if state.get("identity") != identity:
+        raise ValueError(
+            f"{state_file}: an optimisation of other settings ({state.get('identity')}); delete it, or start "
+            "a new run"
+        )
+    return state
+
+
+def _episodes(contour, point, segments, config, count: int, device, seed: int) -> CuttingTask:
+    """``count`` noisy episodes of cutting ``contour`` (``segments``) with the grasp at ``point``."""
+    cut = None if segments is None else [segments] * count
+    points = np.tile(point, (count, 1))
+    return CuttingTask(config, [contour] * count, pinch_points=points, segments=cut, device=device, seed=seed)
+
+
 class Adam:
     """Adam on a NumPy array (minimising), with the usual bias correction."""
 
@@ -152,31 +174,20 @@ def optimize_plan(
             the same contour, pinch point and settings).
     """
     from warpcut.gradients import DifferentiableRollout
-    from warpcut.io import read_json, write_json
+    from warpcut.io import write_json
 
-    settings = settings.validated()
-    config = (config or SimConfig()).validated()
-    arm = arm or ArmModel()
+    settings, config, arm = settings.validated(), (config or SimConfig()).validated(), arm or ArmModel()
     pinch = np.asarray(pinch, dtype=np.float64).reshape(2)
     b = settings.trials
 
     def engine(point: np.ndarray) -> DifferentiableRollout:
-        task = CuttingTask(
-            config, [contour] * b, pinch_points=np.tile(point, (b, 1)),
-            segments=None if segments is None else [segments] * b,
-            device=device, seed=seed + GRAD_SEED_OFFSET,
-        )  # fmt: skip
-        return DifferentiableRollout(task)
+        return DifferentiableRollout(
+            _episodes(contour, point, segments, config, b, device, seed + GRAD_SEED_OFFSET)
+        )
 
     def checker(point: np.ndarray) -> CuttingTask | None:
-        if not settings.validation_trials:
-            return None
-        v = settings.validation_trials
-        return CuttingTask(
-            config, [contour] * v, pinch_points=np.tile(point, (v, 1)),
-            segments=None if segments is None else [segments] * v,
-            device=device, seed=seed + GRAD_SEED_OFFSET + 1,
-        )  # fmt: skip
+        v, held_out = settings.validation_trials, seed + GRAD_SEED_OFFSET + 1
+        return _episodes(contour, point, segments, config, v, device, held_out) if v else None
 
     rollout, validation = engine(pinch), checker(pinch)
     steps = rollout.num_steps
@@ -190,13 +201,8 @@ def optimize_plan(
         "steps": steps,
         **dataclasses.asdict(settings),
     }
-    if state_file is not None and Path(state_file).is_file():
-        state = read_json(state_file)
-        if state.get("identity") != identity:
-            raise ValueError(
-                f"{state_file}: an optimisation of other settings ({state.get('identity')}); delete it, or "
-                "start a new run"
-            )
+    state = _read_state(state_file, identity)
+    if state is not None:
         first, history, elapsed = state["iteration"], state["history"], state["seconds"]
         plan, pinch = np.asarray(state["plan"], np.float32), np.asarray(state["pinch"])
         moves.load(state["moves"]), pinch_moves.load(state["pinch_moves"])

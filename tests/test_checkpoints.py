@@ -407,7 +407,8 @@ def test_resuming_with_other_options_fails_before_touching_the_run(real_copy):
         with pytest.raises(ValueError, match=match):
             train_contour(options, real_copy, cfg, resume=real_copy, **kwargs)
     assert resume_settings(real_copy) == {
-        "seed": 0, "validation_trials": 1, "num_envs": 2, "num_steps_per_env": 4, "stay_prior": 0.9
+        "seed": 0, "validation_trials": 1, "num_envs": 2, "num_steps_per_env": 4, "stay_prior": 0.9,
+        "algorithm": "ppo",
     }  # fmt: skip
 
 

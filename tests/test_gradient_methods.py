@@ -31,7 +31,7 @@ def test_plan_policy_plays_each_contours_plan_to_its_trials():
 
 def test_optimize_plan_lowers_the_surrogate_within_the_move_limits():
     contour = load_contour("circle-small")
-    settings = GradConfig(iterations=4, trials=2, learning_rate=0.2)
+    settings = GradConfig(iterations=4, trials=2, learning_rate=0.2, window=None)  # the whole gradient
     result = optimize_plan(contour, PINCH, config=SMALL, settings=settings)
     surrogate = [h["surrogate"] for h in result.history]
     held_out = [h["validation_error_vertices"] for h in result.history]
