@@ -132,7 +132,6 @@ class DifferentiableRollout:
         count = max(1, min(threads or (os.cpu_count() or 1), task.num_envs)) if cpu else 1
         self._parts = [(int(p[0]), int(p[-1]) + 1) for p in np.array_split(np.arange(task.num_envs), count)]
         self._steps: list[_StepTape] | None = None
-        self._pool = ThreadPoolExecutor(count) if count > 1 else None
 
     @property
     def num_steps(self) -> int:
@@ -203,16 +202,32 @@ class DifferentiableRollout:
         task = self.task
         if self._steps is None:
             self._steps = [_StepTape(self, lo, hi, self.capture) for lo, hi in self._parts]
-        ups, horizon = task.config.updates_per_step, task.horizon_updates
         grasped = np.any(self._pin.reshape(task.num_envs, -1) == int(kernels.PIN_GRASP), axis=1)
         actions = np.where(grasped[:, None, None], rollout.actions, 0.0).astype(np.float32)
         with np.errstate(divide="ignore"):
             weight = np.where(rollout.mapped > 0, 1.0 / rollout.mapped, 0.0)
         for step in self._steps:
             step.begin(rollout.seed, rollout.pinch_shift, weight)
+        grad = np.zeros(actions.shape)
+        # Threads live for one backward pass only: idle pools left behind by rollouts that are kept (or not
+        # yet collected) would outlive them in the process, where they take signals meant for the main thread.
+        pool = ThreadPoolExecutor(len(self._steps)) if len(self._steps) > 1 else None
+        try:
+            self._replay(rollout, window, actions, grad, pool)
+        finally:
+            if pool is not None:
+                pool.shutdown()
+        pinch = np.concatenate([step.shift.grad.numpy() for step in self._steps]).astype(np.float64)
+        diverged = rollout.mapped == 0  # diverged, or nothing mapped: no surrogate, no gradient
+        grad[diverged], pinch[diverged] = 0.0, 0.0
+        return Gradients(grad, pinch)
+
+    def _replay(self, rollout: Rollout, window, actions: np.ndarray, grad: np.ndarray, pool) -> None:
+        """The backward pass's walk over the steps, last to first (:meth:`backward`)."""
+        task = self.task
+        ups, horizon = task.config.updates_per_step, task.horizon_updates
         path = np.zeros((task.num_envs, ups, 3), np.float32)
         target = np.full((task.num_envs, ups, 2), np.nan, np.float32)
-        grad = np.zeros(actions.shape)
         for t in reversed(range(len(rollout.states))):
             if window is not None and (t + 1) % window == 0:
                 for step in self._steps:
@@ -229,12 +244,8 @@ class DifferentiableRollout:
             def run(step: _StepTape, t=t, tips=tips, state=state) -> np.ndarray:
                 return step.run(t * ups, state, actions[:, t], tips, path, target)
 
-            parts = map(run, self._steps) if self._pool is None else self._pool.map(run, self._steps)
+            parts = map(run, self._steps) if pool is None else pool.map(run, self._steps)
             grad[:, t] = np.concatenate(list(parts))
-        pinch = np.concatenate([step.shift.grad.numpy() for step in self._steps]).astype(np.float64)
-        diverged = rollout.mapped == 0  # diverged, or nothing mapped: no surrogate, no gradient
-        grad[diverged], pinch[diverged] = 0.0, 0.0
-        return Gradients(grad, pinch)
 
     def value_and_grad(
         self,
