@@ -297,8 +297,9 @@ def _from_scenario(scenario: object) -> PatternCutOptions:
 
 
 def policy_options(run_dir: str | Path, device: str | None = None) -> PatternCutOptions:
-    """The options a run's policy is evaluated on: a shared policy's at the candidate its run chose."""
-    options = load_options(run_dir, device)
+    """The options a run's policy is evaluated on: a shared policy's at the candidate its run chose, on the
+    nominal parameters (a policy trained with domain randomisation too: :meth:`PatternCutOptions.nominal`)."""
+    options = load_options(run_dir, device).nominal()
     if options.candidates is not None:
         options = options.at_candidate(chosen_candidate(run_dir))
     return options
@@ -311,15 +312,17 @@ def rollout_errors(
     device: str | None = None,
     on_step: StepCallback | None = None,
     paired_noise: tuple[int, int] | None = None,
+    overrides: dict | None = None,
 ) -> dict:
     """Run the trained policy (deterministic: argmax action) for ``trials`` seeded episodes at once.
 
     Trials differ by their fiducials and process-noise streams. Returns per-trial errors (vertices,
     mm^2) and the pinch point used. ``on_step(task, moves)`` is called after the reset (moves ``None``)
     and after every step, as in :meth:`warpcut.task.CuttingTask.run` (e.g. a recorder's callback).
-    ``paired_noise``: see :func:`policy_errors`.
+    ``paired_noise``: see :func:`policy_errors`. ``overrides``: options fields to change from the run's
+    (e.g. per-env ``gravity``, or ``resolution``, for :mod:`agents.robustness`).
     """
-    options = policy_options(run_dir, device)
+    options = dataclasses.replace(policy_options(run_dir, device), **(overrides or {}))
     actor = load_policy(run_dir)
     checkpoint = policy_checkpoint(run_dir)
     _check_layout(actor.state_dict(), checkpoint, options, _options_file(run_dir), _OPTIONS_FIX)

@@ -51,6 +51,7 @@ import numpy as np
 
 from envs.observations import Fiducials, normalise_positions, observation_bounds, sample_fiducials
 from envs.options import PatternCutOptions
+from warpcut.sim.config import sample_parameters
 from warpcut.task import CuttingTask
 
 ACTION_TYPES = ("discrete", "continuous")
@@ -89,6 +90,7 @@ class PatternCut:
             raise ValueError(f"shaft_radius_mm: must be >= 0 mm (got {options.shaft_radius_mm!r})")
         if options.max_episode_steps is not None and options.max_episode_steps < 1:
             raise ValueError(f"max_episode_steps: must be >= 1 or None (got {options.max_episode_steps!r})")
+        self._randomized = options.randomized()
         self.options = options
         self.num_envs = num_envs
         config = options.config()
@@ -138,6 +140,10 @@ class PatternCut:
                     rng, self.options.num_fiducials, self.task.contours, self.task.pinch_points, self.config
                 )
             self._sampled = True
+        if self._randomized:
+            self.task.set_params(**sample_parameters(rng, self._randomized, self.num_envs))
+            steps = self.task.num_steps
+            self.episode_steps = min(steps, self.options.max_episode_steps or steps)
         self.task.reset(seed=seed)
         self._running_path_error = np.zeros(self.num_envs)
         self.diverged = np.zeros(self.num_envs, dtype=bool)

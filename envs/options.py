@@ -15,7 +15,7 @@ import numpy as np
 from warpcut.contours import Contour, builtin_names, contour_from_json, load_contour
 from warpcut.fiducials import NUM_FIDUCIALS, SHAFT_RADIUS_MM
 from warpcut.planning import default_pinch
-from warpcut.sim.config import PerEnv, SimConfig
+from warpcut.sim.config import PerEnv, SimConfig, randomize_ranges
 from warpcut.task import default_segments
 
 ContourSpec = str | os.PathLike | Contour
@@ -85,6 +85,15 @@ class PatternCutOptions:
     """Add the per-step cut-deviation penalty (the path score's increment) to the sparse final reward."""
     max_episode_steps: int | None = None
     """Truncate episodes after this many steps; default: the whole cut."""
+    randomize: Sequence[str] = ()
+    """Domain randomisation: the physical parameters (``gravity``, ``elasticity``, ``noise_std`` or
+    ``noise``, ``damping``) drawn anew for every env at every reset, uniformly over
+    :data:`~warpcut.sim.config.RANDOMIZE_LEVELS` levels of their range (``randomize_ranges``). Empty:
+    the nominal parameters (the fields above) throughout. Evaluation runs a trained policy on the nominal
+    parameters (:meth:`nominal`)."""
+    randomize_ranges: dict[str, Sequence[float]] | None = None
+    """``{parameter: [low, high]}`` for the randomised parameters, in their units; a parameter not given
+    takes its :data:`~warpcut.sim.config.RANDOMIZE_RANGES` default."""
     candidates: Sequence[dict] | None = None
     """Several pinch candidates for one policy shared across them, each ``{"pinch": [x, y], "segments":
     polylines or None}`` (a plan's candidate with its best order): env ``i`` pinches candidate ``i % K`` and
@@ -115,6 +124,15 @@ class PatternCutOptions:
         """``sim_config`` with the given overrides, validated."""
         changes = {k: getattr(self, k) for k in SIM_OVERRIDES if getattr(self, k) is not None}
         return self.sim_config.replace(**changes)
+
+    def randomized(self) -> dict[str, tuple[float, float]]:
+        """The randomised parameters with their ranges (``randomize``), checked: ``ValueError`` naming the
+        field, the parameter and the fix."""
+        return randomize_ranges(self.randomize, self.randomize_ranges)
+
+    def nominal(self) -> PatternCutOptions:
+        """These options without domain randomisation: the scenario a policy is evaluated on."""
+        return dataclasses.replace(self, randomize=(), randomize_ranges=None)
 
     def contours(self, num_envs: int) -> list[Contour]:
         """One loaded contour per env."""
@@ -235,6 +253,7 @@ class PatternCutOptions:
         try:
             options = cls(**fields)
             options.config()  # the simulation settings, checked now
+            options.randomized()
         except (TypeError, ValueError) as exc:  # TypeError: a setting of the wrong type, e.g. "x" > 0
             message = str(exc)
             raise ValueError(message if message.startswith("options: ") else f"options: {message}") from None
@@ -286,6 +305,12 @@ def _field_problem(name: str, value: Any) -> str | None:
             return "give [x_mm, y_mm], or one such pair per env"
         if not np.isfinite(points).all():
             return "must be finite numbers (mm)"
+    if name == "randomize" and not (
+        isinstance(value, list | tuple) and all(isinstance(v, str) for v in value)
+    ):
+        return 'give a list of parameter names, e.g. ["gravity", "noise_std"]'
+    if name == "randomize_ranges" and value is not None and not isinstance(value, dict):
+        return "give {parameter: [low, high]}, or null"
     if name in ("fixture", "device") and value is not None and not isinstance(value, str):
         return "must be a string, or null"
     return None

@@ -45,7 +45,6 @@ class PatternCutRslEnv(VecEnv):
         num_envs: Batch size B.
         num_actions: 1 for discrete actions (one index per env), else the action dimension.
         num_action_choices: Number of discrete actions (5, or 7 with ``allow_z``); ``None`` for continuous.
-        max_episode_length: Steps per episode (the same for every env).
         device: Torch device of observations, rewards, dones and extras (rsl-rl's name for it).
         cfg: The env's :class:`~envs.options.PatternCutOptions` (``to_dict()`` for loggers).
     """
@@ -59,8 +58,12 @@ class PatternCutRslEnv(VecEnv):
         discrete = env.options.action_type == "discrete"
         self.num_action_choices: int | None = int(space.n) if discrete else None
         self.num_actions = 1 if discrete else int(space.shape[0])
-        self.max_episode_length = env.scene.episode_steps
         self.seed(seed)
+
+    @property
+    def max_episode_length(self) -> int:
+        """Steps per episode (the same for every env; with domain randomisation, this episode's)."""
+        return self.env.scene.episode_steps
 
     def seed(self, seed: int | None) -> None:
         """Reseed the env's randomness (noise, fiducials) and reset every env."""

@@ -189,9 +189,25 @@ class CuttingTask:
         if len(self.segments) != num_envs:
             raise ValueError(f"segments: got {len(self.segments)} lists for {num_envs} envs")
         self.pinch_points = self._pinch_array(pinch_points)
+        self._given_segments = segments
+        self._trajectory_cache: dict[tuple, Trajectory] = {}
+        if not trace_path and config.score == "path":
+            raise ValueError(
+                "trace_path: the path score needs the traced path; keep trace_path=True or score='separated'"
+            )
+        self._trace = trace_path
+        self._lay_out_trajectories()
+        self.update_index = 0
+        self.fiducials: Fiducials | None = None
+        """The fiducials a camera tracks on the sheets, where an env observes them (it sets them here):
+        recordings show them, and draw their own where this is None."""
+
+    def _lay_out_trajectories(self) -> None:
+        """Build each env's trajectory on its settled sheet, and the per-update tips and targets."""
+        num_envs = self.num_envs
         self.trajectories = self._build_trajectories()
         self.horizon_updates = max(len(t.tip) for t in self.trajectories)
-        self._check_horizon(segments)
+        self._check_horizon(self._given_segments)
         self._tips = np.zeros((num_envs, self.horizon_updates, 4), dtype=np.float32)
         self._targets = np.full((num_envs, self.horizon_updates, 2), np.nan)
         for env, trajectory in enumerate(self.trajectories):
@@ -201,16 +217,23 @@ class CuttingTask:
             self._targets[env, :t] = trajectory.material
         self._targets.flags.writeable = False
         self._arc_mm = self._compute_target_arcs()
-        if trace_path:
+        if self._trace:
             self.sim.trace_path(self.horizon_updates)
-        elif config.score == "path":
-            raise ValueError(
-                "trace_path: the path score needs the traced path; keep trace_path=True or score='separated'"
-            )
-        self.update_index = 0
-        self.fiducials: Fiducials | None = None
-        """The fiducials a camera tracks on the sheets, where an env observes them (it sets them here):
-        recordings show them, and draw their own where this is None."""
+
+    def set_params(self, **values) -> None:
+        """Change physical parameters (``damping``, ``dt``, ``gravity``, ``elasticity``, ``noise_std``; one
+        value or one per env) before the next :meth:`reset`: :meth:`Simulator.set_params`. A parameter
+        that shapes the settled sheet lays the trajectories out again on it (open loop on the sheet as it
+        hangs), so :attr:`num_steps` may change. Settled sheets and trajectories of parameters seen before
+        are reused (domain randomisation draws from a finite set of levels for that reason)."""
+        from warpcut.sim.settling import SETTLE_PARAMETERS
+
+        settle = self.sim.settle_groups()[0]
+        self.sim.set_params(**values)
+        self.config = self.sim.config
+        if set(values) & set(SETTLE_PARAMETERS) and not np.array_equal(settle, self.sim.settle_groups()[0]):
+            self._lay_out_trajectories()
+        self.update_index = self.num_steps * self.config.updates_per_step  # over: reset() next
 
     @property
     def num_steps(self) -> int:
@@ -264,15 +287,18 @@ class CuttingTask:
 
     def _build_trajectories(self) -> list[Trajectory]:
         settled = self.sim.settled_positions()
-        _, env_group = self.sim.settle_groups()
-        # Envs sharing a settled sheet and segments share a trajectory: build each once.
-        cache: dict[tuple[int, int], Trajectory] = {}
+        group_params, env_group = self.sim.settle_groups()
+        # Envs sharing a settled sheet and segments share a trajectory: build each once, and keep it for
+        # parameters that come back (set_params).
+        cache = self._trajectory_cache
+        if len(cache) > 4 * self.num_envs + 64:
+            cache.clear()
         trajectories = []
         for env in range(self.num_envs):
             segment_bytes = tuple(
                 np.ascontiguousarray(s, dtype=np.float64).tobytes() for s in self.segments[env]
             )
-            key = (int(env_group[env]), hash(segment_bytes))
+            key = (group_params[env_group[env]].tobytes(), hash(segment_bytes))
             if key not in cache:
                 cache[key] = Trajectory.from_segments(
                     self.segments[env], settled[env], self.grid, self.config.trajectory_spacing_mm

@@ -10,7 +10,19 @@ from __future__ import annotations
 
 import click
 
-from agents.cli import bench, contours, evaluate, export, optimize, plan, replay, run, simulate, train
+from agents.cli import (
+    bench,
+    contours,
+    evaluate,
+    export,
+    optimize,
+    plan,
+    replay,
+    robustness,
+    run,
+    simulate,
+    train,
+)
 from agents.cli.common import CleanErrors
 
 
@@ -20,5 +32,5 @@ def main() -> None:
     """Simulate, plan and learn tensioning for surgical pattern cutting."""
 
 
-for _module in (run, contours, simulate, train, optimize, export, evaluate, replay, plan, bench):
+for _module in (run, contours, simulate, train, optimize, robustness, export, evaluate, replay, plan, bench):
     main.add_command(_module.command)

@@ -334,6 +334,66 @@ resolution_option = click.option(
 )
 
 
+def randomize_options(f):
+    """``--randomize PARAMS`` and ``--randomize-range NAME=LOW,HIGH`` (domain randomisation while training;
+    :func:`parse_randomization` reads them)."""
+    from warpcut.sim.config import RANDOMIZE_ALIASES, RANDOMIZE_RANGES
+
+    f = click.option(
+        "--randomize-range",
+        "randomize_range",
+        multiple=True,
+        metavar="NAME=LOW,HIGH",
+        help="The range of a randomised parameter, in its units (repeatable), e.g. gravity=0,1042.",
+    )(f)
+    return click.option(
+        "--randomize",
+        default=None,
+        metavar="PARAMS",
+        help="Domain randomisation while training: physical parameters drawn anew per env at every reset, "
+        f"comma-separated from {','.join([*RANDOMIZE_RANGES, *RANDOMIZE_ALIASES])} (ranges: "
+        "warpcut.sim.config.RANDOMIZE_RANGES, --randomize-range). Validation draws them too; the "
+        "evaluation runs the nominal sheet (docs/robustness.md).",
+    )(f)
+
+
+def parse_randomization(names: str | None, ranges: tuple[str, ...]) -> tuple[list[str], dict]:
+    """``--randomize`` as parameter names and ``--randomize-range`` as ``{name: (low, high)}``, checked
+    (:func:`envs.options.randomize_ranges`); a usage error names the flag and the fix."""
+    from warpcut.sim.config import RANDOMIZE_ALIASES, randomize_ranges
+
+    given = {}
+    for item in ranges:
+        name, _, bounds = item.partition("=")
+        try:
+            low, high = (float(v) for v in bounds.split(","))
+        except ValueError:
+            raise click.BadParameter(
+                f"expected NAME=LOW,HIGH, e.g. gravity=0,1042 (got {item!r})", param_hint="--randomize-range"
+            ) from None
+        given[RANDOMIZE_ALIASES.get(name.strip(), name.strip())] = (low, high)
+    try:
+        chosen = randomize_ranges(names or "", given)
+    except ValueError as error:
+        flag = "--randomize-range" if str(error).startswith("randomize_ranges") else "--randomize"
+        raise click.BadParameter(str(error).split(": ", 1)[1], param_hint=flag) from None
+    return list(chosen), {k: v for k, v in chosen.items() if k in given}
+
+
+def randomized_recipe(recipe, names: str | None, ranges: tuple[str, ...]):
+    """``recipe`` (:class:`agents.config.Recipe`) training with the domain randomisation of ``--randomize``
+    and ``--randomize-range`` (:func:`parse_randomization`); ``recipe`` itself without any."""
+    import dataclasses
+
+    randomized, given = parse_randomization(names, ranges)
+    if not randomized:
+        return recipe
+    if recipe.train.get("algorithm") == "apg":
+        raise click.UsageError("--randomize: APG differentiates one fixed sheet; use a PPO recipe")
+    options = {**recipe.options, "randomize": randomized, "randomize_ranges": given or None}
+    return dataclasses.replace(recipe, options=options)
+
+
 def parse_point(value: str | None, name: str) -> tuple[float, float] | None:
     """``X,Y`` (mm) as a point; None stays None."""
     if value is None:

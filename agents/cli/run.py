@@ -50,6 +50,7 @@ from warpcut.sim.config import SimConfig
     "about K times faster, but it lost to separate policies where they learn (docs/learning.md).",
 )
 @common.recipe_option
+@common.randomize_options
 @common.count_option("candidates", None, "Override the budget's pinch candidates.")
 @common.count_option(
     "rl-candidates",
@@ -81,6 +82,8 @@ def command(
     run_policy: str,
     shared_policy: bool,
     recipe: str,
+    randomize: str | None,
+    randomize_range: tuple[str, ...],
     candidates: int | None,
     rl_candidates: int | None,
     iterations: int | None,
@@ -111,12 +114,13 @@ def command(
     from warpcut.planning import ArmModel
 
     common.check_outputs({"--json": json_path}, [contour_name])
+    chosen_recipe = common.randomized_recipe(RECIPES[recipe], randomize, randomize_range)
     out, claim = common.claim(out, f"run-{safe_name(load_contour(contour_name).name)}", resume, overwrite)
     cuts = common.final_cuts(no_plots)
     with claim, common.recorder(out, record_envs, colour_by) as rec:
         report = run_pipeline(
             contour_name, out, resume=resume, budget=budget, selector=run_policy, shared_policy=shared_policy,
-            recipe=RECIPES[recipe],
+            recipe=chosen_recipe,
             candidates=candidates, rl_candidates=rl_candidates, iterations=iterations, trials=trials,
             num_envs=num_envs, config=SimConfig(resolution=resolution, noise_std=noise, score=score),
             arm=ArmModel(length_mm=arm_length), analytic_pinch=analytic_pinch, device=device,

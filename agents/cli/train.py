@@ -24,6 +24,7 @@ RESUMED_FLAGS = {
     "observe": "--observe",
     "action_type": "--actions",
     "allow_z": "--z/--no-z",
+    "randomize": "--randomize",
 }
 """The env options a run fixes (its options.json): with --resume they may only repeat the run's values."""
 
@@ -100,6 +101,7 @@ RESUMED_FLAGS = {
     help="Held-out episodes scoring the policy every 10 iterations; the best is kept (best.pt). 0: off, "
     "the last policy is the run's.",
 )
+@common.randomize_options
 @common.count_option("eval-trials", EVALUATION_TRIALS, "Trials of the final evaluation against no tension.")
 @common.device_option
 @common.seed_option
@@ -134,6 +136,8 @@ def command(
     allow_z: bool,
     stay_prior: float,
     validation_trials: int,
+    randomize: str | None,
+    randomize_range: tuple[str, ...],
     eval_trials: int,
     device: str | None,
     seed: int,
@@ -154,6 +158,9 @@ def command(
 
     point = common.parse_point(pinch, "--pinch")
     action_type = _actions_for(algo, action_type)
+    randomized, ranges = common.parse_randomization(randomize, randomize_range)
+    if randomized and algo == "apg":
+        raise click.UsageError("--randomize: APG differentiates one fixed sheet; train with --algo ppo")
     if resume is not None:
         if not resume.is_dir():
             from agents.train import read_checkpoint
@@ -163,9 +170,15 @@ def command(
         options, out = load_options(run, device), out or run
         given = dict(
             contour_name=contour_name, pinch=point, noise=noise, score=score, reward=reward, observe=observe,
-            action_type=action_type, allow_z=allow_z,
+            action_type=action_type, allow_z=allow_z, randomize=randomized,
         )  # fmt: skip
         _check_resumed_flags(run, options, given)
+        trained = options.randomized()
+        if any(trained.get(name) != bounds for name, bounds in ranges.items()):
+            raise click.UsageError(
+                f"--randomize-range: the resumed run {run} randomises {trained or 'nothing'} (its "
+                "options.json); drop --randomize-range, or train a new run without --resume"
+            )
         kept = _resumed_settings(
             resume, seed=seed, validation_trials=validation_trials, num_envs=num_envs,
             num_steps_per_env=steps_per_env, stay_prior=stay_prior, algorithm=algo,
@@ -185,6 +198,8 @@ def command(
             dense_reward=reward == "dense",
             contour_features=observe == "contour",
             allow_z=allow_z,
+            randomize=randomized,
+            randomize_ranges=ranges or None,
         )
         options.per_env(1)  # fail early on a bad contour or an infeasible default pinch
         out = out or common.run_dir(None, f"train-{safe_name(load_contour(contour_name).name)}")
@@ -268,6 +283,7 @@ def _check_resumed_flags(run: Path, options, given: dict) -> None:
                 "observe": "contour" if options.contour_features else "fiducials",
                 "action_type": options.action_type,
                 "allow_z": options.allow_z,
+                "randomize": list(options.randomized()),
             }[name]
             if np.array_equal(np.asarray(trained), np.asarray(value)):
                 continue

@@ -89,6 +89,24 @@ RESOLUTION_RANGE = (5, 100)
 """The vertices per sheet side a simulation may have (``SimConfig.resolution``), coarsest and finest."""
 
 
+RANDOMIZE_RANGES: dict[str, tuple[float, float]] = {
+    "gravity": (0.0, 2.0 * GRAVITY_MM_S2),
+    "elasticity": (0.6, CHEBYSHEV_ELASTICITY_MAX),
+    "noise_std": (0.0, 0.15),
+    "damping": (0.97, 0.995),
+}
+"""Domain randomisation's default range of each parameter it can draw
+(``envs.options.PatternCutOptions.randomize``), in the parameter's units: gravity from 0 to twice the
+default (mm/s^2; the force study's sweep), elasticity up to the largest the default Chebyshev sweeps
+accept, process noise up to five times the default (mm), and damping around the paper's 0.99."""
+RANDOMIZE_ALIASES = {"noise": "noise_std"}
+"""Short names ``--randomize`` accepts for a parameter."""
+RANDOMIZE_LEVELS = 9
+"""Levels a randomised parameter takes, evenly spaced over its range including both ends: a parameter that
+shapes the settled sheet (all but noise) settles and lays out the trajectories once per level combination
+met, so a finite set keeps every reset after the first few cheap."""
+
+
 @dataclass
 class SimConfig:
     """Everything that defines a batch of gauze sheets, the scissors and the grasp.
@@ -423,3 +441,54 @@ class SheetGrid:
         return (
             np.linalg.norm(self.material - np.asarray(center_mm, dtype=np.float64)[:2], axis=1) <= radius_mm
         )
+
+
+def randomize_ranges(
+    names: Sequence[str] | str, ranges: dict[str, Sequence[float]] | None = None
+) -> dict[str, tuple[float, float]]:
+    """Each parameter in ``names`` (a list, or comma-separated; aliases such as ``noise`` allowed) with its
+    range: ``ranges``' if given, else :data:`RANDOMIZE_RANGES`'. ``ValueError`` names the field and the fix
+    for an unknown parameter, a bad range, or a range given for a parameter not randomised."""
+    if isinstance(names, str):
+        names = [n.strip() for n in names.split(",") if n.strip()]
+    if not isinstance(names, list | tuple) or not all(isinstance(n, str) for n in names):
+        raise ValueError(f"randomize: give a list of parameter names (got {names!r:.80})")
+    known = ", ".join([*RANDOMIZE_RANGES, *RANDOMIZE_ALIASES])
+    chosen: dict[str, tuple[float, float]] = {}
+    given = dict(ranges or {})
+    if not isinstance(ranges, dict | type(None)):
+        raise ValueError(f"randomize_ranges: give {{parameter: [low, high]}} (got {ranges!r:.80})")
+    for raw in names:
+        name = RANDOMIZE_ALIASES.get(raw, raw)
+        if name not in RANDOMIZE_RANGES:
+            raise ValueError(f"randomize: unknown parameter {raw!r}; choose from {known}")
+        value = given.pop(name, given.pop(raw, RANDOMIZE_RANGES[name]))
+        try:
+            low, high = (float(v) for v in value)
+        except (TypeError, ValueError):
+            raise ValueError(f"randomize_ranges: {name}: give [low, high] (got {value!r:.80})") from None
+        if not (np.isfinite(low) and np.isfinite(high) and low <= high):
+            raise ValueError(f"randomize_ranges: {name}: give finite low <= high (got [{low:g}, {high:g}])")
+        try:  # each end must be a value SimConfig accepts
+            SimConfig(**{name: low}).validated(), SimConfig(**{name: high}).validated()
+        except ValueError as error:
+            raise ValueError(f"randomize_ranges: {name}: [{low:g}, {high:g}]: {error}") from None
+        chosen[name] = (low, high)
+    if given:
+        raise ValueError(
+            f"randomize_ranges: {', '.join(sorted(given))} not randomised; add it to randomize, or drop "
+            "its range"
+        )
+    return chosen
+
+
+def sample_parameters(
+    rng: np.random.Generator, ranges: dict[str, tuple[float, float]], num_envs: int
+) -> dict[str, np.ndarray]:
+    """One draw of every randomised parameter per env: uniform over :data:`RANDOMIZE_LEVELS` levels of its
+    range."""
+    levels = RANDOMIZE_LEVELS
+    return {
+        name: low + (high - low) * rng.integers(levels, size=num_envs) / (levels - 1)
+        for name, (low, high) in ranges.items()
+    }

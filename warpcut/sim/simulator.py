@@ -16,10 +16,11 @@ import numpy as np
 
 from warpcut.sim import kernels
 from warpcut.sim._warp import launch, wp
-from warpcut.sim.checks import DIVERGENCE_REASONS, check_pinch_points, check_settled
+from warpcut.sim.checks import DIVERGENCE_REASONS, check_pinch_points
 from warpcut.sim.config import PHYSICAL_PARAMETERS, SheetGrid, SimConfig, SimulationDiverged
 from warpcut.sim.kernels_simd import SimdModel, SimdState
 from warpcut.sim.memory import check_batch_memory
+from warpcut.sim.settling import SETTLE_PARAMETERS, SettledSheets
 from warpcut.sim.springs import spring_colours
 
 __all__ = [
@@ -109,6 +110,7 @@ class Simulator:
         self.fixture = self.grid.fixture_mask(self.config.fixture)
         self.update_count = 0
         self._settled: np.ndarray | None = None
+        self._settle_cache = SettledSheets()  # what set_params brings back is not settled again
         n = self.grid.num_vertices * num_envs
         self._buffers = [wp.zeros(n, dtype=wp.vec3, device=self.device) for _ in range(3)]
         self._alive = [wp.zeros(n, dtype=wp.int32, device=self.device) for _ in range(2)]
@@ -202,10 +204,7 @@ class Simulator:
         Returns:
             ``(group_params, env_group)``: (G, 4) parameters of each distinct sheet and (B,) group index.
         """
-        columns = [
-            np.broadcast_to(self.params[k], (self.num_envs,))
-            for k in ("damping", "dt", "gravity", "elasticity")
-        ]
+        columns = [np.broadcast_to(self.params[k], (self.num_envs,)) for k in SETTLE_PARAMETERS]
         table = np.stack(columns, axis=1)
         group_params, env_group = np.unique(table, axis=0, return_inverse=True)
         return group_params, env_group.reshape(-1)
@@ -213,25 +212,42 @@ class Simulator:
     def settled_positions(self) -> np.ndarray:
         """(B, N, 3) sheet positions after ``settle_updates`` under gravity, without grasp or scissors.
 
-        Each distinct parameter set is settled once, noise-free, and copied to every env that shares it.
+        Each distinct parameter set is settled once, noise-free, and copied to every env that shares it;
+        settled sheets are kept, so parameters that come back (:meth:`set_params`) are not settled again.
         """
         if self._settled is None:
             group_params, env_group = self.settle_groups()
-            config = self.config.replace(
-                **{
-                    k: group_params[:, c].tolist()
-                    for c, k in enumerate(("damping", "dt", "gravity", "elasticity"))
-                },
-                noise_std=0.0,
-            )
-            sheet = Simulator(config, len(group_params), self.device)
-            sheet.reset_flat()
-            for _ in range(self.config.settle_updates):
-                sheet.update()
-            settled = sheet.positions()
-            check_settled(settled, sheet.divergence(), group_params, self.config)
-            self._settled = settled[env_group]
+            self._settled = self._settle_cache.sheets(self.config, group_params, self.device)[env_group]
         return self._settled
+
+    def set_params(self, **values) -> None:
+        """Change physical parameters between episodes; they apply from the next :meth:`reset`.
+
+        Args:
+            **values: Any of ``damping``, ``dt``, ``gravity``, ``elasticity``, ``noise_std``: one value for
+                every env or one per env, validated as :class:`SimConfig` validates them (domain
+                randomisation: :class:`envs.options.PatternCutOptions` ``randomize``).
+
+        Raises:
+            ValueError: an unknown parameter; :class:`~warpcut.sim.config.ConfigError` for a bad value.
+        """
+        unknown = sorted(set(values) - set(PHYSICAL_PARAMETERS))
+        if unknown:
+            choices = ", ".join(PHYSICAL_PARAMETERS)
+            raise ValueError(f"set_params: unknown {', '.join(unknown)}; choose from {choices}")
+        self.config = self.config.replace(**values).validated()
+        for name in values:
+            new = self.config.per_env(name, self.num_envs)
+            if new.shape == self.params[name].shape:
+                self._wp_params[name].assign(new)  # in place: recorded graphs keep reading it
+            else:
+                self._wp_params[name] = wp.array(new, dtype=float, device=self.device)
+                self._graphs.clear()
+            self.params[name] = new
+        if set(values) & set(SETTLE_PARAMETERS):
+            self._settled = None
+        self._sync_flat()
+        self._packed_current = False  # the SIMD blocks re-pack the parameters (and the state)
 
     # ------------------------------------------------------------------ episode
     def reset_flat(self) -> None:

@@ -688,3 +688,41 @@ def _draw_candidates(fig: Figure, ax, plan: Plan) -> list:
         shrink=0.8,
     )
     return handles
+
+
+def plot_robustness(
+    reports: Sequence[dict], out_dir: str | os.PathLike, name: str = "robustness"
+) -> list[Path]:
+    """The paper's Fig. 5 for ``reports`` of :func:`agents.robustness.robustness_study`: one panel per report,
+    each method's median over trials at every value of the sweep with its interquartile band, the nominal
+    value dashed; improvement studies mark 0 (no tension). Writes ``NAME.png`` and ``NAME.svg``."""
+    return save_figure(robustness_figure(reports), out_dir, name)
+
+
+def robustness_figure(reports: Sequence[dict]) -> Figure:
+    """What :func:`plot_robustness` saves."""
+    if not reports:
+        raise ValueError("reports: give at least one robustness report")
+    fig = Figure(figsize=(4.6 * len(reports), 3.6), layout="constrained")
+    axes = fig.subplots(1, len(reports), squeeze=False)[0]
+    for ax, report in zip(axes, reports, strict=True):
+        values = np.asarray(report["values"], dtype=np.float64)
+        for k, method in enumerate(report["methods"]):
+            stats = {
+                q: np.array([np.nan if v is None else v for v in report[method][q]])
+                for q in ("median", "q25", "q75")
+            }
+            colour = f"C{k % 10}"
+            ax.plot(values, stats["median"], "o-", color=colour, label=method, markersize=3.5)
+            ax.fill_between(values, stats["q25"], stats["q75"], color=colour, alpha=0.15, linewidth=0)
+        ax.axvline(report["nominal"], color="0.3", linestyle="--", linewidth=1, label="nominal")
+        if report["metric"] == "improvement_pct":
+            ax.axhline(0.0, color="0.5", linewidth=0.8)
+            ax.set_ylabel("improvement over no tension (%)")
+        else:
+            ax.set_ylabel("error (% of the sheet)")
+        ax.set_xlabel(report["unit"])
+        ax.set_title(f"{report['contour']}: {report['study']} ({report['trials']} trials)", fontsize=10)
+        ax.legend(fontsize=7, loc="best", framealpha=0.8)
+    fig.text(0.01, -0.02, "lines: median over trials; bands: 25th to 75th percentile", fontsize=7)
+    return fig

@@ -1,0 +1,416 @@
+"""The paper's sensitivity experiments (Thananjeyan et al. 2017, Sec. VII-B and Fig. 5): does a tensioning
+policy tuned on one simulated sheet still help on another?
+
+Three studies, each a sweep of one setting of the simulation around the nominal sheet:
+
+- ``resolution``: the mesh's vertices per side (the paper: 100 to 2500 vertices). Each resolution is its
+  own batch (a batch holds one mesh). The error is reported as a percentage of the sheet's area, the
+  paper's "error in vertices normalised by the test resolution".
+- ``noise``: the process noise ``noise_std`` added to every free vertex per update (mm; the paper's
+  N(0, sigma) on Eq. (1)). All values are one batch (per-env parameters).
+- ``force``: the gravity-like external force (mm/s^2; the paper's f(t) around 2500 units/s^2, 521 mm/s^2
+  here). All values are one batch; each value settles its own sheet and the scissors follow it as it
+  hangs (open loop on the sheet the camera sees).
+
+Every method cuts the same seeded noisy trials of every setting (paired noise: trial ``k`` of setting ``s``
+is env ``s * trials + k`` of each method's batch). The noise and force studies report each method's
+improvement over no tension per trial (%), as the paper's Fig. 5b-c; the resolution study reports the error
+itself, no tension included. ``rl`` is a trained run's policy (``warpcut train``), at the run's pinch point
+and cut order; fixed tension holds the same pinch point, analytic tension pinches its own (the feasible
+centroid), no tension none.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from agents.config import EVALUATION_TRIALS
+from agents.evaluation import run_method
+from agents.methods import BASELINES, check_methods, tensioner
+from warpcut.contours import Contour, ContourError
+from warpcut.scoring import paired_improvement
+from warpcut.sim.config import GRAVITY_MM_S2, SimConfig
+
+STUDIES = ("resolution", "noise", "force")
+"""The studies, in the paper's order (Fig. 5a-c)."""
+
+STUDY_VALUES: dict[str, tuple[float, ...]] = {
+    "resolution": (12, 16, 20, 25, 35, 50),
+    "noise": tuple(round(0.02 * k, 2) for k in range(10)),
+    "force": tuple(GRAVITY_MM_S2 * k / 4 for k in range(9)),
+}
+"""Each study's default sweep: vertices per side (the paper's 400, 625 and 2500 vertices; 144 for its 100,
+as 10 x 10 leaves no room for the default grasp beside most contours; 256 and 1225 between), process noise
+(mm; ten values, the paper's count, from 0 to six times the default 0.03), and gravity (mm/s^2; 0 to twice
+the nominal 521 in quarters)."""
+
+STUDY_UNITS = {"resolution": "vertices per side", "noise": "noise_std (mm)", "force": "gravity (mm/s^2)"}
+"""What a study's values are, in words (plots, tables)."""
+
+
+def _override(study: str, values: Sequence[float], trials: int) -> dict:
+    """The options/config fields that set a batch of every value of ``study`` x ``trials``."""
+    per_env = [float(v) for v in np.repeat(np.asarray(values, dtype=np.float64), trials)]
+    return {"noise": {"noise_std": per_env}, "force": {"gravity": per_env}}[study]
+
+
+def _stats(values: np.ndarray) -> dict[str, list[float | None]]:
+    """Per setting (rows of ``values``, trials along columns): median and quartiles of the finite trials."""
+    out: dict[str, list[float | None]] = {"median": [], "q25": [], "q75": [], "mean": []}
+    for row in np.asarray(values, dtype=np.float64):
+        finite = row[np.isfinite(row)]
+        for key, q in (("median", 50), ("q25", 25), ("q75", 75)):
+            out[key].append(float(np.percentile(finite, q)) if finite.size else None)
+        out["mean"].append(float(finite.mean()) if finite.size else None)
+    return out
+
+
+def check_study(study: str, values: Sequence[float] | None) -> list[float]:
+    """``study``'s values (default :data:`STUDY_VALUES`), checked; ``ValueError`` naming the field."""
+    if study not in STUDIES:
+        raise ValueError(f"study: choose one of {', '.join(STUDIES)} (got {study!r})")
+    values = list(STUDY_VALUES[study] if values is None else values)
+    if not values:
+        raise ValueError("values: give at least one value")
+    if study == "resolution":
+        if not all(float(v).is_integer() and v >= 2 for v in values):
+            raise ValueError(f"values: resolutions are whole numbers of vertices per side (got {values})")
+        values = [int(v) for v in values]
+    for v in values:  # each value must be one SimConfig accepts
+        field = {"resolution": "resolution", "noise": "noise_std", "force": "gravity"}[study]
+        try:
+            SimConfig(**{field: v}).validated()
+        except ValueError as error:
+            raise ValueError(f"values: {study} {v}: {error}") from None
+    return values
+
+
+def robustness_study(
+    contour: str | Contour | None,
+    study: str,
+    out: Path | None = None,
+    *,
+    runs: Mapping[str, str | Path] | str | Path | None = None,
+    methods: Sequence[str] | None = None,
+    values: Sequence[float] | None = None,
+    trials: int = EVALUATION_TRIALS,
+    config: SimConfig | None = None,
+    device: str | None = None,
+    seed: int = 0,
+    log: Callable[[str], None] = lambda _: None,
+) -> dict:
+    """``warpcut robustness``: sweep one setting of the simulation and score every method at each value.
+
+    Args:
+        contour: The contour (built-in name, file or ``Contour``); with ``runs`` None means the runs', and
+            another is refused.
+        study: ``resolution``, ``noise`` or ``force`` (module docstring).
+        out: Where ``robustness-STUDY.json`` goes (None: nowhere).
+        runs: Trained run directories (``warpcut train``/``run``) of the contour, ``{label: run}`` (a single
+            run: ``{"rl": run}``): each label is a method, its policy at its run's pinch point. The first
+            run sets the pinch point fixed tension holds, the cut order and the nominal simulation (its
+            options' nominal parameters). None: fixed tension pinches the plan's point
+            (:func:`warpcut.planning.plan_cut`) and no policy runs.
+        methods: The baselines to run, a subset of :data:`~agents.methods.BASELINES` (default: all;
+            ``none`` always runs, the others' improvements are measured against it).
+        values: The sweep (default :data:`STUDY_VALUES`).
+        trials: Seeded noisy trials per value and method (the default protocol's).
+        config: The nominal simulation without a run (default ``SimConfig()``).
+        device, seed: Warp device; seed of the process noise (and of the plan).
+
+    Returns:
+        ``{"study", "values", "unit", "metric", "contour", "trials", "nominal", "pinch", "runs", "methods",
+        "seconds", "skipped": [value], METHOD: {"median", "q25", "q75", "mean"} (one entry per value)}``, the
+        metric being ``improvement_pct`` (noise, force) or ``error_pct_of_sheet`` (resolution; then
+        ``none`` is a method too). Noise and force add ``none_error_mm2``, the same statistics of no
+        tension's error.
+    """
+    start = time.perf_counter()
+    values = check_study(study, values)
+    if not isinstance(trials, int) or trials < 1:
+        raise ValueError(f"trials: must be a positive integer (got {trials!r})")
+    runs = check_runs(runs)
+    scenario = _scenario(contour, runs, config, device, seed, log)
+    contour, config, pinch, segments = (scenario[k] for k in ("contour", "config", "pinch", "segments"))
+    baselines = check_methods(list(methods or BASELINES), "methods", BASELINES)
+    chosen = ["none", *[m for m in baselines if m != "none"], *runs]
+    errors: dict[str, np.ndarray] = {m: np.full((len(values), trials), np.nan) for m in chosen}
+    skipped = []
+    batches = [[k] for k in range(len(values))] if study == "resolution" else [list(range(len(values)))]
+    for batch in batches:
+        picked = [values[k] for k in batch]
+        if study == "resolution":
+            sim = config.replace(resolution=picked[0])
+            overrides = {"resolution": picked[0]}
+        else:
+            overrides = _override(study, picked, trials)
+            sim = config.replace(**overrides)
+        log(f"  {study} {', '.join(f'{v:g}' for v in picked)}: {', '.join(chosen)} ({trials} trials)")
+        try:
+            for method in chosen:
+                errors[method][batch] = _method_errors(
+                    method, contour, pinch, segments, sim, overrides, len(picked), trials, runs, device, seed
+                )
+        except (ContourError, ValueError) as error:
+            if study != "resolution" or not str(error).startswith(("resolution", "contour")):
+                raise
+            log(f"  skipped {study} {picked[0]:g}: {error}")  # a mesh too coarse for the contour or grasp
+            skipped.extend(picked)
+            for method in chosen:
+                errors[method][batch] = np.nan
+    report = {
+        "study": study,
+        "values": [float(v) for v in values],
+        "unit": STUDY_UNITS[study],
+        "metric": "error_pct_of_sheet" if study == "resolution" else "improvement_pct",
+        "contour": contour.name,
+        "trials": trials,
+        "nominal": _nominal(study, config),
+        "pinch": [float(v) for v in pinch],
+        "runs": {label: str(run) for label, run in runs.items()},
+        "methods": chosen if study == "resolution" else chosen[1:],
+        "skipped": [float(v) for v in skipped],
+    }
+    sheet_mm2 = config.width_mm * config.height_mm
+    for method in chosen:
+        if study == "resolution":
+            report[method] = _stats(100.0 * errors[method] / sheet_mm2)
+        elif method != "none":
+            report[method] = _stats(paired_improvement(errors["none"], errors[method]))
+    if study != "resolution":
+        report["none_error_mm2"] = _stats(errors["none"])
+    report["seconds"] = time.perf_counter() - start
+    if out is not None:
+        from warpcut.io import write_json
+
+        write_json(Path(out) / f"robustness-{study}.json", report)
+    return report
+
+
+def _nominal(study: str, config: SimConfig) -> float:
+    """The nominal sheet's value of the swept setting (the dashed line of the paper's plots)."""
+    if study == "resolution":
+        return float(config.nx)
+    value = np.asarray(config.noise_std if study == "noise" else config.gravity, dtype=np.float64)
+    return float(value.reshape(-1)[0])
+
+
+def check_runs(runs: Mapping[str, str | Path] | str | Path | None) -> dict[str, Path]:
+    """``runs`` as ``{label: run directory}`` (one run: ``{"rl": run}``), each a trained run; ``ValueError``
+    naming ``runs`` for a label that is a baseline's, or not a plain name."""
+    import re
+
+    from agents.export import policy_runs
+    from agents.rl import is_run
+
+    if runs is None:
+        return {}
+    if isinstance(runs, str | Path):
+        runs = {"rl": runs}
+    checked = {}
+    for label, run in dict(runs).items():
+        if label in BASELINES or not re.fullmatch(r"[A-Za-z][\w.-]*", str(label)):
+            raise ValueError(
+                f"runs: label {label!r} must be a plain name (letters, digits, - _ .) other than "
+                f"{', '.join(BASELINES)}"
+            )
+        try:
+            found = policy_runs(run) if Path(run).is_dir() else []
+        except ValueError:  # holds no policy
+            found = []
+        if len(found) != 1 or not is_run(found[0][0]):
+            raise ValueError(
+                f"runs: {run} is not one trained policy's run; give a directory of 'warpcut train' or "
+                "'warpcut run' (or one contour's policies/NAME of 'warpcut evaluate')"
+            )
+        checked[str(label)] = found[0][0]
+    return checked
+
+
+def _scenario(contour, runs: dict[str, Path], config, device, seed, log) -> dict:
+    """The contour, nominal simulation, pinch point and segments: the first run's, or planned."""
+    from warpcut.contours import load_contour
+
+    if runs:
+        from agents.rl import policy_options, same_contour
+
+        given = None
+        if contour is not None:
+            given = load_contour(contour) if not isinstance(contour, Contour) else contour
+        first = None
+        for label, run in runs.items():
+            options = policy_options(run, device)
+            trained = options.contours(1)[0]
+            given = given or trained
+            if not same_contour(given, trained):
+                raise ValueError(
+                    f"runs: {label} ({run}) was trained on {trained.name!r}, not {given.name!r}; give runs "
+                    "of one contour (and leave the contour out, or give that one)"
+                )
+            first = first or options
+        segments = None if first.segments is None else [np.asarray(s) for s in first.segments]
+        return {
+            "contour": first.contours(1)[0],
+            "config": first.config(),
+            "pinch": np.asarray(first.per_env(1)[1][0], dtype=np.float64),
+            "segments": segments,
+        }
+    from warpcut.planning import plan_cut
+
+    if contour is None:
+        raise ValueError("contour: give a contour (or a run, whose contour is used)")
+    contour = load_contour(contour) if not isinstance(contour, Contour) else contour
+    config = (config or SimConfig()).validated()
+    log(f"  planning {contour.name}")
+    plan = plan_cut(contour, config.replace(noise_std=0.0), seed=seed, device=device)
+    return {
+        "contour": contour,
+        "config": config,
+        "pinch": np.asarray(plan.chosen["pinch"], dtype=np.float64),
+        "segments": plan.ordered_segments(),
+    }
+
+
+def _method_errors(
+    method: str,
+    contour: Contour,
+    pinch: np.ndarray,
+    segments: list[np.ndarray] | None,
+    config: SimConfig,
+    overrides: dict,
+    settings: int,
+    trials: int,
+    runs: dict[str, Path],
+    device: str | None,
+    seed: int,
+) -> np.ndarray:
+    """(settings, trials) errors (mm^2) of ``method``: one batch, env ``s * trials + k`` = setting ``s``,
+    trial ``k``, with the same noise streams in every method's batch."""
+    if method in runs:
+        from agents.rl import rollout_errors
+
+        rollouts = rollout_errors(
+            runs[method], settings * trials, seed=seed, device=device, paired_noise=(seed, 0),
+            overrides=overrides,
+        )  # fmt: skip
+        return np.asarray(rollouts["error_mm2"], dtype=np.float64).reshape(settings, trials)
+    if method == "analytic":
+        from agents.baselines import AnalyticTension
+
+        point = AnalyticTension().pinch_point(contour, config)
+    else:
+        point = None if method == "none" else pinch
+    # run_method's layout is contour by contour, trials within: one "contour" per setting.
+    result = run_method(
+        [contour] * settings, [point] * settings, tensioner(method), trials, config, device, seed,
+        segments=[segments] * settings,
+    )  # fmt: skip
+    return np.asarray(result.error_mm2, dtype=np.float64)
+
+
+def robustness_table(report: dict) -> list[str]:
+    """The report as text lines: one row per value, one column per method (median [q25, q75])."""
+    methods = report["methods"]
+    metric = "improvement over none, %" if report["metric"] == "improvement_pct" else "error, % of sheet"
+    lines = [
+        f"{report['contour']}: {report['study']} study, {report['trials']} trials; median [q25, q75] {metric}"
+    ]
+    lines.append(f"{report['unit']:>20} " + " ".join(f"{m:>22}" for m in methods))
+    for k, value in enumerate(report["values"]):
+        cells = []
+        for m in methods:
+            med, lo, hi = (report[m][q][k] for q in ("median", "q25", "q75"))
+            cells.append(f"{'-':>22}" if med is None else f"{med:>8.1f} [{lo:>5.1f}, {hi:>5.1f}]")
+        mark = " (nominal)" if np.isclose(value, report["nominal"]) else ""
+        lines.append(f"{value:>20g} " + " ".join(cells) + mark)
+    return lines
+
+
+__all__ = [
+    "STUDIES",
+    "STUDY_UNITS",
+    "STUDY_VALUES",
+    "check_runs",
+    "check_study",
+    "parse_studies",
+    "robustness",
+    "robustness_study",
+    "robustness_table",
+]
+
+
+def parse_studies(value: str | Sequence[str]) -> list[str]:
+    """Study names from a list or a comma-separated string (``all``: every study); ``ValueError`` naming
+    ``study`` for an unknown one."""
+    names = [value] if isinstance(value, str) else list(value)
+    names = [n.strip() for arg in names for n in str(arg).split(",") if n.strip()]
+    if "all" in names:
+        names = list(STUDIES)
+    unknown = [n for n in names if n not in STUDIES]
+    if not names or unknown:
+        raise ValueError(
+            f"study: choose from {', '.join(STUDIES)} or all (got {', '.join(unknown) or 'none'})"
+        )
+    return list(dict.fromkeys(names))
+
+
+def robustness(
+    contour: str | Contour | None,
+    studies: str | Sequence[str],
+    out: Path,
+    *,
+    runs: Mapping[str, str | Path] | str | Path | None = None,
+    methods: Sequence[str] | None = None,
+    values: Sequence[float] | None = None,
+    trials: int = EVALUATION_TRIALS,
+    config: SimConfig | None = None,
+    device: str | None = None,
+    seed: int = 0,
+    resume: bool = False,
+    log: Callable[[str], None] = lambda _: None,
+) -> list[dict]:
+    """``warpcut robustness``: :func:`robustness_study` for each of ``studies`` (``values`` only with one),
+    each report written to ``out/robustness-STUDY.json`` as it finishes. With ``resume``, the settings must
+    be those ``out`` was started with (``request.json``), and a study already written is read back."""
+    from agents.pipeline import _record_request
+    from warpcut.io import read_json
+
+    studies = parse_studies(studies)
+    if values is not None and len(studies) != 1:
+        raise ValueError("values: give the values of one study (or leave them out: each study's defaults)")
+    runs = check_runs(runs)
+    out = Path(out)
+    named = None if contour is None else str(getattr(contour, "name", contour))
+    _record_request(
+        out, "robustness", resume, contour=named,
+        studies=studies, runs={k: str(v) for k, v in runs.items()}, methods=list(methods or BASELINES),
+        values=values, trials=trials, config=config or SimConfig(), seed=seed,
+    )  # fmt: skip
+    reports = []
+    for study in studies:
+        path = out / f"robustness-{study}.json"
+        if resume and path.is_file():
+            log(f"  {study}: kept {path}")
+            reports.append(read_json(path))
+            continue
+        log(f"{study} study")
+        reports.append(
+            robustness_study(
+                contour,
+                study,
+                out,
+                runs=runs,
+                methods=methods,
+                values=values,
+                trials=trials,
+                config=config,
+                device=device,
+                seed=seed,
+                log=log,
+            )  # fmt: skip
+        )
+    return reports

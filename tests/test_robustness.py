@@ -1,0 +1,199 @@
+"""Issue 20: per-env parameters changed between episodes, domain randomisation, and the sensitivity studies
+(``warpcut robustness``)."""
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from agents.cli import main
+from agents.robustness import check_runs, check_study, parse_studies, robustness_study
+from envs.options import PatternCutOptions
+from envs.vector import PatternCutVecEnv
+from warpcut.contours import load_contour
+from warpcut.sim.config import RANDOMIZE_LEVELS, RANDOMIZE_RANGES, ConfigError, SimConfig, randomize_ranges
+from warpcut.task import CuttingTask
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+RES = 13  # a coarse sheet: fast, and fine enough for the FLS circle
+
+
+def invoke(args):
+    result = CliRunner().invoke(main, args, standalone_mode=True, catch_exceptions=False)
+    return result.exit_code, result.stdout, result.stderr
+
+
+def test_parameters_set_between_episodes_cut_as_a_batch_built_with_them():
+    """Per-env gravity and noise set on a running task give the same bits as a task built with them, and
+    setting the nominal values back gives the nominal bits; settled sheets are not settled twice."""
+    contour = load_contour("fls-circle")
+    gravity, noise = [300.0, 521.0, 800.0], [0.0, 0.03, 0.1]
+    built = CuttingTask(SimConfig(resolution=RES, gravity=gravity, noise_std=noise), contour, 3, seed=3)
+    expected = built.run(None)
+    task = CuttingTask(SimConfig(resolution=RES), contour, 3, seed=3)
+    nominal = task.run(None)
+    task.set_params(gravity=gravity, noise_std=noise)
+    assert task.done, "a change of parameters ends the episode: reset next"
+    changed = task.run(None)
+    np.testing.assert_array_equal(changed.error_mm2, expected.error_mm2)
+    assert task.num_steps == built.num_steps
+    assert not np.array_equal(changed.error_mm2, nominal.error_mm2)
+    sheets = len(task.sim._settle_cache)
+    task.set_params(gravity=521.0, noise_std=0.03)
+    np.testing.assert_array_equal(task.run(None).error_mm2, nominal.error_mm2)
+    assert len(task.sim._settle_cache) == sheets, "a sheet settled before was settled again"
+
+
+def test_set_params_names_a_bad_parameter():
+    task = CuttingTask(SimConfig(resolution=RES), load_contour("fls-circle"), 2)
+    with pytest.raises(ValueError, match="set_params: unknown stiffness; choose from damping"):
+        task.set_params(stiffness=1.0)
+    with pytest.raises(ConfigError, match="gravity"):
+        task.set_params(gravity=[-1.0, 2.0])
+    with pytest.raises(ConfigError, match="noise_std: got 3 values for 2 envs"):
+        task.set_params(noise_std=[0.1, 0.2, 0.3])
+
+
+def test_randomize_ranges_take_aliases_defaults_and_name_what_is_wrong():
+    assert randomize_ranges("gravity,noise") == {
+        "gravity": RANDOMIZE_RANGES["gravity"],
+        "noise_std": RANDOMIZE_RANGES["noise_std"],
+    }
+    assert randomize_ranges(["elasticity"], {"elasticity": [0.8, 1.0]}) == {"elasticity": (0.8, 1.0)}
+    for names, ranges, message in [
+        ("wind", None, "randomize: unknown parameter 'wind'; choose from gravity"),
+        ("gravity", {"gravity": [5.0, 1.0]}, "randomize_ranges: gravity: give finite low <= high"),
+        ("gravity", {"gravity": [0.0]}, r"randomize_ranges: gravity: give \[low, high\]"),
+        ("gravity", {"gravity": [-5.0, 1.0]}, "randomize_ranges: gravity: .*gravity: must lie in"),
+        ("gravity", {"noise_std": [0.0, 0.1]}, "randomize_ranges: noise_std not randomised; add it"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            randomize_ranges(names, ranges)
+
+
+def test_randomised_envs_draw_their_parameters_per_env_and_per_reset_on_the_levels():
+    options = PatternCutOptions(
+        contour="fls-circle", resolution=RES, randomize=["gravity", "noise"], device="cpu"
+    )
+    env = PatternCutVecEnv(8, options)
+    draws = []
+    for seed in (0, 1, 0):
+        env.reset(seed=seed)
+        params = env.task.sim.params
+        draws.append((params["gravity"].copy(), params["noise_std"].copy()))
+    (g0, n0), (g1, _), (g2, n2) = draws
+    low, high = RANDOMIZE_RANGES["gravity"]
+    levels = low + (high - low) * np.arange(RANDOMIZE_LEVELS) / (RANDOMIZE_LEVELS - 1)
+    assert g0.shape == (8,) and len(np.unique(g0)) > 1, "every env draws its own gravity"
+    assert np.all(np.isclose(g0[:, None], levels[None, :], rtol=1e-6).any(axis=1))
+    assert not np.array_equal(g0, g1), "a new episode draws anew"
+    np.testing.assert_array_equal(g0, g2)  # a seed gives the same draws
+    np.testing.assert_array_equal(n0, n2)
+    # The episode is laid out on each env's own settled sheet: the same as a batch built with the draws.
+    built = CuttingTask(SimConfig(resolution=RES, gravity=g2, noise_std=n2), load_contour("fls-circle"), 8)
+    np.testing.assert_array_equal(env.task._tips, built._tips)
+    assert env.scene.episode_steps == built.num_steps
+
+
+def test_options_keep_the_randomisation_and_evaluate_on_the_nominal_sheet():
+    options = PatternCutOptions(randomize=["gravity"], randomize_ranges={"gravity": [100.0, 900.0]})
+    again = PatternCutOptions.from_dict(json.loads(json.dumps(options.to_dict())))
+    assert again.randomized() == {"gravity": (100.0, 900.0)}
+    assert again.nominal().randomized() == {} and again.nominal().contour == options.contour
+    with pytest.raises(ValueError, match="options: randomize: give a list of parameter names"):
+        PatternCutOptions.from_dict({**options.to_dict(), "randomize": "gravity"})
+    with pytest.raises(ValueError, match="options: randomize: unknown parameter 'wind'"):
+        PatternCutOptions.from_dict({**options.to_dict(), "randomize": ["wind"]})
+
+
+def test_studies_and_their_values_are_checked():
+    assert parse_studies("noise, force") == ["noise", "force"]
+    assert parse_studies("all") == ["resolution", "noise", "force"]
+    with pytest.raises(ValueError, match="study: choose from resolution, noise, force or all"):
+        parse_studies("wind")
+    assert check_study("resolution", [12.0, 25]) == [12, 25]
+    with pytest.raises(ValueError, match="values: resolutions are whole numbers"):
+        check_study("resolution", [12.5])
+    with pytest.raises(ValueError, match="values: force -1.*gravity"):
+        check_study("force", [-1.0])
+    with pytest.raises(ValueError, match="runs: label 'fixed' must be a plain name"):
+        check_runs({"fixed": "."})
+    with pytest.raises(ValueError, match="runs: .* is not one trained policy's run"):
+        check_runs({"rl": "tests"})
+
+
+def test_force_study_is_one_batch_with_a_sheet_per_gravity():
+    """Every gravity settles its own sheet in one batch: with no gravity the sheet lies flat and the cut
+    lands where it should, so no tension's error is far below the nominal sheet's."""
+    report = robustness_study(
+        "fls-circle", "force", values=[0.0, 521.0], trials=2, config=SimConfig(resolution=RES), device="cpu"
+    )
+    assert report["study"] == "force" and report["values"] == [0.0, 521.0] and report["nominal"] == 521.0
+    assert report["methods"] == ["fixed", "analytic"] and report["metric"] == "improvement_pct"
+    for method in ("fixed", "analytic"):
+        assert set(report[method]) >= {"median", "q25", "q75"}
+        assert all(len(report[method][q]) == 2 for q in ("median", "q25", "q75"))
+        assert all(
+            lo <= med <= hi
+            for lo, med, hi in zip(*(report[method][q] for q in ("q25", "median", "q75")), strict=True)
+        )
+    flat, hanging = report["none_error_mm2"]["median"]
+    assert flat < 0.25 * hanging
+
+
+def test_resolution_study_skips_a_mesh_too_coarse_for_the_contour():
+    """At 10 x 10 the analytic tensioner's grasp finds no room beside the FLS circle: that resolution is
+    skipped for every method, the others run."""
+    report = robustness_study(
+        "fls-circle", "resolution", values=[10, RES], trials=2, methods=["none", "analytic"], device="cpu"
+    )
+    assert report["skipped"] == [10.0] and report["metric"] == "error_pct_of_sheet"
+    assert report["methods"] == ["none", "analytic"]
+    assert report["none"]["median"][0] is None and report["analytic"]["median"][0] is None
+    assert 0 < report["none"]["median"][1] < 100
+
+
+def test_robustness_and_randomised_training_end_to_end(tmp_path):
+    """``warpcut train --randomize`` keeps its randomisation in the run; ``warpcut robustness --run`` sweeps
+    the policy with the baselines and writes the issue's JSON and the figure."""
+    run = tmp_path / "run"
+    code, out, err = invoke(
+        ["train", "--contour", "fls-circle", "--randomize", "gravity,noise", "--randomize-range",
+         "gravity=200,800", "--iterations", "2", "--num-envs", "8", "--validation-trials", "2",
+         "--eval-trials", "2", "--device", "cpu", "--out", str(run), "--no-progress", "--no-plots"]
+    )  # fmt: skip
+    assert code == 0, err
+    options = json.loads((run / "options.json").read_text())
+    assert options["randomize"] == ["gravity", "noise_std"] and options["randomize_ranges"]["gravity"] == [
+        200,
+        800,
+    ]
+    path = tmp_path / "noise.json"
+    code, out, err = invoke(
+        ["robustness", "--study", "noise", "--run", f"dr={run}", "--values", "0,0.05", "--trials", "2",
+         "--device", "cpu", "--out", str(tmp_path / "rob"), "--json", str(path)]
+    )  # fmt: skip
+    assert code == 0, err
+    report = json.loads(path.read_text())
+    assert report["study"] == "noise" and report["values"] == [0.0, 0.05]
+    assert report["methods"] == ["fixed", "analytic", "dr"] and report["runs"] == {"dr": str(run)}
+    assert len(report["dr"]["median"]) == 2 and "dr" in out
+    assert (tmp_path / "rob" / "robustness-noise.json").is_file() and (
+        tmp_path / "rob" / "robustness.png"
+    ).is_file()
+    # The first trial's noise is the same for every method: with no noise, every trial of a method is one.
+    assert report["fixed"]["q25"][0] == report["fixed"]["q75"][0]
+
+
+def test_robustness_and_randomize_flags_name_what_is_wrong(tmp_path):
+    code, _, err = invoke(
+        ["train", "--contour", "fls-circle", "--randomize", "wind", "--out", str(tmp_path / "x")]
+    )
+    assert code == 2 and "--randomize" in err and "unknown parameter 'wind'" in err
+    code, _, err = invoke(["robustness", "--study", "noise"])
+    assert code == 2 and "--contour: give the contour" in err
+    code, _, err = invoke(["robustness", "--study", "wind", "--contour", "fls-circle"])
+    assert code == 2 and "--study" in err
+    code, _, err = invoke(["robustness", "--study", "noise", "--run", str(tmp_path)])
+    assert code == 2 and "--run" in err and "not one trained policy's run" in err
