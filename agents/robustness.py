@@ -28,8 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.config import EVALUATION_TRIALS
+from agents.config import EVALUATION_TRIALS, GRAD_CONFIG, GradConfig
 from agents.evaluation import run_method
+from agents.gradient import PlanPolicy
 from agents.methods import BASELINES, check_methods, tensioner
 from warpcut.contours import Contour, ContourError
 from warpcut.scoring import paired_improvement
@@ -47,6 +48,11 @@ STUDY_VALUES: dict[str, tuple[float, ...]] = {
 as 10 x 10 leaves no room for the default grasp beside most contours; 256 and 1225 between), process noise
 (mm; ten values, the paper's count, from 0 to six times the default 0.03), and gravity (mm/s^2; 0 to twice
 the nominal 521 in quarters)."""
+
+STUDY_METHODS = (*BASELINES, "grad")
+"""The methods a study can run besides trained policies: the baselines, and ``grad``, an open-loop plan
+optimised through the simulator on the nominal sheet (:func:`agents.gradient.optimize_plan`) and played
+unchanged at every value."""
 
 STUDY_UNITS = {"resolution": "vertices per side", "noise": "noise_std (mm)", "force": "gravity (mm/s^2)"}
 """What a study's values are, in words (plots, tables)."""
@@ -99,6 +105,7 @@ def robustness_study(
     values: Sequence[float] | None = None,
     trials: int = EVALUATION_TRIALS,
     config: SimConfig | None = None,
+    grad: GradConfig = GRAD_CONFIG,
     device: str | None = None,
     seed: int = 0,
     log: Callable[[str], None] = lambda _: None,
@@ -115,11 +122,14 @@ def robustness_study(
             run sets the pinch point fixed tension holds, the cut order and the nominal simulation (its
             options' nominal parameters). None: fixed tension pinches the plan's point
             (:func:`warpcut.planning.plan_cut`) and no policy runs.
-        methods: The baselines to run, a subset of :data:`~agents.methods.BASELINES` (default: all;
-            ``none`` always runs, the others' improvements are measured against it).
+        methods: The methods to run besides the runs' policies, from :data:`STUDY_METHODS` (default: the
+            baselines; ``none`` always runs, the others' improvements are measured against it). ``grad``
+            optimises its plan first, at the pinch point and order fixed tension uses, kept in
+            ``out/grad/CONTOUR.json`` (and reused by the next study).
         values: The sweep (default :data:`STUDY_VALUES`).
         trials: Seeded noisy trials per value and method (the default protocol's).
         config: The nominal simulation without a run (default ``SimConfig()``).
+        grad: The ``grad`` method's optimiser settings.
         device, seed: Warp device; seed of the process noise (and of the plan).
 
     Returns:
@@ -136,8 +146,11 @@ def robustness_study(
     runs = check_runs(runs)
     scenario = _scenario(contour, runs, config, device, seed, log)
     contour, config, pinch, segments = (scenario[k] for k in ("contour", "config", "pinch", "segments"))
-    baselines = check_methods(list(methods or BASELINES), "methods", BASELINES)
+    baselines = check_methods(list(methods or BASELINES), "methods", STUDY_METHODS)
     chosen = ["none", *[m for m in baselines if m != "none"], *runs]
+    plan = None
+    if "grad" in chosen:
+        plan = _grad_plan(contour, pinch, segments, config, grad, device, seed, out, log)
     errors: dict[str, np.ndarray] = {m: np.full((len(values), trials), np.nan) for m in chosen}
     skipped = []
     batches = [[k] for k in range(len(values))] if study == "resolution" else [list(range(len(values)))]
@@ -153,8 +166,9 @@ def robustness_study(
         try:
             for method in chosen:
                 errors[method][batch] = _method_errors(
-                    method, contour, pinch, segments, sim, overrides, len(picked), trials, runs, device, seed
-                )
+                    method, contour, pinch, segments, sim, overrides, len(picked), trials, runs, device, seed,
+                    plan,
+                )  # fmt: skip
         except (ContourError, ValueError) as error:
             if study != "resolution" or not str(error).startswith(("resolution", "contour")):
                 raise
@@ -287,6 +301,7 @@ def _method_errors(
     runs: dict[str, Path],
     device: str | None,
     seed: int,
+    plan: np.ndarray | None = None,
 ) -> np.ndarray:
     """(settings, trials) errors (mm^2) of ``method``: one batch, env ``s * trials + k`` = setting ``s``,
     trial ``k``, with the same noise streams in every method's batch."""
@@ -304,12 +319,36 @@ def _method_errors(
         point = AnalyticTension().pinch_point(contour, config)
     else:
         point = None if method == "none" else pinch
+    policy = tensioner(method) if method != "grad" else PlanPolicy([plan] * settings, trials)
     # run_method's layout is contour by contour, trials within: one "contour" per setting.
     result = run_method(
-        [contour] * settings, [point] * settings, tensioner(method), trials, config, device, seed,
+        [contour] * settings, [point] * settings, policy, trials, config, device, seed,
         segments=[segments] * settings,
     )  # fmt: skip
     return np.asarray(result.error_mm2, dtype=np.float64)
+
+
+def _grad_plan(contour, pinch, segments, config, settings, device, seed, out, log) -> np.ndarray:
+    """The ``grad`` method's open-loop plan (T, 3) for the nominal sheet: read from ``out/grad/NAME.json``
+    when a study before optimised it, else optimised (its state kept beside, so an interrupted optimisation
+    continues) and written there."""
+    from agents.gradient import PlanResult, optimize_plan
+    from warpcut.io import read_json, safe_name, write_json
+
+    done = None if out is None else Path(out) / "grad" / f"{safe_name(contour.name)}.json"
+    if done is not None and done.is_file():
+        result = PlanResult.from_json(read_json(done))
+        if np.allclose(result.pinch, pinch) and len(result.history) == settings.iterations + 1:
+            return result.plan
+    log(f"  grad: optimising a plan for {contour.name} at {', '.join(f'{v:.1f}' for v in pinch)}")
+    state = None if done is None else done.with_suffix(".state.json")
+    result = optimize_plan(
+        contour, pinch, segments, config, settings, device=device, seed=seed, log=log, state_file=state
+    )
+    if done is not None:
+        write_json(done, result.to_json())
+        state.unlink(missing_ok=True)
+    return result.plan
 
 
 def robustness_table(report: dict) -> list[str]:
@@ -332,6 +371,7 @@ def robustness_table(report: dict) -> list[str]:
 
 __all__ = [
     "STUDIES",
+    "STUDY_METHODS",
     "STUDY_UNITS",
     "STUDY_VALUES",
     "check_runs",
@@ -368,6 +408,7 @@ def robustness(
     values: Sequence[float] | None = None,
     trials: int = EVALUATION_TRIALS,
     config: SimConfig | None = None,
+    grad: GradConfig = GRAD_CONFIG,
     device: str | None = None,
     seed: int = 0,
     resume: bool = False,
@@ -388,7 +429,7 @@ def robustness(
     _record_request(
         out, "robustness", resume, contour=named,
         studies=studies, runs={k: str(v) for k, v in runs.items()}, methods=list(methods or BASELINES),
-        values=values, trials=trials, config=config or SimConfig(), seed=seed,
+        values=values, trials=trials, config=config or SimConfig(), grad=grad, seed=seed,
     )  # fmt: skip
     reports = []
     for study in studies:
@@ -398,19 +439,9 @@ def robustness(
             reports.append(read_json(path))
             continue
         log(f"{study} study")
-        reports.append(
-            robustness_study(
-                contour,
-                study,
-                out,
-                runs=runs,
-                methods=methods,
-                values=values,
-                trials=trials,
-                config=config,
-                device=device,
-                seed=seed,
-                log=log,
-            )  # fmt: skip
-        )
+        report = robustness_study(
+            contour, study, out, runs=runs, methods=methods, values=values, trials=trials, config=config,
+            grad=grad, device=device, seed=seed, log=log,
+        )  # fmt: skip
+        reports.append(report)
     return reports

@@ -621,6 +621,10 @@ def test_cli_defaults_are_the_library_defaults():
             expected["grad_iterations"] = evaluate["grad"].default.iterations
         if name == "train":
             expected["algo"] = train.algorithm
+        if name == "robustness":
+            from agents.robustness import robustness
+
+            expected["trials"] = inspect.signature(robustness).parameters["trials"].default
         if name == "optimize":
             grad = GradConfig()
             optimize = inspect.signature(optimize_contour).parameters
@@ -645,6 +649,8 @@ def test_cli_defaults_are_the_library_defaults():
         ("optimize", "learning_rate"),
         ("optimize", "trials"),
         ("plan", "tolerance"),
+        ("robustness", "trials"),
+        ("robustness", "noise"),
     } <= seen
     for command in ("plan", "evaluate", "run"):
         assert (command, "arm_length") in seen, command

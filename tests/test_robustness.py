@@ -197,3 +197,22 @@ def test_robustness_and_randomize_flags_name_what_is_wrong(tmp_path):
     assert code == 2 and "--study" in err
     code, _, err = invoke(["robustness", "--study", "noise", "--run", str(tmp_path)])
     assert code == 2 and "--run" in err and "not one trained policy's run" in err
+
+
+def test_grad_plays_its_plan_at_every_value_and_is_optimised_once(tmp_path):
+    from agents.config import GradConfig
+    from agents.robustness import robustness
+
+    settings = GradConfig(iterations=2, trials=2, validation_trials=2)
+    reports = robustness(
+        "fls-circle", "noise,force", tmp_path, methods=["none", "grad"], values=None, trials=2,
+        config=SimConfig(resolution=RES), grad=settings, device="cpu",
+    )  # fmt: skip
+    plan = json.loads((tmp_path / "grad" / "fls-circle.json").read_text())
+    assert len(plan["history"]) == settings.iterations + 1
+    for report in reports:
+        assert report["methods"] == ["grad"] and len(report["grad"]["median"]) == len(report["values"])
+    # The second study read the plan back: the file was written once, before it.
+    assert (tmp_path / "grad" / "fls-circle.json").stat().st_mtime <= (
+        tmp_path / "robustness-noise.json"
+    ).stat().st_mtime

@@ -39,7 +39,9 @@ from warpcut.sim.config import SimConfig
     "--methods",
     default=",".join(BASELINES),
     show_default=True,
-    help="The baselines to run (none always runs: the others are measured against it).",
+    help="The methods to run besides the policies: none, fixed, analytic, and grad (an open-loop plan "
+    "optimised through the simulator on the nominal sheet, then played unchanged at every value); none "
+    "always runs, the others are measured against it.",
 )
 @click.option(
     "--values",
@@ -74,7 +76,7 @@ def command(
 ) -> None:
     """Sweep mesh resolution, process noise or gravity around the nominal sheet and compare how each
     tensioner holds up (the paper's Fig. 5)."""
-    from agents.robustness import check_runs, parse_studies, robustness, robustness_table
+    from agents.robustness import STUDY_METHODS, check_runs, parse_studies, robustness, robustness_table
     from warpcut.contours import load_contour
     from warpcut.io import safe_name, write_json
 
@@ -94,7 +96,7 @@ def command(
             source = click.get_current_context().get_parameter_source(name)
             if source == click.core.ParameterSource.COMMANDLINE:
                 raise click.UsageError(f"{flag}: with --run the nominal sheet is the run's; drop {flag}")
-    baselines = common.parse_methods(methods, "--methods", BASELINES)
+    baselines = common.parse_methods(methods, "--methods", STUDY_METHODS)
     sweep = _parse_values(values)
     common.check_outputs({"--json": json_path}, [contour_name] if contour_name else [])
     name = load_contour(contour_name).name if contour_name else "run"
