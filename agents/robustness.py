@@ -41,18 +41,26 @@ STUDIES = ("resolution", "noise", "force")
 
 STUDY_VALUES: dict[str, tuple[float, ...]] = {
     "resolution": (12, 16, 20, 25, 35, 50),
-    "noise": tuple(round(0.02 * k, 2) for k in range(10)),
+    "noise": tuple(round(0.03 * k, 2) for k in range(10)),
     "force": tuple(GRAVITY_MM_S2 * k / 4 for k in range(9)),
 }
 """Each study's default sweep: vertices per side (the paper's 400, 625 and 2500 vertices; 144 for its 100,
 as 10 x 10 leaves no room for the default grasp beside most contours; 256 and 1225 between), process noise
-(mm; ten values, the paper's count, from 0 to six times the default 0.03), and gravity (mm/s^2; 0 to twice
-the nominal 521 in quarters)."""
+(mm; ten values, the paper's count, 0 to nine times the default 0.03 in its steps: the paper's largest sigma
+was 0.21 mm), and gravity (mm/s^2; 0 to twice the nominal 521 in quarters)."""
 
 STUDY_METHODS = (*BASELINES, "grad")
 """The methods a study can run besides trained policies: the baselines, and ``grad``, an open-loop plan
 optimised through the simulator on the nominal sheet (:func:`agents.gradient.optimize_plan`) and played
 unchanged at every value."""
+
+REPORT_FIELDS = (
+    "study", "values", "unit", "metric", "contour", "trials", "nominal", "pinch", "runs", "methods",
+    "seconds", "skipped", "none_error_mm2",
+)  # fmt: skip
+"""The keys of a study's report besides its methods' (:func:`robustness_study`)."""
+RESERVED_LABELS = (*STUDY_METHODS, *REPORT_FIELDS)
+"""Names a run's label may not take: a method's, or a report field's."""
 
 STUDY_UNITS = {"resolution": "vertices per side", "noise": "noise_std (mm)", "force": "gravity (mm/s^2)"}
 """What a study's values are, in words (plots, tables)."""
@@ -227,10 +235,10 @@ def check_runs(runs: Mapping[str, str | Path] | str | Path | None) -> dict[str, 
         runs = {"rl": runs}
     checked = {}
     for label, run in dict(runs).items():
-        if label in BASELINES or not re.fullmatch(r"[A-Za-z][\w.-]*", str(label)):
+        if label in RESERVED_LABELS or not re.fullmatch(r"[A-Za-z][\w.-]*", str(label)):
             raise ValueError(
-                f"runs: label {label!r} must be a plain name (letters, digits, - _ .) other than "
-                f"{', '.join(BASELINES)}"
+                f"runs: label {label!r} must be a plain name (letters, digits, - _ .) other than a method's "
+                f"or a report field's ({', '.join(RESERVED_LABELS)})"
             )
         try:
             found = policy_runs(run) if Path(run).is_dir() else []
@@ -371,6 +379,7 @@ def robustness_table(report: dict) -> list[str]:
 
 __all__ = [
     "STUDIES",
+    "REPORT_FIELDS",
     "STUDY_METHODS",
     "STUDY_UNITS",
     "STUDY_VALUES",

@@ -117,8 +117,9 @@ def test_studies_and_their_values_are_checked():
         check_study("resolution", [12.5])
     with pytest.raises(ValueError, match="values: force -1.*gravity"):
         check_study("force", [-1.0])
-    with pytest.raises(ValueError, match="runs: label 'fixed' must be a plain name"):
-        check_runs({"fixed": "."})
+    for label in ("fixed", "grad", "nominal", "values", "2nd"):
+        with pytest.raises(ValueError, match=f"runs: label '{label}' must be a plain name"):
+            check_runs({label: "."})
     with pytest.raises(ValueError, match="runs: .* is not one trained policy's run"):
         check_runs({"rl": "tests"})
 
