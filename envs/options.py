@@ -83,6 +83,10 @@ class PatternCutOptions:
     and its "stay" action is analytic control. 0: off (the policy's moves alone)."""
     dense_reward: bool = False
     """Add the per-step cut-deviation penalty (the path score's increment) to the sparse final reward."""
+    relative_reward: bool = False
+    """Scale every env's reward by the nominal sheet's no-tension error over its own sheet's (module
+    :mod:`envs.core`): with domain randomisation, each sheet counts by its relative improvement, as the
+    evaluation counts it. Without randomisation every scale is 1."""
     max_episode_steps: int | None = None
     """Truncate episodes after this many steps; default: the whole cut."""
     randomize: Sequence[str] = ()
@@ -268,7 +272,14 @@ def _is_count(value: Any, least: int) -> bool:
     return isinstance(value, int) and not isinstance(value, bool) and value >= least
 
 
-_FLAGS = ("resample_fiducials", "contour_features", "observe_pinch", "allow_z", "dense_reward")
+_FLAGS = (
+    "resample_fiducials",
+    "contour_features",
+    "observe_pinch",
+    "allow_z",
+    "dense_reward",
+    "relative_reward",
+)
 
 
 def _field_problem(name: str, value: Any) -> str | None:

@@ -161,11 +161,13 @@ def test_robustness_and_randomised_training_end_to_end(tmp_path):
     run = tmp_path / "run"
     code, out, err = invoke(
         ["train", "--contour", "fls-circle", "--randomize", "gravity,noise", "--randomize-range",
-         "gravity=200,800", "--iterations", "2", "--num-envs", "8", "--validation-trials", "2",
-         "--eval-trials", "2", "--device", "cpu", "--out", str(run), "--no-progress", "--no-plots"]
+         "gravity=200,800", "--relative-reward", "--iterations", "2", "--num-envs", "8",
+         "--validation-trials", "2", "--eval-trials", "2", "--device", "cpu", "--out", str(run),
+         "--no-progress", "--no-plots"]
     )  # fmt: skip
     assert code == 0, err
     options = json.loads((run / "options.json").read_text())
+    assert options["relative_reward"] is True
     assert options["randomize"] == ["gravity", "noise_std"] and options["randomize_ranges"]["gravity"] == [
         200,
         800,
@@ -217,3 +219,32 @@ def test_grad_plays_its_plan_at_every_value_and_is_optimised_once(tmp_path):
     assert (tmp_path / "grad" / "fls-circle.json").stat().st_mtime <= (
         tmp_path / "robustness-noise.json"
     ).stat().st_mtime
+
+
+def test_relative_reward_weighs_each_sheet_by_its_no_tension_error():
+    """Each env's reward is its plain reward times the nominal sheet's no-tension error over its own: 1 on
+    the nominal sheet, larger on a flatter one, clipped on a sheet that hangs flat."""
+    from envs.core import RELATIVE_REWARD_MAX_SCALE
+
+    gravity = [521.0, 260.5, 0.0]
+    plain = PatternCutVecEnv(3, PatternCutOptions(contour="fls-circle", resolution=RES, gravity=gravity))
+    options = PatternCutOptions(contour="fls-circle", resolution=RES, relative_reward=True)
+    scaled = PatternCutVecEnv(3, options)
+    scaled.reset(seed=0)
+    scaled.task.set_params(gravity=gravity)  # as a randomised reset would draw them
+    scaled.scene.reset(np.random.default_rng(0), True)
+    plain.scene.reset(np.random.default_rng(0), True)
+    scale = scaled.scene._reward_scale
+    assert scale[0] == pytest.approx(1.0) and 1.0 < scale[1] < RELATIVE_REWARD_MAX_SCALE
+    assert scale[2] == RELATIVE_REWARD_MAX_SCALE
+    none = CuttingTask(
+        SimConfig(resolution=RES, gravity=gravity, noise_std=0.0), load_contour("fls-circle"), 3
+    )
+    errors = none.run(None).error_mm2
+    assert scale[1] == pytest.approx(errors[0] / errors[1])
+    actions = np.zeros(3, dtype=np.int64)
+    for _ in range(plain.scene.episode_steps):
+        _, r_plain, *_ = plain.scene.step(actions)
+        _, r_scaled, *_ = scaled.scene.step(actions)
+        np.testing.assert_allclose(r_scaled, r_plain * scale)
+    assert (r_plain < 0).all(), "the last step carries the final error"

@@ -340,6 +340,13 @@ def randomize_options(f):
     from warpcut.sim.config import RANDOMIZE_ALIASES, RANDOMIZE_RANGES
 
     f = click.option(
+        "--relative-reward",
+        is_flag=True,
+        help="Scale each env's reward by the nominal sheet's no-tension error over its own sheet's (at most "
+        "10x): with --randomize, a sheet that hangs flat counts as much as the nominal one, as in the "
+        "evaluation's relative improvement (docs/robustness.md).",
+    )(f)
+    f = click.option(
         "--randomize-range",
         "randomize_range",
         multiple=True,
@@ -380,17 +387,20 @@ def parse_randomization(names: str | None, ranges: tuple[str, ...]) -> tuple[lis
     return list(chosen), {k: v for k, v in chosen.items() if k in given}
 
 
-def randomized_recipe(recipe, names: str | None, ranges: tuple[str, ...]):
+def randomized_recipe(recipe, names: str | None, ranges: tuple[str, ...], relative_reward: bool = False):
     """``recipe`` (:class:`agents.config.Recipe`) training with the domain randomisation of ``--randomize``
-    and ``--randomize-range`` (:func:`parse_randomization`); ``recipe`` itself without any."""
+    and ``--randomize-range`` (:func:`parse_randomization`) and ``--relative-reward``; ``recipe`` itself
+    without any."""
     import dataclasses
 
     randomized, given = parse_randomization(names, ranges)
-    if not randomized:
+    if not randomized and not relative_reward:
         return recipe
     if recipe.train.get("algorithm") == "apg":
         raise click.UsageError("--randomize: APG differentiates one fixed sheet; use a PPO recipe")
     options = {**recipe.options, "randomize": randomized, "randomize_ranges": given or None}
+    if relative_reward:
+        options["relative_reward"] = True
     return dataclasses.replace(recipe, options=options)
 
 

@@ -84,6 +84,7 @@ def command(
     recipe: str,
     randomize: str | None,
     randomize_range: tuple[str, ...],
+    relative_reward: bool,
     candidates: int | None,
     rl_candidates: int | None,
     iterations: int | None,
@@ -114,7 +115,7 @@ def command(
     from warpcut.planning import ArmModel
 
     common.check_outputs({"--json": json_path}, [contour_name])
-    chosen_recipe = common.randomized_recipe(RECIPES[recipe], randomize, randomize_range)
+    chosen_recipe = common.randomized_recipe(RECIPES[recipe], randomize, randomize_range, relative_reward)
     out, claim = common.claim(out, f"run-{safe_name(load_contour(contour_name).name)}", resume, overwrite)
     cuts = common.final_cuts(no_plots)
     with claim, common.recorder(out, record_envs, colour_by) as rec:

@@ -25,6 +25,7 @@ RESUMED_FLAGS = {
     "action_type": "--actions",
     "allow_z": "--z/--no-z",
     "randomize": "--randomize",
+    "relative_reward": "--relative-reward",
 }
 """The env options a run fixes (its options.json): with --resume they may only repeat the run's values."""
 
@@ -138,6 +139,7 @@ def command(
     validation_trials: int,
     randomize: str | None,
     randomize_range: tuple[str, ...],
+    relative_reward: bool,
     eval_trials: int,
     device: str | None,
     seed: int,
@@ -170,7 +172,7 @@ def command(
         options, out = load_options(run, device), out or run
         given = dict(
             contour_name=contour_name, pinch=point, noise=noise, score=score, reward=reward, observe=observe,
-            action_type=action_type, allow_z=allow_z, randomize=randomized,
+            action_type=action_type, allow_z=allow_z, randomize=randomized, relative_reward=relative_reward,
         )  # fmt: skip
         _check_resumed_flags(run, options, given)
         trained = options.randomized()
@@ -200,6 +202,7 @@ def command(
             allow_z=allow_z,
             randomize=randomized,
             randomize_ranges=ranges or None,
+            relative_reward=relative_reward,
         )
         options.per_env(1)  # fail early on a bad contour or an infeasible default pinch
         out = out or common.run_dir(None, f"train-{safe_name(load_contour(contour_name).name)}")
@@ -284,6 +287,7 @@ def _check_resumed_flags(run: Path, options, given: dict) -> None:
                 "action_type": options.action_type,
                 "allow_z": options.allow_z,
                 "randomize": list(options.randomized()),
+                "relative_reward": options.relative_reward,
             }[name]
             if np.array_equal(np.asarray(trained), np.asarray(value)):
                 continue
