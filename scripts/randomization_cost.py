@@ -25,7 +25,7 @@ def episode_rates(randomize: list[str], envs: int, episodes: int) -> list[float]
     for _ in range(episodes):
         start, steps = time.perf_counter(), 0
         while True:  # the vector env resets itself (drawing anew) after the last step
-            _, _, terminated, truncated, _ = env.step(rng.integers(0, 7, size=envs))
+            _, _, terminated, truncated, _ = env.step(rng.integers(0, 5, size=envs))
             steps += envs
             if terminated.any() or truncated.any():
                 break

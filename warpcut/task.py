@@ -191,6 +191,7 @@ class CuttingTask:
         self.pinch_points = self._pinch_array(pinch_points)
         self._given_segments = segments
         self._trajectory_cache: dict[tuple, Trajectory] = {}
+        self._arc_cache: dict[tuple[int, int], np.ndarray] = {}
         if not trace_path and config.score == "path":
             raise ValueError(
                 "trace_path: the path score needs the traced path; keep trace_path=True or score='separated'"
@@ -293,6 +294,7 @@ class CuttingTask:
         cache = self._trajectory_cache
         if len(cache) > 4 * self.num_envs + 64:
             cache.clear()
+            self._arc_cache.clear()
         trajectories = []
         for env in range(self.num_envs):
             segment_bytes = tuple(
@@ -318,7 +320,7 @@ class CuttingTask:
 
     def _compute_target_arcs(self) -> np.ndarray:
         arcs = np.full(self._targets.shape[:2], np.nan)
-        cache: dict[tuple[int, int], np.ndarray] = {}
+        cache = self._arc_cache  # kept with the trajectories (their ids are stable while they are kept)
         for env, (contour, trajectory) in enumerate(zip(self.contours, self.trajectories, strict=True)):
             key = (id(contour), id(trajectory))
             if key not in cache:

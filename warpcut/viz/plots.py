@@ -690,6 +690,10 @@ def _draw_candidates(fig: Figure, ax, plan: Plan) -> list:
     return handles
 
 
+ROBUSTNESS_FLOOR_PCT = -100.0
+"""Improvements below this are drawn at it, with their value written (:func:`robustness_figure`)."""
+
+
 def plot_robustness(
     reports: Sequence[dict], out_dir: str | os.PathLike, name: str = "robustness"
 ) -> list[Path]:
@@ -699,22 +703,35 @@ def plot_robustness(
     return save_figure(robustness_figure(reports), out_dir, name)
 
 
-def robustness_figure(reports: Sequence[dict]) -> Figure:
-    """What :func:`plot_robustness` saves."""
+def robustness_figure(reports: Sequence[dict], floor_pct: float = ROBUSTNESS_FLOOR_PCT) -> Figure:
+    """What :func:`plot_robustness` saves. A method keeps its colour in every panel; improvements below
+    ``floor_pct`` (e.g. a policy dragging a sheet that hangs flat, where no tension is nearly exact) are
+    drawn at the floor with their value written beside them, so they do not squash the rest."""
     if not reports:
         raise ValueError("reports: give at least one robustness report")
+    names = list(dict.fromkeys(m for report in reports for m in report["methods"]))
+    colours = {m: f"C{k % 10}" for k, m in enumerate(names)}
     fig = Figure(figsize=(4.6 * len(reports), 3.6), layout="constrained")
     axes = fig.subplots(1, len(reports), squeeze=False)[0]
     for ax, report in zip(axes, reports, strict=True):
         values = np.asarray(report["values"], dtype=np.float64)
-        for k, method in enumerate(report["methods"]):
+        floor = floor_pct if report["metric"] == "improvement_pct" else -np.inf
+        below: dict[float, int] = {}  # off-scale labels already written at each value: stacked
+        for method in report["methods"]:
             stats = {
-                q: np.array([np.nan if v is None else v for v in report[method][q]])
+                q: np.array([np.nan if v is None else v for v in report[method][q]], dtype=np.float64)
                 for q in ("median", "q25", "q75")
             }
-            colour = f"C{k % 10}"
-            ax.plot(values, stats["median"], "o-", color=colour, label=method, markersize=3.5)
-            ax.fill_between(values, stats["q25"], stats["q75"], color=colour, alpha=0.15, linewidth=0)
+            shown = np.maximum(stats["median"], floor)
+            colour = colours[method]
+            ax.plot(values, shown, "o-", color=colour, label=method, markersize=3.5)
+            band = [np.maximum(stats[q], floor) for q in ("q25", "q75")]
+            ax.fill_between(values, *band, color=colour, alpha=0.15, linewidth=0)
+            for x, med in zip(values, stats["median"], strict=True):
+                if med < floor:
+                    k = below[x] = below.get(x, -1) + 1
+                    ax.annotate(f"{med:.0f}%", (x, floor), xytext=(4, 3 + 8 * k), textcoords="offset points",
+                                fontsize=6, color=colour)  # fmt: skip
         ax.axvline(report["nominal"], color="0.3", linestyle="--", linewidth=1, label="nominal")
         if report["metric"] == "improvement_pct":
             ax.axhline(0.0, color="0.5", linewidth=0.8)
@@ -724,5 +741,10 @@ def robustness_figure(reports: Sequence[dict]) -> Figure:
         ax.set_xlabel(report["unit"])
         ax.set_title(f"{report['contour']}: {report['study']} ({report['trials']} trials)", fontsize=10)
         ax.legend(fontsize=7, loc="best", framealpha=0.8)
-    fig.text(0.01, -0.02, "lines: median over trials; bands: 25th to 75th percentile", fontsize=7)
+    fig.text(
+        0.01,
+        -0.02,
+        f"lines: median over trials; bands: 25th to 75th percentile; floor {floor_pct:g}%",
+        fontsize=7,
+    )
     return fig
