@@ -126,7 +126,10 @@ def train_contour(
         def validate(actor: torch.nn.Module) -> np.ndarray:
             """Validation errors (vertices), (episodes, candidates): env i pinches candidate i % K."""
             seed = cfg.seed + VALIDATION_SEED_OFFSET
-            return policy_errors(actor, validation_env, seed)["error_vertices"].reshape(-1, candidates)
+            errors = policy_errors(actor, validation_env, seed)["error_vertices"]
+            if options.relative_reward:  # selection on the reward's scale: a flat sheet's error counts
+                errors = errors * validation_env.scene.reward_scale
+            return errors.reshape(-1, candidates)
 
         def candidate_errors(actor: torch.nn.Module) -> np.ndarray:
             """Mean validation error (vertices) per candidate."""

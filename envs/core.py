@@ -212,6 +212,11 @@ class PatternCut:
             rewards *= self._reward_scale
         return self.observe(), rewards, terminated, truncated, info
 
+    @property
+    def reward_scale(self) -> np.ndarray:
+        """(B,) the factor each env's reward is scaled by this episode (``relative_reward``; else all 1)."""
+        return np.ones(self.num_envs) if self._reward_scale is None else self._reward_scale.copy()
+
     def _relative_scale(self) -> np.ndarray:
         """(B,) the nominal sheet's no-tension error over each env's own (``relative_reward``), clipped to
         ``[1 / RELATIVE_REWARD_MAX_SCALE, RELATIVE_REWARD_MAX_SCALE]``. No-tension errors are cut once per

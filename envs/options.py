@@ -86,7 +86,8 @@ class PatternCutOptions:
     relative_reward: bool = False
     """Scale every env's reward by the nominal sheet's no-tension error over its own sheet's (module
     :mod:`envs.core`): with domain randomisation, each sheet counts by its relative improvement, as the
-    evaluation counts it. Without randomisation every scale is 1."""
+    evaluation counts it; validation scales each episode's error alike. Without randomisation every scale
+    is 1."""
     max_episode_steps: int | None = None
     """Truncate episodes after this many steps; default: the whole cut."""
     randomize: Sequence[str] = ()

@@ -234,7 +234,8 @@ def test_relative_reward_weighs_each_sheet_by_its_no_tension_error():
     scaled.task.set_params(gravity=gravity)  # as a randomised reset would draw them
     scaled.scene.reset(np.random.default_rng(0), True)
     plain.scene.reset(np.random.default_rng(0), True)
-    scale = scaled.scene._reward_scale
+    scale = scaled.scene.reward_scale
+    np.testing.assert_array_equal(plain.scene.reward_scale, np.ones(3))
     assert scale[0] == pytest.approx(1.0) and 1.0 < scale[1] < RELATIVE_REWARD_MAX_SCALE
     assert scale[2] == RELATIVE_REWARD_MAX_SCALE
     none = CuttingTask(
