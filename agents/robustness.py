@@ -56,7 +56,7 @@ unchanged at every value."""
 
 REPORT_FIELDS = (
     "study", "values", "unit", "metric", "contour", "trials", "nominal", "pinch", "runs", "methods",
-    "seconds", "skipped", "none_error_mm2",
+    "seconds", "skipped", "none_error_mm2", "own_order_none",
 )  # fmt: skip
 """The keys of a study's report besides its methods' (:func:`robustness_study`)."""
 RESERVED_LABELS = (*STUDY_METHODS, *REPORT_FIELDS)
@@ -145,7 +145,8 @@ def robustness_study(
         "seconds", "skipped": [value], METHOD: {"median", "q25", "q75", "mean"} (one entry per value)}``, the
         metric being ``improvement_pct`` (noise, force) or ``error_pct_of_sheet`` (resolution; then
         ``none`` is a method too). Noise and force add ``none_error_mm2``, the same statistics of no
-        tension's error.
+        tension's error. A run cut in another order than the first run (e.g. one that chose another pinch
+        candidate) is paired with no tension cut in its own order: ``own_order_none`` names those runs.
     """
     start = time.perf_counter()
     values = check_study(study, values)
@@ -154,12 +155,19 @@ def robustness_study(
     runs = check_runs(runs)
     scenario = _scenario(contour, runs, config, device, seed, log)
     contour, config, pinch, segments = (scenario[k] for k in ("contour", "config", "pinch", "segments"))
+    # A run cut in another order than the first is measured against no tension cut in its own order.
+    own_order = {
+        label: cut
+        for label, cut in scenario.get("run_segments", {}).items()
+        if _order_key(cut) != _order_key(segments)
+    }
     baselines = check_methods(list(methods or BASELINES), "methods", STUDY_METHODS)
     chosen = ["none", *[m for m in baselines if m != "none"], *runs]
     plan = None
     if "grad" in chosen:
         plan = _grad_plan(contour, pinch, segments, config, grad, device, seed, out, log)
     errors: dict[str, np.ndarray] = {m: np.full((len(values), trials), np.nan) for m in chosen}
+    own_none = {label: np.full((len(values), trials), np.nan) for label in own_order}
     skipped = []
     batches = [[k] for k in range(len(values))] if study == "resolution" else [list(range(len(values)))]
     for batch in batches:
@@ -177,6 +185,14 @@ def robustness_study(
                     method, contour, pinch, segments, sim, overrides, len(picked), trials, runs, device, seed,
                     plan,
                 )  # fmt: skip
+            done: dict = {}
+            for label, cut in own_order.items():
+                key = _order_key(cut)
+                if key not in done:
+                    done[key] = _method_errors(
+                        "none", contour, pinch, cut, sim, overrides, len(picked), trials, runs, device, seed
+                    )
+                own_none[label][batch] = done[key]
         except (ContourError, ValueError) as error:
             if study != "resolution" or not str(error).startswith(("resolution", "contour")):
                 raise
@@ -196,13 +212,15 @@ def robustness_study(
         "runs": {label: str(run) for label, run in runs.items()},
         "methods": chosen if study == "resolution" else chosen[1:],
         "skipped": [float(v) for v in skipped],
+        "own_order_none": sorted(own_order),
     }
     sheet_mm2 = config.width_mm * config.height_mm
     for method in chosen:
         if study == "resolution":
             report[method] = _stats(100.0 * errors[method] / sheet_mm2)
         elif method != "none":
-            report[method] = _stats(paired_improvement(errors["none"], errors[method]))
+            none = own_none.get(method, errors["none"])
+            report[method] = _stats(paired_improvement(none, errors[method]))
     if study != "resolution":
         report["none_error_mm2"] = _stats(errors["none"])
     report["seconds"] = time.perf_counter() - start
@@ -211,6 +229,13 @@ def robustness_study(
 
         write_json(Path(out) / f"robustness-{study}.json", report)
     return report
+
+
+def _order_key(segments: list[np.ndarray] | None) -> tuple | None:
+    """What identifies a cut order (None: the contour as one segment)."""
+    if segments is None:
+        return None
+    return tuple(np.ascontiguousarray(s, dtype=np.float64).tobytes() for s in segments)
 
 
 def _nominal(study: str, config: SimConfig) -> float:
@@ -263,7 +288,7 @@ def _scenario(contour, runs: dict[str, Path], config, device, seed, log) -> dict
         given = None
         if contour is not None:
             given = load_contour(contour) if not isinstance(contour, Contour) else contour
-        first = None
+        first, cuts = None, {}
         for label, run in runs.items():
             options = policy_options(run, device)
             trained = options.contours(1)[0]
@@ -274,12 +299,13 @@ def _scenario(contour, runs: dict[str, Path], config, device, seed, log) -> dict
                     "of one contour (and leave the contour out, or give that one)"
                 )
             first = first or options
-        segments = None if first.segments is None else [np.asarray(s) for s in first.segments]
+            cuts[label] = None if options.segments is None else [np.asarray(s) for s in options.segments]
         return {
             "contour": first.contours(1)[0],
             "config": first.config(),
             "pinch": np.asarray(first.per_env(1)[1][0], dtype=np.float64),
-            "segments": segments,
+            "segments": next(iter(cuts.values())),
+            "run_segments": cuts,
         }
     from warpcut.planning import plan_cut
 

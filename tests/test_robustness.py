@@ -249,3 +249,30 @@ def test_relative_reward_weighs_each_sheet_by_its_no_tension_error():
         _, r_scaled, *_ = scaled.scene.step(actions)
         np.testing.assert_allclose(r_scaled, r_plain * scale)
     assert (r_plain < 0).all(), "the last step carries the final error"
+
+
+def test_a_run_cut_in_another_order_is_paired_with_no_tension_in_that_order(tmp_path):
+    """Two runs of one contour with different cut orders: each policy's improvement is over no tension cut
+    in its own order, so the same run gives the same figures whether it comes first or second."""
+    loop = load_contour("fls-circle")
+    half = len(loop.points) // 2
+    other = [loop.points[: half + 1].tolist(), loop.points[half:].tolist() + [loop.points[0].tolist()]]
+    runs = {}
+    for label, segments in (("whole", None), ("split", other)):
+        code, _, err = invoke(
+            ["train", "--contour", "fls-circle", "--iterations", "1", "--num-envs", "4",
+             "--validation-trials", "0", "--eval-trials", "2", "--device", "cpu", "--out",
+             str(tmp_path / label), "--no-progress", "--no-plots"]
+        )  # fmt: skip
+        assert code == 0, err
+        if segments is not None:  # the run's own order, as a plan would give it
+            path = tmp_path / label / "options.json"
+            options = json.loads(path.read_text())
+            path.write_text(json.dumps({**options, "segments": segments}))
+        runs[label] = tmp_path / label
+    both = robustness_study(None, "noise", runs=runs, values=[0.03], trials=2, methods=["none"], device="cpu")
+    alone = robustness_study(
+        None, "noise", runs={"split": runs["split"]}, values=[0.03], trials=2, methods=["none"]
+    )
+    assert both["own_order_none"] == ["split"] and alone["own_order_none"] == []
+    assert both["split"]["median"] == alone["split"]["median"]
