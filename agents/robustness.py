@@ -214,21 +214,29 @@ def robustness_study(
         "skipped": [float(v) for v in skipped],
         "own_order_none": sorted(own_order),
     }
-    sheet_mm2 = config.width_mm * config.height_mm
-    for method in chosen:
-        if study == "resolution":
-            report[method] = _stats(100.0 * errors[method] / sheet_mm2)
-        elif method != "none":
-            none = own_none.get(method, errors["none"])
-            report[method] = _stats(paired_improvement(none, errors[method]))
-    if study != "resolution":
-        report["none_error_mm2"] = _stats(errors["none"])
+    report.update(_method_stats(study, chosen, errors, own_none, config.width_mm * config.height_mm))
     report["seconds"] = time.perf_counter() - start
     if out is not None:
         from warpcut.io import write_json
 
         write_json(Path(out) / f"robustness-{study}.json", report)
     return report
+
+
+def _method_stats(study: str, methods: list[str], errors: dict, own_none: dict, sheet_mm2: float) -> dict:
+    """Each method's statistics per value: its error as % of the sheet (resolution), or its improvement
+    over no tension (paired; cut in the run's own order where ``own_none`` has it), and no tension's
+    error (``none_error_mm2``)."""
+    stats = {}
+    for method in methods:
+        if study == "resolution":
+            stats[method] = _stats(100.0 * errors[method] / sheet_mm2)
+        elif method != "none":
+            none = own_none.get(method, errors["none"])
+            stats[method] = _stats(paired_improvement(none, errors[method]))
+    if study != "resolution":
+        stats["none_error_mm2"] = _stats(errors["none"])
+    return stats
 
 
 def _order_key(segments: list[np.ndarray] | None) -> tuple | None:
