@@ -35,6 +35,7 @@ from agents.config import (
     EVALUATION_TRIALS,
     GRAD_CONFIG,
     RECIPES,
+    VALIDATION_TRIALS,
     GradConfig,
     Recipe,
     TrainConfig,
@@ -42,7 +43,7 @@ from agents.config import (
 from agents.evaluation import Method, MethodResult, evaluate_suite, run_method
 from agents.gradient import grad_column
 from agents.methods import SELECTORS, TABLE_METHODS, StepCallbacks, check_methods, point_text
-from agents.rl import check_policy_run, is_run, rollout_errors, train_contour
+from agents.rl import check_policy_run, is_run, nominal_validation_error, rollout_errors, train_contour
 from envs.options import PatternCutOptions
 from warpcut.contours import Contour, builtin_names, load_contour
 from warpcut.io import claim_run_dir, finite_json, read_json, safe_name, write_json
@@ -456,11 +457,16 @@ def _train_candidates(
             return run_dir, int(summary["candidates"]["chosen"]), [run_dir]
         listed[k]["rl_validation_error_vertices"] = summary["best"]["validation_error"]
         listed[k]["rl_best_iteration"] = summary["best"]["iterations"]
+        if options.randomize or options.relative_reward:  # validated off the nominal sheet: compare there
+            listed[k]["rl_training_validation_error"] = summary["best"]["validation_error"]
+            listed[k]["rl_validation_error_vertices"] = nominal_validation_error(
+                run_dir, recipe.validation_trials or VALIDATION_TRIALS, train["seed"], device
+            )
         listed[k]["run"] = str(run_dir.relative_to(out))
         log(
             f"      candidate {point_text(listed[k]['pinch'])}: fixed "
-            f"{listed[k]['fixed_error_vertices']:.1f}, rl {summary['best']['validation_error']:.1f} vertices "
-            "(validation)"
+            f"{listed[k]['fixed_error_vertices']:.1f}, rl {listed[k]['rl_validation_error_vertices']:.1f} "
+            f"vertices (validation{', nominal sheet' if 'rl_training_validation_error' in listed[k] else ''})"
         )
     chosen = min(range(len(listed)), key=lambda k: (listed[k]["rl_validation_error_vertices"], k))
     return out / listed[chosen]["run"], chosen, [run_dir for run_dir, _ in jobs]

@@ -333,6 +333,16 @@ def rollout_errors(
     return policy_errors(actor, env, seed=seed, on_step=on_step, paired_noise=paired_noise)
 
 
+def nominal_validation_error(
+    run_dir: str | Path, episodes: int, seed: int, device: str | None = None
+) -> float:
+    """The mean error (vertices) of a run's policy on ``episodes`` validation episodes of the nominal sheet
+    (seed ``seed + VALIDATION_SEED_OFFSET``, as training validates): how a pipeline compares pinch
+    candidates whose training validated elsewhere (domain randomisation, a relative reward)."""
+    rollouts = rollout_errors(run_dir, episodes, seed=seed + VALIDATION_SEED_OFFSET, device=device)
+    return float(np.nanmean(rollouts["error_vertices"]))
+
+
 LAYOUT_FIELDS = (
     "num_fiducials",
     "contour_features",

@@ -276,3 +276,23 @@ def test_a_run_cut_in_another_order_is_paired_with_no_tension_in_that_order(tmp_
     )
     assert both["own_order_none"] == ["split"] and alone["own_order_none"] == []
     assert both["split"]["median"] == alone["split"]["median"]
+
+
+def test_a_randomised_run_compares_its_pinch_candidates_on_the_nominal_sheet(tmp_path):
+    """``warpcut run --randomize``: each candidate's policy validated on randomised sheets; the candidates
+    are compared by their policies' error on the nominal sheet's validation episodes."""
+    from agents.rl import nominal_validation_error
+
+    out = tmp_path / "run"
+    code, _, err = invoke(
+        ["run", "--contour", "circle-small", "--randomize", "gravity", "--candidates", "2", "--rl-candidates",
+         "1", "--iterations", "2", "--trials", "2", "--num-envs", "8", "--device", "cpu", "--out", str(out),
+         "--no-plots"]
+    )  # fmt: skip
+    assert code == 0, err
+    candidate = json.loads((out / "results.json").read_text())["candidates"][0]
+    assert "rl_training_validation_error" in candidate
+    run = out / candidate["run"]
+    assert json.loads((run / "options.json").read_text())["randomize"] == ["gravity"]
+    expected = nominal_validation_error(run, 16, seed=0, device="cpu")
+    assert candidate["rl_validation_error_vertices"] == pytest.approx(expected)
