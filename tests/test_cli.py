@@ -606,8 +606,9 @@ def test_cli_defaults_are_the_library_defaults():
     seen = set()
     for name, command in main.commands.items():
         expected = dict(library)
-        if name == "run":  # the budget's (agents.config.BUDGETS), unless overridden
+        if name == "run":  # the budget's (agents.config.BUDGETS) and the recipe's, unless overridden
             del expected["num_envs"]
+            expected["validation_trials"] = None
         if name in ("train", "evaluate"):
             expected["iterations"] = train.iterations
         if name == "plan":

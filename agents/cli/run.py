@@ -58,6 +58,13 @@ from warpcut.sim.config import SimConfig
     "Override how many of the best candidates (ranked by fixed tension) get a PPO policy.",
 )
 @common.count_option("iterations", None, "Override the budget's PPO iterations.")
+@click.option(
+    "--validation-trials",
+    default=None,
+    type=click.IntRange(min=1),
+    help="Held-out episodes per validation of each policy (default: the recipe's, 16); more make model "
+    "selection steadier under --randomize.",
+)
 @common.count_option("trials", None, "Override the budget's evaluation trials.")
 @common.count_option(
     "num-envs",
@@ -88,6 +95,7 @@ def command(
     candidates: int | None,
     rl_candidates: int | None,
     iterations: int | None,
+    validation_trials: int | None,
     trials: int | None,
     num_envs: int | None,
     resolution: int,
@@ -116,6 +124,10 @@ def command(
 
     common.check_outputs({"--json": json_path}, [contour_name])
     chosen_recipe = common.randomized_recipe(RECIPES[recipe], randomize, randomize_range, relative_reward)
+    if validation_trials is not None:
+        import dataclasses
+
+        chosen_recipe = dataclasses.replace(chosen_recipe, validation_trials=validation_trials)
     out, claim = common.claim(out, f"run-{safe_name(load_contour(contour_name).name)}", resume, overwrite)
     cuts = common.final_cuts(no_plots)
     with claim, common.recorder(out, record_envs, colour_by) as rec:
