@@ -45,6 +45,16 @@ def test_parameters_set_between_episodes_cut_as_a_batch_built_with_them():
     assert len(task.sim._settle_cache) == sheets, "a sheet settled before was settled again"
 
 
+def test_parameters_swapped_between_envs_lay_each_env_out_on_its_own_sheet():
+    """The same set of values, assigned to other envs: each env's trajectory follows its new sheet."""
+    contour = load_contour("fls-circle")
+    task = CuttingTask(SimConfig(resolution=RES, gravity=[300.0, 800.0]), contour, 2, seed=1)
+    task.set_params(gravity=[800.0, 300.0])
+    built = CuttingTask(SimConfig(resolution=RES, gravity=[800.0, 300.0]), contour, 2, seed=1)
+    np.testing.assert_array_equal(task._tips, built._tips)
+    np.testing.assert_array_equal(task.run(None).error_mm2, built.run(None).error_mm2)
+
+
 def test_set_params_names_a_bad_parameter():
     task = CuttingTask(SimConfig(resolution=RES), load_contour("fls-circle"), 2)
     with pytest.raises(ValueError, match="set_params: unknown stiffness; choose from damping"):

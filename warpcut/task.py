@@ -229,10 +229,9 @@ class CuttingTask:
         are reused (domain randomisation draws from a finite set of levels for that reason)."""
         from warpcut.sim.settling import SETTLE_PARAMETERS
 
-        settle = self.sim.settle_groups()[0]
         self.sim.set_params(**values)
         self.config = self.sim.config
-        if set(values) & set(SETTLE_PARAMETERS) and not np.array_equal(settle, self.sim.settle_groups()[0]):
+        if set(values) & set(SETTLE_PARAMETERS):  # each env's own sheet (kept trajectories make it cheap)
             self._lay_out_trajectories()
         self.update_index = self.num_steps * self.config.updates_per_step  # over: reset() next
 
