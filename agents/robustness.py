@@ -35,6 +35,7 @@ from agents.methods import BASELINES, check_methods, tensioner
 from warpcut.contours import Contour, ContourError
 from warpcut.scoring import paired_improvement
 from warpcut.sim.config import GRAVITY_MM_S2, SimConfig
+from warpcut.task import segments_key
 
 STUDIES = ("resolution", "noise", "force")
 """The studies, in the paper's order (Fig. 5a-c)."""
@@ -62,6 +63,9 @@ REPORT_FIELDS = (
 RESERVED_LABELS = (*STUDY_METHODS, *REPORT_FIELDS)
 """Names a run's label may not take: a method's, or a report field's."""
 
+STUDY_FIELDS = {"resolution": "resolution", "noise": "noise_std", "force": "gravity"}
+"""The :class:`~warpcut.sim.config.SimConfig` field each study sweeps."""
+
 STUDY_UNITS = {"resolution": "vertices per side", "noise": "noise_std (mm)", "force": "gravity (mm/s^2)"}
 """What a study's values are, in words (plots, tables)."""
 
@@ -69,7 +73,7 @@ STUDY_UNITS = {"resolution": "vertices per side", "noise": "noise_std (mm)", "fo
 def _override(study: str, values: Sequence[float], trials: int) -> dict:
     """The options/config fields that set a batch of every value of ``study`` x ``trials``."""
     per_env = [float(v) for v in np.repeat(np.asarray(values, dtype=np.float64), trials)]
-    return {"noise": {"noise_std": per_env}, "force": {"gravity": per_env}}[study]
+    return {STUDY_FIELDS[study]: per_env}
 
 
 def _stats(values: np.ndarray) -> dict[str, list[float | None]]:
@@ -95,9 +99,8 @@ def check_study(study: str, values: Sequence[float] | None) -> list[float]:
             raise ValueError(f"values: resolutions are whole numbers of vertices per side (got {values})")
         values = [int(v) for v in values]
     for v in values:  # each value must be one SimConfig accepts
-        field = {"resolution": "resolution", "noise": "noise_std", "force": "gravity"}[study]
         try:
-            SimConfig(**{field: v}).validated()
+            SimConfig(**{STUDY_FIELDS[study]: v}).validated()
         except ValueError as error:
             raise ValueError(f"values: {study} {v}: {error}") from None
     return values
@@ -159,7 +162,7 @@ def robustness_study(
     own_order = {
         label: cut
         for label, cut in scenario.get("run_segments", {}).items()
-        if _order_key(cut) != _order_key(segments)
+        if segments_key(cut) != segments_key(segments)
     }
     baselines = check_methods(list(methods or BASELINES), "methods", STUDY_METHODS)
     chosen = ["none", *[m for m in baselines if m != "none"], *runs]
@@ -187,7 +190,7 @@ def robustness_study(
                 )  # fmt: skip
             done: dict = {}
             for label, cut in own_order.items():
-                key = _order_key(cut)
+                key = segments_key(cut)
                 if key not in done:
                     done[key] = _method_errors(
                         "none", contour, pinch, cut, sim, overrides, len(picked), trials, runs, device, seed
@@ -239,18 +242,11 @@ def _method_stats(study: str, methods: list[str], errors: dict, own_none: dict, 
     return stats
 
 
-def _order_key(segments: list[np.ndarray] | None) -> tuple | None:
-    """What identifies a cut order (None: the contour as one segment)."""
-    if segments is None:
-        return None
-    return tuple(np.ascontiguousarray(s, dtype=np.float64).tobytes() for s in segments)
-
-
 def _nominal(study: str, config: SimConfig) -> float:
     """The nominal sheet's value of the swept setting (the dashed line of the paper's plots)."""
     if study == "resolution":
         return float(config.nx)
-    value = np.asarray(config.noise_std if study == "noise" else config.gravity, dtype=np.float64)
+    value = np.asarray(getattr(config, STUDY_FIELDS[study]), dtype=np.float64)
     return float(value.reshape(-1)[0])
 
 
@@ -414,6 +410,7 @@ def robustness_table(report: dict) -> list[str]:
 __all__ = [
     "STUDIES",
     "REPORT_FIELDS",
+    "STUDY_FIELDS",
     "STUDY_METHODS",
     "STUDY_UNITS",
     "STUDY_VALUES",

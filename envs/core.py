@@ -56,7 +56,7 @@ import numpy as np
 from envs.observations import Fiducials, normalise_positions, observation_bounds, sample_fiducials
 from envs.options import PatternCutOptions
 from warpcut.sim.config import sample_parameters
-from warpcut.task import CuttingTask
+from warpcut.task import CuttingTask, segments_key
 
 ACTION_TYPES = ("discrete", "continuous")
 DISCRETE_MOVES = np.array(
@@ -224,12 +224,12 @@ class PatternCut:
         from warpcut.sim.settling import SETTLE_PARAMETERS
 
         task, nominal, b = self.task, self.options.config(), self.num_envs
-        own = np.stack([np.broadcast_to(task.sim.params[k], (b,)) for k in SETTLE_PARAMETERS], axis=1)
+        group_params, env_group = task.sim.settle_groups()
+        own = group_params[env_group]
         base = np.stack([np.broadcast_to(nominal.per_env(k, b), (b,)) for k in SETTLE_PARAMETERS], axis=1)
 
         def key(row: np.ndarray, env: int) -> tuple:
-            cut = tuple(np.ascontiguousarray(p, dtype=np.float64).tobytes() for p in task.segments[env])
-            return row.astype(np.float32).tobytes(), id(task.contours[env]), hash(cut)
+            return row.astype(np.float32).tobytes(), id(task.contours[env]), segments_key(task.segments[env])
 
         missing: dict[tuple, tuple[np.ndarray, int]] = {}
         for env in range(b):

@@ -96,6 +96,14 @@ class Trajectory:
         return cls(np.vstack(tips).astype(np.float32), np.vstack(materials))
 
 
+def segments_key(segments: Sequence[np.ndarray] | None) -> int | None:
+    """A hashable identity of a cut's polylines (None: the contour as one segment), for caches of what a
+    cut order determines (trajectories, no-tension errors)."""
+    if segments is None:
+        return None
+    return hash(tuple(np.ascontiguousarray(s, dtype=np.float64).tobytes() for s in segments))
+
+
 def estimate_horizon(
     contours: Sequence[Contour],
     segments: Sequence[Sequence[np.ndarray]] | None,
@@ -296,10 +304,7 @@ class CuttingTask:
             self._arc_cache.clear()
         trajectories = []
         for env in range(self.num_envs):
-            segment_bytes = tuple(
-                np.ascontiguousarray(s, dtype=np.float64).tobytes() for s in self.segments[env]
-            )
-            key = (group_params[env_group[env]].tobytes(), hash(segment_bytes))
+            key = (group_params[env_group[env]].tobytes(), segments_key(self.segments[env]))
             if key not in cache:
                 cache[key] = Trajectory.from_segments(
                     self.segments[env], settled[env], self.grid, self.config.trajectory_spacing_mm
