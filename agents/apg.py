@@ -24,6 +24,7 @@ import numpy as np
 import torch
 from rsl_rl.env import VecEnv
 
+from agents.config import APG_FIXED_SHEET
 from agents.train import Runner
 
 
@@ -39,6 +40,8 @@ class ApgRunner(Runner):
         if scene is None:
             raise ValueError("env: APG needs warpcut's env (envs.rsl.PatternCutRslEnv over PatternCutVecEnv)")
         options = scene.options
+        if options.randomize or options.relative_reward:
+            raise ValueError(APG_FIXED_SHEET)
         if options.action_type != "continuous":
             raise ValueError("action_type: APG differentiates continuous moves; use --actions continuous")
         if scene.episode_steps < scene.task.num_steps:

@@ -175,6 +175,9 @@ class Recipe:
     """Held-out episodes per validation; 0: no validation, the last policy is the run's."""
 
 
+APG_FIXED_SHEET = "randomize: APG differentiates one fixed sheet; train with PPO (--algo ppo)"
+"""Why APG refuses domain randomisation and a relative reward (:class:`agents.apg.ApgRunner`, the CLI)."""
+
 APG_LEARNING_RATE = 3e-3
 """Adam's step of the ``apg`` recipe (APG's gradients are clipped to ``max_grad_norm``; docs/learning.md)."""
 

@@ -2,6 +2,7 @@
 (``warpcut robustness``)."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -306,3 +307,17 @@ def test_a_randomised_run_compares_its_pinch_candidates_on_the_nominal_sheet(tmp
     assert json.loads((run / "options.json").read_text())["randomize"] == ["gravity"]
     expected = nominal_validation_error(run, 16, seed=0, device="cpu")
     assert candidate["rl_validation_error_vertices"] == pytest.approx(expected)
+
+
+def test_apg_refuses_randomised_sheets_in_the_library_and_on_the_command_line(tmp_path):
+    from agents.config import APG_FIXED_SHEET, TrainConfig
+    from agents.rl import train_contour
+
+    options = PatternCutOptions(
+        contour="fls-circle", resolution=RES, randomize=["gravity"], action_type="continuous", device="cpu"
+    )
+    cfg = TrainConfig(algorithm="apg", discrete=False, iterations=1, num_envs=2)
+    with pytest.raises(ValueError, match=re.escape(APG_FIXED_SHEET)):
+        train_contour(options, tmp_path / "apg", cfg, validation_trials=0, progress=False)
+    code, _, err = invoke(["train", "--contour", "fls-circle", "--algo", "apg", "--relative-reward"])
+    assert code == 2 and APG_FIXED_SHEET in err

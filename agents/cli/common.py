@@ -387,6 +387,15 @@ def parse_randomization(names: str | None, ranges: tuple[str, ...]) -> tuple[lis
     return list(chosen), {k: v for k, v in chosen.items() if k in given}
 
 
+def refuse_apg(randomized: bool, algorithm: str | None) -> None:
+    """A usage error for domain randomisation (or a relative reward) with APG, before anything is written
+    (:data:`agents.config.APG_FIXED_SHEET`)."""
+    if randomized and algorithm == "apg":
+        from agents.config import APG_FIXED_SHEET
+
+        raise click.UsageError(f"--{APG_FIXED_SHEET}")
+
+
 def randomized_recipe(recipe, names: str | None, ranges: tuple[str, ...], relative_reward: bool = False):
     """``recipe`` (:class:`agents.config.Recipe`) training with the domain randomisation of ``--randomize``
     and ``--randomize-range`` (:func:`parse_randomization`) and ``--relative-reward``; ``recipe`` itself
@@ -396,8 +405,7 @@ def randomized_recipe(recipe, names: str | None, ranges: tuple[str, ...], relati
     randomized, given = parse_randomization(names, ranges)
     if not randomized and not relative_reward:
         return recipe
-    if recipe.train.get("algorithm") == "apg":
-        raise click.UsageError("--randomize: APG differentiates one fixed sheet; use a PPO recipe")
+    refuse_apg(randomized or relative_reward, recipe.train.get("algorithm"))
     options = {**recipe.options, "randomize": randomized, "randomize_ranges": given or None}
     if relative_reward:
         options["relative_reward"] = True

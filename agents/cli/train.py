@@ -161,8 +161,7 @@ def command(
     point = common.parse_point(pinch, "--pinch")
     action_type = _actions_for(algo, action_type)
     randomized, ranges = common.parse_randomization(randomize, randomize_range)
-    if randomized and algo == "apg":
-        raise click.UsageError("--randomize: APG differentiates one fixed sheet; train with --algo ppo")
+    common.refuse_apg(bool(randomized) or relative_reward, algo)
     if resume is not None:
         if not resume.is_dir():
             from agents.train import read_checkpoint

@@ -454,10 +454,10 @@ def randomize_ranges(
     if not isinstance(names, list | tuple) or not all(isinstance(n, str) for n in names):
         raise ValueError(f"randomize: give a list of parameter names (got {names!r:.80})")
     known = ", ".join([*RANDOMIZE_RANGES, *RANDOMIZE_ALIASES])
-    chosen: dict[str, tuple[float, float]] = {}
-    given = dict(ranges or {})
     if not isinstance(ranges, dict | type(None)):
         raise ValueError(f"randomize_ranges: give {{parameter: [low, high]}} (got {ranges!r:.80})")
+    chosen: dict[str, tuple[float, float]] = {}
+    given = dict(ranges or {})
     for raw in names:
         name = RANDOMIZE_ALIASES.get(raw, raw)
         if name not in RANDOMIZE_RANGES:
