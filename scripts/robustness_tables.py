@@ -55,10 +55,12 @@ def targets(reports: dict[str, dict], policy: str) -> list[str]:
         ]
         worst = max(gaps)
         within = sum(1 for g, _, _ in gaps if g <= 0.1 * abs(nominal))
+        not_below = sum(1 for _, _, m in gaps if m >= nominal - 0.1 * abs(nominal))
         out.append(
             f"noise: {policy}'s median improvement at the nominal {noise['values'][k]:g} mm is "
             f"{nominal:+.1f}%; within 10% of it ({0.1 * abs(nominal):.1f} points) at {within} of {len(gaps)} "
-            f"values; farthest {worst[2]:+.1f}% at {worst[1]:g} mm"
+            f"values (no more than that below it at {not_below}); farthest {worst[2]:+.1f}% at "
+            f"{worst[1]:g} mm"
         )
     return out
 
