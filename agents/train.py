@@ -329,6 +329,10 @@ class Runner(OnPolicyRunner):
         # rsl-rl prints the models and observation sets; config.json records them instead.
         with contextlib.redirect_stdout(io.StringIO()):
             super().__init__(env, train_cfg, log_dir, device)
+        # rsl-rl's Adam, fused: one kernel per step, not ~12 ops per tensor (docs/performance.md, "PPO").
+        if type(self.alg.optimizer) is torch.optim.Adam:
+            (group,) = self.alg.optimizer.param_groups  # rsl-rl's one group: the actor's and critic's
+            self.alg.optimizer = torch.optim.Adam(group["params"], lr=group["lr"], fused=True)
         self.logger = _QuietLogger(
             self._end_iteration,
             log_dir=log_dir,
@@ -750,11 +754,7 @@ def seed_everything(seed: int) -> None:
 
 def _mean_log_value(ep_extras: list[dict], key: str) -> float | None:
     """Mean of every value logged under ``key`` this iteration (scalars and tensors alike), or None."""
-    values = [
-        torch.as_tensor(extras[key], dtype=torch.float).reshape(-1).cpu()
-        for extras in ep_extras
-        if key in extras
-    ]
+    values = [torch.as_tensor(e[key], dtype=torch.float).reshape(-1).cpu() for e in ep_extras if key in e]
     values = torch.cat(values) if values else torch.empty(0)
     return float(values.mean()) if values.numel() else None
 

@@ -63,7 +63,25 @@ def test_categorical_matches_torch_and_starts_uniform():
     assert torch.equal(dist.deterministic_output(logits), logits.argmax(-1).float())
     assert torch.allclose(dist.kl_divergence(dist.params, dist.params), torch.zeros(5), atol=1e-6)
     probs = reference.probs
+    assert torch.allclose(dist.probs, probs)
     assert torch.allclose(dist.mean, (probs * torch.arange(3.0)).sum(-1))
+    other = torch.randn(5, 2, 3)
+    expected = torch.distributions.kl_divergence(reference, torch.distributions.Categorical(logits=other))
+    dist_other = Categorical(output_dim=2, num_choices=3)
+    dist_other.update(other)
+    assert torch.allclose(dist.kl_divergence(dist.params, dist_other.params), expected.sum(-1), atol=1e-6)
+    # A choice the new policy cannot take costs infinity; one the old could not take costs nothing.
+    impossible = torch.tensor([[[0.0, -torch.inf, 0.0]]])
+    assert dist.kl_divergence((impossible.log_softmax(-1),), (torch.zeros(1, 1, 3),)).isfinite().all()
+    assert dist.kl_divergence((torch.zeros(1, 1, 3),), (impossible.log_softmax(-1),)).isinf().all()
+
+    # Samples follow the probabilities: 20,000 draws of each of 5 x 2 distributions, within 4 sigma.
+    torch.manual_seed(0)
+    dist.update(logits.expand(20_000, 5, 2, 3))
+    draws = dist.sample().long()
+    frequencies = torch.nn.functional.one_hot(draws, 3).float().mean(0)
+    sigma = (probs * (1 - probs) / 20_000).sqrt()
+    assert torch.all((frequencies - probs).abs() < 4 * sigma + 1e-4)
 
     env = ReachEnv(num_envs=4)
     cfg = tiny_config(num_envs=4).to_rsl_rl(env.num_action_choices)
@@ -78,7 +96,7 @@ def test_stay_prior_starts_at_choice_zero():
     actor = Runner(env, cfg, log_dir=None).alg.get_policy()
     obs = env.get_observations()
     actor(obs, stochastic_output=True)
-    probs = actor.distribution._distribution.probs
+    probs = actor.distribution.probs
     assert torch.allclose(probs, torch.tensor([0.8, 0.1, 0.1]).expand_as(probs), atol=1e-2)
     assert torch.equal(actor(obs), torch.zeros(4, 1))
     for kwargs, match in (

