@@ -39,7 +39,6 @@ from envs.observations import observation_bounds
 from envs.options import ContourSpec, PatternCutOptions, plain
 from envs.rsl import PatternCutRslEnv
 from envs.vector import PatternCutVecEnv
-from warpcut.bench import SIM_ENV_STEP_ENVS
 from warpcut.contours import Contour, builtin_names, load_contour
 from warpcut.io import read_json, write_json
 from warpcut.task import StepCallback
@@ -602,7 +601,7 @@ def evaluate_run(
 
 
 def benchmark_training(
-    device: str | None = None, num_envs: int = SIM_ENV_STEP_ENVS, iterations: int = 6
+    device: str | None = None, num_envs: int = TrainConfig.num_envs, iterations: int = 6
 ) -> dict[str, float]:
     """PPO throughput training ``fls-circle`` on ``num_envs`` envs with warpcut's recipe (:data:`RECIPE`:
     dense reward, contour features, x-y-z moves), in steady state: the median over the

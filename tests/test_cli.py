@@ -189,6 +189,8 @@ def test_bench_writes_the_documented_json(tmp_path):
             "1,4",
             "--rollout-envs",
             "2",
+            "--train-envs",
+            "4,8",
             "--repeats",
             "1",
             "--json",
@@ -206,16 +208,20 @@ def test_bench_writes_the_documented_json(tmp_path):
         "speedup_vs_numpy",
         "cold_start_s",
         "warm_start_s",
+    ):
+        assert result[key] > 0, key
+    for key in (
         "sim_env_steps_per_s",
         "train_steps_per_s",
         "train_collection_steps_per_s",
         "train_overall_steps_per_s",
     ):
-        assert result[key] > 0, key
-    assert result["train_vs_sim_pct"] == pytest.approx(
-        100 * result["train_steps_per_s"] / result["sim_env_steps_per_s"]
-    )
-    assert result["train_collection_steps_per_s"] > result["train_steps_per_s"]  # collection + update
+        assert set(result[key]) == {"4", "8"} and min(result[key].values()) > 0, key
+    for b in ("4", "8"):
+        assert result["train_vs_sim_pct"][b] == pytest.approx(
+            100 * result["train_steps_per_s"][b] / result["sim_env_steps_per_s"][b]
+        )
+        assert result["train_collection_steps_per_s"][b] > result["train_steps_per_s"][b]  # + the update
     assert result["speedup_vs_numpy"] == pytest.approx(
         max(result["updates_per_s"].values()) / result["numpy_updates_per_s"]
     )
@@ -550,6 +556,21 @@ def test_run_with_a_quick_analytic_plan(tmp_path):
     assert chosen["analytic_error_vertices"] == min(scores)
     assert report["rows"][0]["analytic_pinch"] == pytest.approx(chosen["pinch"])
     assert not (tmp_path / "run" / "rl").exists()
+
+
+@pytest.mark.parametrize("option", ["--batch-sizes", "--train-envs"])
+@pytest.mark.parametrize("value", ["64,x", "0,64"])
+def test_bench_names_a_bad_batch_list(option, value):
+    code, stdout, stderr = invoke(["bench", option, value])
+    assert code == 2 and option in stderr and "Traceback" not in stdout + stderr
+
+
+def test_bench_measures_training_at_the_default_batch():
+    """The first batch of the env-step and PPO measurements is the one ``warpcut train`` steps by default."""
+    from agents.config import TrainConfig
+    from warpcut.bench import ENV_STEP_ENVS
+
+    assert ENV_STEP_ENVS[0] == TrainConfig.num_envs
 
 
 def test_bench_times_the_captured_colours_update_on_cpu():

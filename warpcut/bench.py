@@ -25,8 +25,10 @@ REPEATS = 3
 """Timed repeats of each measurement (the median is reported)."""
 ROLLOUT_ENVS = 256
 """Batch of the fls-circle rollout measurements."""
-SIM_ENV_STEP_ENVS = 64
-"""Batch of the ``sim_env_steps_per_s`` measurement: the envs a training run steps by default."""
+ENV_STEP_ENVS = (64, 256)
+"""Batches of the tensioned env-step measurement (``sim_env_steps_per_s``) and of PPO's beside it: the envs
+a training run steps by default (``agents.config.TrainConfig.num_envs``) and the largest batch that still
+learned within issue 16's time budget (docs/performance.md, section 6)."""
 PAPER_SWEEPS = SimConfig(springs=("structural",), sweeps=5, chebyshev_rho=0.0, noise_std=0.0)
 """The issue's and the paper's unit of work: one update = integrate + 5 structural relaxation sweeps,
 without process noise (the authors' code had none)."""
@@ -178,13 +180,15 @@ def run_bench(
     repeats: int = REPEATS,
     batch_sizes: tuple[int, ...] = BATCH_SIZES,
     rollout_envs: int = ROLLOUT_ENVS,
+    env_step_envs: tuple[int, ...] = ENV_STEP_ENVS,
     progress: Callable[[str], None] = lambda _: None,
     training: Callable[[int], dict[str, float]] | None = None,
 ) -> dict:
     """Measure the simulator as ``warpcut bench`` reports it; then, if given, ``training(num_envs)`` (what
-    lies above the simulator: PPO's steady-state figures, ``train_steps_per_s`` among them) at the batch of
-    ``sim_env_steps_per_s``, with ``train_vs_sim_pct``, the one as a percentage of the other. Returns the
-    JSON-ready dict."""
+    lies above the simulator: PPO's steady-state figures, ``train_steps_per_s`` among them) at each batch of
+    ``sim_env_steps_per_s`` (``env_step_envs``), with ``train_vs_sim_pct``, the one as a percentage of the
+    other. Per-batch figures are dicts keyed by the batch, as ``updates_per_s``. Returns the JSON-ready
+    dict."""
     from warpcut.sim._warp import wp
     from warpcut.sim.simulator import Simulator
 
@@ -220,16 +224,20 @@ def run_bench(
     result["rollout_envs"] = rollout_envs
     result["rollouts_per_s"] = rollouts_per_second(rollout_envs, device, repeats)
     result["rollouts_per_s_paper_sweeps"] = rollouts_per_second(rollout_envs, device, repeats, PAPER_SWEEPS)
-    progress(f"tensioned env steps at B={SIM_ENV_STEP_ENVS}")
-    result["sim_env_steps_per_s"] = env_steps_per_second(SIM_ENV_STEP_ENVS, device, repeats)
+    result["sim_env_steps_per_s"] = {}
+    for b in env_step_envs:
+        progress(f"tensioned env steps at B={b}")
+        result["sim_env_steps_per_s"][str(b)] = env_steps_per_second(b, device, repeats)
     progress(f"path-scoring overhead at B={rollout_envs}")
     result["scoring_overhead_pct"] = scoring_overhead_pct(rollout_envs, device, repeats)
     progress("NumPy reference")
     result["numpy_updates_per_s"] = numpy_updates_per_second(repeats)
     best = max(ups.values())
     result["speedup_vs_numpy"] = best / result["numpy_updates_per_s"]
-    if training is not None:
-        progress(f"PPO training at B={SIM_ENV_STEP_ENVS}")
-        result.update(training(SIM_ENV_STEP_ENVS))
-        result["train_vs_sim_pct"] = 100 * result["train_steps_per_s"] / result["sim_env_steps_per_s"]
+    for b in env_step_envs if training is not None else ():
+        progress(f"PPO training at B={b}")
+        for key, value in {**training(b)}.items():
+            result.setdefault(key, {})[str(b)] = value
+        sim = result["sim_env_steps_per_s"][str(b)]
+        result.setdefault("train_vs_sim_pct", {})[str(b)] = 100 * result["train_steps_per_s"][str(b)] / sim
     return result

@@ -20,26 +20,30 @@ from warpcut import bench
     help="Comma-separated batch sizes.",
 )
 @common.count_option("rollout-envs", bench.ROLLOUT_ENVS, "Batch size of the fls-circle rollout measurement.")
+@click.option(
+    "--train-envs",
+    default=",".join(map(str, bench.ENV_STEP_ENVS)),
+    show_default=True,
+    help="Comma-separated batch sizes of the tensioned env-step and PPO measurements.",
+)
 @common.json_option
 def command(
-    device: str | None, repeats: int, batch_sizes: str, rollout_envs: int, json_path: Path | None
+    device: str | None,
+    repeats: int,
+    batch_sizes: str,
+    rollout_envs: int,
+    train_envs: str,
+    json_path: Path | None,
 ) -> None:
     """Measure simulator and PPO throughput (medians over repeats, all in one run)."""
     from agents.rl import benchmark_training
 
-    try:
-        sizes = tuple(int(v) for v in batch_sizes.split(","))
-    except ValueError:
-        raise click.BadParameter(
-            f"expected integers like 1,64,1024 (got {batch_sizes!r})", param_hint="--batch-sizes"
-        ) from None
-    if not sizes or min(sizes) < 1:
-        raise click.BadParameter("batch sizes must be positive", param_hint="--batch-sizes")
     result = bench.run_bench(
         device,
         repeats=repeats,
-        batch_sizes=sizes,
+        batch_sizes=_sizes(batch_sizes, "--batch-sizes"),
         rollout_envs=rollout_envs,
+        env_step_envs=_sizes(train_envs, "--train-envs"),
         progress=lambda what: click.echo(f"  measuring {what} ...", err=True),
         training=lambda num_envs: benchmark_training(device, num_envs),
     )
@@ -63,15 +67,26 @@ def command(
         f"NumPy reference updates/s: {result['numpy_updates_per_s']:,.1f}  "
         f"(Warp best / NumPy = {result['speedup_vs_numpy']:,.0f}x)"
     )
-    click.echo(
-        f"env steps/s at {bench.SIM_ENV_STEP_ENVS} envs (tensioned fls-circle): simulator "
-        f"{result['sim_env_steps_per_s']:,.0f}; PPO in steady state {result['train_steps_per_s']:,.0f} "
-        f"({result['train_vs_sim_pct']:.0f}% of the simulator; collection alone "
-        f"{result['train_collection_steps_per_s']:,.0f}; a whole short run "
-        f"{result['train_overall_steps_per_s']:,.0f})"
-    )
+    for b, sim in result["sim_env_steps_per_s"].items():
+        click.echo(
+            f"env steps/s at {b} envs (tensioned fls-circle): simulator {sim:,.0f}; PPO in steady state "
+            f"{result['train_steps_per_s'][b]:,.0f} ({result['train_vs_sim_pct'][b]:.0f}% of the simulator; "
+            f"collection alone {result['train_collection_steps_per_s'][b]:,.0f}; a whole short run "
+            f"{result['train_overall_steps_per_s'][b]:,.0f})"
+        )
     if json_path:
         from warpcut.io import write_json
 
         write_json(json_path, result)
         click.echo(f"wrote {json_path}")
+
+
+def _sizes(text: str, hint: str) -> tuple[int, ...]:
+    """Positive batch sizes from comma-separated ``text``; ``click.BadParameter`` naming ``hint``."""
+    try:
+        sizes = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise click.BadParameter(f"expected integers like 1,64,1024 (got {text!r})", param_hint=hint) from None
+    if not sizes or min(sizes) < 1:
+        raise click.BadParameter("batch sizes must be positive", param_hint=hint)
+    return sizes
