@@ -276,7 +276,7 @@ def run_pipeline(
             plan's choice) or ``analytic`` (each candidate scored with the analytic policy, noise-free).
         shared_policy: With rl: one policy for all the candidates, observing its pinch point.
         recipe: How rl policies are trained (:data:`agents.config.RECIPES`).
-        num_envs: PPO envs per policy (default 64; shared: 64, or 8 per candidate when more).
+        num_envs: PPO envs per policy (default ``TrainConfig.num_envs``; shared: at least 8 per candidate).
         config: Simulation settings (default: ``SimConfig()``).
         arm: The cutting arm's footprint for pinch feasibility (default: the paper's).
         analytic_pinch: :data:`ANALYTIC_PINCHES`.

@@ -566,11 +566,11 @@ def test_bench_names_a_bad_batch_list(option, value):
 
 
 def test_bench_measures_training_at_the_default_batch():
-    """The first batch of the env-step and PPO measurements is the one ``warpcut train`` steps by default."""
+    """The env-step and PPO measurements include the batch ``warpcut train`` steps by default."""
     from agents.config import TrainConfig
     from warpcut.bench import ENV_STEP_ENVS
 
-    assert ENV_STEP_ENVS[0] == TrainConfig.num_envs
+    assert TrainConfig.num_envs in ENV_STEP_ENVS
 
 
 def test_bench_times_the_captured_colours_update_on_cpu():

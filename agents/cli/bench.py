@@ -86,7 +86,9 @@ def _sizes(text: str, hint: str) -> tuple[int, ...]:
     try:
         sizes = tuple(int(v) for v in text.split(","))
     except ValueError:
-        raise click.BadParameter(f"expected integers like 1,64,1024 (got {text!r})", param_hint=hint) from None
+        raise click.BadParameter(
+            f"expected integers like 1,64,1024 (got {text!r})", param_hint=hint
+        ) from None
     if not sizes or min(sizes) < 1:
         raise click.BadParameter("batch sizes must be positive", param_hint=hint)
     return sizes
