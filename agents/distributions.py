@@ -64,7 +64,7 @@ class Categorical(Distribution):
         Log-probabilities and probabilities are computed once per update from a few elementwise ops: rsl-rl
         asks for the sample, log-probability, parameters and entropy at every env step and minibatch, and
         torch's CPU softmax over a short last dimension costs ~60 us for 512 x 7 logits where these cost ~10
-        (docs/performance.md, "PPO")."""
+        (docs/performance.md, section 6)."""
         shifted = mlp_output - mlp_output.amax(dim=-1, keepdim=True)
         self._logits = shifted - shifted.exp().sum(dim=-1, keepdim=True).log()
         self._probs = self._logits.exp()

@@ -329,7 +329,7 @@ class Runner(OnPolicyRunner):
         # rsl-rl prints the models and observation sets; config.json records them instead.
         with contextlib.redirect_stdout(io.StringIO()):
             super().__init__(env, train_cfg, log_dir, device)
-        # rsl-rl's Adam, fused: one kernel per step, not ~12 ops per tensor (docs/performance.md, "PPO").
+        # rsl-rl's Adam, fused: one kernel per step, not ~12 ops per tensor (docs/performance.md, section 6).
         if type(self.alg.optimizer) is torch.optim.Adam:
             (group,) = self.alg.optimizer.param_groups  # rsl-rl's one group: the actor's and critic's
             self.alg.optimizer = torch.optim.Adam(group["params"], lr=group["lr"], fused=True)
@@ -449,7 +449,7 @@ class Runner(OnPolicyRunner):
     def learn(self, num_learning_iterations: int, init_at_random_ep_len: bool = False) -> None:
         """rsl-rl's learning loop, with torch on one thread while it collects rollouts and on all of its
         threads for the PPO update (on a CPU): the simulator steps the envs on threads of its own, and torch
-        threads spinning beside them cost more than they gain (docs/performance.md, "PPO")."""
+        threads spinning beside them cost more than they gain (docs/performance.md, section 6)."""
         if self.device != "cpu":
             return super().learn(num_learning_iterations, init_at_random_ep_len)
         threads = torch.get_num_threads()
