@@ -234,10 +234,12 @@ def run_bench(
     result["numpy_updates_per_s"] = numpy_updates_per_second(repeats)
     best = max(ups.values())
     result["speedup_vs_numpy"] = best / result["numpy_updates_per_s"]
-    for b in env_step_envs if training is not None else ():
+    if training is None:
+        return result
+    for b in map(str, env_step_envs):
         progress(f"PPO training at B={b}")
-        for key, value in {**training(b)}.items():
-            result.setdefault(key, {})[str(b)] = value
-        sim = result["sim_env_steps_per_s"][str(b)]
-        result.setdefault("train_vs_sim_pct", {})[str(b)] = 100 * result["train_steps_per_s"][str(b)] / sim
+        for key, value in training(int(b)).items():
+            result.setdefault(key, {})[b] = value
+        pct = 100 * result["train_steps_per_s"][b] / result["sim_env_steps_per_s"][b]
+        result.setdefault("train_vs_sim_pct", {})[b] = pct
     return result
