@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import statistics
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -600,31 +599,44 @@ def evaluate_run(
     }
 
 
+BENCH_EPISODES = 3
+"""Whole episodes the steady-state window of :func:`benchmark_training` covers."""
+
+
 def benchmark_training(
-    device: str | None = None, num_envs: int = TrainConfig.num_envs, iterations: int = 6
+    device: str | None = None, num_envs: int = TrainConfig.num_envs, episodes: int = BENCH_EPISODES
 ) -> dict[str, float]:
     """PPO throughput training ``fls-circle`` on ``num_envs`` envs with warpcut's recipe (:data:`RECIPE`:
-    dense reward, contour features, x-y-z moves), in steady state: the median over the
-    iterations after the first (start-up, kernel loading and the first iteration's allocations excluded;
-    no validation runs) of
+    dense reward, contour features, x-y-z moves), in steady state: the env steps of the iterations after
+    the first (start-up, kernel loading and the first iteration's allocations excluded; no validation runs)
+    over their time, as many iterations as cover ``episodes`` whole episodes. The steps that end an episode
+    (scoring, resets) cost several times a step; a median over iterations would leave them out.
 
-    - ``train_steps_per_s``: env steps per second of an iteration, collection + PPO update;
-    - ``train_collection_steps_per_s``: of its collection alone (policy forward passes, env steps,
+    - ``train_steps_per_s``: env steps per second of those iterations, collection + PPO update;
+    - ``train_collection_steps_per_s``: of their collection alone (policy forward passes, env steps,
       storage);
 
     and ``train_overall_steps_per_s``, the whole call's steps over its wall time (what a short run sees).
     """
     import tempfile
 
-    if iterations < 2:
-        raise ValueError(f"iterations: the steady state needs at least 2 (got {iterations})")
-    cfg = TrainConfig(num_envs=num_envs, iterations=iterations, num_steps_per_env=32, save_interval=10**6)
+    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
+        raise ValueError(f"episodes: the steady state needs at least 1 whole episode (got {episodes!r})")
+    cfg = TrainConfig(num_envs=num_envs, num_steps_per_env=32, save_interval=10**6)
     options = PatternCutOptions(contour="fls-circle", device=device, **RECIPE)
+    env = training_env(options, cfg)
+    steady_iterations = -(-episodes * env.max_episode_length // cfg.num_steps_per_env)
+    cfg = dataclasses.replace(cfg, iterations=1 + steady_iterations)
     with tempfile.TemporaryDirectory() as out:
-        summary = train(training_env(options, cfg), cfg, out, progress=False)
+        summary = train(env, cfg, out, progress=False)
     steady = summary["history"][1:]
+    steps = len(steady) * cfg.num_envs * cfg.num_steps_per_env
+
+    def rate(key: str) -> float:
+        return steps / sum(cfg.num_envs * cfg.num_steps_per_env / m[key] for m in steady)
+
     return {
-        "train_steps_per_s": statistics.median(m["iteration_steps_per_s"] for m in steady),
-        "train_collection_steps_per_s": statistics.median(m["collection_steps_per_s"] for m in steady),
+        "train_steps_per_s": rate("iteration_steps_per_s"),
+        "train_collection_steps_per_s": rate("collection_steps_per_s"),
         "train_overall_steps_per_s": float(summary["steps_per_s"]),
     }

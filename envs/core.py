@@ -48,6 +48,7 @@ Divergence:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import gymnasium as gym
@@ -129,6 +130,8 @@ class PatternCut:
         self.newly_diverged = np.zeros(num_envs, dtype=bool)
         """(B,) bool: envs that diverged in the last step."""
         self._over = False
+        self._fiducial_reader: tuple[tuple, Callable[[], np.ndarray]] | None = None
+        """The fiducials' cells and a ``Simulator.gatherer`` of their corners (:meth:`_fiducial_corners`)."""
 
     @property
     def step_index(self) -> int:
@@ -281,11 +284,19 @@ class PatternCut:
         """(B, 3) ``target_world() - tip`` (mm) for the next update; NaN while travelling or done."""
         return self.task.target_world() - self.task.tip_positions()[:, :3]
 
+    def _fiducial_corners(self) -> np.ndarray:
+        """(B, 4K, 4) state of the fiducials' cell corners, read by a gatherer made once per set of cells
+        (a reset, or fiducials placed by hand and reset)."""
+        cells = self.fiducials.cells
+        if self._fiducial_reader is None or self._fiducial_reader[0] is not cells:
+            self._fiducial_reader = (cells, self.task.sim.gatherer(self.fiducials.cell_vertices))
+        return self._fiducial_reader[1]()
+
     def observe(self) -> np.ndarray:
         """(B, D) float32 observations of the current state (layout: :mod:`envs.observations`)."""
         u = self.task.update_index
         tip = self.task.tip_positions(max(u - 1, 0))  # where the scissors are now
-        corners = self.task.sim.gather(self.fiducials.cell_vertices)  # the fiducials' cells only
+        corners = self._fiducial_corners()  # the fiducials' cells only
         fiducials = self.fiducials.track_corners(corners.reshape(self.num_envs, -1, 4, 4), tip)
         parts = [
             np.full((self.num_envs, 1), self.step_index / self.task.num_steps),

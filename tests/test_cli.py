@@ -573,6 +573,14 @@ def test_bench_measures_training_at_the_default_batch():
     assert TrainConfig.num_envs in ENV_STEP_ENVS
 
 
+@pytest.mark.parametrize("episodes", [0, 1.5, True])
+def test_bench_training_names_a_bad_window(episodes):
+    from agents.rl import benchmark_training
+
+    with pytest.raises(ValueError, match="episodes: the steady state needs at least 1 whole episode"):
+        benchmark_training(num_envs=2, episodes=episodes)
+
+
 def test_bench_times_the_captured_colours_update_on_cpu():
     """The path ``warpcut bench --device cuda`` takes (colours backend replayed from graphs) also runs on
     the CPU, so it is exercised without a GPU."""

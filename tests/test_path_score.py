@@ -6,7 +6,7 @@ import shapely
 
 from warpcut import SimConfig, Simulator
 from warpcut.contours import load_contour, validate
-from warpcut.scoring import order_cut_path, path_region, path_regions
+from warpcut.scoring import order_cut_path, order_cut_paths, path_region, path_regions
 from warpcut.sim.kernels import PATH_DROPPED, PATH_IDLE, PATH_MAPPED
 from warpcut.task import CuttingTask, default_segments
 
@@ -111,6 +111,32 @@ def test_order_cut_path_sorts_by_arc_and_counts_drops():
     points, dropped = order_cut_path(path, arc)
     np.testing.assert_array_equal(points, [[3.0, 3.0], [1.0, 1.0]])
     assert dropped == pytest.approx(1 / 3)
+
+
+def test_a_batch_of_cut_paths_is_ordered_as_each_env_alone():
+    """:func:`order_cut_paths` sorts a batch in one call: per env, the points and dropped share of
+    :func:`order_cut_path`'s own definition (mapped points by arc length, stably), equal arc lengths, envs
+    that never cut and envs with every update dropped among them."""
+    rng = np.random.default_rng(5)
+    b, t = 12, 40
+    paths = rng.uniform(0.0, 100.0, size=(b, t, 3))
+    paths[..., 2] = rng.choice([PATH_MAPPED, PATH_DROPPED, PATH_IDLE], size=(b, t), p=[0.6, 0.2, 0.2])
+    arc = rng.integers(0, 15, size=(b, t)).astype(np.float64)  # ties: the stable order decides
+    arc[rng.uniform(size=(b, t)) < 0.1] = np.nan
+    paths[2, :, 2] = PATH_IDLE
+    paths[3, :, 2] = PATH_DROPPED
+    points, dropped = order_cut_paths(paths, arc)
+    for env in range(b):
+        cutting = (paths[env, :, 2] >= 0.0) & np.isfinite(arc[env])
+        mapped = cutting & (paths[env, :, 2] > 0.5)
+        order = np.argsort(arc[env][mapped], kind="stable")
+        np.testing.assert_array_equal(points[env], paths[env][mapped][order, :2])
+        expected = (cutting.sum() - mapped.sum()) / cutting.sum() if cutting.any() else np.nan
+        np.testing.assert_equal(dropped[env], expected)
+        single = order_cut_path(paths[env], arc[env])
+        np.testing.assert_array_equal(single[0], points[env])
+        np.testing.assert_equal(single[1], dropped[env])
+    assert np.isnan(dropped[2]) and dropped[3] == 1.0 and len(points[3]) == 0
 
 
 def test_a_batch_of_path_regions_is_each_env_alone():

@@ -190,6 +190,29 @@ def test_gather_reads_what_positions_and_alive_mask_hold(backend):
         sim.gather(np.full((11, 1), 81))
 
 
+@pytest.mark.parametrize("backend", ["simd", "colours"])
+def test_a_gatherer_reads_the_state_at_each_call(backend):
+    """A :meth:`Simulator.gatherer` made once reads what ``gather`` reads now, call after call: after updates,
+    after a reset (unpacked state) and after the caller changed its own index array."""
+    sim = Simulator(SimConfig(resolution=9), 11, backend=backend, seed=2)
+    sim.reset(np.tile([[50.0, 50.0]], (11, 1)))
+    vertices = np.random.default_rng(1).integers(0, 81, size=(11, 9))
+    read = sim.gatherer(vertices)
+    expected = vertices.copy()
+    vertices[:] = 0  # the gatherer kept its own indices
+    for _ in range(2):
+        sim.set_tip(np.tile([[50.0, 50.0, -5.0, 1.0]], (11, 1)))
+        for _ in range(3):
+            sim.update()
+            np.testing.assert_array_equal(read(), sim.gather(expected))
+        assert (read()[..., 3] == 0).any()
+        sim.reset(np.tile([[50.0, 50.0]], (11, 1)))
+        np.testing.assert_array_equal(read(), sim.gather(expected))
+        assert (read()[..., 3] == 1).all()
+    with pytest.raises(ValueError, match=r"vertices: expected \(11, K\) indices"):
+        sim.gatherer(np.zeros((3, 2), dtype=int))
+
+
 def test_per_env_length_mismatch_is_reported():
     with pytest.raises(ConfigError, match="gravity: got 2 values for 3 envs"):
         Simulator(SimConfig(gravity=[1.0, 2.0]), 3)

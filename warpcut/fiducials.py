@@ -54,9 +54,14 @@ def visible_corners(
     """:func:`visible` from each fiducial's cell corners' alive flags ``corner_alive`` (B, K, 4) (non-zero
     where uncut) instead of the whole sheet's: the cell is whole and the shaft (a cylinder of radius
     ``shaft_radius_mm`` from each ``tip`` toward +x) does not cover the point."""
-    off_axis = np.linalg.norm(world[..., 1:] - tip[:, None, 1:3], axis=2)
-    shaded = (world[..., 0] > tip[:, None, 0]) & (off_axis < shaft_radius_mm)
-    return np.all(corner_alive != 0, axis=2) & ~shaded
+    # Written out component by component (the values of np.linalg.norm and np.all over the last axis, bit
+    # for bit, in a third of their time: the envs observe this every step).
+    dy, dz = world[..., 1] - tip[:, None, 1], world[..., 2] - tip[:, None, 2]
+    shaded = (world[..., 0] > tip[:, None, 0]) & (np.sqrt(dy * dy + dz * dz) < shaft_radius_mm)
+    whole = corner_alive[..., 0] != 0
+    for corner in range(1, corner_alive.shape[-1]):
+        whole &= corner_alive[..., corner] != 0
+    return whole & ~shaded
 
 
 def sample_fiducials(
@@ -142,6 +147,12 @@ class Fiducials:
         corners = np.take_along_axis(positions[:, None], self._cells[0][..., None], axis=2)
         corner_alive = np.take_along_axis(alive[:, None], self._cells[0], axis=2)
         return self.track_corners(np.concatenate([corners, corner_alive[..., None]], axis=3), tip)
+
+    @property
+    def cells(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(vertices, weights)``, each (B, K, 4): every fiducial's cell (:func:`material_cells`), the same
+        object until the next :meth:`reset`."""
+        return self._cells
 
     @property
     def cell_vertices(self) -> np.ndarray:

@@ -26,6 +26,8 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
+from concurrent import futures
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -246,13 +248,19 @@ def achieved_mask(alive: np.ndarray, intended: np.ndarray, grid: SheetGrid) -> n
     outside = ~np.broadcast_to(_batch_mask(intended, "intended", grid, alive.shape[0]), alive.shape)
     hx, hy = grid.spacing_mm
     achieved = np.zeros(alive.shape, dtype=bool)
+    # One labelling of the whole batch, envs never joined: raster order numbers env k's pieces right after
+    # env k - 1's, in the order labelling env k alone would (tests/test_scoring.py checks it).
+    joins = np.zeros((3, 3, 3), dtype=bool)
+    joins[1] = ndimage.generate_binary_structure(2, 1)
+    labels = ndimage.label(alive.reshape(-1, grid.ny, grid.nx), joins)[0].reshape(alive.shape)
+    counts = labels.max(axis=1)
+    first = np.concatenate([[0], np.maximum.accumulate(counts)[:-1]])  # pieces of the envs before
+    counts = np.where(counts > 0, counts - first, 0)
     for env, (env_alive, env_outside) in enumerate(zip(alive, outside, strict=True)):
-        if not env_alive.any():
+        count = int(counts[env])
+        if count <= 1:  # no alive vertex, or the sheet is still one piece: nothing separated
             continue
-        pieces, count = ndimage.label(env_alive.reshape(grid.ny, grid.nx))
-        if count == 1:  # the sheet is still one piece: nothing separated
-            continue
-        pieces = pieces.ravel()
+        pieces = np.where(env_alive, labels[env] - first[env], 0)
         size = np.bincount(pieces, minlength=count + 1)[1:]
         size_outside = np.bincount(pieces[env_outside], minlength=count + 1)[1:]
         # size <= V, so this key orders by size_outside first and size second; argmax takes the first
@@ -412,13 +420,24 @@ def order_cut_path(path: np.ndarray, arc_mm: np.ndarray) -> tuple[np.ndarray, fl
         ``(points, dropped_fraction)``: (K, 2) mapped material points sorted by ``arc_mm`` (stable), and
         the share of cutting updates that were dropped (NaN if none cut).
     """
-    status = path[:, 2]
+    points, dropped = order_cut_paths(np.asarray(path)[None], np.asarray(arc_mm)[None])
+    return points[0], float(dropped[0])
+
+
+def order_cut_paths(paths: np.ndarray, arc_mm: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+    """:func:`order_cut_path` of a batch, ``paths`` (B, T, 3) and ``arc_mm`` (B, T), sorted in one call:
+    ``(points, dropped_fraction)``, a list of B (K_b, 2) arrays and (B,) shares."""
+    status = paths[..., 2]
     cutting = (status >= 0.0) & np.isfinite(arc_mm)
     mapped = cutting & (status > 0.5)
-    total = int(np.count_nonzero(cutting))
-    dropped = float(total - np.count_nonzero(mapped)) / total if total else float("nan")
-    order = np.argsort(arc_mm[mapped], kind="stable")
-    return path[mapped][order, :2].astype(np.float64), dropped
+    total = np.count_nonzero(cutting, axis=1)
+    count = np.count_nonzero(mapped, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        dropped = np.where(total > 0, (total - count) / np.maximum(total, 1), np.nan)
+    # Unmapped updates sort last; a stable sort keeps the mapped ones as a stable sort of them alone would.
+    order = np.argsort(np.where(mapped, arc_mm, np.inf), axis=1, kind="stable")
+    xy = np.take_along_axis(paths[..., :2], order[..., None], axis=1).astype(np.float64)
+    return [xy[env, :k] for env, k in enumerate(count.tolist())], dropped
 
 
 def path_region(points: np.ndarray, contour) -> shapely.Geometry:
@@ -515,17 +534,18 @@ def score_cut(
     """
     if metric not in SCORES:
         raise ValueError(f"metric: choose one of {SCORES} (got {metric!r})")
-    if paths is None:
-        if metric == "path":
-            raise ValueError("paths: the path score needs the traced cut path (Simulator.trace_path)")
-        nan = np.full(len(contours), np.nan)
-        ordered = [(np.zeros((0, 2)), np.nan)] * len(contours)
-        points, regions, error_mm2, error_vertices = [o[0] for o in ordered], [None] * len(contours), nan, nan
-    else:
-        ordered = [order_cut_path(p, a) for p, a in zip(paths, arc_mm, strict=True)]
-        points = [o[0] for o in ordered]
-        error_mm2, error_vertices, regions = path_errors(points, contours, grid)
-    separation = symmetric_difference(alive, [c.intended_region() for c in contours], grid)
+    if paths is None and metric == "path":
+        raise ValueError("paths: the path score needs the traced cut path (Simulator.trace_path)")
+    intended = [c.intended_region() for c in contours]
+    # The separated score on a second thread while this one scores the paths: shapely's GEOS calls, most
+    # of the path score's time, release the GIL (an episode's end costs two thirds; the same values).
+    separating = _scoring_thread().submit(symmetric_difference, alive, intended, grid)
+    try:
+        points, regions, ordered, error_mm2, error_vertices = _path_score(paths, arc_mm, contours, grid)
+    except BaseException:
+        futures.wait([separating])  # never leave the thread working on a batch the caller may change
+        raise
+    separation = separating.result()
     chosen = (
         (error_mm2, error_vertices) if metric == "path" else (separation.error_mm2, separation.error_vertices)
     )
@@ -540,6 +560,30 @@ def score_cut(
         cut_regions=regions,
         separation=separation,
     )
+
+
+_SCORING_THREAD: list[ThreadPoolExecutor] = []
+
+
+def _scoring_thread() -> ThreadPoolExecutor:
+    """The one worker thread :func:`score_cut` scores separated material on (made at the first score)."""
+    if not _SCORING_THREAD:
+        _SCORING_THREAD.append(ThreadPoolExecutor(1, thread_name_prefix="warpcut-scoring"))
+    return _SCORING_THREAD[0]
+
+
+def _path_score(paths, arc_mm, contours, grid):
+    """:func:`score_cut`'s path half: ``(points, regions, ordered, error_mm2, error_vertices)``, NaN errors
+    where ``paths`` is None."""
+    if paths is None:
+        nan = np.full(len(contours), np.nan)
+        ordered = [(np.zeros((0, 2)), np.nan)] * len(contours)
+        points, regions, error_mm2, error_vertices = [o[0] for o in ordered], [None] * len(contours), nan, nan
+    else:
+        points, dropped = order_cut_paths(paths, arc_mm)
+        ordered = list(zip(points, dropped.tolist(), strict=True))
+        error_mm2, error_vertices, regions = path_errors(points, contours, grid)
+    return points, regions, ordered, error_mm2, error_vertices
 
 
 def _onto_edge(point: np.ndarray, edge_point: np.ndarray, width: float, height: float) -> np.ndarray:

@@ -20,6 +20,7 @@ from warpcut.sim.checks import DIVERGENCE_REASONS, check_pinch_points
 from warpcut.sim.config import PHYSICAL_PARAMETERS, SheetGrid, SimConfig, SimulationDiverged
 from warpcut.sim.kernels_simd import SimdModel, SimdState
 from warpcut.sim.memory import check_batch_memory
+from warpcut.sim.reads import StateReads
 from warpcut.sim.settling import SETTLE_PARAMETERS, SettledSheets
 from warpcut.sim.springs import spring_colours
 
@@ -55,7 +56,7 @@ def resolve_device(device: str | None) -> str:
     return device
 
 
-class Simulator:
+class Simulator(StateReads):
     """``num_envs`` sheets on one device.
 
     Args:
@@ -275,9 +276,13 @@ class Simulator:
             if pinch_points.shape[0] != b:
                 raise ValueError(f"pinch_points: expected shape ({b}, 2), got {pinch_points.shape}")
             check_pinch_points(pinch_points)
+            discs: dict[bytes, np.ndarray] = {}  # by pinch point: a batch mostly shares a few
             for env, point in enumerate(pinch_points):
                 if np.all(np.isfinite(point)):
-                    disc = self.grid.disc_mask(point, self.config.grasp_radius) & ~self.fixture
+                    disc = discs.get(point.tobytes())
+                    if disc is None:
+                        disc = self.grid.disc_mask(point, self.config.grasp_radius) & ~self.fixture
+                        discs[point.tobytes()] = disc
                     pin[env, disc] = kernels.PIN_GRASP
                     self.grasped[env] = bool(disc.any())
         flat = positions.reshape(-1, 3).astype(np.float32)
@@ -647,99 +652,7 @@ class Simulator:
             device=self.device,
         )
 
-    # ------------------------------------------------------------------ read-back
-    def positions(self) -> np.ndarray:
-        """(B, N, 3) current vertex positions (mm)."""
-        self._sync_flat()
-        return self.x.numpy().reshape(self.num_envs, self.grid.num_vertices, 3).copy()
-
-    def alive_mask(self) -> np.ndarray:
-        """(B, N) bool: False where the scissors removed the vertex."""
-        self._sync_flat()
-        return self.alive.numpy().reshape(self.num_envs, self.grid.num_vertices).astype(bool)
-
-    def read_envs(self, envs: np.ndarray | list[int]) -> tuple[np.ndarray, np.ndarray]:
-        """Positions (k, N, 3) float32 (mm) and alive masks (k, N) bool of the envs ``envs`` (k,) only.
-
-        The same values as ``positions()[envs]`` and ``alive_mask()[envs]``, but only those envs are read
-        (see :meth:`read_state`). For recorders that watch a few envs of a big batch.
-        """
-        state = self.read_state(envs)
-        return np.ascontiguousarray(state[..., :3]), state[..., 3] != 0.0
-
-    def read_state(self, envs: np.ndarray | list[int], out: np.ndarray | None = None) -> np.ndarray:
-        """(k, N, 4) float32 state of the envs ``envs`` (k,) only: x, y, z (mm) and alive (1.0, or 0.0 where
-        the scissors removed the vertex), written into ``out`` if given.
-
-        The cheapest read-back of a few envs: the ``simd`` backend copies their lanes out of the packed
-        blocks (one strided copy per env) instead of unpacking the whole batch as :meth:`positions` and
-        :meth:`alive_mask` do, and on a GPU only their slices are copied. A step callback that reads the
-        same envs every step calls :meth:`state_reader` once instead.
-        """
-        return self.state_reader(envs)(out)
-
-    def state_reader(self, envs: np.ndarray | list[int]) -> Callable[..., np.ndarray]:
-        """A function ``read(out=None)`` that does what ``read_state(envs, out)`` does, with the checks and
-        lookups done once, here: what a recorder's step callback calls every step (in the stepping loop the
-        simulation's kernels have evicted Python's own working set, and every call it makes is slow;
-        docs/performance.md §5)."""
-        envs = np.asarray(envs, dtype=np.intp).reshape(-1)
-        if envs.size and (envs.min() < 0 or envs.max() >= self.num_envs):
-            raise ValueError(f"envs: indices must lie in [0, {self.num_envs}) (got {envs.tolist()})")
-        envs = envs.tolist()
-        n = self.grid.num_vertices
-        shape = (len(envs), n, 4)
-        lanes = self._simd.lane_views(envs) if self._simd is not None and self._is_cpu else None
-
-        def read(out: np.ndarray | None = None) -> np.ndarray:
-            if out is None:
-                out = np.empty(shape, dtype=np.float32)
-            elif out.shape != shape or out.dtype != np.float32:
-                raise ValueError(
-                    f"out: expected a float32 array of shape {shape}, got {out.dtype} {out.shape}"
-                )
-            if not self._flat_current:
-                for k, lane in enumerate(lanes):
-                    out[k] = lane
-            elif self._is_cpu:
-                x = self.x.numpy().reshape(self.num_envs, n, 3)
-                alive = self.alive.numpy().reshape(self.num_envs, n)
-                for k, env in enumerate(envs):
-                    out[k, :, :3] = x[env]
-                    out[k, :, 3] = alive[env] != 0
-            else:
-                for k, env in enumerate(envs):
-                    out[k, :, :3] = self.x[env * n : (env + 1) * n].numpy()
-                    out[k, :, 3] = self.alive[env * n : (env + 1) * n].numpy() != 0
-            return out
-
-        return read
-
-    def gather(self, vertices: np.ndarray) -> np.ndarray:
-        """(B, K, 4) float32 state of K vertices per env, ``vertices`` (B, K) indices: x, y, z (mm) and alive
-        (1.0, or 0.0 where the scissors removed the vertex).
-
-        The same values as ``positions()`` and ``alive_mask()`` at those indices, without reading the rest:
-        the ``simd`` backend indexes its packed blocks in place instead of unpacking the batch (what the
-        envs' observations read every step: fiducials, the scissors' target; docs/performance.md)."""
-        vertices = np.asarray(vertices, dtype=np.intp)
-        n = self.grid.num_vertices
-        if vertices.ndim != 2 or vertices.shape[0] != self.num_envs:
-            raise ValueError(f"vertices: expected ({self.num_envs}, K) indices, got shape {vertices.shape}")
-        if vertices.size and (vertices.min() < 0 or vertices.max() >= n):
-            raise ValueError(f"vertices: indices must lie in [0, {n})")
-        if not self._flat_current and self._simd is not None and self._is_cpu:
-            lanes = self._simd.lanes
-            envs = np.arange(self.num_envs)[:, None]
-            return self._simd.packed_view()[envs // lanes, vertices, :4, envs % lanes]  # a float32 copy
-        self._sync_flat()
-        x = self.x.numpy().reshape(self.num_envs, n, 3)
-        alive = self.alive.numpy().reshape(self.num_envs, n)
-        out = np.empty(vertices.shape + (4,), dtype=np.float32)
-        out[..., :3] = np.take_along_axis(x, vertices[..., None], axis=1)
-        out[..., 3] = np.take_along_axis(alive, vertices, axis=1) != 0
-        return out
-
+    # ------------------------------------------------------------------ state (reads: StateReads)
     def state(self) -> dict:
         """A copy of what the next updates start from: ``x``, ``x_prev`` (B * N, 3), ``alive`` (B * N,),
         ``displacement`` (B, 3) and ``update_count`` (the noise stream): a checkpoint for :meth:`load_state`

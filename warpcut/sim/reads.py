@@ -1,0 +1,144 @@
+"""Reading a :class:`~warpcut.sim.simulator.Simulator`'s sheets back to NumPy: the whole batch, a few envs,
+or a few vertices of every env, each read the cheapest way its backend allows (docs/performance.md,
+sections 5 and 6)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from warpcut.sim._warp import wp
+    from warpcut.sim.config import SheetGrid
+    from warpcut.sim.kernels_simd import SimdState
+
+
+class StateReads:
+    """The read-back methods of :class:`~warpcut.sim.simulator.Simulator`, which it inherits (one module per
+    concern; the simulator's own module holds the stepping). They read the simulator's ``x`` and ``alive``
+    arrays, or the ``simd`` backend's packed blocks (``_simd``) while those hold the newer state
+    (``_flat_current`` False)."""
+
+    num_envs: int
+    grid: SheetGrid
+    x: wp.array
+    alive: wp.array
+    _simd: SimdState | None
+    _is_cpu: bool
+    _flat_current: bool
+
+    def _sync_flat(self) -> None:  # the simulator's: unpack the blocks into x and alive if they are newer
+        raise NotImplementedError
+
+    def positions(self) -> np.ndarray:
+        """(B, N, 3) current vertex positions (mm)."""
+        self._sync_flat()
+        return self.x.numpy().reshape(self.num_envs, self.grid.num_vertices, 3).copy()
+
+    def alive_mask(self) -> np.ndarray:
+        """(B, N) bool: False where the scissors removed the vertex."""
+        self._sync_flat()
+        return self.alive.numpy().reshape(self.num_envs, self.grid.num_vertices).astype(bool)
+
+    def read_envs(self, envs: np.ndarray | list[int]) -> tuple[np.ndarray, np.ndarray]:
+        """Positions (k, N, 3) float32 (mm) and alive masks (k, N) bool of the envs ``envs`` (k,) only.
+
+        The same values as ``positions()[envs]`` and ``alive_mask()[envs]``, but only those envs are read
+        (see :meth:`read_state`). For recorders that watch a few envs of a big batch.
+        """
+        state = self.read_state(envs)
+        return np.ascontiguousarray(state[..., :3]), state[..., 3] != 0.0
+
+    def read_state(self, envs: np.ndarray | list[int], out: np.ndarray | None = None) -> np.ndarray:
+        """(k, N, 4) float32 state of the envs ``envs`` (k,) only: x, y, z (mm) and alive (1.0, or 0.0 where
+        the scissors removed the vertex), written into ``out`` if given.
+
+        The cheapest read-back of a few envs: the ``simd`` backend copies their lanes out of the packed
+        blocks (one strided copy per env) instead of unpacking the whole batch as :meth:`positions` and
+        :meth:`alive_mask` do, and on a GPU only their slices are copied. A step callback that reads the
+        same envs every step calls :meth:`state_reader` once instead.
+        """
+        return self.state_reader(envs)(out)
+
+    def state_reader(self, envs: np.ndarray | list[int]) -> Callable[..., np.ndarray]:
+        """A function ``read(out=None)`` that does what ``read_state(envs, out)`` does, with the checks and
+        lookups done once, here: what a recorder's step callback calls every step (in the stepping loop the
+        simulation's kernels have evicted Python's own working set, and every call it makes is slow;
+        docs/performance.md §5)."""
+        envs = np.asarray(envs, dtype=np.intp).reshape(-1)
+        if envs.size and (envs.min() < 0 or envs.max() >= self.num_envs):
+            raise ValueError(f"envs: indices must lie in [0, {self.num_envs}) (got {envs.tolist()})")
+        envs = envs.tolist()
+        n = self.grid.num_vertices
+        shape = (len(envs), n, 4)
+        lanes = self._simd.lane_views(envs) if self._simd is not None and self._is_cpu else None
+
+        def read(out: np.ndarray | None = None) -> np.ndarray:
+            if out is None:
+                out = np.empty(shape, dtype=np.float32)
+            elif out.shape != shape or out.dtype != np.float32:
+                raise ValueError(
+                    f"out: expected a float32 array of shape {shape}, got {out.dtype} {out.shape}"
+                )
+            if not self._flat_current:
+                for k, lane in enumerate(lanes):
+                    out[k] = lane
+            elif self._is_cpu:
+                x = self.x.numpy().reshape(self.num_envs, n, 3)
+                alive = self.alive.numpy().reshape(self.num_envs, n)
+                for k, env in enumerate(envs):
+                    out[k, :, :3] = x[env]
+                    out[k, :, 3] = alive[env] != 0
+            else:
+                for k, env in enumerate(envs):
+                    out[k, :, :3] = self.x[env * n : (env + 1) * n].numpy()
+                    out[k, :, 3] = self.alive[env * n : (env + 1) * n].numpy() != 0
+            return out
+
+        return read
+
+    def gather(self, vertices: np.ndarray) -> np.ndarray:
+        """(B, K, 4) float32 state of K vertices per env, ``vertices`` (B, K) indices: x, y, z (mm) and alive
+        (1.0, or 0.0 where the scissors removed the vertex).
+
+        The same values as ``positions()`` and ``alive_mask()`` at those indices, without reading the rest:
+        the ``simd`` backend takes them from its packed blocks in place instead of unpacking the batch (what
+        the envs' observations read every step: fiducials, the scissors' target; docs/performance.md). To
+        read the same vertices every step, make a :meth:`gatherer` once."""
+        return self.gatherer(vertices)()
+
+    def gatherer(self, vertices: np.ndarray) -> Callable[[], np.ndarray]:
+        """A function ``read()`` that returns what ``gather(vertices)`` returns at the time of the call, with
+        the indices checked and their offsets in the packed blocks computed once, here (the envs read the
+        fiducials' cells every step: the offsets cost as much as the read; docs/performance.md, section 6).
+        """
+        vertices = np.asarray(vertices, dtype=np.intp)
+        n = self.grid.num_vertices
+        if vertices.ndim != 2 or vertices.shape[0] != self.num_envs:
+            raise ValueError(f"vertices: expected ({self.num_envs}, K) indices, got shape {vertices.shape}")
+        if vertices.size and (vertices.min() < 0 or vertices.max() >= n):
+            raise ValueError(f"vertices: indices must lie in [0, {n})")
+        vertices = vertices.copy()  # the caller's array may change; this reader's vertices do not
+        offsets: dict = {}  # of the packed blocks last read: their state object and the flat indices
+
+        def read() -> np.ndarray:
+            simd = self._simd
+            if not self._flat_current and simd is not None and self._is_cpu:
+                view = simd.packed_view()  # (blocks, n, fields, lanes), contiguous
+                if offsets.get("state") is not simd:
+                    _, _, fields, lanes = view.shape
+                    env = np.arange(self.num_envs)[:, None]
+                    first = ((env // lanes) * n + vertices) * (fields * lanes) + env % lanes
+                    offsets.update(state=simd, index=first[..., None] + lanes * np.arange(4))
+                return np.take(view.reshape(-1), offsets["index"])  # a float32 copy
+            self._sync_flat()
+            x = self.x.numpy().reshape(self.num_envs, n, 3)
+            alive = self.alive.numpy().reshape(self.num_envs, n)
+            out = np.empty(vertices.shape + (4,), dtype=np.float32)
+            out[..., :3] = np.take_along_axis(x, vertices[..., None], axis=1)
+            out[..., 3] = np.take_along_axis(alive, vertices, axis=1) != 0
+            return out
+
+        return read
