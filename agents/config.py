@@ -185,6 +185,19 @@ class Recipe:
 APG_FIXED_SHEET = "randomize: APG differentiates one fixed sheet; train with PPO (--algo ppo)"
 """Why APG refuses domain randomisation and a relative reward (:class:`agents.apg.ApgRunner`, the CLI)."""
 
+APG_BATCH = {"num_envs": 16, "iterations": 30}
+"""APG's envs and iterations where none are given (Table I's APG column, docs/learning.md): PPO's 256 x 150
+would train APG for about an hour and a half a contour (an APG iteration at 256 envs took 35 s here)."""
+
+
+def batch_defaults(algorithm: str) -> dict[str, int]:
+    """``{"num_envs": ..., "iterations": ...}`` a run of ``algorithm`` ("ppo" or "apg") trains with unless
+    told otherwise: :class:`TrainConfig`'s for PPO, :data:`APG_BATCH` for APG."""
+    if algorithm == "apg":
+        return dict(APG_BATCH)
+    return {"num_envs": TrainConfig.num_envs, "iterations": TrainConfig.iterations}
+
+
 APG_LEARNING_RATE = 3e-3
 """Adam's step of the ``apg`` recipe (APG's gradients are clipped to ``max_grad_norm``; docs/learning.md)."""
 

@@ -39,6 +39,7 @@ from agents.config import (
     GradConfig,
     Recipe,
     TrainConfig,
+    batch_defaults,
 )
 from agents.evaluation import Method, MethodResult, evaluate_suite, run_method
 from agents.gradient import grad_column
@@ -276,7 +277,7 @@ def run_pipeline(
             plan's choice) or ``analytic`` (each candidate scored with the analytic policy, noise-free).
         shared_policy: With rl: one policy for all the candidates, observing its pinch point.
         recipe: How rl policies are trained (:data:`agents.config.RECIPES`).
-        num_envs: PPO envs per policy (default ``TrainConfig.num_envs``; shared: at least 8 per candidate).
+        num_envs: Envs per policy (default: :func:`agents.config.batch_defaults`; shared: >= 8 a candidate).
         config: Simulation settings (default: ``SimConfig()``).
         arm: The cutting arm's footprint for pinch feasibility (default: the paper's).
         analytic_pinch: :data:`ANALYTIC_PINCHES`.
@@ -428,13 +429,14 @@ def _train_candidates(
     directory, its index (the first, i.e. the better fixed rank, among ties) and every run directory."""
     cuts = [[s.tolist() for s in plan.ordered_segments(c["order"])] for c in listed]
     common = dict(contour=contour, sim_config=config, device=device, **recipe.options)
+    batch = batch_defaults(recipe.train.get("algorithm", TrainConfig.algorithm))["num_envs"]
     if shared:
-        envs = num_envs or max(TrainConfig.num_envs, 8 * len(listed))
+        envs = num_envs or max(batch, 8 * len(listed))
         choices = [{"pinch": c["pinch"], "segments": s} for c, s in zip(listed, cuts, strict=True)]
         jobs = [(out / "rl", PatternCutOptions(candidates=choices, **common))]
         what = f"one RL policy shared by {len(listed)} pinch candidate(s) ({envs} envs"
     else:
-        envs = num_envs or TrainConfig.num_envs
+        envs = num_envs or batch
         jobs = [
             (out / "rl" / f"candidate-{k}", PatternCutOptions(pinch_point=c["pinch"], segments=s, **common))
             for k, (c, s) in enumerate(zip(listed, cuts, strict=True))
@@ -549,8 +551,8 @@ def evaluate_table(
     checkpoints: str | Path | None = None,
     allow_partial: bool = False,
     recipe: Recipe = RECIPES["warpcut"],
-    iterations: int = TrainConfig.iterations,
-    num_envs: int = TrainConfig.num_envs,
+    iterations: int | None = None,
+    num_envs: int | None = None,
     plan: bool | Sequence[Plan] = True,
     candidates: int = EVALUATION_CANDIDATES,
     arm: ArmModel | None = None,
@@ -584,7 +586,7 @@ def evaluate_table(
         checkpoints: Directory of trained runs, one per contour, each checked against the request.
         allow_partial: Accept checkpoints whose training was interrupted (their last saved policy).
         recipe: How rl policies are trained when there are no checkpoints (:data:`agents.config.RECIPES`).
-        iterations, num_envs: PPO iterations and envs per contour when training.
+        iterations, num_envs: Per contour when training (default: :func:`agents.config.batch_defaults`).
         plan: Plan every cut (see above); or the plans themselves, one per contour (e.g. to compare
             recipes on the same plans).
         candidates: Pinch candidates per plan.
@@ -601,6 +603,8 @@ def evaluate_table(
     """
     methods = check_methods(methods, "methods")
     config = (config or SimConfig()).validated()
+    batch = batch_defaults(recipe.train.get("algorithm", TrainConfig.algorithm))
+    iterations, num_envs = iterations or batch["iterations"], num_envs or batch["num_envs"]
     out = Path(out)
     named = resolve_contours(contours)
     loaded = [c for _, c in named]

@@ -638,8 +638,8 @@ def test_cli_defaults_are_the_library_defaults():
         if name == "run":  # the budget's (agents.config.BUDGETS) and the recipe's, unless overridden
             del expected["num_envs"]
             expected["validation_trials"] = None
-        if name in ("train", "evaluate"):
-            expected["iterations"] = train.iterations
+        if name in ("train", "evaluate"):  # the algorithm's (agents.config.batch_defaults), resolved later
+            expected["iterations"] = expected["num_envs"] = None
         if name == "plan":
             planning = inspect.signature(plan_cut).parameters
             expected["tolerance"] = planning["tolerance_mm"].default
@@ -708,18 +708,48 @@ def test_optimize_writes_the_plan_and_its_evaluation(tmp_path):
     assert code != 0 and "--overwrite" in stderr
 
 
+def test_batch_defaults_are_ppos_and_apgs_own():
+    from agents.config import APG_BATCH, TrainConfig, batch_defaults
+
+    assert batch_defaults("ppo") == {"num_envs": TrainConfig.num_envs, "iterations": TrainConfig.iterations}
+    assert batch_defaults("apg") == APG_BATCH and APG_BATCH["num_envs"] < TrainConfig.num_envs
+
+
 def test_train_apg_runs_and_refuses_discrete_actions(tmp_path):
+    """APG runs, on its own default batch (16 envs, not PPO's 256)."""
     run = tmp_path / "apg"
-    args = ["train", "--contour", "circle-small", "--algo", "apg", "--iterations", "1", "--num-envs", "2"]
+    args = ["train", "--contour", "circle-small", "--algo", "apg", "--iterations", "1"]
     code, stdout, _ = invoke(
         args + ["--eval-trials", "2", "--validation-trials", "2", "--no-progress", "--out", str(run)]
     )
     assert code == 0, stdout
+    assert "(16 envs, 1 iterations" in stdout
     config = json.loads((run / "config.json").read_text())["train"]
-    assert config["algorithm"] == "apg" and config["discrete"] is False
+    assert config["algorithm"] == "apg" and config["discrete"] is False and config["num_envs"] == 16
     assert json.loads((run / "options.json").read_text())["action_type"] == "continuous"
     code, _, stderr = invoke(args + ["--actions", "discrete", "--out", str(tmp_path / "other")])
     assert code == 2 and "--actions continuous" in stderr
+
+
+def test_evaluate_trains_apg_on_its_own_default_batch(tmp_path):
+    out = tmp_path / "run"
+    args = [
+        "evaluate",
+        "--contours",
+        "circle-small",
+        "--methods",
+        "none,rl",
+        "--recipe",
+        "apg",
+        "--trials",
+        "2",
+    ]
+    args += ["--iterations", "1", "--candidates", "2", "--no-plots", "--out", str(out)]
+    code, stdout, _ = invoke(args)
+    assert code == 0, stdout
+    assert json.loads((out / "request.json").read_text())["arguments"]["num_envs"] == 16
+    config = json.loads((out / "policies" / "circle-small" / "config.json").read_text())["train"]
+    assert config["algorithm"] == "apg" and config["num_envs"] == 16
 
 
 def test_evaluate_with_the_grad_column(tmp_path):

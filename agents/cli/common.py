@@ -15,7 +15,7 @@ from pathlib import Path
 
 import click
 
-from agents.config import ANALYTIC_PINCHES, RECIPES
+from agents.config import ANALYTIC_PINCHES, RECIPES, batch_defaults
 from warpcut.sim.config import ARM_LENGTH_MM, RESOLUTION_RANGE, SCORES, SimConfig
 from warpcut.viz import COLOUR_FIELDS
 from warpcut.viz.process import RecordingError
@@ -204,6 +204,13 @@ seed_option = click.option(
 
 DEFAULTS = SimConfig()
 """The library's defaults, which the options below show and pass on (one set for library and CLI)."""
+
+_PPO, _APG = batch_defaults("ppo"), batch_defaults("apg")
+BATCH_DEFAULTS_HELP = (
+    f"Default: the algorithm's, {_PPO['num_envs']} envs x {_PPO['iterations']} iterations for PPO, "
+    f"{_APG['num_envs']} x {_APG['iterations']} for APG (agents.config.batch_defaults)."
+)
+"""What ``--num-envs`` and ``--iterations`` default to where the algorithm decides (train, evaluate)."""
 
 noise_option = click.option(
     "--noise",

@@ -9,7 +9,7 @@ import click
 
 from agents.cli import common
 from agents.cli.video import video_option, videos, with_videos
-from agents.config import EVALUATION_CANDIDATES, EVALUATION_TRIALS, GRAD_CONFIG, RECIPES, TrainConfig
+from agents.config import EVALUATION_CANDIDATES, EVALUATION_TRIALS, GRAD_CONFIG, RECIPES
 from agents.methods import METHODS, TABLE_METHODS
 from warpcut.sim.config import SimConfig
 
@@ -46,8 +46,10 @@ from warpcut.sim.config import SimConfig
     help="Accept --checkpoints runs whose training was interrupted (their last saved policy).",
 )
 @common.recipe_option
-@common.count_option("iterations", TrainConfig.iterations, "PPO iterations per contour when training.")
-@common.count_option("num-envs", TrainConfig.num_envs, "Envs when training.")
+@common.count_option(
+    "iterations", None, f"Iterations per contour when training. {common.BATCH_DEFAULTS_HELP}"
+)
+@common.count_option("num-envs", None, f"Envs when training. {common.BATCH_DEFAULTS_HELP}")
 @common.count_option(
     "grad-iterations", GRAD_CONFIG.iterations, "Adam steps per contour of the grad column's optimiser."
 )

@@ -8,7 +8,14 @@ import click
 
 from agents.cli import common
 from agents.cli.video import video_option, videos, with_videos
-from agents.config import ALGORITHMS, EVALUATION_TRIALS, RECIPE, VALIDATION_TRIALS, TrainConfig
+from agents.config import (
+    ALGORITHMS,
+    EVALUATION_TRIALS,
+    RECIPE,
+    VALIDATION_TRIALS,
+    TrainConfig,
+    batch_defaults,
+)
 from warpcut.sim.config import SimConfig
 
 TRAIN = TrainConfig()
@@ -48,9 +55,11 @@ RESUMED_FLAGS = {
     help="ppo (rsl-rl) or apg: analytic policy gradients through the differentiable simulator (continuous "
     "moves; one whole episode per env and iteration; docs/learning.md).",
 )
-@common.count_option("num-envs", TRAIN.num_envs, "Parallel envs.")
+@common.count_option("num-envs", None, f"Parallel envs. {common.BATCH_DEFAULTS_HELP}")
 @common.count_option(
-    "iterations", TRAIN.iterations, "PPO iterations in total (a resumed run continues up to this count)."
+    "iterations",
+    None,
+    f"Iterations in total (a resumed run continues up to this count). {common.BATCH_DEFAULTS_HELP}",
 )
 @common.count_option("steps-per-env", TRAIN.num_steps_per_env, "Env steps per env per PPO iteration.")
 @common.noise_option
@@ -126,8 +135,8 @@ def command(
     contour_name: str | None,
     pinch: str | None,
     algo: str,
-    num_envs: int,
-    iterations: int,
+    num_envs: int | None,
+    iterations: int | None,
     steps_per_env: int,
     noise: float,
     score: str,
@@ -206,6 +215,8 @@ def command(
         options.per_env(1)  # fail early on a bad contour or an infeasible default pinch
         out = out or common.run_dir(None, f"train-{safe_name(load_contour(contour_name).name)}")
     name, discrete = options.contours(1)[0].name, options.action_type == "discrete"
+    batch = batch_defaults(algo)
+    num_envs, iterations = num_envs or batch["num_envs"], iterations or batch["iterations"]
     cfg = TrainConfig(
         num_envs=num_envs, iterations=iterations, num_steps_per_env=steps_per_env, seed=seed,
         discrete=discrete, stay_prior=stay_prior if discrete else 0.0, algorithm=algo,
