@@ -181,6 +181,12 @@ class Recipe:
     validation_trials: int = VALIDATION_TRIALS
     """Held-out episodes per validation; 0: no validation, the last policy is the run's."""
 
+    @property
+    def batch(self) -> dict[str, int]:
+        """The envs and iterations it trains with unless told otherwise: its algorithm's
+        (:func:`batch_defaults`)."""
+        return batch_defaults(self.train.get("algorithm", TrainConfig.algorithm))
+
 
 APG_FIXED_SHEET = "randomize: APG differentiates one fixed sheet; train with PPO (--algo ppo)"
 """Why APG refuses domain randomisation and a relative reward (:class:`agents.apg.ApgRunner`, the CLI)."""

@@ -39,7 +39,6 @@ from agents.config import (
     GradConfig,
     Recipe,
     TrainConfig,
-    batch_defaults,
 )
 from agents.evaluation import Method, MethodResult, evaluate_suite, run_method
 from agents.gradient import grad_column
@@ -429,7 +428,7 @@ def _train_candidates(
     directory, its index (the first, i.e. the better fixed rank, among ties) and every run directory."""
     cuts = [[s.tolist() for s in plan.ordered_segments(c["order"])] for c in listed]
     common = dict(contour=contour, sim_config=config, device=device, **recipe.options)
-    batch = batch_defaults(recipe.train.get("algorithm", TrainConfig.algorithm))["num_envs"]
+    batch = recipe.batch["num_envs"]
     if shared:
         envs = num_envs or max(batch, 8 * len(listed))
         choices = [{"pinch": c["pinch"], "segments": s} for c, s in zip(listed, cuts, strict=True)]
@@ -603,7 +602,7 @@ def evaluate_table(
     """
     methods = check_methods(methods, "methods")
     config = (config or SimConfig()).validated()
-    batch = batch_defaults(recipe.train.get("algorithm", TrainConfig.algorithm))
+    batch = recipe.batch
     iterations, num_envs = iterations or batch["iterations"], num_envs or batch["num_envs"]
     out = Path(out)
     named = resolve_contours(contours)

@@ -25,6 +25,7 @@ the sheet (:meth:`warpcut.contours.Contour.intended_region`).
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Sequence
 from concurrent import futures
 from concurrent.futures import ThreadPoolExecutor
@@ -541,7 +542,7 @@ def score_cut(
     # of the path score's time, release the GIL (an episode's end costs two thirds; the same values).
     separating = _scoring_thread().submit(symmetric_difference, alive, intended, grid)
     try:
-        points, regions, ordered, error_mm2, error_vertices = _path_score(paths, arc_mm, contours, grid)
+        points, regions, dropped, error_mm2, error_vertices = _path_score(paths, arc_mm, contours, grid)
     except BaseException:
         futures.wait([separating])  # never leave the thread working on a batch the caller may change
         raise
@@ -555,35 +556,28 @@ def score_cut(
         error_mm2=chosen[0],
         path_error_mm2=error_mm2,
         path_error_vertices=error_vertices,
-        dropped_fraction=np.array([o[1] for o in ordered]),
+        dropped_fraction=dropped,
         cut_paths=points,
         cut_regions=regions,
         separation=separation,
     )
 
 
-_SCORING_THREAD: list[ThreadPoolExecutor] = []
-
-
+@functools.cache
 def _scoring_thread() -> ThreadPoolExecutor:
     """The one worker thread :func:`score_cut` scores separated material on (made at the first score)."""
-    if not _SCORING_THREAD:
-        _SCORING_THREAD.append(ThreadPoolExecutor(1, thread_name_prefix="warpcut-scoring"))
-    return _SCORING_THREAD[0]
+    return ThreadPoolExecutor(1, thread_name_prefix="warpcut-scoring")
 
 
 def _path_score(paths, arc_mm, contours, grid):
-    """:func:`score_cut`'s path half: ``(points, regions, ordered, error_mm2, error_vertices)``, NaN errors
+    """:func:`score_cut`'s path half: ``(points, regions, dropped_fraction, error_mm2, error_vertices)``, NaN
     where ``paths`` is None."""
     if paths is None:
         nan = np.full(len(contours), np.nan)
-        ordered = [(np.zeros((0, 2)), np.nan)] * len(contours)
-        points, regions, error_mm2, error_vertices = [o[0] for o in ordered], [None] * len(contours), nan, nan
-    else:
-        points, dropped = order_cut_paths(paths, arc_mm)
-        ordered = list(zip(points, dropped.tolist(), strict=True))
-        error_mm2, error_vertices, regions = path_errors(points, contours, grid)
-    return points, regions, ordered, error_mm2, error_vertices
+        return [np.zeros((0, 2))] * len(contours), [None] * len(contours), nan, nan, nan
+    points, dropped = order_cut_paths(paths, arc_mm)
+    error_mm2, error_vertices, regions = path_errors(points, contours, grid)
+    return points, regions, dropped, error_mm2, error_vertices
 
 
 def _onto_edge(point: np.ndarray, edge_point: np.ndarray, width: float, height: float) -> np.ndarray:
