@@ -42,6 +42,10 @@ class ApgRunner(Runner):
         options = scene.options
         if options.randomize or options.relative_reward:
             raise ValueError(APG_FIXED_SHEET)
+        if options.base_plan is not None:
+            raise ValueError(
+                "base_plan: APG trains a policy's own moves; train on a base plan with PPO (--algo ppo)"
+            )
         if options.action_type != "continuous":
             raise ValueError("action_type: APG differentiates continuous moves; use --actions continuous")
         if scene.episode_steps < scene.task.num_steps:

@@ -180,6 +180,11 @@ class Recipe:
     """:class:`TrainConfig` fields (not ``num_envs``, ``iterations``, ``seed``: the budget's)."""
     validation_trials: int = VALIDATION_TRIALS
     """Held-out episodes per validation; 0: no validation, the last policy is the run's."""
+    base_plan: str | None = None
+    """``"grad"``: each contour's policy acts on top of the open-loop plan the gradient optimiser finds at
+    its pinch point (the ``grad`` column's plan, :func:`agents.gradient.cached_plan`; the env's
+    ``base_plan``), so PPO learns a residual on it and its "stay" plays the plan. None: the policy's moves
+    alone."""
 
     @property
     def batch(self) -> dict[str, int]:
@@ -190,6 +195,12 @@ class Recipe:
 
 APG_FIXED_SHEET = "randomize: APG differentiates one fixed sheet; train with PPO (--algo ppo)"
 """Why APG refuses domain randomisation and a relative reward (:class:`agents.apg.ApgRunner`, the CLI)."""
+
+SHARED_BASE_PLAN = (
+    "shared-policy: a recipe on a base plan (grad-residual) trains a policy per pinch candidate, each on its "
+    "own candidate's plan; drop --shared-policy or choose another --recipe"
+)
+"""Why a shared policy refuses a recipe with a ``base_plan`` (``agents.pipeline.run_pipeline``, the CLI)."""
 
 APG_BATCH = {"num_envs": 16, "iterations": 30}
 """APG's envs and iterations where none are given (Table I's APG column, docs/learning.md): PPO's 256 x 150
@@ -218,6 +229,11 @@ RECIPES = {
     ),
     "apg": Recipe(
         {**RECIPE, "action_type": "continuous"}, {"algorithm": "apg", "learning_rate": APG_LEARNING_RATE}
+    ),
+    "grad-residual": Recipe(
+        RECIPE,
+        {"stay_prior": TrainConfig.stay_prior, "entropy_coef": TrainConfig.entropy_coef},
+        base_plan="grad",
     ),
 }
 """``--recipe``: warpcut's (:data:`RECIPE`, the default) or the paper's setting (sparse reward, 12

@@ -64,7 +64,9 @@ class PlanResult:
         return {
             "contour": self.contour,
             "pinch": [float(v) for v in self.pinch],
-            "plan": np.asarray(self.plan, dtype=np.float64).round(6).tolist(),
+            # every float32 bit: a plan read back must play as the one found (the sheet is chaotic: moves
+            # rounded to 1e-6 mm changed trials by vertices)
+            "plan": np.asarray(self.plan, dtype=np.float32).astype(np.float64).tolist(),
             "best_iteration": self.best_iteration,
             "history": self.history,
             "seconds": self.seconds,
@@ -285,31 +287,49 @@ def grad_result(
     ``folder``: each contour's plan is kept in ``NAME.json`` (a plan found there is used as it is) and its
     optimiser's state in ``NAME.state.json`` while it runs (an interrupted optimisation continues)."""
     from agents.evaluation import run_method
-    from warpcut.io import read_json, safe_name, write_json
 
-    results = []
-    for k, (contour, pinch, cut) in enumerate(zip(contours, pinches, segments, strict=True)):
-        done = state = None
-        if folder is not None:
-            done = Path(folder) / f"{safe_name(contour.name)}.json"
-            state = done.with_suffix(".state.json")
-        if done is not None and done.is_file():
-            results.append(PlanResult.from_json(read_json(done)))
-            continue
-        log(
-            f"  [{k + 1}/{len(contours)}] optimising a plan for {contour.name} "
-            f"({settings.iterations} iterations)"
-        )
-        result = optimize_plan(contour, pinch, cut, config, settings, device, seed, arm, log, state)
-        if done is not None:
-            write_json(done, result.to_json())
-            state.unlink(missing_ok=True)
-        results.append(result)
+    n = len(contours)
+    results = [
+        cached_plan(contour, pinch, cut, config, settings, device, seed, folder, log, arm, f"[{k + 1}/{n}] ")
+        for k, (contour, pinch, cut) in enumerate(zip(contours, pinches, segments, strict=True))
+    ]
     method = run_method(
         contours, [np.asarray(r.pinch) for r in results], PlanPolicy([r.plan for r in results], trials),
         trials, config, device, seed, segments=list(segments),
     )  # fmt: skip
     return method, results
+
+
+def cached_plan(
+    contour: Contour,
+    pinch: np.ndarray,
+    segments: list[np.ndarray] | None,
+    config: SimConfig,
+    settings: GradConfig = GRAD_CONFIG,
+    device: str | None = None,
+    seed: int = 0,
+    folder: Path | None = None,
+    log: Callable[[str], None] = lambda _: None,
+    arm: ArmModel | None = None,
+    count: str = "",
+) -> PlanResult:
+    """:func:`optimize_plan`, kept in ``folder/NAME.json`` (a plan found there is used as it is; the
+    optimiser's state is kept in ``NAME.state.json`` while it runs, and an interrupted optimisation
+    continues from it). ``count``: the progress line's prefix, e.g. "[2/26] "."""
+    from warpcut.io import read_json, safe_name, write_json
+
+    done = state = None
+    if folder is not None:
+        done = Path(folder) / f"{safe_name(contour.name)}.json"
+        state = done.with_suffix(".state.json")
+        if done.is_file():
+            return PlanResult.from_json(read_json(done))
+    log(f"  {count}optimising a plan for {contour.name} ({settings.iterations} iterations)")
+    result = optimize_plan(contour, pinch, segments, config, settings, device, seed, arm, log, state)
+    if done is not None:
+        write_json(done, result.to_json())
+        state.unlink(missing_ok=True)
+    return result
 
 
 def optimize_contour(

@@ -35,13 +35,14 @@ from agents.config import (
     EVALUATION_TRIALS,
     GRAD_CONFIG,
     RECIPES,
+    SHARED_BASE_PLAN,
     VALIDATION_TRIALS,
     GradConfig,
     Recipe,
     TrainConfig,
 )
 from agents.evaluation import Method, MethodResult, evaluate_suite, run_method
-from agents.gradient import grad_column
+from agents.gradient import cached_plan, grad_column
 from agents.methods import SELECTORS, TABLE_METHODS, StepCallbacks, check_methods, point_text
 from agents.rl import check_policy_run, is_run, nominal_validation_error, rollout_errors, train_contour
 from envs.options import PatternCutOptions
@@ -426,6 +427,8 @@ def _train_candidates(
     """The rl selector: a PPO policy per candidate in ``listed`` (or one shared by all), each candidate cut
     in its best order; records each candidate's validation error in ``listed``. Returns the winner's run
     directory, its index (the first, i.e. the better fixed rank, among ties) and every run directory."""
+    if shared and recipe.base_plan:
+        raise ValueError(SHARED_BASE_PLAN)
     cuts = [[s.tolist() for s in plan.ordered_segments(c["order"])] for c in listed]
     common = dict(contour=contour, sim_config=config, device=device, **recipe.options)
     batch = recipe.batch["num_envs"]
@@ -440,6 +443,14 @@ def _train_candidates(
             (out / "rl" / f"candidate-{k}", PatternCutOptions(pinch_point=c["pinch"], segments=s, **common))
             for k, (c, s) in enumerate(zip(listed, cuts, strict=True))
         ]
+        if recipe.base_plan == "grad":  # each candidate's policy on its own grad plan (out/grad/candidate-K)
+            jobs = [
+                (run_dir, PatternCutOptions.build(options, **_grad_base_plan(
+                    plan.contour, {"pinch_point": c["pinch"], "segments": s}, out / "grad" / f"candidate-{k}",
+                    config, (GRAD_CONFIG, ArmModel()), device, train["seed"], log,
+                )))
+                for k, ((run_dir, options), c, s) in enumerate(zip(jobs, listed, cuts, strict=True))
+            ]  # fmt: skip
         what = f"an RL policy for each of the best {len(listed)} pinch candidate(s) ({envs} envs each"
     log(f"[2/3] training {what}, {train['iterations']} PPO iterations)")
     for k, (run_dir, options) in enumerate(jobs):
@@ -627,6 +638,7 @@ def evaluate_table(
             spec.pinches = analytic_pinches(analytic_pinch, loaded, plans)
         elif spec.name == "rl":
             training = {"recipe": recipe, "iterations": iterations, "num_envs": num_envs, "resume": resume}
+            training["grad"] = (grad, arm or ArmModel())
             feedback = (log, step_callbacks, stages)
             spec.result, runs, kept = _rl_result(
                 named, plans, checkpoints, out, trials, config, training, device, seed, *feedback
@@ -745,6 +757,10 @@ def _rl_result(
                     "pinch_point": [float(v) for v in plans[k].chosen["pinch"]],
                     "segments": [s.tolist() for s in plans[k].ordered_segments()],
                 }
+            if recipe.base_plan == "grad" and not kept:
+                planned.update(
+                    _grad_base_plan(contour, planned, out, config, training["grad"], device, seed, log)
+                )
             options = PatternCutOptions(
                 contour=spec, sim_config=config, device=device, **recipe.options, **planned
             )
@@ -765,6 +781,33 @@ def _rl_result(
     what = "trained" if checkpoints is None else "rolled out"
     log(f"  rl: {what} {len(named)} policy(ies) in {time.perf_counter() - started:.0f} s")
     return MethodResult.from_rollouts(rollouts), runs, iterations
+
+
+def _grad_base_plan(
+    contour: Contour,
+    planned: dict,
+    folder: Path,
+    config: SimConfig,
+    settings: tuple[GradConfig, ArmModel],
+    device: str | None,
+    seed: int,
+    log: Callable[[str], None],
+) -> dict:
+    """The options of a policy on top of ``contour``'s grad plan (:func:`~agents.gradient.cached_plan`, kept
+    in ``folder``) at the planned pinch point and segments (none planned: the feasible centroid, the whole
+    contour): ``base_plan`` and the plan's ``pinch_point``."""
+    from warpcut.planning.feasibility import default_pinch
+
+    grad, arm = settings
+    pinch = planned.get("pinch_point")
+    pinch = np.asarray(default_pinch(contour, config, arm) if pinch is None else pinch, dtype=np.float64)
+    segments = planned.get("segments")
+    segments = None if segments is None else [np.asarray(s, dtype=np.float64) for s in segments]
+    result = cached_plan(contour, pinch, segments, config, grad, device, seed, folder, log, arm)
+    return {
+        "base_plan": np.asarray(result.plan, dtype=np.float64).tolist(),
+        "pinch_point": list(result.pinch),
+    }
 
 
 def policy_iteration(run_dir: Path) -> int | None:

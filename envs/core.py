@@ -108,6 +108,8 @@ class PatternCut:
             config, contours, num_envs, pinch_points=pinch_points, segments=segments, device=options.device
         )
         self.config = self.task.config
+        self.base_plan = _base_plan(options.base_plan, self.config.max_step_mm)
+        """(T, 3) float32 grasp moves (mm) added to the policy's (``options.base_plan``), or None."""
         self.area_mm2 = np.array([c.area_mm2 for c in contours])
         self.episode_steps = min(self.task.num_steps, options.max_episode_steps or self.task.num_steps)
         self.fiducials = Fiducials(self.task.grid, options.shaft_radius_mm)
@@ -187,6 +189,9 @@ class PatternCut:
         moves = self.moves(actions)
         if self.options.residual_gain:
             moves[:, :2] -= self.options.residual_gain * np.nan_to_num(self.tracking_error()[:, :2], nan=0.0)
+        if self.base_plan is not None and self.task.step_index < len(self.base_plan):
+            step = self.config.max_step_mm
+            moves = np.clip(moves + self.base_plan[self.task.step_index], -step, step)
         self.last_moves = moves
         self.task.step(moves)
         diverged = self.task.diverged()
@@ -358,3 +363,24 @@ def check_reset_options(options: dict[str, Any] | None, allowed: tuple[str, ...]
 def reject_reset_options(options: dict[str, Any] | None) -> None:
     """Raise ``ValueError`` for non-empty reset ``options``: these envs take none."""
     check_reset_options(options)
+
+
+def _base_plan(plan, max_step_mm: float) -> np.ndarray | None:
+    """``options.base_plan`` as a (T, 3) float32 array, checked (``ValueError`` naming the field and fix)."""
+    if plan is None:
+        return None
+    try:
+        moves = np.asarray(plan, dtype=np.float32)
+    except (TypeError, ValueError):
+        moves = None
+    if moves is None or moves.ndim != 2 or moves.shape[1] != 3 or not len(moves):
+        raise ValueError("base_plan: give (T, 3) grasp moves (mm), one [dx, dy, dz] per env step, or None")
+    if not np.isfinite(moves).all():
+        raise ValueError("base_plan: every move must be finite (mm)")
+    if np.abs(moves).max() > max_step_mm * (1 + 1e-5):
+        step = int(np.argwhere(np.abs(moves) > max_step_mm * (1 + 1e-5))[0][0])
+        raise ValueError(
+            f"base_plan: step {step} moves {moves[step].tolist()} mm, beyond max_step_mm = {max_step_mm} per "
+            "axis; give a plan of moves within it (warpcut optimize's are)"
+        )
+    return moves

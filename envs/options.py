@@ -81,6 +81,11 @@ class PatternCutOptions:
     """Add the analytic controller's move to every action: ``-residual_gain`` times the tracking error in
     x-y (mm per mm, per step; the paper's analytic gain is 0.048), so the policy learns a residual on it
     and its "stay" action is analytic control. 0: off (the policy's moves alone)."""
+    base_plan: Sequence[Sequence[float]] | np.ndarray | None = None
+    """An open-loop plan the policy acts on: (T, 3) grasp moves (mm), one per env step (e.g. the ``plan`` of
+    the ``NAME.json`` that ``warpcut optimize`` writes), added to the policy's move at every step, the sum
+    clipped to ``max_step_mm`` per axis; after step T the policy's moves alone. The policy learns a residual
+    on the plan, and its "stay" action plays the plan. None: off."""
     dense_reward: bool = False
     """Add the per-step cut-deviation penalty (the path score's increment) to the sparse final reward."""
     relative_reward: bool = False
@@ -305,6 +310,13 @@ def _field_problem(name: str, value: Any) -> str | None:
         return "must be an integer >= 1, or null"
     if name in ("residual_gain", "shaft_radius_mm") and not (_is_number(value) and value >= 0):
         return "must be a number >= 0"
+    if name == "base_plan" and value is not None:
+        try:
+            plan = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            plan = None
+        if plan is None or plan.ndim != 2 or plan.shape[1] != 3 or not len(plan):
+            return "give a list of [dx, dy, dz] grasp moves (mm), one per env step, or null"
     lists = ("pinch_point", "segments", "candidates")
     if name in lists and value is not None and not isinstance(value, list | tuple | np.ndarray):
         return "must be a list, or null"

@@ -764,3 +764,10 @@ def test_evaluate_with_the_grad_column(tmp_path):
     assert table["grad_initial_plan_contours"] in (0, 1)
     assert (out / "grad" / "circle-small.json").is_file()
     assert "grad kept its initial plan" in stdout
+
+
+def test_run_refuses_a_shared_policy_on_grad_plans(tmp_path):
+    args = ["run", "--contour", "circle-small", "--recipe", "grad-residual", "--shared-policy"]
+    code, stdout, stderr = invoke(args + ["--out", str(tmp_path / "run")])
+    assert code == 2 and "--shared-policy: a recipe on a base plan" in stderr and "Traceback" not in stdout
+    assert not (tmp_path / "run").exists()

@@ -267,3 +267,112 @@ def test_a_residual_policy_that_stays_is_the_analytic_controller():
     np.testing.assert_array_equal(residual["error_vertices"], expected)
     with pytest.raises(ValueError, match="residual_gain: must be a finite number >= 0"):
         PatternCutVecEnv(1, options.__class__(contour="fls-circle", residual_gain=-1.0))
+
+
+def test_a_policy_that_stays_on_a_base_plan_plays_the_plan():
+    """``base_plan``: the env adds the plan's move to every action (the sum clipped to 1 mm per axis), so
+    "stay" plays the open-loop plan, trial for trial (paired noise), as the ``grad`` method plays it."""
+    from agents.evaluation import run_method
+    from agents.gradient import PlanPolicy
+    from agents.rl import policy_errors
+
+    class Stay(torch.nn.Module):
+        def forward(self, obs):
+            return torch.zeros(obs.batch_size[0], 1)
+
+    config = SimConfig(resolution=13, noise_std=0.05)
+    contour = load_contour("circle-small")
+    pinch = default_pinch(contour, config)
+    plan = np.random.default_rng(0).uniform(-1, 1, (30, 3)).astype(np.float32)  # shorter than the cut
+    options = PatternCutOptions(
+        contour="circle-small", sim_config=config, device="cpu", pinch_point=pinch, allow_z=True,
+        base_plan=plan.tolist(),
+    )  # fmt: skip
+    expected = run_method([contour], [pinch], PlanPolicy([plan], 3), 3, config, "cpu", 4).error_vertices[0]
+    residual = policy_errors(Stay(), PatternCutVecEnv(3, options), 9, paired_noise=(4, 0))
+    np.testing.assert_array_equal(residual["error_vertices"], expected)
+
+    env = PatternCutVecEnv(2, options)
+    env.reset(seed=0)
+    env.step(np.array([1, 2]))  # +x and -x on top of the plan's first move, each axis kept within 1 mm
+    np.testing.assert_allclose(env.scene.last_moves, np.clip(plan[0] + [[1, 0, 0], [-1, 0, 0]], -1, 1))
+    assert PatternCutOptions.from_dict(options.to_dict()).base_plan == options.base_plan
+
+
+@pytest.mark.parametrize(
+    ("plan", "message"),
+    [
+        ([[0.0, 0.0]], r"base_plan: give \(T, 3\) grasp moves"),
+        ([[0.0, 0.0, float("nan")]], "base_plan: every move must be finite"),
+        (
+            [[0.0, 0.0, 0.0], [1.5, 0.0, 0.0]],
+            r"base_plan: step 1 moves \[1.5, 0.0, 0.0\] mm, beyond max_step_mm",
+        ),
+    ],
+)
+def test_a_bad_base_plan_is_named(plan, message):
+    with pytest.raises(ValueError, match=message):
+        PatternCutVecEnv(
+            1, PatternCutOptions(contour="circle-small", resolution=9, device="cpu", base_plan=plan)
+        )
+    if "give" in message:
+        with pytest.raises(ValueError, match="options: base_plan: give a list of"):
+            PatternCutOptions.from_dict({"base_plan": plan})
+
+
+def test_the_grad_residual_recipe_trains_on_the_grad_columns_plan(tmp_path):
+    """``Recipe.base_plan = "grad"``: the rl column's policy acts on top of the grad column's plan (one
+    optimisation, kept in ``out/grad``), at the plan's pinch point."""
+    from agents.config import RECIPES, GradConfig
+    from agents.pipeline import evaluate_table
+
+    config = SimConfig(resolution=13, noise_std=0.03)
+    report = evaluate_table(
+        "circle-small", tmp_path, methods=["rl", "grad"], trials=2, config=config, plan=False,
+        recipe=RECIPES["grad-residual"], iterations=1, num_envs=4, grad=GradConfig(iterations=1, trials=2),
+    )  # fmt: skip
+    grad = json.loads((tmp_path / "grad" / "circle-small.json").read_text())
+    options = json.loads((tmp_path / "policies" / "circle-small" / "options.json").read_text())
+    np.testing.assert_array_equal(options["base_plan"], grad["plan"])
+    assert options["pinch_point"] == grad["pinch"]
+    row = report.table["rows"][0]
+    assert np.isfinite(row["rl_improvement_pct"]) and np.isfinite(row["grad_improvement_pct"])
+
+
+def test_run_trains_each_candidate_on_its_own_grad_plan(tmp_path, monkeypatch):
+    """``warpcut run --recipe grad-residual``: every trained pinch candidate gets its own grad plan
+    (``out/grad/candidate-K``), optimised at that candidate's pinch point and order; a shared policy, which
+    would need one plan for all of them, is refused before any work."""
+    import agents.pipeline as pipeline
+    from agents.config import RECIPES, SHARED_BASE_PLAN, GradConfig
+
+    monkeypatch.setattr(pipeline, "GRAD_CONFIG", GradConfig(iterations=1, trials=2, validation_trials=2))
+    config = SimConfig(resolution=13, noise_std=0.03)
+    report = pipeline.run_pipeline(
+        "circle-small", tmp_path, candidates=2, rl_candidates=2, iterations=1, trials=1, num_envs=4,
+        config=config, recipe=RECIPES["grad-residual"],
+    )  # fmt: skip
+    for k, candidate in enumerate(report.candidates[:2]):
+        grad = json.loads((tmp_path / "grad" / f"candidate-{k}" / "circle-small.json").read_text())
+        options = json.loads((tmp_path / candidate["run"] / "options.json").read_text())
+        np.testing.assert_array_equal(options["base_plan"], grad["plan"])
+        np.testing.assert_allclose(grad["pinch"], candidate["pinch"])
+    with pytest.raises(ValueError, match="shared-policy: a recipe on a base plan"):
+        pipeline.run_pipeline(
+            "circle-small", tmp_path / "shared", candidates=2, rl_candidates=2, iterations=1, trials=1,
+            config=config, recipe=RECIPES["grad-residual"], shared_policy=True,
+        )  # fmt: skip
+    assert SHARED_BASE_PLAN.startswith("shared-policy:")
+
+
+def test_apg_refuses_a_base_plan(tmp_path):
+    from agents.config import TrainConfig
+    from agents.rl import training_env
+    from agents.train import train
+
+    options = PatternCutOptions(
+        contour="circle-small", resolution=9, device="cpu", action_type="continuous", base_plan=[[0.0] * 3]
+    )
+    cfg = TrainConfig(algorithm="apg", num_envs=2, iterations=1, discrete=False)
+    with pytest.raises(ValueError, match="base_plan: APG trains a policy's own moves"):
+        train(training_env(options, cfg), cfg, tmp_path / "apg", progress=False)

@@ -7,7 +7,14 @@ from pathlib import Path
 import click
 
 from agents.cli import common
-from agents.config import BUDGETS, DEFAULT_BUDGET, DEFAULT_CONTOUR, DEFAULT_SELECTOR, RECIPES
+from agents.config import (
+    BUDGETS,
+    DEFAULT_BUDGET,
+    DEFAULT_CONTOUR,
+    DEFAULT_SELECTOR,
+    RECIPES,
+    SHARED_BASE_PLAN,
+)
 from agents.methods import SELECTORS, point_text
 from warpcut.sim.config import SimConfig
 
@@ -69,7 +76,8 @@ from warpcut.sim.config import SimConfig
 @common.count_option(
     "num-envs",
     None,
-    "PPO envs per policy (default: 64; with --shared-policy 64, or 8 per candidate when more).",
+    "Envs per policy (default: the recipe's algorithm's, PPO 256, APG 16; with --shared-policy at least 8 "
+    "per candidate).",
 )
 @common.resolution_option
 @common.noise_option
@@ -124,6 +132,8 @@ def command(
 
     common.check_outputs({"--json": json_path}, [contour_name])
     chosen_recipe = common.randomized_recipe(RECIPES[recipe], randomize, randomize_range, relative_reward)
+    if shared_policy and chosen_recipe.base_plan:
+        raise click.UsageError(f"--{SHARED_BASE_PLAN}")
     if validation_trials is not None:
         import dataclasses
 
