@@ -332,6 +332,33 @@ def cached_plan(
     return result
 
 
+def base_plan_options(
+    contour: Contour,
+    planned: dict,
+    folder: Path,
+    config: SimConfig,
+    settings: tuple[GradConfig, ArmModel],
+    device: str | None,
+    seed: int,
+    log: Callable[[str], None],
+) -> dict:
+    """The options of a policy on top of ``contour``'s grad plan (:func:`cached_plan`, kept
+    in ``folder``) at the planned pinch point and segments (none planned: the feasible centroid, the whole
+    contour): ``base_plan`` and the plan's ``pinch_point``."""
+    from warpcut.planning.feasibility import default_pinch
+
+    grad, arm = settings
+    pinch = planned.get("pinch_point")
+    pinch = np.asarray(default_pinch(contour, config, arm) if pinch is None else pinch, dtype=np.float64)
+    segments = planned.get("segments")
+    segments = None if segments is None else [np.asarray(s, dtype=np.float64) for s in segments]
+    result = cached_plan(contour, pinch, segments, config, grad, device, seed, folder, log, arm)
+    return {
+        "base_plan": np.asarray(result.plan, dtype=np.float64).tolist(),
+        "pinch_point": list(result.pinch),
+    }
+
+
 def optimize_contour(
     contour: str | Contour,
     out: Path | None = None,

@@ -42,7 +42,7 @@ from agents.config import (
     TrainConfig,
 )
 from agents.evaluation import Method, MethodResult, evaluate_suite, run_method
-from agents.gradient import cached_plan, grad_column
+from agents.gradient import base_plan_options, grad_column
 from agents.methods import SELECTORS, TABLE_METHODS, StepCallbacks, check_methods, point_text
 from agents.rl import check_policy_run, is_run, nominal_validation_error, rollout_errors, train_contour
 from envs.options import PatternCutOptions
@@ -445,7 +445,7 @@ def _train_candidates(
         ]
         if recipe.base_plan == "grad":  # each candidate's policy on its own grad plan (out/grad/candidate-K)
             jobs = [
-                (run_dir, PatternCutOptions.build(options, **_grad_base_plan(
+                (run_dir, PatternCutOptions.build(options, **base_plan_options(
                     plan.contour, {"pinch_point": c["pinch"], "segments": s}, out / "grad" / f"candidate-{k}",
                     config, (GRAD_CONFIG, ArmModel()), device, train["seed"], log,
                 )))
@@ -584,14 +584,12 @@ def evaluate_table(
 
     Args:
         contours: Built-in names or contour files (``all``: the built-in suite).
-        out: Run directory: ``plans.json``, ``results.json``, ``policies/`` (one run per contour, named
-            by :func:`warpcut.io.safe_name`). Locked while the pipeline runs; refused if it holds another
-            run (see :func:`warpcut.io.claim_run_dir`).
+        out: Run directory: ``plans.json``, ``results.json``, ``policies/`` (a run per contour, named by
+            ``safe_name``). Locked while it runs; refused if it holds another run (``claim_run_dir``).
         resume: Continue the run in ``out`` (started with the same arguments, ``request.json``): policies
             trained to the end are kept, interrupted ones continue from their checkpoints.
         overwrite: Delete what ``out`` holds first.
-        methods: Names from :data:`agents.methods.METHODS`.
-        trials: Trials per contour and method.
+        methods, trials: Names from :data:`agents.methods.METHODS`; trials per contour and method.
         config: Simulation settings (default ``SimConfig()``); plans are searched noise-free.
         checkpoints: Directory of trained runs, one per contour, each checked against the request.
         allow_partial: Accept checkpoints whose training was interrupted (their last saved policy).
@@ -602,9 +600,8 @@ def evaluate_table(
         candidates: Pinch candidates per plan.
         arm: The cutting arm's footprint for pinch feasibility (default: the paper's).
         analytic_pinch: :data:`ANALYTIC_PINCHES`.
-        grad: The ``grad`` column's optimiser (:class:`~agents.config.GradConfig`): a plan per contour at
-            the planned pinch (unplanned: the feasible centroid), saved in ``out/grad/NAME.json`` (kept on
-            resume).
+        grad: The optimiser (:class:`~agents.config.GradConfig`) of the ``grad`` column and of a recipe on its
+            plans: a plan per contour at the planned pinch (else the feasible centroid), in ``out/grad``.
         device: Warp device.
         seed: Seed of everything random.
         log: Called with each progress line.
@@ -612,7 +609,7 @@ def evaluate_table(
         step_callbacks: Step callbacks of the batches (``("rl", k)``: contour k's rollout).
     """
     methods = check_methods(methods, "methods")
-    config = (config or SimConfig()).validated()
+    config, arm = (config or SimConfig()).validated(), arm or ArmModel()
     batch = recipe.batch
     iterations, num_envs = iterations or batch["iterations"], num_envs or batch["num_envs"]
     out = Path(out)
@@ -624,11 +621,11 @@ def evaluate_table(
         out, "evaluate", resume, contours=[_contour_key(spec, c) for spec, c in named], methods=list(methods),
         trials=trials, config=config, checkpoints=checkpoints, recipe=recipe, iterations=iterations,
         num_envs=num_envs, plan=plan if isinstance(plan, bool) else [p.contour.name for p in plan],
-        candidates=candidates, arm=arm or ArmModel(), analytic_pinch=analytic_pinch, seed=seed,
+        candidates=candidates, arm=arm, analytic_pinch=analytic_pinch, seed=seed,
         **({"grad": grad} if "grad" in methods else {}),
     )  # fmt: skip
     start = time.perf_counter()
-    settings = dict(num_candidates=candidates, seed=seed, device=device, arm=arm or ArmModel())
+    settings = dict(num_candidates=candidates, seed=seed, device=device, arm=arm)
     plans = _table_plans(plan, loaded, config, settings, out, log, stages)
     specs, runs, notes = [Method(m) for m in methods], [], []  # notes: add a column's own fields to the table
     for spec in specs:
@@ -637,16 +634,18 @@ def evaluate_table(
         elif spec.name == "analytic":
             spec.pinches = analytic_pinches(analytic_pinch, loaded, plans)
         elif spec.name == "rl":
-            training = {"recipe": recipe, "iterations": iterations, "num_envs": num_envs, "resume": resume}
-            training["grad"] = (grad, arm or ArmModel())
+            training = dict(
+                recipe=recipe, iterations=iterations, num_envs=num_envs, resume=resume, grad=(grad, arm)
+            )
             feedback = (log, step_callbacks, stages)
             spec.result, runs, kept = _rl_result(
                 named, plans, checkpoints, out, trials, config, training, device, seed, *feedback
             )
             notes.append(functools.partial(_note_rl_iterations, kept))
         elif spec.name == "grad":
-            settings = (grad, arm or ArmModel())
-            spec.result, note = grad_column(loaded, plans, out, trials, config, settings, device, seed, log)
+            spec.result, note = grad_column(
+                loaded, plans, out, trials, config, (grad, arm), device, seed, log
+            )
             notes.append(note)
     batches = len({spec.name for spec in specs} | {"none"})  # evaluate_suite also runs none, the baseline
     running = iter(range(batches))
@@ -759,7 +758,7 @@ def _rl_result(
                 }
             if recipe.base_plan == "grad" and not kept:
                 planned.update(
-                    _grad_base_plan(contour, planned, out, config, training["grad"], device, seed, log)
+                    base_plan_options(contour, planned, out, config, training["grad"], device, seed, log)
                 )
             options = PatternCutOptions(
                 contour=spec, sim_config=config, device=device, **recipe.options, **planned
@@ -781,33 +780,6 @@ def _rl_result(
     what = "trained" if checkpoints is None else "rolled out"
     log(f"  rl: {what} {len(named)} policy(ies) in {time.perf_counter() - started:.0f} s")
     return MethodResult.from_rollouts(rollouts), runs, iterations
-
-
-def _grad_base_plan(
-    contour: Contour,
-    planned: dict,
-    folder: Path,
-    config: SimConfig,
-    settings: tuple[GradConfig, ArmModel],
-    device: str | None,
-    seed: int,
-    log: Callable[[str], None],
-) -> dict:
-    """The options of a policy on top of ``contour``'s grad plan (:func:`~agents.gradient.cached_plan`, kept
-    in ``folder``) at the planned pinch point and segments (none planned: the feasible centroid, the whole
-    contour): ``base_plan`` and the plan's ``pinch_point``."""
-    from warpcut.planning.feasibility import default_pinch
-
-    grad, arm = settings
-    pinch = planned.get("pinch_point")
-    pinch = np.asarray(default_pinch(contour, config, arm) if pinch is None else pinch, dtype=np.float64)
-    segments = planned.get("segments")
-    segments = None if segments is None else [np.asarray(s, dtype=np.float64) for s in segments]
-    result = cached_plan(contour, pinch, segments, config, grad, device, seed, folder, log, arm)
-    return {
-        "base_plan": np.asarray(result.plan, dtype=np.float64).tolist(),
-        "pinch_point": list(result.pinch),
-    }
 
 
 def policy_iteration(run_dir: Path) -> int | None:
