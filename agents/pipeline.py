@@ -757,8 +757,9 @@ def _rl_result(
                     "segments": [s.tolist() for s in plans[k].ordered_segments()],
                 }
             if recipe.base_plan == "grad" and not kept:
+                folder = out / "grad"  # the grad column's plans
                 planned.update(
-                    base_plan_options(contour, planned, out, config, training["grad"], device, seed, log)
+                    base_plan_options(contour, planned, folder, config, training["grad"], device, seed, log)
                 )
             options = PatternCutOptions(
                 contour=spec, sim_config=config, device=device, **recipe.options, **planned

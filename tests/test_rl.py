@@ -320,17 +320,24 @@ def test_a_bad_base_plan_is_named(plan, message):
             PatternCutOptions.from_dict({"base_plan": plan})
 
 
-def test_the_grad_residual_recipe_trains_on_the_grad_columns_plan(tmp_path):
+def test_the_grad_residual_recipe_trains_on_the_grad_columns_plan(tmp_path, monkeypatch):
     """``Recipe.base_plan = "grad"``: the rl column's policy acts on top of the grad column's plan (one
     optimisation, kept in ``out/grad``), at the plan's pinch point."""
+    import agents.gradient
     from agents.config import RECIPES, GradConfig
     from agents.pipeline import evaluate_table
 
+    optimised = []
+    optimize_plan = agents.gradient.optimize_plan
+    monkeypatch.setattr(
+        agents.gradient, "optimize_plan", lambda *a, **k: optimised.append(1) or optimize_plan(*a, **k)
+    )
     config = SimConfig(resolution=13, noise_std=0.03)
     report = evaluate_table(
         "circle-small", tmp_path, methods=["rl", "grad"], trials=2, config=config, plan=False,
         recipe=RECIPES["grad-residual"], iterations=1, num_envs=4, grad=GradConfig(iterations=1, trials=2),
     )  # fmt: skip
+    assert len(optimised) == 1  # one optimisation, for the policy and the grad column
     grad = json.loads((tmp_path / "grad" / "circle-small.json").read_text())
     options = json.loads((tmp_path / "policies" / "circle-small" / "options.json").read_text())
     np.testing.assert_array_equal(options["base_plan"], grad["plan"])
