@@ -23,6 +23,13 @@ from warpcut.sim.config import SimConfig
 SMALL = SimConfig(resolution=13)
 
 
+class Stay(torch.nn.Module):
+    """A discrete policy that always picks action 0, "stay"."""
+
+    def forward(self, obs):
+        return torch.zeros(obs.batch_size[0], 1)
+
+
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory):
     torch.set_num_threads(1)
@@ -193,10 +200,6 @@ def test_a_still_policy_with_paired_noise_cuts_exactly_as_fixed_tension():
     from agents.evaluation import run_method
     from agents.rl import policy_errors
 
-    class Stay(torch.nn.Module):
-        def forward(self, obs):
-            return torch.zeros(obs.batch_size[0], 1)
-
     config = SimConfig(resolution=13, noise_std=0.05)
     options = PatternCutOptions(contour="circle-small", sim_config=config, device="cpu")
     contour = load_contour("circle-small")
@@ -251,10 +254,6 @@ def test_a_residual_policy_that_stays_is_the_analytic_controller():
     from agents.evaluation import run_method
     from agents.rl import policy_errors
 
-    class Stay(torch.nn.Module):
-        def forward(self, obs):
-            return torch.zeros(obs.batch_size[0], 1)
-
     config = SimConfig(resolution=13, noise_std=0.05)
     contour = load_contour("fls-circle")
     pinch = default_pinch(contour, config)
@@ -275,10 +274,6 @@ def test_a_policy_that_stays_on_a_base_plan_plays_the_plan():
     from agents.evaluation import run_method
     from agents.gradient import PlanPolicy
     from agents.rl import policy_errors
-
-    class Stay(torch.nn.Module):
-        def forward(self, obs):
-            return torch.zeros(obs.batch_size[0], 1)
 
     config = SimConfig(resolution=13, noise_std=0.05)
     contour = load_contour("circle-small")
