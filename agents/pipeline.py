@@ -288,7 +288,7 @@ def run_pipeline(
         step_callbacks: Step callbacks of the evaluation's batches (:data:`agents.methods.StepCallbacks`).
     """
     overrides = dict(candidates=candidates, rl_candidates=rl_candidates, iterations=iterations, trials=trials)
-    settings = _settings(budget, selector, overrides)
+    settings = _settings(budget, selector, overrides, recipe)
     config = (config or SimConfig()).validated()
     out = Path(out)
     loaded = load_contour(contour)
@@ -359,13 +359,17 @@ def run_pipeline(
     return report
 
 
-def _settings(budget: str, selector: str, overrides: dict) -> dict:
-    """``run_pipeline``'s budget with the ``overrides`` that are not None."""
+def _settings(budget: str, selector: str, overrides: dict, recipe: Recipe) -> dict:
+    """``run_pipeline``'s budget with the ``overrides`` that are not None. The budgets' iterations are PPO's:
+    an APG recipe trains its own (:func:`agents.config.batch_defaults`) unless ``iterations`` is given."""
     if budget not in BUDGETS:
         raise ValueError(f"budget: choose one of {', '.join(BUDGETS)} (got {budget!r})")
     if selector not in SELECTORS:
         raise ValueError(f"selector: choose one of {', '.join(SELECTORS)} (got {selector!r})")
-    return {**BUDGETS[budget], **{k: v for k, v in overrides.items() if v is not None}}
+    chosen = dict(BUDGETS[budget])
+    if recipe.train.get("algorithm") == "apg":
+        chosen["iterations"] = recipe.batch["iterations"]
+    return {**chosen, **{k: v for k, v in overrides.items() if v is not None}}
 
 
 def _ranked_candidates(plan: Plan, keep: int | None) -> list[dict]:

@@ -118,3 +118,15 @@ def test_evaluate_table_reports_each_stage_as_it_advances(tmp_path):
     evaluate_table("circle-small", tmp_path / "b", methods=["fixed", "analytic"], trials=1, config=SMALL,
                    plan=False, stages=stages)  # fmt: skip
     assert [done for stage, done, _ in seen if stage == "evaluating"] == [0, 1, 2, 3]
+
+
+def test_run_trains_apg_for_its_own_iterations_unless_told():
+    """The budgets' iterations are PPO's (fast: 60); an APG recipe trains APG's default (30) unless
+    ``iterations`` is given."""
+    from agents.config import APG_BATCH, BUDGETS, RECIPES
+    from agents.pipeline import _settings
+
+    none = {"candidates": None, "rl_candidates": None, "iterations": None, "trials": None}
+    assert _settings("fast", "rl", none, RECIPES["warpcut"])["iterations"] == BUDGETS["fast"]["iterations"]
+    assert _settings("fast", "rl", none, RECIPES["apg"])["iterations"] == APG_BATCH["iterations"]
+    assert _settings("paper", "rl", {**none, "iterations": 5}, RECIPES["apg"])["iterations"] == 5

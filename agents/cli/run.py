@@ -64,7 +64,9 @@ from warpcut.sim.config import SimConfig
     None,
     "Override how many of the best candidates (ranked by fixed tension) get a PPO policy.",
 )
-@common.count_option("iterations", None, "Override the budget's PPO iterations.")
+@common.count_option(
+    "iterations", None, "Override the budget's PPO iterations (--recipe apg: APG's own, 30)."
+)
 @click.option(
     "--validation-trials",
     default=None,
