@@ -48,6 +48,15 @@ def num_steps(contour: str, resolution: int = RESOLUTION) -> int:
     return CuttingTask(SimConfig(resolution=resolution), load_contour(contour), device="cpu").num_steps
 
 
+@pytest.fixture(autouse=True)
+def ctrl_c_interrupts():
+    """Ctrl-C raises KeyboardInterrupt here, as in a terminal, even when the suite was started with SIGINT
+    ignored (a background job of a non-interactive shell is: these tests failed under one)."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
 @pytest.fixture(scope="module")
 def simulated(tmp_path_factory):
     """One ``simulate --record 2`` run (two trials, two methods) with plots, shared by the tests."""
@@ -283,7 +292,8 @@ def replay_web(path, viewer: list[str] | None, env: dict | None = None) -> subpr
     """``warpcut replay PATH --web`` in a new process, with ``viewer`` as rerun's command (None: rerun's)."""
     driver = textwrap.dedent(
         f"""
-        import sys
+        import signal, sys
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # Ctrl-C as a terminal gives it
         from agents.cli import main, replay
         if {viewer!r} is not None:
             replay.VIEWER = {viewer!r}
@@ -933,3 +943,38 @@ def test_the_recorder_process_and_the_cli_start_without_warp():
     code = "import sys, agents.cli, warpcut.viz.process, warpcut.viz.recorder; print('warp' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "False"
+
+
+@pytest.mark.skipif(not hasattr(os, "killpg"), reason="process groups")
+def test_a_signal_while_the_viewer_starts_still_stops_it(tmp_path, tiny_recording, monkeypatch):
+    """Ctrl-C arriving inside ``Popen``, after the viewer started but before ``replay --web`` holds its
+    process (a race a slow machine hit): the interrupt is held back until the viewer can be stopped, then
+    raised, and the viewer's server does not outlive the command."""
+    from agents.cli import replay
+
+    note = tmp_path / "viewer.json"
+    monkeypatch.setenv("FAKE_VIEWER_NOTE", str(note))
+    monkeypatch.setattr(replay, "VIEWER_STOP_S", 0.5)
+    popen = subprocess.Popen
+
+    def started_then_interrupted(*args, **kwargs):
+        process = popen(*args, **kwargs)
+        deadline = time.monotonic() + 60
+        while not note.exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        os.kill(os.getpid(), signal.SIGINT)  # handled at the next bytecode: still inside Popen
+        time.sleep(0.2)
+        return process
+
+    monkeypatch.setattr(replay.subprocess, "Popen", started_then_interrupted)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            replay.serve_web(tiny_recording, [sys.executable, "-c", FAKE_VIEWER])
+        server = json.loads(note.read_text())["server"]
+        deadline = time.monotonic() + 10
+        while running(server) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not running(server), "the viewer's server outlived replay --web"
+    finally:
+        if note.exists() and running(server := json.loads(note.read_text())["server"]):
+            os.kill(server, signal.SIGKILL)

@@ -130,11 +130,41 @@ def serve_web(path: Path, viewer: list[str]) -> int:
     command = [*viewer, "--web-viewer", "--bind", "127.0.0.1", "--server-memory-limit", limit, str(path)]
     click.echo(f"serving {path}: open {web_url()}")
     click.echo(f"({_SSH_HINT}); Ctrl-C stops it")
-    process = subprocess.Popen(command, start_new_session=hasattr(os, "killpg"))
+    process, deferred = _start_deferring_signals(command)
     try:
+        for signum in deferred:  # arrived while the viewer started: handled now that it can be stopped
+            os.kill(os.getpid(), signum)
         return process.wait()
     finally:
         stop_viewer(process)
+
+
+STOP_SIGNALS = tuple(
+    getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name)
+)
+"""The signals that stop ``replay --web`` (Ctrl-C; SIGTERM and SIGHUP through ``CleanErrors``)."""
+
+
+def _start_deferring_signals(command: list[str]) -> tuple[subprocess.Popen, list[int]]:
+    """Start the viewer in its own process group with :data:`STOP_SIGNALS` held back meanwhile: one that
+    arrived while ``Popen`` ran would raise in it after the viewer had started, before its process could
+    be stopped, and leave the viewer's server running (seen on a slow machine). Returns the process and the
+    signals held back, for the caller to send again. Held back only in the main thread, where Python runs
+    signal handlers; the viewer starts with the default handlers either way (exec resets them)."""
+    import threading
+
+    deferred: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        return subprocess.Popen(command, start_new_session=hasattr(os, "killpg")), deferred
+    previous = {
+        signum: signal.signal(signum, lambda signum, _: deferred.append(signum)) for signum in STOP_SIGNALS
+    }
+    try:
+        process = subprocess.Popen(command, start_new_session=hasattr(os, "killpg"))
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+    return process, deferred
 
 
 def stop_viewer(process: subprocess.Popen, grace_s: float | None = None) -> None:
