@@ -377,8 +377,9 @@ def _base_plan(plan, max_step_mm: float) -> np.ndarray | None:
         raise ValueError("base_plan: give (T, 3) grasp moves (mm), one [dx, dy, dz] per env step, or None")
     if not np.isfinite(moves).all():
         raise ValueError("base_plan: every move must be finite (mm)")
-    if np.abs(moves).max() > max_step_mm * (1 + 1e-5):
-        step = int(np.argwhere(np.abs(moves) > max_step_mm * (1 + 1e-5))[0][0])
+    beyond = np.abs(moves) > max_step_mm * (1 + 1e-5)
+    if beyond.any():
+        step = int(np.argwhere(beyond)[0][0])
         raise ValueError(
             f"base_plan: step {step} moves {moves[step].tolist()} mm, beyond max_step_mm = {max_step_mm} per "
             "axis; give a plan of moves within it (warpcut optimize's are)"

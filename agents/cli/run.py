@@ -8,6 +8,7 @@ import click
 
 from agents.cli import common
 from agents.config import (
+    APG_BATCH,
     BUDGETS,
     DEFAULT_BUDGET,
     DEFAULT_CONTOUR,
@@ -65,7 +66,9 @@ from warpcut.sim.config import SimConfig
     "Override how many of the best candidates (ranked by fixed tension) get a PPO policy.",
 )
 @common.count_option(
-    "iterations", None, "Override the budget's PPO iterations (--recipe apg: APG's own, 30)."
+    "iterations",
+    None,
+    f"Override the budget's PPO iterations (--recipe apg: APG's own, {APG_BATCH['iterations']}).",
 )
 @click.option(
     "--validation-trials",
