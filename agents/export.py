@@ -148,7 +148,9 @@ def policy_metadata(source: str | Path) -> dict[str, str]:
         actions = [f"{k}: {name} (grasp move of max_step_mm)" for k, name in enumerate(actions)]
     else:
         actions = [f"grasp d{axis} / max_step_mm, in [-1, 1]" for axis in "xyz"[:axes]]
-    names = observation_names(options.num_fiducials, options.contour_features, options.observe_pinch)
+    names = observation_names(
+        options.num_fiducials, options.contour_features, options.observe_pinch, options.observe_plan
+    )
     scenario = dataclasses.replace(options, device=None).to_dict()
     return {
         "warpcut.observations": json.dumps(names),

@@ -345,6 +345,7 @@ LAYOUT_FIELDS = (
     "num_fiducials",
     "contour_features",
     "observe_pinch",
+    "observe_plan",
     "action_type",
     "allow_z",
     "residual_gain",
@@ -361,7 +362,9 @@ def options_layout(options: PatternCutOptions) -> tuple[int, int]:
     :func:`agents.train.policy_layout` reads them from a policy: the observation's size
     (:func:`envs.observations.observation_bounds`) and the action choices (discrete: stay and +-1 mm per
     axis) or axes (continuous)."""
-    low, _ = observation_bounds(options.num_fiducials, options.contour_features, options.observe_pinch)
+    low, _ = observation_bounds(
+        options.num_fiducials, options.contour_features, options.observe_pinch, options.observe_plan
+    )
     axes = 3 if options.allow_z else 2
     return int(low.size), 1 + 2 * axes if options.action_type == "discrete" else axes
 

@@ -114,7 +114,13 @@ class PatternCut:
         self.episode_steps = min(self.task.num_steps, options.max_episode_steps or self.task.num_steps)
         self.fiducials = Fiducials(self.task.grid, options.shaft_radius_mm)
         self.task.fiducials = self.fiducials  # what a recording of the task shows
-        low, high = observation_bounds(options.num_fiducials, options.contour_features, options.observe_pinch)
+        if options.observe_plan and self.base_plan is None:
+            raise ValueError(
+                "observe_plan: there is no base_plan to observe; give one, or set observe_plan=False"
+            )
+        low, high = observation_bounds(
+            options.num_fiducials, options.contour_features, options.observe_pinch, options.observe_plan
+        )
         self.observation_space = gym.spaces.Box(low, high, dtype=np.float32)
         num_axes = 3 if options.allow_z else 2
         if options.action_type == "discrete":
@@ -191,7 +197,7 @@ class PatternCut:
             moves[:, :2] -= self.options.residual_gain * np.nan_to_num(self.tracking_error()[:, :2], nan=0.0)
         if self.base_plan is not None and self.task.step_index < len(self.base_plan):
             step = self.config.max_step_mm
-            moves = np.clip(moves + self.base_plan[self.task.step_index], -step, step)
+            moves = np.clip(moves + self.plan_move(), -step, step)
         self.last_moves = moves
         self.task.step(moves)
         diverged = self.task.diverged()
@@ -219,6 +225,14 @@ class PatternCut:
         if self._reward_scale is not None:
             rewards *= self._reward_scale
         return self.observe(), rewards, terminated, truncated, info
+
+    def plan_move(self) -> np.ndarray:
+        """(3,) the base plan's grasp move (mm) at this step: added to the policy's; zero without a plan or
+        once it has run out."""
+        step = self.task.step_index
+        if self.base_plan is None or step >= len(self.base_plan):
+            return np.zeros(3, dtype=np.float32)
+        return self.base_plan[step]
 
     @property
     def reward_scale(self) -> np.ndarray:
@@ -314,6 +328,8 @@ class PatternCut:
         if self.options.observe_pinch:
             pinch = np.nan_to_num(self.task.pinch_points, nan=0.0)
             parts.append(normalise_positions(np.pad(pinch, ((0, 0), (0, 1))), self.config)[:, :2])
+        if self.options.observe_plan:
+            parts.append(np.broadcast_to(self.plan_move() / self.config.max_step_mm, (self.num_envs, 3)))
         obs = np.concatenate(parts, axis=1).astype(np.float32)
         obs[self.diverged] = 0.0  # a diverged env's state means nothing (and may be NaN)
         obs = np.nan_to_num(obs, nan=0.0)

@@ -81,6 +81,9 @@ class PatternCutOptions:
     """Add the analytic controller's move to every action: ``-residual_gain`` times the tracking error in
     x-y (mm per mm, per step; the paper's analytic gain is 0.048), so the policy learns a residual on it
     and its "stay" action is analytic control. 0: off (the policy's moves alone)."""
+    observe_plan: bool = False
+    """Add the base plan's move at this step (``base_plan``; zero once it has run out), in units of
+    ``max_step_mm``, to the observation: a residual policy sees what it corrects. Needs a ``base_plan``."""
     base_plan: Sequence[Sequence[float]] | np.ndarray | None = None
     """An open-loop plan the policy acts on: (T, 3) grasp moves (mm), one per env step (e.g. the ``plan`` of
     the ``NAME.json`` that ``warpcut optimize`` writes), added to the policy's move at every step, the sum
@@ -282,6 +285,7 @@ _FLAGS = (
     "resample_fiducials",
     "contour_features",
     "observe_pinch",
+    "observe_plan",
     "allow_z",
     "dense_reward",
     "relative_reward",

@@ -1,5 +1,6 @@
 """Learned tensioners on the real pattern-cutting env: run directories and their evaluation."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -292,6 +293,33 @@ def test_a_policy_that_stays_on_a_base_plan_plays_the_plan():
     env.step(np.array([1, 2]))  # +x and -x on top of the plan's first move, each axis kept within 1 mm
     np.testing.assert_allclose(env.scene.last_moves, np.clip(plan[0] + [[1, 0, 0], [-1, 0, 0]], -1, 1))
     assert PatternCutOptions.from_dict(options.to_dict()).base_plan == options.base_plan
+
+
+def test_a_residual_policy_can_observe_the_plans_move():
+    """``observe_plan``: the last three observation entries are the base plan's move at this step, in units
+    of ``max_step_mm``, then zero once the plan has run out; without a plan the option is refused."""
+    from envs.observations import observation_names
+
+    plan = np.random.default_rng(1).uniform(-1, 1, (3, 3)).round(3)
+    options = PatternCutOptions(
+        contour="circle-small", resolution=9, device="cpu", allow_z=True, contour_features=True,
+        base_plan=plan.tolist(), observe_plan=True,
+    )  # fmt: skip
+    env = PatternCutVecEnv(2, options)
+    obs, _ = env.reset(seed=0)
+    names = observation_names(options.num_fiducials, True, observe_plan=True)
+    assert obs.shape == (2, len(names)) and names[-3:] == ["plan_dx", "plan_dy", "plan_dz"]
+    seen = [obs[:, -3:]]
+    for _ in range(4):
+        seen.append(env.step(np.zeros(2, dtype=int))[0][:, -3:])
+    expected = np.concatenate([plan, np.zeros((2, 3))]).astype(np.float32)
+    np.testing.assert_allclose(np.stack(seen), np.repeat(expected[:, None], 2, axis=1), atol=1e-6)
+    without = dataclasses.replace(options, observe_plan=False)
+    assert PatternCutVecEnv(1, without).observation_space.shape[-1] == len(names) - 3
+    with pytest.raises(ValueError, match="observe_plan: there is no base_plan to observe"):
+        PatternCutVecEnv(1, dataclasses.replace(options, base_plan=None))
+    with pytest.raises(ValueError, match="observe_plan: must be true or false"):
+        PatternCutOptions.from_dict({"observe_plan": "yes"})
 
 
 @pytest.mark.parametrize(
