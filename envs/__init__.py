@@ -3,7 +3,7 @@
 Importing this package registers ``warpcut/PatternCut-v0``::
 
     import gymnasium as gym
-    import envs  # noqa: F401  (or use the id "envs:warpcut/PatternCut-v0")
+    import envs  # noqa: F401  (or import warpcut.gym, or use the id "warpcut.gym:warpcut/PatternCut-v0")
 
     env = gym.make("warpcut/PatternCut-v0", contour="fls-circle", action_type="discrete")
     vec = gym.make_vec("warpcut/PatternCut-v0", num_envs=64, vectorization_mode="vector_entry_point")
@@ -12,19 +12,21 @@ Keyword arguments are the fields of :class:`PatternCutOptions`, plus ``render_mo
 ``"human"``: :mod:`envs.pattern_cut`) and, for the vector env, ``autoreset_mode`` and ``render_envs``
 (:mod:`envs.vector`). The rsl-rl adapter lives in :mod:`envs.rsl` (imported on demand: it pulls in torch).
 
-Registration: :func:`register_envs`, which importing this package runs, is also the ``warpcut`` entry point
-of the ``gymnasium.envs`` group. Gymnasium 1.x no longer loads that group by itself (0.26 to 0.29 did), so
-a script imports ``envs`` (or names it in the id, ``"envs:warpcut/PatternCut-v0"``). A script's own
-top-level ``agents`` package does not get in the way; its own top-level ``envs`` package, first on
-``sys.path``, hides this one under the same name, and then nothing of ours can be imported by name.
+Registration: importing this package runs :func:`register_envs`. A script whose own top-level ``envs``
+package comes first on ``sys.path`` cannot ``import envs`` to get this one: it imports :mod:`warpcut.gym`
+instead (or names it in the id, ``"warpcut.gym:warpcut/PatternCut-v0"``), which finds this package by
+location, loads it under another name if need be (its modules import each other relatively for that), and
+registers it. :mod:`warpcut.gym` is also the ``warpcut`` entry point of the ``gymnasium.envs`` group, which
+Gymnasium 1.x no longer loads by itself (0.26 to 0.29 did). A script's own ``agents`` package does not get
+in the way either.
 """
 
 import gymnasium
 
-from envs.core import PatternCut
-from envs.options import PatternCutOptions
-from envs.pattern_cut import PatternCutEnv
-from envs.vector import PatternCutVecEnv
+from .core import PatternCut
+from .options import PatternCutOptions
+from .pattern_cut import PatternCutEnv
+from .vector import PatternCutVecEnv
 
 ENV_ID = "warpcut/PatternCut-v0"
 

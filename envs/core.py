@@ -54,10 +54,11 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from envs.observations import Fiducials, normalise_positions, observation_bounds, sample_fiducials
-from envs.options import PatternCutOptions
 from warpcut.sim.config import sample_parameters
 from warpcut.task import CuttingTask, segments_key
+
+from .observations import Fiducials, normalise_positions, observation_bounds, sample_fiducials
+from .options import PatternCutOptions
 
 ACTION_TYPES = ("discrete", "continuous")
 DISCRETE_MOVES = np.array(

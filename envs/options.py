@@ -304,7 +304,7 @@ def _field_problem(name: str, value: Any) -> str | None:
     if name == "sim_config" and not isinstance(value, dict | SimConfig):
         return "give an object of SimConfig fields"
     if name == "action_type":
-        from envs.core import ACTION_TYPES  # envs.core imports this module
+        from .core import ACTION_TYPES  # envs.core imports this module
 
         if value not in ACTION_TYPES:
             return f"choose one of {', '.join(ACTION_TYPES)}"

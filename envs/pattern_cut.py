@@ -24,9 +24,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from envs.core import PatternCut, reject_reset_options
-from envs.options import PatternCutOptions
 from warpcut.task import CuttingTask
+
+from .core import PatternCut, reject_reset_options
+from .options import PatternCutOptions
 
 RENDER_MODES = ["human", "rgb_array"]
 """The render modes of the envs (:class:`envs.vector.PatternCutVecEnv`: ``"rgb_array"`` only)."""

@@ -25,8 +25,8 @@ import torch
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
-from envs.options import PatternCutOptions
-from envs.vector import PatternCutVecEnv
+from .options import PatternCutOptions
+from .vector import PatternCutVecEnv
 
 FINAL_ERROR_KEY = "Episode/final_error"
 """``extras["log"]`` key of each completed cut's relative error (the name ``agents.train`` reads)."""

@@ -62,8 +62,8 @@ except ImportError as error:  # pragma: no cover - exercised only without the ex
         "(or pip install 'stable-baselines3>=2.3')"
     ) from error
 
-from envs.options import PatternCutOptions
-from envs.vector import PatternCutVecEnv
+from .options import PatternCutOptions
+from .vector import PatternCutVecEnv
 
 STEP_KEYS = ("cut_deviation_mm", "running_path_error_mm2", "diverged")
 """The per-step info keys of :class:`~envs.vector.PatternCutVecEnv` copied into every env's info."""

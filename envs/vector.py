@@ -58,10 +58,11 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from envs.core import PatternCut, check_reset_options
-from envs.options import PatternCutOptions
-from envs.pattern_cut import check_render_mode, step_fps
 from warpcut.task import CuttingTask
+
+from .core import PatternCut, check_reset_options
+from .options import PatternCutOptions
+from .pattern_cut import check_render_mode, step_fps
 
 VECTOR_RENDER_MODES = ["rgb_array"]
 

@@ -179,8 +179,11 @@ def run_python(code: str, *path: str) -> subprocess.CompletedProcess:
 
 
 def test_the_registration_is_an_entry_point_with_fully_qualified_entry_points():
+    import warpcut.gym
+
     (entry,) = [e for e in entry_points(group="gymnasium.envs") if e.name == "warpcut"]
-    assert entry.value == "envs:register_envs" and entry.load() is envs.register_envs
+    assert entry.value == "warpcut.gym:register_envs" and entry.load() is warpcut.gym.register_envs
+    assert warpcut.gym.env_package() is envs  # the name envs is ours here: no second copy
     spec = gym.spec(ENV_ID)
     assert spec.entry_point == "envs.pattern_cut:PatternCutEnv"
     assert spec.vector_entry_point == "envs.vector:PatternCutVecEnv"
@@ -215,22 +218,40 @@ def test_a_users_own_agents_package_does_not_shadow_the_env(tmp_path):
     assert done.returncode == 0 and done.stdout.strip() == "(40,) (2, 40)", done.stderr
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="a user's top-level envs package first on sys.path takes the name 'envs', which our registration "
-    "(and every module of ours) imports; only renaming ours, or a uniquely named alias package, fixes it",
+@pytest.mark.parametrize(
+    "how",
+    [
+        "entry",  # what a plugin loader does
+        "import",  # import warpcut.gym
+        "id",  # gym.make("warpcut.gym:warpcut/PatternCut-v0")
+    ],
 )
-def test_a_users_own_envs_package_shadows_the_env(tmp_path):
+def test_a_users_own_envs_package_does_not_hide_the_env(tmp_path, how):
+    """A script's own top-level ``envs`` package, first on ``sys.path``, keeps the name ``envs``;
+    :mod:`warpcut.gym` registers warpcut's from its location; ``gym.make`` and ``gym.make_vec`` build it."""
     (tmp_path / "envs").mkdir()
     (tmp_path / "envs" / "__init__.py").write_text("MINE = True\n")
+    load = {
+        "entry": "from importlib.metadata import entry_points\n"
+        "for entry in entry_points(group='gymnasium.envs'):\n    entry.load()()",
+        "import": "import warpcut.gym",
+        "id": "",
+    }[how]
+    env_id = "warpcut.gym:warpcut/PatternCut-v0" if how == "id" else "warpcut/PatternCut-v0"
     done = run_python(
-        """
-        from importlib.metadata import entry_points
-        import gymnasium as gym
-        for entry in entry_points(group="gymnasium.envs"):
-            entry.load()()
-        env = gym.make("warpcut/PatternCut-v0", contour="circle-small", resolution=9, device="cpu")
-        """,
+        f"""
+import sys
+import gymnasium as gym
+import envs
+assert envs.MINE
+{load}
+env = gym.make("{env_id}", contour="circle-small", resolution=9, device="cpu")
+vec = gym.make_vec("warpcut/PatternCut-v0", num_envs=2, vectorization_mode="vector_entry_point",
+                   contour="circle-small", resolution=9, device="cpu")
+print(type(env.unwrapped).__module__, env.reset(seed=0)[0].shape, vec.reset(seed=0)[0].shape)
+assert sys.modules["envs"].MINE
+""",
         str(tmp_path),
     )
     assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "_warpcut_envs.pattern_cut (40,) (2, 40)", done.stdout
