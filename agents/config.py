@@ -183,8 +183,8 @@ class Recipe:
     base_plan: str | None = None
     """``"grad"``: each contour's policy acts on top of the open-loop plan the gradient optimiser finds at
     its pinch point (the ``grad`` column's plan, :func:`agents.gradient.cached_plan`; the env's
-    ``base_plan``), so PPO learns a residual on it and its "stay" plays the plan. None: the policy's moves
-    alone."""
+    ``base_plan``), so PPO learns a residual on it and its "stay" plays the plan (``grad-residual`` also
+    observes the plan's move, ``observe_plan``). None: the policy's moves alone."""
 
     @property
     def batch(self) -> dict[str, int]:
@@ -231,7 +231,7 @@ RECIPES = {
         {**RECIPE, "action_type": "continuous"}, {"algorithm": "apg", "learning_rate": APG_LEARNING_RATE}
     ),
     "grad-residual": Recipe(
-        RECIPE,
+        {**RECIPE, "observe_plan": True},
         {"stay_prior": TrainConfig.stay_prior, "entropy_coef": TrainConfig.entropy_coef},
         base_plan="grad",
     ),

@@ -364,7 +364,7 @@ def test_the_grad_residual_recipe_trains_on_the_grad_columns_plan(tmp_path, monk
     grad = json.loads((tmp_path / "grad" / "circle-small.json").read_text())
     options = json.loads((tmp_path / "policies" / "circle-small" / "options.json").read_text())
     np.testing.assert_array_equal(options["base_plan"], grad["plan"])
-    assert options["pinch_point"] == grad["pinch"]
+    assert options["pinch_point"] == grad["pinch"] and options["observe_plan"]  # it sees what it corrects
     row = report.table["rows"][0]
     assert np.isfinite(row["rl_improvement_pct"]) and np.isfinite(row["grad_improvement_pct"])
 

@@ -239,7 +239,8 @@ recipe_option = click.option(
     "(sparse reward, 12 fiducials, x-y moves, a uniform start, the last policy kept) or apg (warpcut's "
     "observations, continuous moves learnt by analytic policy gradients through the simulator, starting "
     "from holding still) or grad-residual (warpcut's, PPO learning a residual on the open-loop plan the "
-    "gradient optimiser finds first, as for the grad method; its 'stay' plays that plan).",
+    "gradient optimiser finds first, as for the grad method, and observing that plan's moves; its 'stay' "
+    "plays the plan).",
 )
 
 
