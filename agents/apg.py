@@ -7,6 +7,9 @@ replays it backward for the surrogate's gradient with respect to every step's gr
 through the policy's moves into its weights (Adam, gradient-norm clipping). The observations are taken as
 given: the gradient does not flow from a move through the sheet into later observations (the usual
 truncation of APG through a non-differentiable observer; the fiducials' tracking is not differentiable).
+On a base plan (``PatternCutOptions.base_plan``, ``--recipe apg-residual``) the policy's move is added to
+the plan's, as the env adds them, and the gradient reaches the policy through the clipped sum: APG then
+refines the open-loop plan with a closed-loop residual, starting from the plan itself.
 
 The policy is rsl-rl's actor, as PPO's (an MLP with observation normalisation and a Gaussian head over
 continuous moves): :class:`ApgRunner` is PPO's runner with the learning iteration replaced, so checkpoints,
@@ -42,10 +45,6 @@ class ApgRunner(Runner):
         options = scene.options
         if options.randomize or options.relative_reward:
             raise ValueError(APG_FIXED_SHEET)
-        if options.base_plan is not None:
-            raise ValueError(
-                "base_plan: APG trains a policy's own moves; train on a base plan with PPO (--algo ppo)"
-            )
         if options.action_type != "continuous":
             raise ValueError("action_type: APG differentiates continuous moves; use --actions continuous")
         if scene.episode_steps < scene.task.num_steps:
@@ -126,19 +125,26 @@ class ApgRunner(Runner):
         def policy(task) -> np.ndarray:
             obs = TensorDict({"policy": torch.as_tensor(scene.observe(), device=self.device)}, batch_size=[b])
             actor.update_normalization(obs)
-            move = torch.clamp(actor(obs), -1.0, 1.0) * max_step
-            moves.append(move)
-            applied = np.zeros((b, 3), dtype=np.float32)
-            applied[:, :axes] = move.detach().cpu().numpy()
-            if scene.options.residual_gain:  # the residual controller's part does not depend on the policy
+            move = torch.zeros((b, 3), device=self.device)
+            move[:, :axes] = torch.clamp(actor(obs), -1.0, 1.0) * max_step
+            # The parts that do not depend on the policy, added as the env adds them
+            # (envs.core.PatternCut.step): the analytic controller's (residual_gain), then the base plan's
+            # with the sum clipped per axis (no gradient where the clip binds).
+            fixed = np.zeros((b, 3), dtype=np.float32)
+            if scene.options.residual_gain:
                 tracking = np.nan_to_num(scene.tracking_error()[:, :2], nan=0.0)
-                applied[:, :2] -= scene.options.residual_gain * tracking
-            return applied
+                fixed[:, :2] -= scene.options.residual_gain * tracking
+            move = move + torch.as_tensor(fixed, device=self.device)
+            if scene.base_plan is not None and task.step_index < len(scene.base_plan):
+                plan = torch.as_tensor(scene.plan_move(), dtype=torch.float32, device=self.device)
+                move = torch.clamp(move + plan, -max_step, max_step)
+            moves.append(move)
+            return move.detach().cpu().numpy()
 
         rollout = self.engine.forward(policy, reset=False)
         collected = time.perf_counter()
         grads = self.engine.backward(rollout, self.window)
-        g = torch.as_tensor(grads.actions[:, :, :axes], dtype=torch.float32, device=self.device)
+        g = torch.as_tensor(grads.actions, dtype=torch.float32, device=self.device)
         proxy = sum((g[:, t] * move).sum() for t, move in enumerate(moves)) / b
         self.apg_optimizer.zero_grad()
         proxy.backward()

@@ -183,8 +183,9 @@ class Recipe:
     base_plan: str | None = None
     """``"grad"``: each contour's policy acts on top of the open-loop plan the gradient optimiser finds at
     its pinch point (the ``grad`` column's plan, :func:`agents.gradient.cached_plan`; the env's
-    ``base_plan``), so PPO learns a residual on it and its "stay" plays the plan (``grad-residual`` also
-    observes the plan's move, ``observe_plan``). None: the policy's moves alone."""
+    ``base_plan``), so PPO (``grad-residual``) or APG (``apg-residual``) learns a residual on it and its
+    "stay" plays the plan (both also observe the plan's move, ``observe_plan``). None: the policy's moves
+    alone."""
 
     @property
     def batch(self) -> dict[str, int]:
@@ -218,6 +219,10 @@ def batch_defaults(algorithm: str) -> dict[str, int]:
 APG_LEARNING_RATE = 3e-3
 """Adam's step of the ``apg`` recipe (APG's gradients are clipped to ``max_grad_norm``; docs/learning.md)."""
 
+APG_RESIDUAL_LEARNING_RATE = 1e-3
+"""Adam's step of the ``apg-residual`` recipe: on fls-circle's plan 3e-3 left the plan within 5 iterations and
+diverged, 3e-4 did not move it, 1e-3 improved wave-1 and wave-2's plans (docs/learning.md)."""
+
 RECIPES = {
     "warpcut": Recipe(
         RECIPE, {"stay_prior": TrainConfig.stay_prior, "entropy_coef": TrainConfig.entropy_coef}
@@ -233,6 +238,11 @@ RECIPES = {
     "grad-residual": Recipe(
         {**RECIPE, "observe_plan": True},
         {"stay_prior": TrainConfig.stay_prior, "entropy_coef": TrainConfig.entropy_coef},
+        base_plan="grad",
+    ),
+    "apg-residual": Recipe(
+        {**RECIPE, "action_type": "continuous", "observe_plan": True},
+        {"algorithm": "apg", "learning_rate": APG_RESIDUAL_LEARNING_RATE},
         base_plan="grad",
     ),
 }

@@ -343,9 +343,10 @@ def test_a_bad_base_plan_is_named(plan, message):
             PatternCutOptions.from_dict({"base_plan": plan})
 
 
-def test_the_grad_residual_recipe_trains_on_the_grad_columns_plan(tmp_path, monkeypatch):
-    """``Recipe.base_plan = "grad"``: the rl column's policy acts on top of the grad column's plan (one
-    optimisation, kept in ``out/grad``), at the plan's pinch point."""
+@pytest.mark.parametrize("name", ["grad-residual", "apg-residual"])
+def test_the_grad_residual_recipe_trains_on_the_grad_columns_plan(tmp_path, monkeypatch, name):
+    """``Recipe.base_plan = "grad"``: the rl column's policy (PPO's or APG's) acts on top of the grad
+    column's plan (one optimisation, kept in ``out/grad``), at the plan's pinch point."""
     import agents.gradient
     from agents.config import RECIPES, GradConfig
     from agents.pipeline import evaluate_table
@@ -358,7 +359,7 @@ def test_the_grad_residual_recipe_trains_on_the_grad_columns_plan(tmp_path, monk
     config = SimConfig(resolution=13, noise_std=0.03)
     report = evaluate_table(
         "circle-small", tmp_path, methods=["rl", "grad"], trials=2, config=config, plan=False,
-        recipe=RECIPES["grad-residual"], iterations=1, num_envs=4, grad=GradConfig(iterations=1, trials=2),
+        recipe=RECIPES[name], iterations=1, num_envs=4, grad=GradConfig(iterations=1, trials=2),
     )  # fmt: skip
     assert len(optimised) == 1  # one optimisation, for the policy and the grad column
     grad = json.loads((tmp_path / "grad" / "circle-small.json").read_text())
@@ -395,14 +396,27 @@ def test_run_trains_each_candidate_on_its_own_grad_plan(tmp_path, monkeypatch):
     assert SHARED_BASE_PLAN.startswith("shared-policy:")
 
 
-def test_apg_refuses_a_base_plan(tmp_path):
+def test_apg_learns_a_residual_on_a_base_plan(tmp_path):
+    """APG on a base plan (``--recipe apg-residual``): its first episode plays the plan (the policy starts
+    at holding still), the plan's moves added as the env adds them (clipped to 1 mm per axis), the policy's
+    moves alone after the plan ends; the gradient reaches the policy through the sum."""
+    from agents.apg import ApgRunner
     from agents.config import TrainConfig
     from agents.rl import training_env
-    from agents.train import train
 
+    config = SimConfig(resolution=9, noise_std=0.03)
+    plan = np.random.default_rng(1).uniform(-1, 1, (6, 3))
     options = PatternCutOptions(
-        contour="circle-small", resolution=9, device="cpu", action_type="continuous", base_plan=[[0.0] * 3]
-    )
+        contour="circle-small", sim_config=config, device="cpu", action_type="continuous", allow_z=True,
+        contour_features=True, observe_plan=True, base_plan=plan.tolist(),
+    )  # fmt: skip
     cfg = TrainConfig(algorithm="apg", num_envs=2, iterations=1, discrete=False)
-    with pytest.raises(ValueError, match="base_plan: APG trains a policy's own moves"):
-        train(training_env(options, cfg), cfg, tmp_path / "apg", progress=False)
+    runner = ApgRunner(training_env(options, cfg), cfg.to_rsl_rl(None), None)
+    played = []
+    forward = runner.engine.forward
+    runner.engine.forward = lambda *a, **k: played.append(forward(*a, **k)) or played[-1]
+    metrics = runner._iteration()
+    actions = played[0].actions
+    np.testing.assert_allclose(actions[:, : len(plan)], np.broadcast_to(plan, (2, *plan.shape)), atol=1e-6)
+    assert np.all(actions[:, len(plan) :] == 0)  # the plan ran out: the untrained policy holds still
+    assert metrics["grad_norm"] > 0  # the surrogate's gradient reached the weights through plan + move

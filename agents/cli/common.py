@@ -240,7 +240,8 @@ recipe_option = click.option(
     "observations, continuous moves learnt by analytic policy gradients through the simulator, starting "
     "from holding still) or grad-residual (warpcut's, PPO learning a residual on the open-loop plan the "
     "gradient optimiser finds first, as for the grad method, and observing that plan's moves; its 'stay' "
-    "plays the plan).",
+    "plays the plan) or apg-residual (the same with APG: the plan's moves plus continuous moves learnt by "
+    "analytic policy gradients, starting from the plan).",
 )
 
 
