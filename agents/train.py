@@ -70,6 +70,7 @@ from rsl_rl.runners import OnPolicyRunner
 from rsl_rl.utils.logger import Logger
 
 from agents.config import ALGORITHMS, TrainConfig
+from agents.ppo_speed import speed_up
 from envs.rsl import FINAL_ERROR_KEY
 from warpcut.io import DiskFull, write_atomic, write_json
 
@@ -329,10 +330,7 @@ class Runner(OnPolicyRunner):
         # rsl-rl prints the models and observation sets; config.json records them instead.
         with contextlib.redirect_stdout(io.StringIO()):
             super().__init__(env, train_cfg, log_dir, device)
-        # rsl-rl's Adam, fused: one kernel per step, not ~12 ops per tensor (docs/performance.md, section 6).
-        if type(self.alg.optimizer) is torch.optim.Adam:
-            (group,) = self.alg.optimizer.param_groups  # rsl-rl's one group: the actor's and critic's
-            self.alg.optimizer = torch.optim.Adam(group["params"], lr=group["lr"], fused=True)
+        speed_up(self.alg)  # fused Adam, minibatches by index_select (agents.ppo_speed)
         self.logger = _QuietLogger(
             self._end_iteration,
             log_dir=log_dir,

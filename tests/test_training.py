@@ -338,3 +338,12 @@ def test_collection_runs_on_one_torch_thread_and_the_update_on_all(tmp_path, mon
         assert torch.get_num_threads() == 2
     finally:
         torch.set_num_threads(1)  # the module's fixture's setting
+
+
+def test_the_runner_installs_the_ppo_speed_ups():
+    from agents.ppo_speed import mini_batches
+
+    env = ReachEnv(num_envs=4)
+    alg = Runner(env, tiny_config(num_envs=4).to_rsl_rl(env.num_action_choices), log_dir=None).alg
+    assert alg.storage.mini_batch_generator.__func__ is mini_batches
+    assert alg.optimizer.defaults["fused"] is True
