@@ -19,6 +19,7 @@ are not trained.
 
 from __future__ import annotations
 
+import copy
 import os
 import time
 from pathlib import Path
@@ -65,6 +66,8 @@ class ApgRunner(Runner):
         self.apg_optimizer = torch.optim.Adam(self.alg.actor.parameters(), lr=algorithm["learning_rate"])
         self.max_grad_norm = algorithm["max_grad_norm"]
         self.window = train_cfg.get("apg", {}).get("window")
+        self.accept = bool(train_cfg.get("apg", {}).get("accept", False))
+        self.max_learning_rate = algorithm["learning_rate"]
         self.episode_rng = vector.np_random  # seeded by train() (env.seed): episodes follow the run's seed
 
     def _state_bytes(self, infos: dict | None = None) -> bytes:
@@ -112,48 +115,33 @@ class ApgRunner(Runner):
                 self.save(os.path.join(self.logger.log_dir, f"model_{it}.pt"))
 
     def _iteration(self) -> dict:
-        """One episode per env, its backward pass, one Adam step; the iteration's metrics."""
-        from tensordict import TensorDict
-
+        """One episode per env, its backward pass, one Adam step (kept only if it helps, with ``accept``);
+        the iteration's metrics."""
         scene, actor = self.scene, self.alg.actor
-        b, axes = self.env.num_envs, self.env.num_actions
-        max_step = scene.config.max_step_mm
         start = time.perf_counter()
+        episodes = self.episode_rng.bit_generator.state
         scene.reset(self.episode_rng, resample_fiducials=scene.options.resample_fiducials)
         moves: list[torch.Tensor] = []
-
-        def policy(task) -> np.ndarray:
-            obs = TensorDict({"policy": torch.as_tensor(scene.observe(), device=self.device)}, batch_size=[b])
-            actor.update_normalization(obs)
-            move = torch.zeros((b, 3), device=self.device)
-            move[:, :axes] = torch.clamp(actor(obs), -1.0, 1.0) * max_step
-            # The parts that do not depend on the policy, added as the env adds them
-            # (envs.core.PatternCut.step): the analytic controller's (residual_gain), then the base plan's
-            # with the sum clipped per axis (no gradient where the clip binds).
-            fixed = np.zeros((b, 3), dtype=np.float32)
-            if scene.options.residual_gain:
-                tracking = np.nan_to_num(scene.tracking_error()[:, :2], nan=0.0)
-                fixed[:, :2] -= scene.options.residual_gain * tracking
-            move = move + torch.as_tensor(fixed, device=self.device)
-            if scene.base_plan is not None and task.step_index < len(scene.base_plan):
-                plan = torch.as_tensor(scene.plan_move(), dtype=torch.float32, device=self.device)
-                move = torch.clamp(move + plan, -max_step, max_step)
-            moves.append(move)
-            return move.detach().cpu().numpy()
-
-        rollout = self.engine.forward(policy, reset=False)
+        observations: list = []
+        rollout = self.engine.forward(self._policy(moves, observations), reset=False)
         collected = time.perf_counter()
         grads = self.engine.backward(rollout, self.window)
         g = torch.as_tensor(grads.actions, dtype=torch.float32, device=self.device)
-        proxy = sum((g[:, t] * move).sum() for t, move in enumerate(moves)) / b
+        proxy = sum((g[:, t] * move).sum() for t, move in enumerate(moves)) / len(g)
         self.apg_optimizer.zero_grad()
         proxy.backward()
         norm = torch.nn.utils.clip_grad_norm_(actor.parameters(), self.max_grad_norm)
-        self.apg_optimizer.step()
+        error = float(np.nanmean(rollout.score.error_vertices))
+        if self.accept:
+            accepted = self._step(error, episodes)
+        else:
+            self.apg_optimizer.step()
+        if observations:  # with accept, the normaliser learns after the step (see TrainConfig.apg_accept)
+            actor.update_normalization(torch.cat(observations))
         elapsed = time.perf_counter() - start
-        steps = b * len(moves)
-        return {
-            "final_error": float(np.nanmean(rollout.score.error_vertices)),
+        steps = self.env.num_envs * len(moves)
+        metrics = {
+            "final_error": error,
             "surrogate": float(np.nanmean(rollout.surrogate)),
             "grad_norm": float(norm),
             "mean_return": None,
@@ -161,3 +149,67 @@ class ApgRunner(Runner):
             "iteration_steps_per_s": steps / elapsed,
             "collection_steps_per_s": steps / (collected - start),
         }
+        if self.accept:
+            metrics |= {"accepted": float(accepted), "step_size": self.apg_optimizer.param_groups[0]["lr"]}
+        return metrics
+
+    def _policy(self, moves: list | None, observations: list | None):
+        """The policy the differentiable rollout calls before each step: the actor's clamped mean move plus
+        what the env adds (analytic share, base plan). ``moves`` collects the moves with their graph (None:
+        no graph, a replay); the observation normaliser learns from each step's observations as they come
+        unless ``observations`` collects them (with ``accept``) or it is a replay."""
+        from tensordict import TensorDict
+
+        scene, actor = self.scene, self.alg.actor
+        b, axes = self.env.num_envs, self.env.num_actions
+        max_step = scene.config.max_step_mm
+
+        def policy(task) -> np.ndarray:
+            obs = TensorDict({"policy": torch.as_tensor(scene.observe(), device=self.device)}, batch_size=[b])
+            if moves is not None and not self.accept:
+                actor.update_normalization(obs)
+            elif observations is not None:
+                observations.append(obs)
+            with torch.set_grad_enabled(moves is not None):
+                move = torch.zeros((b, 3), device=self.device)
+                move[:, :axes] = torch.clamp(actor(obs), -1.0, 1.0) * max_step
+                # The parts that do not depend on the policy, added as the env adds them
+                # (envs.core.PatternCut.step): the analytic controller's (residual_gain), then the base
+                # plan's with the sum clipped per axis (no gradient where the clip binds).
+                fixed = np.zeros((b, 3), dtype=np.float32)
+                if scene.options.residual_gain:
+                    tracking = np.nan_to_num(scene.tracking_error()[:, :2], nan=0.0)
+                    fixed[:, :2] -= scene.options.residual_gain * tracking
+                move = move + torch.as_tensor(fixed, device=self.device)
+                if scene.base_plan is not None and task.step_index < len(scene.base_plan):
+                    plan = torch.as_tensor(scene.plan_move(), dtype=torch.float32, device=self.device)
+                    move = torch.clamp(move + plan, -max_step, max_step)
+            if moves is not None:
+                moves.append(move)
+            return move.detach().cpu().numpy()
+
+        return policy
+
+    def _step(self, error: float, episodes: dict) -> bool:
+        """Adam's step, kept only if the same episodes (``episodes``: the episode generator's state before
+        their reset) cut with the new weights have a lower mean path error than ``error``, the old weights';
+        otherwise the weights and Adam's state go back. The step size halves on a rejection and grows by
+        1.5 on an acceptance, up to the run's learning rate. True if kept."""
+        actor, scene = self.alg.actor, self.scene
+        weights = [p.detach().clone() for p in actor.parameters()]
+        adam = copy.deepcopy(self.apg_optimizer.state_dict())
+        self.apg_optimizer.step()
+        after = self.episode_rng.bit_generator.state
+        self.episode_rng.bit_generator.state = episodes
+        scene.reset(self.episode_rng, resample_fiducials=scene.options.resample_fiducials)
+        self.episode_rng.bit_generator.state = after
+        replay = self.engine.forward(self._policy(None, None), reset=False)
+        kept = bool(np.nanmean(replay.score.error_vertices) < error)
+        if not kept:
+            with torch.no_grad():
+                for p, w in zip(actor.parameters(), weights, strict=True):
+                    p.copy_(w)
+            self.apg_optimizer.load_state_dict(adam)
+        group = self.apg_optimizer.param_groups[0]
+        group["lr"] = min(group["lr"] * 1.5, self.max_learning_rate) if kept else group["lr"] * 0.5
+        return kept

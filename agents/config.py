@@ -28,6 +28,12 @@ class TrainConfig:
     apg_window: int | None = 5
     """APG only: truncate the gradient to windows of this many env steps (:meth:`~warpcut.gradients.
     DifferentiableRollout.backward`); None: through the whole episode (docs/learning.md, "APG")."""
+    apg_accept: bool = False
+    """APG only: keep a step only if it lowers the iteration's mean path error on the same episodes (run
+    again with the new weights: the same noise and fiducials); otherwise revert it (weights and Adam's
+    state) and halve the step size; a kept step grows it by 1.5, up to ``learning_rate``. The observation
+    normaliser then learns from each iteration's observations after the step, not during the rollout
+    (docs/learning.md, "APG that keeps only steps that help")."""
     iterations: int = 150
     """Total learning iterations of the run, counting those done before a resume. 150: on the Table I suite,
     two seeds of 256 envs x 150 iterations kept a trained policy on 17-18 contours of 26 at RL +43.0-43.3%,
@@ -119,7 +125,9 @@ class TrainConfig:
                 "init_std": self.init_noise_std,
             }
         model = {"class_name": "rsl_rl.models:MLPModel", "activation": self.activation}
-        apg = {"apg": {"window": self.apg_window}} if self.algorithm == "apg" else {}
+        apg = (
+            {"apg": {"window": self.apg_window, "accept": self.apg_accept}} if self.algorithm == "apg" else {}
+        )
         return {
             **apg,
             "num_steps_per_env": self.num_steps_per_env,

@@ -112,6 +112,46 @@ def test_apg_trains_saves_and_resumes(tmp_path):
     assert more["iterations"] == 3 and len(more["history"]) == 3
 
 
+def test_apg_accept_replays_the_same_episodes_and_keeps_only_steps_that_help(monkeypatch):
+    """``apg_accept``: the step is judged on the iteration's own episodes run again (the same noise and
+    fiducials: weights left as they were replay the same error to the bit, so that step is not kept), and a
+    rejected step leaves the weights and Adam's state as they were and halves the step size."""
+    import copy
+
+    import torch
+
+    from agents.apg import ApgRunner
+
+    env, cfg = _apg_env(3)
+    cfg = TrainConfig(**{**cfg.__dict__, "apg_accept": True, "learning_rate": 0.05})
+    runner = ApgRunner(env, cfg.to_rsl_rl(None), None)
+    errors = []
+    forward = runner.engine.forward
+
+    def recorded(*args, **kwargs):
+        rollout = forward(*args, **kwargs)
+        errors.append(float(np.nanmean(rollout.score.error_vertices)))
+        return rollout
+
+    runner.engine.forward = recorded
+    with monkeypatch.context() as patch:
+        patch.setattr(runner.apg_optimizer, "step", lambda: None)  # a step that changes nothing
+        metrics = runner._iteration()
+    assert errors[0] == errors[1] and metrics["accepted"] == 0.0
+    assert metrics["step_size"] == pytest.approx(0.025)
+    for _ in range(4):  # real steps: kept exactly when the replay cut better
+        errors.clear()
+        before = [p.detach().clone() for p in runner.alg.actor.parameters()]
+        adam = copy.deepcopy(runner.apg_optimizer.state_dict()["state"])
+        metrics = runner._iteration()
+        after = list(runner.alg.actor.parameters())
+        same = all(torch.equal(p, q) for p, q in zip(before, after, strict=True))
+        assert metrics["accepted"] == float(errors[1] < errors[0]) == float(not same)
+        if same:
+            kept = runner.apg_optimizer.state_dict()["state"]
+            assert all(torch.equal(adam[k]["exp_avg"], kept[k]["exp_avg"]) for k in adam)
+
+
 def test_apg_refuses_discrete_actions():
     from agents.train import train
 
