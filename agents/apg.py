@@ -9,7 +9,10 @@ given: the gradient does not flow from a move through the sheet into later obser
 truncation of APG through a non-differentiable observer; the fiducials' tracking is not differentiable).
 On a base plan (``PatternCutOptions.base_plan``, ``--recipe apg-residual``) the policy's move is added to
 the plan's, as the env adds them, and the gradient reaches the policy through the clipped sum: APG then
-refines the open-loop plan with a closed-loop residual, starting from the plan itself.
+refines the open-loop plan with a closed-loop residual, starting from the plan itself. With ``accept``
+(``TrainConfig.apg_accept``) a step is kept only if the iteration's episodes, cut again with the new weights,
+come out better (docs/learning.md: it stops the drift, and the surrogate's roughness explains why it learns
+nothing).
 
 The policy is rsl-rl's actor, as PPO's (an MLP with observation normalisation and a Gaussian head over
 continuous moves): :class:`ApgRunner` is PPO's runner with the learning iteration replaced, so checkpoints,
