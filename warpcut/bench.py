@@ -237,9 +237,31 @@ def run_bench(
     if training is None:
         return result
     for b in map(str, env_step_envs):
-        progress(f"PPO training at B={b}")
-        for key, value in training(int(b)).items():
-            result.setdefault(key, {})[b] = value
-        pct = 100 * result["train_steps_per_s"][b] / result["sim_env_steps_per_s"][b]
-        result.setdefault("train_vs_sim_pct", {})[b] = pct
+        progress(f"PPO training at B={b}, alternating with the simulator ({repeats} x)")
+        result.update(_training_against_simulator(result, int(b), device, repeats, training))
     return result
+
+
+def _training_against_simulator(
+    result: dict, num_envs: int, device: str, repeats: int, training: Callable[[int], dict[str, float]]
+) -> dict:
+    """``repeats`` runs of ``training(num_envs)``, each between two measurements of the simulator's env-step
+    rate at that batch (the first is the one already in ``result``). On a shared machine the rate drifts
+    by tens of percent within minutes, so each run is compared with the simulator just before and after it:
+    ``train_vs_sim_pct`` is the median over runs of its rate as a percentage of that pair's mean
+    (``train_vs_sim_pct_runs``: each run's). ``sim_env_steps_per_s`` becomes the median of every simulator
+    measurement at the batch, the training figures medians over runs."""
+    b = str(num_envs)
+    sims = [result["sim_env_steps_per_s"][b]]
+    runs, ratios = [], []
+    for _ in range(repeats):
+        runs.append(training(num_envs))
+        sims.append(env_steps_per_second(num_envs, device, repeats))
+        ratios.append(100 * runs[-1]["train_steps_per_s"] / ((sims[-2] + sims[-1]) / 2))
+    out = {key: dict(result.get(key, {})) for key in (*runs[0], "sim_env_steps_per_s")}
+    for key in runs[0]:
+        out[key][b] = statistics.median(run[key] for run in runs)
+    out["sim_env_steps_per_s"][b] = statistics.median(sims)
+    out["train_vs_sim_pct"] = {**result.get("train_vs_sim_pct", {}), b: statistics.median(ratios)}
+    out["train_vs_sim_pct_runs"] = {**result.get("train_vs_sim_pct_runs", {}), b: ratios}
+    return out

@@ -68,9 +68,11 @@ def command(
         f"(Warp best / NumPy = {result['speedup_vs_numpy']:,.0f}x)"
     )
     for b, sim in result["sim_env_steps_per_s"].items():
+        runs = ", ".join(f"{r:.0f}%" for r in result["train_vs_sim_pct_runs"][b])
         click.echo(
             f"env steps/s at {b} envs (tensioned fls-circle): simulator {sim:,.0f}; PPO in steady state "
-            f"{result['train_steps_per_s'][b]:,.0f} ({result['train_vs_sim_pct'][b]:.0f}% of the simulator; "
+            f"{result['train_steps_per_s'][b]:,.0f} ({result['train_vs_sim_pct'][b]:.0f}% of the simulator "
+            f"around each run, median of {runs}; "
             f"collection alone {result['train_collection_steps_per_s'][b]:,.0f}; a whole short run "
             f"{result['train_overall_steps_per_s'][b]:,.0f})"
         )
