@@ -125,7 +125,7 @@ class ApgRunner(Runner):
         episodes = self.episode_rng.bit_generator.state
         scene.reset(self.episode_rng, resample_fiducials=scene.options.resample_fiducials)
         moves: list[torch.Tensor] = []
-        observations: list = []
+        observations: list | None = [] if self.accept else None
         rollout = self.engine.forward(self._policy(moves, observations), reset=False)
         collected = time.perf_counter()
         grads = self.engine.backward(rollout, self.window)
@@ -159,8 +159,8 @@ class ApgRunner(Runner):
     def _policy(self, moves: list | None, observations: list | None):
         """The policy the differentiable rollout calls before each step: the actor's clamped mean move plus
         what the env adds (analytic share, base plan). ``moves`` collects the moves with their graph (None:
-        no graph, a replay); the observation normaliser learns from each step's observations as they come
-        unless ``observations`` collects them (with ``accept``) or it is a replay."""
+        no graph, a replay); ``observations`` collects each step's observations for the normaliser to learn
+        from after the step (with ``accept``; None: it learns from them as they come, except in a replay)."""
         from tensordict import TensorDict
 
         scene, actor = self.scene, self.alg.actor
@@ -169,10 +169,10 @@ class ApgRunner(Runner):
 
         def policy(task) -> np.ndarray:
             obs = TensorDict({"policy": torch.as_tensor(scene.observe(), device=self.device)}, batch_size=[b])
-            if moves is not None and not self.accept:
-                actor.update_normalization(obs)
-            elif observations is not None:
+            if observations is not None:
                 observations.append(obs)
+            elif moves is not None:
+                actor.update_normalization(obs)
             with torch.set_grad_enabled(moves is not None):
                 move = torch.zeros((b, 3), device=self.device)
                 move[:, :axes] = torch.clamp(actor(obs), -1.0, 1.0) * max_step

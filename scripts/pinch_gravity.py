@@ -22,6 +22,7 @@ from agents.evaluation import run_method
 from agents.robustness import STUDY_VALUES
 from warpcut import SimConfig, plan_cut
 from warpcut.contours import load_contour
+from warpcut.scoring import paired_improvement
 
 
 def paired_medians(contour, plan, config: SimConfig, gravity: float, trials: int, seed: int) -> np.ndarray:
@@ -41,10 +42,11 @@ def paired_medians(contour, plan, config: SimConfig, gravity: float, trials: int
         seed,
         segments=segments,
     )
-    return 100 * (none.error_vertices - still.error_vertices) / none.error_vertices
+    return paired_improvement(none.error_vertices, still.error_vertices)
 
 
 def bootstrap_median(values: np.ndarray, rng: np.random.Generator, draws: int = 2000) -> tuple[float, float]:
+    values = values[np.isfinite(values)]
     samples = rng.choice(values, size=(draws, len(values)), replace=True)
     low, high = np.percentile(np.median(samples, axis=1), [2.5, 97.5])
     return float(low), float(high)
@@ -68,9 +70,9 @@ def main() -> None:
         row = []
         for gravity in gravities:
             improvements = paired_medians(contour, plan, config, gravity, args.trials, seed)
-            medians.setdefault(seed, []).append(np.median(improvements, axis=1))
+            medians.setdefault(seed, []).append(np.nanmedian(improvements, axis=1))
             low, high = bootstrap_median(improvements[chosen], rng)
-            row.append(f"{gravity:g}: {np.median(improvements[chosen]):+.1f} [{low:+.1f}, {high:+.1f}]")
+            row.append(f"{gravity:g}: {np.nanmedian(improvements[chosen]):+.1f} [{low:+.1f}, {high:+.1f}]")
         lines.append(f"planner's pinch, seed {seed}, median paired improvement [95% CI]: " + "; ".join(row))
         print(lines[-1], flush=True)
     first = np.array(medians[min(medians)])  # (G, K), the first seed
