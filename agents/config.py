@@ -282,16 +282,33 @@ EVALUATION_CANDIDATES = PINCH_CANDIDATES
 """Pinch candidates per plan in :func:`evaluate_table` (the paper's 30)."""
 
 
+GRAD_ESTIMATORS = ("tape", "es")
+"""How the plan optimiser estimates its gradient (``GradConfig.estimator``)."""
+
+
 @dataclass(frozen=True)
 class GradConfig:
     """Gradient-based tensioning (:mod:`agents.gradient`): Adam on an open-loop plan of grasp moves (and
     optionally the pinch point) through the differentiable simulator (:mod:`warpcut.gradients`)."""
 
+    estimator: str = "tape"
+    """How each step's gradient is estimated. "tape": the path surrogate's gradient through ``wp.Tape``
+    (:mod:`warpcut.gradients`), over ``trials`` episodes. "es": evolution strategies, the gradient of the path
+    score itself smoothed by Gaussian perturbations of the plan (``es_population`` perturbed plans, antithetic
+    pairs, ``es_trials`` episodes each, ranked; forward passes only, one batch a step). docs/learning.md,
+    "Evolution strategies through the batched simulator"."""
     iterations: int = 20
-    """Adam steps (each one forward and one backward pass of ``trials`` episodes)."""
+    """Adam steps (tape: each one forward and one backward pass of ``trials`` episodes; es: one batch of
+    ``es_population x es_trials`` episodes)."""
     trials: int = 8
-    """Noisy episodes per step, the same seeds every step (the expected surrogate over them is minimised);
-    their noise is not the evaluation's (seed ``seed + GRAD_SEED_OFFSET``)."""
+    """Noisy episodes per step of the tape estimator, the same seeds every step (the expected surrogate over
+    them is minimised); their noise is not the evaluation's (seed ``seed + GRAD_SEED_OFFSET``)."""
+    es_population: int = 64
+    """Perturbed plans per step of the es estimator (an even number: antithetic pairs)."""
+    es_trials: int = 2
+    """Noisy episodes per perturbed plan (es), the same seeds every step, not the evaluation's."""
+    es_sigma_mm: float = 0.3
+    """Standard deviation of the es estimator's perturbation of each move (mm)."""
     learning_rate: float = 0.3
     """Adam's step (mm per grasp move); moves are projected back onto ``max_step_mm`` per axis."""
     validation_trials: int = 8
@@ -309,23 +326,42 @@ class GradConfig:
 
     def validated(self) -> GradConfig:
         """Itself, or ``ValueError`` naming the field and the fix."""
-        for name in ("iterations", "trials"):
+        if self.estimator not in GRAD_ESTIMATORS:
+            names = ", ".join(GRAD_ESTIMATORS)
+            raise ValueError(f"estimator: must be one of {names} (got {self.estimator!r})")
+        for name in ("iterations", "trials", "es_population", "es_trials"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ValueError(f"{name}: must be a positive integer (got {value!r})")
+        if self.es_population % 2:
+            raise ValueError(f"es_population: must be even, antithetic pairs (got {self.es_population})")
+        if self.estimator == "es" and self.optimize_pinch:
+            raise ValueError("optimize_pinch: the pinch point moves only with estimator 'tape'; drop one")
+        if self.estimator == "es" and self.validation_trials == 0:
+            raise ValueError(
+                "validation_trials: estimator 'es' scores each iterate on held-out episodes only; give at "
+                f"least 1 (got {self.validation_trials!r})"
+            )
         if not isinstance(self.validation_trials, int) or self.validation_trials < 0:
             raise ValueError(f"validation_trials: must be an integer >= 0 (got {self.validation_trials!r})")
         if self.window is not None and (not isinstance(self.window, int) or self.window < 1):
             raise ValueError(f"window: must be a positive number of steps or None (got {self.window!r})")
-        for name in ("learning_rate", "pinch_learning_rate"):
+        for name in ("learning_rate", "pinch_learning_rate", "es_sigma_mm"):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and 0 < value < float("inf")):
                 raise ValueError(f"{name}: must be a positive number of mm (got {value!r})")
         return self
 
 
-GRAD_CONFIG = GradConfig()
-"""The optimiser's defaults (library and command line)."""
+GRAD_CONFIGS = {
+    "tape": GradConfig(),
+    "es": GradConfig(estimator="es", iterations=40, learning_rate=0.1),
+}
+"""The optimiser's defaults per estimator (library and command line). es: 40 steps of 0.1 mm did better than
+20 of 0.3 on fls-circle and kidney (+79.0% and +61.4% against +72.4% and +49.2%; docs/learning.md)."""
+
+GRAD_CONFIG = GRAD_CONFIGS["tape"]
+"""The optimiser's defaults (library and command line): the tape estimator's."""
 
 GRAD_SEED_OFFSET = 4241
 """The gradient optimiser's episodes use seed ``seed + GRAD_SEED_OFFSET``: never the evaluation's noise."""

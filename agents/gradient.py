@@ -1,9 +1,11 @@
 """Gradient-based tensioning: an open-loop plan of grasp moves, optimised by Adam through the differentiable
-simulator (:mod:`warpcut.gradients`), and the ``grad`` method that plays it.
+simulator (:mod:`warpcut.gradients`) or by evolution strategies through the batched one
+(:class:`SmoothedGradient`, ``GradConfig.estimator == "es"``), and the ``grad`` method that plays it.
 
-The objective is the path surrogate (the mean squared distance between where the scissors cut and where
-they meant to, in material coordinates), averaged over ``GradConfig.trials`` noisy episodes whose seeds
-stay the same from step to step (common random numbers) and differ from the evaluation's. Every move is
+The tape estimator's objective is the path surrogate (the mean squared distance between where the scissors
+cut and where they meant to, in material coordinates), averaged over ``GradConfig.trials`` noisy episodes
+whose seeds stay the same from step to step (common random numbers) and differ from the evaluation's; the
+es estimator's is the path score itself, smoothed by Gaussian perturbations of the plan. Every move is
 projected back onto ``max_step_mm`` per axis after each step; the simulator applies the displacement cap.
 Every iterate is also played on ``GradConfig.validation_trials`` held-out episodes (other seeds again) and
 scored with the path score: the iterate with the lowest mean validation error, the initial still grasp
@@ -53,12 +55,15 @@ class PlanResult:
     best_iteration: int
     """The iterate kept (0: the initial still grasp)."""
     history: list[dict] = field(default_factory=list)
-    """Per iterate: ``iteration``, ``surrogate`` (mm^2) and ``error_vertices`` (mean over the episodes),
-    ``pinch``, ``seconds`` since the start."""
+    """Per iterate: ``iteration``, ``surrogate`` (mm^2) and ``error_vertices`` (mean over the episodes;
+    es: no surrogate, the perturbed plans' mean error, none for the last iterate), ``pinch``,
+    ``validation_error_vertices`` (the held-out episodes', when there are some), ``seconds`` since the
+    start."""
     seconds: float = 0.0
     """Wall time of the optimisation."""
     env_steps: int = 0
-    """Env steps simulated forward (episodes x steps); each backward pass replays as many again."""
+    """Env steps the optimiser simulated forward (episodes x steps; the held-out validation episodes not
+    counted); each backward pass of the tape estimator replays as many again."""
 
     def to_json(self) -> dict:
         return {
@@ -147,6 +152,53 @@ class Adam:
         return -self.learning_rate * m_hat / (np.sqrt(v_hat) + self.eps)
 
 
+class SmoothedGradient:
+    """The es estimator (``GradConfig.estimator == "es"``): the gradient of the path score averaged over
+    Gaussian perturbations of the plan, ``∇ E[error(plan + σε)]``, estimated from ``es_population`` perturbed
+    plans in antithetic pairs (``+ε``, ``-ε``), each played on ``es_trials`` noisy episodes, all in one
+    simulator batch. Errors are replaced by their centred ranks (robust to the score's outliers and scale;
+    Salimans et al. 2017), a diverged plan ranking last. Forward passes only: no surrogate, no tape; what is
+    smoothed is the score the evaluation reports.
+
+    ``task``: the ``es_population x es_trials`` episodes (plan ``p``'s trials are envs ``p * es_trials ...``);
+    ``seed``: the perturbations' random stream (NumPy's PCG64; :meth:`state` and :meth:`load` keep it across
+    a resume)."""
+
+    def __init__(self, task: CuttingTask, settings: GradConfig, max_step: float, seed: int):
+        self.task, self.settings, self.max_step = task, settings, float(max_step)
+        self.rng = np.random.default_rng(seed)
+
+    @property
+    def num_steps(self) -> int:
+        return self.task.num_steps
+
+    def state(self) -> dict:
+        return self.rng.bit_generator.state
+
+    def load(self, state: dict) -> None:
+        self.rng.bit_generator.state = state
+
+    def __call__(self, plan: np.ndarray) -> tuple[float, np.ndarray]:
+        """``(mean error of the perturbed plans in vertices, gradient estimate shaped like plan)``."""
+        population, trials, sigma = (
+            self.settings.es_population,
+            self.settings.es_trials,
+            self.settings.es_sigma_mm,
+        )
+        half = self.rng.standard_normal((population // 2, *plan.shape)).astype(np.float32)
+        eps = np.concatenate([half, -half])
+        plans = np.clip(plan + sigma * eps, -self.max_step, self.max_step).astype(np.float32)
+        errors = self.task.run(PlanPolicy(list(plans), trials)).error_vertices.reshape(population, trials)
+        finite = np.isfinite(errors).all(axis=1)
+        fitness = np.where(finite, errors.mean(axis=1), np.inf)
+        ranks = np.empty(population)
+        ranks[np.argsort(fitness, kind="stable")] = np.arange(population)
+        centred = ranks / (population - 1) - 0.5  # the highest error +0.5
+        grad = np.tensordot(centred, eps, axes=1) / (population * sigma)
+        mean = float(np.mean(fitness[finite])) if finite.any() else float("nan")
+        return mean, grad
+
+
 def optimize_plan(
     contour: Contour,
     pinch: np.ndarray,
@@ -180,12 +232,14 @@ def optimize_plan(
 
     settings, config, arm = settings.validated(), (config or SimConfig()).validated(), arm or ArmModel()
     pinch = np.asarray(pinch, dtype=np.float64).reshape(2)
-    b = settings.trials
+    es = settings.estimator == "es"
+    b = settings.es_population * settings.es_trials if es else settings.trials
 
-    def engine(point: np.ndarray) -> DifferentiableRollout:
-        return DifferentiableRollout(
-            _episodes(contour, point, segments, config, b, device, seed + GRAD_SEED_OFFSET)
-        )
+    def engine(point: np.ndarray) -> DifferentiableRollout | SmoothedGradient:
+        task = _episodes(contour, point, segments, config, b, device, seed + GRAD_SEED_OFFSET)
+        if es:
+            return SmoothedGradient(task, settings, config.max_step_mm, seed)
+        return DifferentiableRollout(task)
 
     def checker(point: np.ndarray) -> CuttingTask | None:
         v, held_out = settings.validation_trials, seed + GRAD_SEED_OFFSET + 1
@@ -208,6 +262,8 @@ def optimize_plan(
         first, history, elapsed = state["iteration"], state["history"], state["seconds"]
         plan, pinch = np.asarray(state["plan"], np.float32), np.asarray(state["pinch"])
         moves.load(state["moves"]), pinch_moves.load(state["pinch_moves"])
+        if es:
+            rollout.load(state["perturbations"])
         error, it, best_plan, best_pinch = state["best"]
         best = (error, it, np.asarray(best_plan, np.float32), np.asarray(best_pinch))
         if not np.allclose(pinch, identity["pinch"]):
@@ -216,20 +272,25 @@ def optimize_plan(
     start = time.perf_counter() - elapsed
     for iteration in range(first, settings.iterations + 1):
         last = iteration == settings.iterations
-        batch = np.broadcast_to(plan, (b, steps, 3))
-        if last:
-            forward, grads = rollout.forward(batch, seed=seed + GRAD_SEED_OFFSET), None
+        if es:  # the perturbed plans' mean error; the plan itself is scored on the held-out episodes
+            error, step = (None, None) if last else rollout(plan)
+            record = {"iteration": iteration, "surrogate": None, "error_vertices": error}
         else:
-            forward, grads = rollout.value_and_grad(
-                batch, seed=seed + GRAD_SEED_OFFSET, window=settings.window
-            )
-        error = float(np.nanmean(forward.score.error_vertices))  # a diverged episode is NaN (and no gradient)
-        record = {
-            "iteration": iteration,
-            "surrogate": float(np.nanmean(forward.surrogate)),
-            "error_vertices": error,
-            "pinch": [float(v) for v in pinch],
-        }
+            batch = np.broadcast_to(plan, (b, steps, 3))
+            if last:
+                forward, grads = rollout.forward(batch, seed=seed + GRAD_SEED_OFFSET), None
+            else:
+                forward, grads = rollout.value_and_grad(
+                    batch, seed=seed + GRAD_SEED_OFFSET, window=settings.window
+                )
+            error = float(np.nanmean(forward.score.error_vertices))  # a diverged episode is NaN (no gradient)
+            step = None if grads is None else grads.actions.mean(axis=0)
+            record = {
+                "iteration": iteration,
+                "surrogate": float(np.nanmean(forward.surrogate)),
+                "error_vertices": error,
+            }
+        record["pinch"] = [float(v) for v in pinch]
         if validation is not None:  # model selection on held-out episodes
             held_out = validation.run(PlanPolicy([plan], settings.validation_trials)).error_vertices
             error = record["validation_error_vertices"] = float(np.nanmean(held_out))
@@ -238,14 +299,11 @@ def optimize_plan(
         if best is None or error < best[0]:
             best = (error, iteration, plan.copy(), pinch.copy())
         if iteration % 5 == 0 or last:
-            log(
-                f"  iteration {iteration}: surrogate {record['surrogate']:.2f} mm^2, error {error:.2f} "
-                "vertices "
-                f"({record['seconds']:.0f} s)"
-            )
+            surrogate = "" if es else f"surrogate {record['surrogate']:.2f} mm^2, "
+            log(f"  iteration {iteration}: {surrogate}error {error:.2f} vertices ({record['seconds']:.0f} s)")
         if last:
             break
-        plan = np.clip(plan + moves.step(grads.actions.mean(axis=0)), -max_step, max_step).astype(np.float32)
+        plan = np.clip(plan + moves.step(step), -max_step, max_step).astype(np.float32)
         if settings.optimize_pinch:
             moved = pinch + pinch_moves.step(grads.pinch.mean(axis=0))
             segments_path = None if segments is None else [np.asarray(s) for s in segments]
@@ -260,11 +318,14 @@ def optimize_plan(
                 "moves": moves.state(), "pinch_moves": pinch_moves.state(),
                 "best": [error, it, best_plan.tolist(), best_pinch.tolist()],
             }  # fmt: skip
+            if es:
+                state["perturbations"] = rollout.state()
             write_json(state_file, state)
     _, best_iteration, best_plan, best_pinch = best
+    env_steps = settings.iterations * b * steps if es else (settings.iterations + 1) * b * steps
     return PlanResult(
         contour.name, [float(v) for v in best_pinch], best_plan, best_iteration, history,
-        time.perf_counter() - start, (settings.iterations + 1) * b * steps,
+        time.perf_counter() - start, env_steps,
     )  # fmt: skip
 
 
@@ -319,15 +380,25 @@ def cached_plan(
     from warpcut.io import read_json, safe_name, write_json
 
     done = state = None
+    wanted = dataclasses.asdict(settings)
     if folder is not None:
         done = Path(folder) / f"{safe_name(contour.name)}.json"
         state = done.with_suffix(".state.json")
         if done.is_file():
-            return PlanResult.from_json(read_json(done))
-    log(f"  {count}optimising a plan for {contour.name} ({settings.iterations} iterations)")
+            data = read_json(done)
+            if data.get("settings", wanted) != wanted:  # plans written before session 20 carry none
+                raise ValueError(
+                    f"{done}: a plan optimised with other settings ({data['settings']}, here {wanted}); "
+                    "delete it to optimise again, or run with its settings"
+                )
+            return PlanResult.from_json(data)
+    log(
+        f"  {count}optimising a plan for {contour.name} ({settings.iterations} iterations, "
+        f"{settings.estimator} estimator)"
+    )
     result = optimize_plan(contour, pinch, segments, config, settings, device, seed, arm, log, state)
     if done is not None:
-        write_json(done, result.to_json())
+        write_json(done, {**result.to_json(), "settings": wanted})
         state.unlink(missing_ok=True)
     return result
 

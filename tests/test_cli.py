@@ -617,6 +617,7 @@ def test_cli_defaults_are_the_library_defaults():
     from agents.config import (
         EVALUATION_CANDIDATES,
         EVALUATION_TRIALS,
+        GRAD_CONFIGS,
         RECIPE,
         VALIDATION_TRIALS,
         GradConfig,
@@ -666,19 +667,22 @@ def test_cli_defaults_are_the_library_defaults():
             for key in ("trials", "candidates", "num_envs", "plan", "analytic_pinch", "iterations"):
                 expected[key] = evaluate[key].default
             assert expected["candidates"] == EVALUATION_CANDIDATES
-            expected["grad_iterations"] = evaluate["grad"].default.iterations
+            expected["grad_iterations"] = None  # the estimator's (agents.config.GRAD_CONFIGS)
+            expected["grad_estimator"] = evaluate["grad"].default.estimator
         if name == "train":
             expected["algo"] = train.algorithm
         if name == "robustness":
             from agents.robustness import robustness
 
             expected["trials"] = inspect.signature(robustness).parameters["trials"].default
-        if name == "optimize":
-            grad = GradConfig()
+        if name == "optimize":  # iterations and step: the estimator's (GRAD_CONFIGS), resolved later
+            grad, es = GradConfig(), GRAD_CONFIGS["es"]
             optimize = inspect.signature(optimize_contour).parameters
-            expected.update(
-                iterations=grad.iterations, episodes=grad.trials, learning_rate=grad.learning_rate
-            )
+            assert optimize["settings"].default == grad
+            expected.update(iterations=None, learning_rate=None, estimator=grad.estimator)
+            expected["episodes"] = grad.trials
+            expected.update(population=es.es_population, population_episodes=es.es_trials)
+            expected["sigma"] = es.es_sigma_mm
             expected.update(trials=optimize["trials"].default, candidates=optimize["candidates"].default)
         for param in command.params:
             if param.name in expected:
@@ -692,6 +696,10 @@ def test_cli_defaults_are_the_library_defaults():
         ("train", "algo"),
         ("evaluate", "trials"),
         ("evaluate", "grad_iterations"),
+        ("evaluate", "grad_estimator"),
+        ("optimize", "estimator"),
+        ("optimize", "population"),
+        ("optimize", "sigma"),
         ("optimize", "iterations"),
         ("optimize", "episodes"),
         ("optimize", "learning_rate"),
@@ -724,6 +732,27 @@ def test_optimize_writes_the_plan_and_its_evaluation(tmp_path):
     assert "grad" in stdout and "kept iteration" in stdout
     code, _, stderr = invoke(args[:-4] + ["--out", str(out)])  # a finished run directory is not overwritten
     assert code != 0 and "--overwrite" in stderr
+
+
+def test_optimize_by_evolution_strategies_takes_the_es_defaults(tmp_path):
+    import dataclasses
+
+    from agents.config import GRAD_CONFIGS
+
+    out = tmp_path / "run"
+    args = ["optimize", "--contour", "circle-small", "--estimator", "es", "--iterations", "2"]
+    args += ["--population", "4", "--trials", "2", "--candidates", "2", "--out", str(out)]
+    code, stdout, _ = invoke(args + ["--json", str(tmp_path / "es.json")])
+    assert code == 0, stdout
+    report = json.loads((tmp_path / "es.json").read_text())
+    es = dataclasses.asdict(GRAD_CONFIGS["es"])
+    assert report["settings"] == {**es, "iterations": 2, "es_population": 4}  # the step is es's, not tape's
+    assert report["optimized"]["env_steps"] == 2 * 4 * es["es_trials"] * len(report["optimized"]["plan"])
+    assert json.loads((out / "circle-small.json").read_text())["settings"] == report["settings"]
+    code, _, stderr = invoke(args[:-4] + ["--population", "3", "--out", str(tmp_path / "odd")])
+    assert code != 0 and "es_population: must be even" in stderr
+    code, _, stderr = invoke(args[:-4] + ["--optimize-pinch", "--out", str(tmp_path / "pinch")])
+    assert code != 0 and "optimize_pinch" in stderr and "tape" in stderr
 
 
 def test_batch_defaults_are_ppos_and_apgs_own():

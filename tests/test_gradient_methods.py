@@ -1,12 +1,14 @@
 """Gradient-based tensioning: the open-loop plan optimiser (agents.gradient) and APG training (agents.apg)."""
 
+import dataclasses
 import json
+import types
 
 import numpy as np
 import pytest
 
 from agents.config import GradConfig, TrainConfig
-from agents.gradient import PlanPolicy, PlanResult, optimize_plan
+from agents.gradient import PlanPolicy, PlanResult, SmoothedGradient, cached_plan, optimize_plan
 from warpcut import CuttingTask, load_contour
 from warpcut.sim.config import SimConfig
 
@@ -81,6 +83,103 @@ def test_grad_config_names_a_bad_field():
         GradConfig(iterations=0).validated()
     with pytest.raises(ValueError, match="learning_rate"):
         GradConfig(learning_rate=float("nan")).validated()
+    with pytest.raises(ValueError, match="estimator: must be one of tape, es"):
+        GradConfig(estimator="cma").validated()
+    with pytest.raises(ValueError, match="es_population: must be even"):
+        GradConfig(estimator="es", es_population=5).validated()
+    with pytest.raises(ValueError, match="optimize_pinch: .* only with estimator 'tape'"):
+        GradConfig(estimator="es", optimize_pinch=True).validated()
+    with pytest.raises(ValueError, match="validation_trials: estimator 'es'"):
+        GradConfig(estimator="es", validation_trials=0).validated()
+    with pytest.raises(ValueError, match="es_sigma_mm"):
+        GradConfig(estimator="es", es_sigma_mm=0.0).validated()
+
+
+class _QuadraticTask:
+    """Stands in for a CuttingTask: a plan's "error" is its squared distance from ``target`` (the same for
+    every trial), NaN (diverged) for plans whose first move exceeds ``diverge_above``."""
+
+    num_steps = 3
+
+    def __init__(self, target: np.ndarray, diverge_above: float = np.inf):
+        self.target, self.diverge_above, self.played = target, diverge_above, []
+
+    def run(self, policy: PlanPolicy):
+        plans = np.asarray(policy.plans)
+        self.played.append(plans)
+        errors = ((plans - self.target) ** 2).sum(axis=(1, 2))
+        errors[plans[:, 0, 0] > self.diverge_above] = np.nan
+        return types.SimpleNamespace(error_vertices=np.repeat(errors, policy.trials))
+
+
+def test_the_es_estimator_points_uphill_from_antithetic_ranked_pairs():
+    settings = GradConfig(estimator="es", es_population=64, es_trials=2, es_sigma_mm=0.1)
+    target = np.random.default_rng(1).uniform(-0.5, 0.5, (3, 3))
+    task = _QuadraticTask(target)
+    plan = np.zeros((3, 3), np.float32)
+    mean, grad = SmoothedGradient(task, settings, max_step=1.0, seed=4)(plan)
+    (played,) = task.played
+    assert played.shape == (64, 3, 3)
+    np.testing.assert_allclose(played[:32] - plan, -(played[32:] - plan), atol=1e-6)  # antithetic pairs
+    assert mean == pytest.approx(((played - target) ** 2).sum(axis=(1, 2)).mean())
+    true = 2 * (plan - target)  # the error's gradient
+    cosine = (grad * true).sum() / np.linalg.norm(grad) / np.linalg.norm(true)
+    assert cosine > 0.7, cosine
+    again = SmoothedGradient(_QuadraticTask(target), settings, max_step=1.0, seed=4)(plan)[1]
+    np.testing.assert_array_equal(again, grad)  # seeded
+    other = SmoothedGradient(_QuadraticTask(target), settings, max_step=1.0, seed=5)(plan)[1]
+    assert not np.array_equal(other, grad)
+    # A diverged plan ranks last (as the worst error), and the mean leaves it out
+    nan_task = _QuadraticTask(target, diverge_above=0.15)
+    mean, grad = SmoothedGradient(nan_task, settings, max_step=1.0, seed=4)(plan)
+    assert np.isfinite(mean) and np.isfinite(grad).all()
+    # Perturbed plans stay within the move limit
+    big = SmoothedGradient(_QuadraticTask(target), dataclasses.replace(settings, es_sigma_mm=5.0), 1.0, 4)
+    big(plan)
+    assert np.abs(big.task.played[0]).max() <= 1.0
+
+
+def test_es_optimises_the_path_score_and_resumes_bit_for_bit(tmp_path, monkeypatch):
+    contour = load_contour("circle-small")
+    settings = GradConfig(
+        estimator="es", iterations=4, learning_rate=0.2, es_population=8, es_trials=1, validation_trials=2
+    )
+    whole = optimize_plan(contour, PINCH, config=SMALL, settings=settings)
+    held_out = [h["validation_error_vertices"] for h in whole.history]
+    assert len(whole.history) == settings.iterations + 1 and whole.history[0]["surrogate"] is None
+    assert whole.best_iteration == int(np.argmin(held_out))
+    assert np.abs(whole.plan).max() <= SMALL.max_step_mm
+    assert whole.env_steps == settings.iterations * 8 * len(whole.plan)
+
+    state = tmp_path / "state.json"
+    call = SmoothedGradient.__call__
+    calls = []
+
+    def interrupted(self, plan):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return call(self, plan)
+
+    monkeypatch.setattr(SmoothedGradient, "__call__", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        optimize_plan(contour, PINCH, config=SMALL, settings=settings, state_file=state)
+    assert json.loads(state.read_text())["iteration"] == 2
+    monkeypatch.setattr(SmoothedGradient, "__call__", call)
+    resumed = optimize_plan(contour, PINCH, config=SMALL, settings=settings, state_file=state)
+    np.testing.assert_array_equal(resumed.plan, whole.plan)  # the perturbations' stream resumed too
+    assert [h["error_vertices"] for h in resumed.history] == [h["error_vertices"] for h in whole.history]
+
+
+def test_a_kept_plan_of_other_settings_is_refused(tmp_path):
+    contour = load_contour("circle-small")
+    settings = GradConfig(iterations=1, trials=2, validation_trials=2)
+    first = cached_plan(contour, PINCH, None, SMALL, settings, folder=tmp_path)
+    again = cached_plan(contour, PINCH, None, SMALL, settings, folder=tmp_path)  # read back, not rerun
+    np.testing.assert_array_equal(again.plan, first.plan)
+    other = dataclasses.replace(settings, estimator="es", es_population=2, es_trials=1)
+    with pytest.raises(ValueError, match="circle-small.json: a plan optimised with other settings"):
+        cached_plan(contour, PINCH, None, SMALL, other, folder=tmp_path)
 
 
 def _apg_env(num_envs: int):

@@ -9,7 +9,14 @@ import click
 
 from agents.cli import common
 from agents.cli.video import video_option, videos, with_videos
-from agents.config import EVALUATION_CANDIDATES, EVALUATION_TRIALS, GRAD_CONFIG, RECIPES
+from agents.config import (
+    EVALUATION_CANDIDATES,
+    EVALUATION_TRIALS,
+    GRAD_CONFIG,
+    GRAD_CONFIGS,
+    GRAD_ESTIMATORS,
+    RECIPES,
+)
 from agents.methods import METHODS, TABLE_METHODS
 from warpcut.sim.config import SimConfig
 
@@ -50,8 +57,19 @@ from warpcut.sim.config import SimConfig
     "iterations", None, f"Iterations per contour when training. {common.BATCH_DEFAULTS_HELP}"
 )
 @common.count_option("num-envs", None, f"Envs when training. {common.BATCH_DEFAULTS_HELP}")
+@click.option(
+    "--grad-estimator",
+    type=click.Choice(GRAD_ESTIMATORS),
+    default=GRAD_CONFIG.estimator,
+    show_default=True,
+    help="The grad column's gradient (and a recipe's on its plans): 'tape' (through wp.Tape) or 'es' "
+    "(evolution strategies on the path score); see 'warpcut optimize'.",
+)
 @common.count_option(
-    "grad-iterations", GRAD_CONFIG.iterations, "Adam steps per contour of the grad column's optimiser."
+    "grad-iterations",
+    None,
+    "Adam steps per contour of the grad column's optimiser; default "
+    f"{GRAD_CONFIGS['tape'].iterations} (tape), {GRAD_CONFIGS['es'].iterations} (es).",
 )
 @common.device_option
 @common.seed_option
@@ -92,7 +110,8 @@ def command(
     recipe: str,
     iterations: int,
     num_envs: int,
-    grad_iterations: int,
+    grad_estimator: str,
+    grad_iterations: int | None,
     plan: bool,
     candidates: int,
     arm_length: float,
@@ -135,7 +154,11 @@ def command(
             plan=plan,
             candidates=candidates,
             arm=ArmModel(length_mm=arm_length), analytic_pinch=analytic_pinch,
-            grad=dataclasses.replace(GRAD_CONFIG, iterations=grad_iterations), device=device,
+            grad=dataclasses.replace(
+                GRAD_CONFIGS[grad_estimator],
+                iterations=grad_iterations or GRAD_CONFIGS[grad_estimator].iterations,
+            ),
+            device=device,
             seed=seed, log=common.log, stages=stages,
             step_callbacks=with_videos(common.step_callbacks(rec, cuts), vid),
         )  # fmt: skip

@@ -3,12 +3,13 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import click
 
 from agents.cli import common
-from agents.config import EVALUATION_CANDIDATES, EVALUATION_TRIALS, GRAD_CONFIG, GradConfig
+from agents.config import EVALUATION_CANDIDATES, EVALUATION_TRIALS, GRAD_CONFIG, GRAD_CONFIGS, GRAD_ESTIMATORS
 from agents.methods import point_text
 from warpcut.sim.config import SimConfig
 
@@ -20,17 +21,41 @@ from warpcut.sim.config import SimConfig
     default=None,
     help="Pinch point X,Y (mm); default: the plan's (fixed tension's best candidate).",
 )
-@common.count_option("iterations", GRAD_CONFIG.iterations, "Adam steps (a forward and a backward pass each).")
+@click.option(
+    "--estimator",
+    type=click.Choice(GRAD_ESTIMATORS),
+    default=GRAD_CONFIG.estimator,
+    show_default=True,
+    help="The plan's gradient: 'tape', the path surrogate's through wp.Tape; 'es', evolution strategies on "
+    "the path score (perturbed plans in one batch, forward passes only).",
+)
 @common.count_option(
-    "episodes", GRAD_CONFIG.trials, "Noisy episodes per step (their noise is not the evaluation's)."
+    "iterations",
+    None,
+    f"Adam steps; default {GRAD_CONFIGS['tape'].iterations} (tape: a forward and a backward pass each), "
+    f"{GRAD_CONFIGS['es'].iterations} (es: one batch of perturbed plans each).",
+)
+@common.count_option(
+    "episodes", GRAD_CONFIG.trials, "Noisy episodes per tape step (their noise is not the evaluation's)."
 )
 @click.option(
     "--lr",
     "learning_rate",
-    default=GRAD_CONFIG.learning_rate,
+    default=None,
+    type=click.FloatRange(min=0.0, min_open=True),
+    help=f"Adam's step (mm per grasp move); default {GRAD_CONFIGS['tape'].learning_rate} (tape), "
+    f"{GRAD_CONFIGS['es'].learning_rate} (es).",
+)
+@common.count_option("population", GRAD_CONFIGS["es"].es_population, "Perturbed plans per es step (even).")
+@common.count_option(
+    "population-episodes", GRAD_CONFIGS["es"].es_trials, "Noisy episodes per perturbed plan (es)."
+)
+@click.option(
+    "--sigma",
+    default=GRAD_CONFIGS["es"].es_sigma_mm,
     show_default=True,
     type=click.FloatRange(min=0.0, min_open=True),
-    help="Adam's step (mm per grasp move).",
+    help="Standard deviation of es's perturbation of each move (mm).",
 )
 @click.option(
     "--optimize-pinch",
@@ -50,9 +75,13 @@ from warpcut.sim.config import SimConfig
 def command(
     contour_name: str,
     pinch: str | None,
-    iterations: int,
+    estimator: str,
+    iterations: int | None,
     episodes: int,
-    learning_rate: float,
+    learning_rate: float | None,
+    population: int,
+    population_episodes: int,
+    sigma: float,
     optimize_pinch: bool,
     trials: int,
     candidates: int,
@@ -66,16 +95,20 @@ def command(
     overwrite: bool,
     json_path: Path | None,
 ) -> None:
-    """Optimise grasp moves by gradient descent through the simulator, then evaluate them."""
+    """Optimise grasp moves by gradient descent through the simulator (tape or es gradients), then evaluate
+    them."""
     from agents.gradient import optimize_contour
     from warpcut.io import write_json
     from warpcut.planning import ArmModel
 
     point = common.parse_point(pinch, "--pinch")
     common.check_outputs({"--json": json_path}, [contour_name])
-    settings = GradConfig(
-        iterations=iterations, trials=episodes, learning_rate=learning_rate, optimize_pinch=optimize_pinch
-    )
+    base = GRAD_CONFIGS[estimator]
+    settings = dataclasses.replace(
+        base, iterations=iterations or base.iterations, trials=episodes,
+        learning_rate=learning_rate or base.learning_rate, es_population=population,
+        es_trials=population_episodes, es_sigma_mm=sigma, optimize_pinch=optimize_pinch,
+    )  # fmt: skip
     out, claim = common.claim(out, "optimize", resume, overwrite)
     with claim:
         report = optimize_contour(
@@ -86,7 +119,7 @@ def command(
     optimized = report["optimized"]
     click.echo(
         f"{report['contour']}: pinch {point_text(optimized['pinch'])}, kept iteration "
-        f"{optimized['best_iteration']} of {iterations}, {optimized['seconds']:.0f} s, "
+        f"{optimized['best_iteration']} of {settings.iterations}, {optimized['seconds']:.0f} s, "
         f"{optimized['env_steps']} env steps"
     )
     click.echo(f"{'method':<8} {'error (vertices)':>16} {'improvement':>12}")
