@@ -152,6 +152,44 @@ class Adam:
         return -self.learning_rate * m_hat / (np.sqrt(v_hat) + self.eps)
 
 
+class TapeGradient:
+    """The tape estimator (``GradConfig.estimator == "tape"``): the path surrogate's gradient through
+    ``wp.Tape`` (:class:`warpcut.gradients.DifferentiableRollout`), averaged over the episodes of ``task``
+    (``GradConfig.trials``; the noise of ``seed``, the same every step); ``pinch_grad`` holds the last
+    step's gradient with respect to the pinch point."""
+
+    def __init__(self, task: CuttingTask, settings: GradConfig, seed: int):
+        from warpcut.gradients import DifferentiableRollout
+
+        self.rollout, self.settings, self.seed = DifferentiableRollout(task), settings, seed
+        self.pinch_grad: np.ndarray | None = None
+
+    @property
+    def num_steps(self) -> int:
+        return self.rollout.num_steps
+
+    def state(self) -> None:
+        return None  # nothing random: the episodes' noise is the seed's
+
+    def load(self, state: None) -> None:
+        pass
+
+    def step(self, plan: np.ndarray, last: bool) -> tuple[dict, np.ndarray | None]:
+        """``(history fields, gradient)`` for :func:`optimize_plan`; the last iterate has no backward pass."""
+        batch = np.broadcast_to(plan, (self.settings.trials, *plan.shape))
+        if last:
+            forward, grads = self.rollout.forward(batch, seed=self.seed), None
+        else:
+            forward, grads = self.rollout.value_and_grad(batch, seed=self.seed, window=self.settings.window)
+        self.pinch_grad = None if grads is None else grads.pinch.mean(axis=0)
+        record = {
+            "surrogate": float(np.nanmean(forward.surrogate)),
+            # a diverged episode is NaN (and has no gradient)
+            "error_vertices": float(np.nanmean(forward.score.error_vertices)),
+        }
+        return record, None if grads is None else grads.actions.mean(axis=0)
+
+
 class SmoothedGradient:
     """The es estimator (``GradConfig.estimator == "es"``): the gradient of the path score averaged over
     Gaussian perturbations of the plan, ``∇ E[error(plan + σε)]``, estimated from ``es_population`` perturbed
@@ -177,6 +215,13 @@ class SmoothedGradient:
 
     def load(self, state: dict) -> None:
         self.rng.bit_generator.state = state
+
+    def step(self, plan: np.ndarray, last: bool) -> tuple[dict, np.ndarray | None]:
+        """``(history fields, gradient)`` for :func:`optimize_plan`; the last iterate is only validated."""
+        if last:
+            return {"surrogate": None, "error_vertices": None}, None
+        error, grad = self(plan)
+        return {"surrogate": None, "error_vertices": error}, grad
 
     def __call__(self, plan: np.ndarray) -> tuple[float, np.ndarray]:
         """``(mean error of the perturbed plans in vertices, gradient estimate shaped like plan)``."""
@@ -227,7 +272,6 @@ def optimize_plan(
             optimisation interrupted (Ctrl-C, a crash) continues from it when it exists (it must be of
             the same contour, pinch point and settings).
     """
-    from warpcut.gradients import DifferentiableRollout
     from warpcut.io import write_json
 
     settings, config, arm = settings.validated(), (config or SimConfig()).validated(), arm or ArmModel()
@@ -235,11 +279,11 @@ def optimize_plan(
     es = settings.estimator == "es"
     b = settings.es_population * settings.es_trials if es else settings.trials
 
-    def engine(point: np.ndarray) -> DifferentiableRollout | SmoothedGradient:
+    def engine(point: np.ndarray) -> TapeGradient | SmoothedGradient:
         task = _episodes(contour, point, segments, config, b, device, seed + GRAD_SEED_OFFSET)
         if es:
             return SmoothedGradient(task, settings, config.max_step_mm, seed)
-        return DifferentiableRollout(task)
+        return TapeGradient(task, settings, seed + GRAD_SEED_OFFSET)
 
     def checker(point: np.ndarray) -> CuttingTask | None:
         v, held_out = settings.validation_trials, seed + GRAD_SEED_OFFSET + 1
@@ -262,8 +306,7 @@ def optimize_plan(
         first, history, elapsed = state["iteration"], state["history"], state["seconds"]
         plan, pinch = np.asarray(state["plan"], np.float32), np.asarray(state["pinch"])
         moves.load(state["moves"]), pinch_moves.load(state["pinch_moves"])
-        if es:
-            rollout.load(state["perturbations"])
+        rollout.load(state["estimator"])
         error, it, best_plan, best_pinch = state["best"]
         best = (error, it, np.asarray(best_plan, np.float32), np.asarray(best_pinch))
         if not np.allclose(pinch, identity["pinch"]):
@@ -272,25 +315,9 @@ def optimize_plan(
     start = time.perf_counter() - elapsed
     for iteration in range(first, settings.iterations + 1):
         last = iteration == settings.iterations
-        if es:  # the perturbed plans' mean error; the plan itself is scored on the held-out episodes
-            error, step = (None, None) if last else rollout(plan)
-            record = {"iteration": iteration, "surrogate": None, "error_vertices": error}
-        else:
-            batch = np.broadcast_to(plan, (b, steps, 3))
-            if last:
-                forward, grads = rollout.forward(batch, seed=seed + GRAD_SEED_OFFSET), None
-            else:
-                forward, grads = rollout.value_and_grad(
-                    batch, seed=seed + GRAD_SEED_OFFSET, window=settings.window
-                )
-            error = float(np.nanmean(forward.score.error_vertices))  # a diverged episode is NaN (no gradient)
-            step = None if grads is None else grads.actions.mean(axis=0)
-            record = {
-                "iteration": iteration,
-                "surrogate": float(np.nanmean(forward.surrogate)),
-                "error_vertices": error,
-            }
-        record["pinch"] = [float(v) for v in pinch]
+        fields, step = rollout.step(plan, last)
+        record = {"iteration": iteration, **fields, "pinch": [float(v) for v in pinch]}
+        error = record["error_vertices"]  # es: the perturbed plans'; the plan itself is validated
         if validation is not None:  # model selection on held-out episodes
             held_out = validation.run(PlanPolicy([plan], settings.validation_trials)).error_vertices
             error = record["validation_error_vertices"] = float(np.nanmean(held_out))
@@ -305,7 +332,7 @@ def optimize_plan(
             break
         plan = np.clip(plan + moves.step(step), -max_step, max_step).astype(np.float32)
         if settings.optimize_pinch:
-            moved = pinch + pinch_moves.step(grads.pinch.mean(axis=0))
+            moved = pinch + pinch_moves.step(rollout.pinch_grad)
             segments_path = None if segments is None else [np.asarray(s) for s in segments]
             if pinch_feasible(moved[None], contour, config, segments_path, arm)[0]:
                 pinch = moved
@@ -317,9 +344,8 @@ def optimize_plan(
                 "seconds": time.perf_counter() - start, "plan": plan.tolist(), "pinch": pinch.tolist(),
                 "moves": moves.state(), "pinch_moves": pinch_moves.state(),
                 "best": [error, it, best_plan.tolist(), best_pinch.tolist()],
+                "estimator": rollout.state(),
             }  # fmt: skip
-            if es:
-                state["perturbations"] = rollout.state()
             write_json(state_file, state)
     _, best_iteration, best_plan, best_pinch = best
     env_steps = settings.iterations * b * steps if es else (settings.iterations + 1) * b * steps
