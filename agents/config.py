@@ -357,8 +357,8 @@ GRAD_CONFIGS = {
     "tape": GradConfig(),
     "es": GradConfig(estimator="es", iterations=40, learning_rate=0.1),
 }
-"""The optimiser's defaults per estimator (library and command line). es: 40 steps of 0.1 mm did better than
-20 of 0.3 on fls-circle and kidney (+79.0% and +61.4% against +72.4% and +49.2%; docs/learning.md)."""
+"""The optimiser's defaults per estimator (library and command line). es: 40 steps of 0.1 mm, on fls-circle
+and kidney +74.6% and +55.3% against +75.3% and +48.9% with 20 steps of 0.3 mm (docs/learning.md)."""
 
 GRAD_CONFIG = GRAD_CONFIGS["tape"]
 """The optimiser's defaults (library and command line): the tape estimator's."""

@@ -6,7 +6,8 @@ tensioning".
 
 Run: python scripts/grad_settings.py --contours fls-circle,kidney,crescent,arc-top,s-curve,e-shape
      [--settings lr=0.1;lr=0.2,window=5;...] [--out logs/grad-settings.txt]
-A setting is a list of GradConfig fields (lr is learning_rate), e.g. "lr=0.3,window=10,iterations=20".
+A setting is a list of GradConfig fields (lr is learning_rate, sigma es_sigma_mm, population es_population),
+e.g. "lr=0.3,window=10,iterations=20" or "estimator=es,iterations=40,lr=0.1".
 """
 
 from __future__ import annotations
@@ -30,8 +31,13 @@ def parse_setting(text: str) -> GradConfig:
     fields = {}
     for item in text.split(","):
         key, value = item.split("=")
-        key = {"lr": "learning_rate"}.get(key.strip(), key.strip())
-        fields[key] = float(value) if key.endswith("rate") else int(value)
+        key = {"lr": "learning_rate", "sigma": "es_sigma_mm", "population": "es_population"}.get(
+            key.strip(), key.strip()
+        )
+        if key == "estimator":
+            fields[key] = value.strip()
+        else:
+            fields[key] = float(value) if key.endswith(("rate", "_mm")) else int(value)
     return GradConfig(**fields).validated()
 
 
