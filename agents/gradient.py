@@ -39,7 +39,9 @@ from warpcut.task import CuttingTask
 
 if TYPE_CHECKING:
     from agents.evaluation import MethodResult
+    from agents.methods import StepCallbacks
     from warpcut.planning import Plan
+    from warpcut.task import StepCallback
 
 
 @dataclass
@@ -367,12 +369,14 @@ def grad_result(
     folder: Path | None = None,
     log: Callable[[str], None] = lambda _: None,
     arm: ArmModel | None = None,
+    on_step: StepCallback | None = None,
 ) -> tuple[MethodResult, list[PlanResult]]:
     """The ``grad`` method on a suite: a plan per contour, then every (contour, trial) played in one batch
     with the evaluation's noise (paired with the baselines'); ``(MethodResult, [PlanResult])``.
 
     ``folder``: each contour's plan is kept in ``NAME.json`` (a plan found there is used as it is) and its
-    optimiser's state in ``NAME.state.json`` while it runs (an interrupted optimisation continues)."""
+    optimiser's state in ``NAME.state.json`` while it runs (an interrupted optimisation continues).
+    ``on_step``: the evaluation batch's step callback (:meth:`CuttingTask.run`), e.g. the regions plot's."""
     from agents.evaluation import run_method
 
     n = len(contours)
@@ -382,7 +386,7 @@ def grad_result(
     ]
     method = run_method(
         contours, [np.asarray(r.pinch) for r in results], PlanPolicy([r.plan for r in results], trials),
-        trials, config, device, seed, segments=list(segments),
+        trials, config, device, seed, on_step, segments=list(segments),
     )  # fmt: skip
     return method, results
 
@@ -536,6 +540,7 @@ def grad_column(
     device: str | None,
     seed: int,
     log: Callable[[str], None],
+    step_callbacks: StepCallbacks | None = None,
 ) -> tuple[MethodResult, Callable[[dict], None]]:
     """:func:`agents.pipeline.evaluate_table`'s grad column (:func:`grad_result`, kept in ``out/grad``) at
     the planned pinch points and segments (unplanned: the feasible centroid, the contour as one loop);
@@ -550,8 +555,9 @@ def grad_column(
     else:
         pinches, segments = [default_pinch(c, config, arm) for c in contours], [None] * len(contours)
     started = time.perf_counter()
+    on_step = None if step_callbacks is None else step_callbacks("grad", 0)
     method, optimized = grad_result(
-        contours, pinches, segments, trials, config, grad, device, seed, out / "grad", log, arm
+        contours, pinches, segments, trials, config, grad, device, seed, out / "grad", log, arm, on_step
     )
     log(f"  grad: {len(contours)} plan(s) in {time.perf_counter() - started:.0f} s")
 

@@ -648,7 +648,7 @@ def evaluate_table(
             notes.append(functools.partial(_note_rl_iterations, kept))
         elif spec.name == "grad":
             spec.result, note = grad_column(
-                loaded, plans, out, trials, config, (grad, arm), device, seed, log
+                loaded, plans, out, trials, config, (grad, arm), device, seed, log, step_callbacks
             )
             notes.append(note)
     batches = len({spec.name for spec in specs} | {"none"})  # evaluate_suite also runs none, the baseline

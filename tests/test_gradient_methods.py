@@ -8,7 +8,14 @@ import numpy as np
 import pytest
 
 from agents.config import GradConfig, TrainConfig
-from agents.gradient import PlanPolicy, PlanResult, SmoothedGradient, cached_plan, optimize_plan
+from agents.gradient import (
+    PlanPolicy,
+    PlanResult,
+    SmoothedGradient,
+    cached_plan,
+    grad_result,
+    optimize_plan,
+)
 from warpcut import CuttingTask, load_contour
 from warpcut.sim.config import SimConfig
 
@@ -169,6 +176,20 @@ def test_es_optimises_the_path_score_and_resumes_bit_for_bit(tmp_path, monkeypat
     resumed = optimize_plan(contour, PINCH, config=SMALL, settings=settings, state_file=state)
     np.testing.assert_array_equal(resumed.plan, whole.plan)  # the perturbations' stream resumed too
     assert [h["error_vertices"] for h in resumed.history] == [h["error_vertices"] for h in whole.history]
+
+
+def test_the_grad_column_passes_its_evaluation_batch_to_the_step_callback(tmp_path):
+    """The regions plot and recordings see the grad column's cuts (``on_step``) like the other methods'."""
+    from warpcut.viz.plots import FinalCuts
+
+    contour = load_contour("circle-small")
+    cuts = FinalCuts()
+    settings = GradConfig(iterations=1, trials=2, validation_trials=2)
+    method, _ = grad_result(
+        [contour], [PINCH], [None], 2, SMALL, settings, folder=tmp_path, on_step=cuts.step_callback("grad")
+    )
+    (cut,) = cuts.of("circle-small", ["grad"]).values()
+    assert cut.trials == 2 and cut.score.error_vertices[0] == method.error_vertices[0, 0]
 
 
 def test_a_kept_plan_of_other_settings_is_refused(tmp_path):
