@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 from warpcut.sim.config import PINCH_CANDIDATES
@@ -359,6 +360,15 @@ GRAD_CONFIGS = {
 }
 """The optimiser's defaults per estimator (library and command line). es: 40 steps of 0.1 mm, on fls-circle
 and kidney +74.6% and +55.3% against +75.3% and +48.9% with 20 steps of 0.3 mm (docs/learning.md)."""
+
+
+def grad_config(estimator: str = "tape", **overrides) -> GradConfig:
+    """``estimator``'s defaults (:data:`GRAD_CONFIGS`) with the ``overrides`` that are not None (the CLI's
+    options left unset are None), validated."""
+    base = GRAD_CONFIGS.get(estimator, GradConfig(estimator=estimator))  # unknown: validated() names it
+    given = {k: v for k, v in overrides.items() if v is not None}
+    return dataclasses.replace(base, **given).validated()
+
 
 GRAD_CONFIG = GRAD_CONFIGS["tape"]
 """The optimiser's defaults (library and command line): the tape estimator's."""

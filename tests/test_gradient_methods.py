@@ -7,7 +7,7 @@ import types
 import numpy as np
 import pytest
 
-from agents.config import GradConfig, TrainConfig
+from agents.config import GRAD_CONFIGS, GradConfig, TrainConfig, grad_config
 from agents.gradient import (
     PlanPolicy,
     PlanResult,
@@ -54,6 +54,26 @@ def test_optimize_plan_lowers_the_surrogate_within_the_move_limits():
     np.testing.assert_array_equal(again.plan, result.plan)  # bit for bit: a read-back plan plays the same
 
 
+def _interrupt_and_resume(monkeypatch, owner, name: str, call: int, settings, state) -> PlanResult:
+    """Optimise circle-small's plan with ``owner.name`` interrupted (Ctrl-C) at its ``call``-th call, check
+    the state file holds the iterations done, and continue from it; returns the continued result."""
+    method, calls = getattr(owner, name), []
+
+    def interrupted(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == call:
+            raise KeyboardInterrupt
+        return method(self, *args, **kwargs)
+
+    contour = load_contour("circle-small")
+    monkeypatch.setattr(owner, name, interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        optimize_plan(contour, PINCH, config=SMALL, settings=settings, state_file=state)
+    assert json.loads(state.read_text())["iteration"] == call - 1
+    monkeypatch.setattr(owner, name, method)
+    return optimize_plan(contour, PINCH, config=SMALL, settings=settings, state_file=state)
+
+
 def test_an_interrupted_optimisation_continues_from_its_state(tmp_path, monkeypatch):
     from warpcut.gradients import DifferentiableRollout
 
@@ -62,21 +82,7 @@ def test_an_interrupted_optimisation_continues_from_its_state(tmp_path, monkeypa
     whole = optimize_plan(contour, PINCH, config=SMALL, settings=settings)
 
     state = tmp_path / "state.json"
-    backward = DifferentiableRollout.backward
-    calls = []
-
-    def interrupted(self, rollout, window=None):
-        calls.append(1)
-        if len(calls) == 2:
-            raise KeyboardInterrupt
-        return backward(self, rollout, window)
-
-    monkeypatch.setattr(DifferentiableRollout, "backward", interrupted)
-    with pytest.raises(KeyboardInterrupt):
-        optimize_plan(contour, PINCH, config=SMALL, settings=settings, state_file=state)
-    assert json.loads(state.read_text())["iteration"] == 1
-    monkeypatch.setattr(DifferentiableRollout, "backward", backward)
-    resumed = optimize_plan(contour, PINCH, config=SMALL, settings=settings, state_file=state)
+    resumed = _interrupt_and_resume(monkeypatch, DifferentiableRollout, "backward", 2, settings, state)
     np.testing.assert_array_equal(resumed.plan, whole.plan)
     assert [h["error_vertices"] for h in resumed.history] == [h["error_vertices"] for h in whole.history]
     with pytest.raises(ValueError, match="other settings"):
@@ -100,6 +106,15 @@ def test_grad_config_names_a_bad_field():
         GradConfig(estimator="es", validation_trials=0).validated()
     with pytest.raises(ValueError, match="es_sigma_mm"):
         GradConfig(estimator="es", es_sigma_mm=0.0).validated()
+    with pytest.raises(ValueError, match="estimator: must be one of"):
+        grad_config("cma")
+
+
+def test_grad_config_takes_the_estimators_defaults_and_the_given_fields():
+    assert grad_config() == GRAD_CONFIGS["tape"] == GradConfig()
+    es = grad_config("es", iterations=None, learning_rate=None, es_population=8)
+    assert es == dataclasses.replace(GRAD_CONFIGS["es"], es_population=8)
+    assert es.learning_rate != GradConfig().learning_rate  # es's own step, not tape's
 
 
 class _QuadraticTask:
@@ -158,22 +173,9 @@ def test_es_optimises_the_path_score_and_resumes_bit_for_bit(tmp_path, monkeypat
     assert np.abs(whole.plan).max() <= SMALL.max_step_mm
     assert whole.env_steps == settings.iterations * 8 * len(whole.plan)
 
-    state = tmp_path / "state.json"
-    call = SmoothedGradient.__call__
-    calls = []
-
-    def interrupted(self, plan):
-        calls.append(1)
-        if len(calls) == 3:
-            raise KeyboardInterrupt
-        return call(self, plan)
-
-    monkeypatch.setattr(SmoothedGradient, "__call__", interrupted)
-    with pytest.raises(KeyboardInterrupt):
-        optimize_plan(contour, PINCH, config=SMALL, settings=settings, state_file=state)
-    assert json.loads(state.read_text())["iteration"] == 2
-    monkeypatch.setattr(SmoothedGradient, "__call__", call)
-    resumed = optimize_plan(contour, PINCH, config=SMALL, settings=settings, state_file=state)
+    resumed = _interrupt_and_resume(
+        monkeypatch, SmoothedGradient, "__call__", 3, settings, tmp_path / "s.json"
+    )
     np.testing.assert_array_equal(resumed.plan, whole.plan)  # the perturbations' stream resumed too
     assert [h["error_vertices"] for h in resumed.history] == [h["error_vertices"] for h in whole.history]
 

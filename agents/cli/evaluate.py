@@ -2,21 +2,13 @@
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import click
 
 from agents.cli import common
 from agents.cli.video import video_option, videos, with_videos
-from agents.config import (
-    EVALUATION_CANDIDATES,
-    EVALUATION_TRIALS,
-    GRAD_CONFIG,
-    GRAD_CONFIGS,
-    GRAD_ESTIMATORS,
-    RECIPES,
-)
+from agents.config import EVALUATION_CANDIDATES, EVALUATION_TRIALS, GRAD_CONFIGS, RECIPES, grad_config
 from agents.methods import METHODS, TABLE_METHODS
 from warpcut.sim.config import SimConfig
 
@@ -57,14 +49,7 @@ from warpcut.sim.config import SimConfig
     "iterations", None, f"Iterations per contour when training. {common.BATCH_DEFAULTS_HELP}"
 )
 @common.count_option("num-envs", None, f"Envs when training. {common.BATCH_DEFAULTS_HELP}")
-@click.option(
-    "--grad-estimator",
-    type=click.Choice(GRAD_ESTIMATORS),
-    default=GRAD_CONFIG.estimator,
-    show_default=True,
-    help="The grad column's gradient (and a recipe's on its plans): 'tape' (through wp.Tape) or 'es' "
-    "(evolution strategies on the path score); see 'warpcut optimize'.",
-)
+@common.estimator_option("grad-estimator", "the grad column's optimiser (and a recipe's on its plans)")
 @common.count_option(
     "grad-iterations",
     None,
@@ -154,10 +139,7 @@ def command(
             plan=plan,
             candidates=candidates,
             arm=ArmModel(length_mm=arm_length), analytic_pinch=analytic_pinch,
-            grad=dataclasses.replace(
-                GRAD_CONFIGS[grad_estimator],
-                iterations=grad_iterations or GRAD_CONFIGS[grad_estimator].iterations,
-            ),
+            grad=grad_config(grad_estimator, iterations=grad_iterations),
             device=device,
             seed=seed, log=common.log, stages=stages,
             step_callbacks=with_videos(common.step_callbacks(rec, cuts), vid),

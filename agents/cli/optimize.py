@@ -3,13 +3,12 @@
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import click
 
 from agents.cli import common
-from agents.config import EVALUATION_CANDIDATES, EVALUATION_TRIALS, GRAD_CONFIG, GRAD_CONFIGS, GRAD_ESTIMATORS
+from agents.config import EVALUATION_CANDIDATES, EVALUATION_TRIALS, GRAD_CONFIG, GRAD_CONFIGS, grad_config
 from agents.methods import point_text
 from warpcut.sim.config import SimConfig
 
@@ -21,14 +20,7 @@ from warpcut.sim.config import SimConfig
     default=None,
     help="Pinch point X,Y (mm); default: the plan's (fixed tension's best candidate).",
 )
-@click.option(
-    "--estimator",
-    type=click.Choice(GRAD_ESTIMATORS),
-    default=GRAD_CONFIG.estimator,
-    show_default=True,
-    help="The plan's gradient: 'tape', the path surrogate's through wp.Tape; 'es', evolution strategies on "
-    "the path score (perturbed plans in one batch, forward passes only).",
-)
+@common.estimator_option("estimator", "the optimiser")
 @common.count_option(
     "iterations",
     None,
@@ -103,11 +95,10 @@ def command(
 
     point = common.parse_point(pinch, "--pinch")
     common.check_outputs({"--json": json_path}, [contour_name])
-    base = GRAD_CONFIGS[estimator]
-    settings = dataclasses.replace(
-        base, iterations=iterations or base.iterations, trials=episodes,
-        learning_rate=learning_rate or base.learning_rate, es_population=population,
-        es_trials=population_episodes, es_sigma_mm=sigma, optimize_pinch=optimize_pinch,
+    settings = grad_config(
+        estimator, iterations=iterations, trials=episodes, learning_rate=learning_rate,
+        es_population=population, es_trials=population_episodes, es_sigma_mm=sigma,
+        optimize_pinch=optimize_pinch,
     )  # fmt: skip
     out, claim = common.claim(out, "optimize", resume, overwrite)
     with claim:
