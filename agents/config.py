@@ -283,10 +283,6 @@ EVALUATION_CANDIDATES = PINCH_CANDIDATES
 """Pinch candidates per plan in :func:`evaluate_table` (the paper's 30)."""
 
 
-GRAD_ESTIMATORS = ("tape", "es")
-"""How the plan optimiser estimates its gradient (``GradConfig.estimator``)."""
-
-
 @dataclass(frozen=True)
 class GradConfig:
     """Gradient-based tensioning (:mod:`agents.gradient`): Adam on an open-loop plan of grasp moves (and
@@ -360,6 +356,9 @@ GRAD_CONFIGS = {
 }
 """The optimiser's defaults per estimator (library and command line). es: 40 steps of 0.1 mm, on fls-circle
 and kidney +74.6% and +55.3% against +75.3% and +48.9% with 20 steps of 0.3 mm (docs/learning.md)."""
+
+GRAD_ESTIMATORS = tuple(GRAD_CONFIGS)
+"""How the plan optimiser may estimate its gradient (``GradConfig.estimator``): "tape" or "es"."""
 
 
 def grad_config(estimator: str = "tape", **overrides) -> GradConfig:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import click
 
-from agents.config import ANALYTIC_PINCHES, GRAD_CONFIGS, GRAD_ESTIMATORS, RECIPES, batch_defaults
+from agents.config import ANALYTIC_PINCHES, GRAD_CONFIG, GRAD_ESTIMATORS, RECIPES, batch_defaults
 from warpcut.sim.config import ARM_LENGTH_MM, RESOLUTION_RANGE, SCORES, SimConfig
 from warpcut.viz import COLOUR_FIELDS
 from warpcut.viz.process import RecordingError
@@ -230,12 +230,12 @@ score_option = click.option(
 
 
 def estimator_option(name: str, what: str):
-    """``--NAME tape|es``: how ``what`` estimates its gradient (``GradConfig.estimator``; the defaults of each
-    are :data:`agents.config.GRAD_CONFIGS`)."""
+    """``--NAME tape|es``: how ``what`` estimates its gradient (``GradConfig.estimator``; the library's
+    default, each one's settings in :data:`agents.config.GRAD_CONFIGS`)."""
     return click.option(
         f"--{name}",
         type=click.Choice(GRAD_ESTIMATORS),
-        default=GRAD_CONFIGS["tape"].estimator,
+        default=GRAD_CONFIG.estimator,
         show_default=True,
         help=f"How {what} estimates its gradient: 'tape', the path surrogate's through wp.Tape; 'es', "
         "evolution strategies on the path score itself (perturbed plans cut in one batch, forward passes "
