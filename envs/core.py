@@ -22,9 +22,10 @@ Reward:
     score's own increment; 0 while the tip travels), so an episode's shaping sums to about minus the mean
     deviation in units of ``max_displacement_mm``. With ``relative_reward`` both are scaled, per env, by
     the nominal sheet's no-tension error over that of the env's own sheet (noise-free, computed once per
-    parameter set; at most :data:`RELATIVE_REWARD_MAX_SCALE`): under domain randomisation a sheet that
-    hangs flat, where any cut is nearly right, weighs as much as the nominal one, as it does in the
-    evaluation's relative improvement.
+    parameter set, :class:`warpcut.task.NoTensionReference`; at most
+    :data:`warpcut.task.RELATIVE_REWARD_MAX_SCALE`): under domain randomisation a sheet that hangs flat,
+    where any cut is nearly right, weighs as much as the nominal one, as it does in the evaluation's
+    relative improvement.
 
 Episode:
     Ends (``terminated``) once the scissors have followed the whole trajectory, ``num_steps`` steps. Every
@@ -55,7 +56,7 @@ import gymnasium as gym
 import numpy as np
 
 from warpcut.sim.config import sample_parameters
-from warpcut.task import CuttingTask, segments_key
+from warpcut.task import CuttingTask, NoTensionReference
 
 from .observations import Fiducials, normalise_positions, observation_bounds, sample_fiducials
 from .options import PatternCutOptions
@@ -65,10 +66,6 @@ DISCRETE_MOVES = np.array(
     [[0, 0, 0], [1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.float32
 )
 """Grasp move of each discrete action, in units of ``max_step_mm``: stay, +x, -x, +y, -y, +z, -z."""
-
-RELATIVE_REWARD_MAX_SCALE = 10.0
-"""The largest factor ``relative_reward`` scales an env's reward by (and 1 / it the smallest): a sheet that
-hangs flat has almost no no-tension error, and an unbounded scale would let its episodes swamp the rest."""
 
 
 class PatternCut:
@@ -134,8 +131,8 @@ class PatternCut:
         self.diverged = np.zeros(num_envs, dtype=bool)
         """(B,) bool: envs whose simulation diverged this episode (module docstring)."""
         self._reward_scale: np.ndarray | None = None
-        self._no_tension: dict[tuple, float] = {}
-        """No-tension errors (mm^2, noise-free) by (settle parameters, contour, segments): relative_reward."""
+        self._no_tension = NoTensionReference()
+        """No-tension errors (noise-free) by (settle parameters, contour, segments): relative_reward."""
         self.newly_diverged = np.zeros(num_envs, dtype=bool)
         """(B,) bool: envs that diverged in the last step."""
         self._over = False
@@ -168,7 +165,7 @@ class PatternCut:
             steps = self.task.num_steps
             self.episode_steps = min(steps, self.options.max_episode_steps or steps)
         if self.options.relative_reward:
-            self._reward_scale = self._relative_scale()
+            self._reward_scale = self._no_tension.scale(self.task, self.options.config())
         self.task.reset(seed=seed)
         self._running_path_error = np.zeros(self.num_envs)
         self.diverged = np.zeros(self.num_envs, dtype=bool)
@@ -239,42 +236,6 @@ class PatternCut:
     def reward_scale(self) -> np.ndarray:
         """(B,) the factor each env's reward is scaled by this episode (``relative_reward``; else all 1)."""
         return np.ones(self.num_envs) if self._reward_scale is None else self._reward_scale.copy()
-
-    def _relative_scale(self) -> np.ndarray:
-        """(B,) the nominal sheet's no-tension error over each env's own (``relative_reward``), clipped to
-        ``[1 / RELATIVE_REWARD_MAX_SCALE, RELATIVE_REWARD_MAX_SCALE]``. No-tension errors are cut once per
-        (parameters, contour, segments), noise-free, in one batch of those not met before."""
-        from warpcut.sim.settling import SETTLE_PARAMETERS
-
-        task, nominal, b = self.task, self.options.config(), self.num_envs
-        group_params, env_group = task.sim.settle_groups()
-        own = group_params[env_group]
-        base = np.stack([np.broadcast_to(nominal.per_env(k, b), (b,)) for k in SETTLE_PARAMETERS], axis=1)
-
-        def key(row: np.ndarray, env: int) -> tuple:
-            return row.astype(np.float32).tobytes(), id(task.contours[env]), segments_key(task.segments[env])
-
-        missing: dict[tuple, tuple[np.ndarray, int]] = {}
-        for env in range(b):
-            for row in (own[env], base[env]):
-                if key(row, env) not in self._no_tension:
-                    missing.setdefault(key(row, env), (row, env))
-        if missing:
-            rows = np.array([row for row, _ in missing.values()])
-            envs = [env for _, env in missing.values()]
-            params = {k: rows[:, c].tolist() for c, k in enumerate(SETTLE_PARAMETERS)}
-            probe = CuttingTask(
-                nominal.replace(**params, noise_std=0.0), [task.contours[e] for e in envs],
-                segments=[task.segments[e] for e in envs], device=task.sim.device,
-            )  # fmt: skip
-            errors = probe.run(None).error_mm2
-            self._no_tension.update({k: float(err) for k, err in zip(missing, errors, strict=True)})
-        own_error = np.array([self._no_tension[key(own[e], e)] for e in range(b)])
-        base_error = np.array([self._no_tension[key(base[e], e)] for e in range(b)])
-        scale = base_error / np.maximum(own_error, 1e-9)
-        return np.clip(
-            np.nan_to_num(scale, nan=1.0), 1.0 / RELATIVE_REWARD_MAX_SCALE, RELATIVE_REWARD_MAX_SCALE
-        )
 
     def moves(self, actions: np.ndarray) -> np.ndarray:
         """(B, 3) grasp moves (mm) for a batch of actions; raise ``ValueError`` naming a bad action."""

@@ -235,7 +235,7 @@ def test_grad_plays_its_plan_at_every_value_and_is_optimised_once(tmp_path):
 def test_relative_reward_weighs_each_sheet_by_its_no_tension_error():
     """Each env's reward is its plain reward times the nominal sheet's no-tension error over its own: 1 on
     the nominal sheet, larger on a flatter one, clipped on a sheet that hangs flat."""
-    from envs.core import RELATIVE_REWARD_MAX_SCALE
+    from warpcut.task import RELATIVE_REWARD_MAX_SCALE
 
     gravity = [521.0, 260.5, 0.0]
     plain = PatternCutVecEnv(3, PatternCutOptions(contour="fls-circle", resolution=RES, gravity=gravity))

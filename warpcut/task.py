@@ -449,6 +449,57 @@ class CuttingTask:
         return self.score()
 
 
+RELATIVE_REWARD_MAX_SCALE = 10.0
+"""The largest factor a relative weighting scales an episode by (and 1 / it the smallest;
+:meth:`NoTensionReference.scale`): a sheet that hangs flat has almost no no-tension error, and an unbounded
+scale would let its episodes swamp the rest."""
+
+
+class NoTensionReference:
+    """No-tension errors, noise-free, cut once per (settle parameters, contour, segments) and kept: the
+    reference that weighs each randomised sheet as much as the nominal one (the env's ``relative_reward``,
+    the es estimator's ``es_randomize``)."""
+
+    def __init__(self) -> None:
+        self._errors: dict[tuple, float] = {}
+
+    def scale(self, task: CuttingTask, nominal: SimConfig) -> np.ndarray:
+        """(B,) the ``nominal`` sheet's no-tension error over that of each env's own sheet in ``task`` (as
+        its parameters stand), clipped to ``[1 / RELATIVE_REWARD_MAX_SCALE, RELATIVE_REWARD_MAX_SCALE]``.
+        Errors not met before are cut in one batch."""
+        from warpcut.sim.settling import SETTLE_PARAMETERS
+
+        b = task.num_envs
+        group_params, env_group = task.sim.settle_groups()
+        own = group_params[env_group]
+        base = np.stack([np.broadcast_to(nominal.per_env(k, b), (b,)) for k in SETTLE_PARAMETERS], axis=1)
+
+        def key(row: np.ndarray, env: int) -> tuple:
+            return row.astype(np.float32).tobytes(), id(task.contours[env]), segments_key(task.segments[env])
+
+        missing: dict[tuple, tuple[np.ndarray, int]] = {}
+        for env in range(b):
+            for row in (own[env], base[env]):
+                if key(row, env) not in self._errors:
+                    missing.setdefault(key(row, env), (row, env))
+        if missing:
+            rows = np.array([row for row, _ in missing.values()])
+            envs = [env for _, env in missing.values()]
+            params = {k: rows[:, c].tolist() for c, k in enumerate(SETTLE_PARAMETERS)}
+            probe = CuttingTask(
+                nominal.replace(**params, noise_std=0.0), [task.contours[e] for e in envs],
+                segments=[task.segments[e] for e in envs], device=task.sim.device,
+            )  # fmt: skip
+            errors = probe.run(None).error_mm2
+            self._errors.update({k: float(err) for k, err in zip(missing, errors, strict=True)})
+        own_error = np.array([self._errors[key(own[e], e)] for e in range(b)])
+        base_error = np.array([self._errors[key(base[e], e)] for e in range(b)])
+        scale = base_error / np.maximum(own_error, 1e-9)
+        return np.clip(
+            np.nan_to_num(scale, nan=1.0), 1.0 / RELATIVE_REWARD_MAX_SCALE, RELATIVE_REWARD_MAX_SCALE
+        )
+
+
 def divergence_error(
     contours: Sequence[Contour], diverged: np.ndarray, config: SimConfig, reasons: Sequence[str] = ()
 ) -> SimulationDiverged:
