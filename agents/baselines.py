@@ -87,8 +87,7 @@ class AnalyticTension:
         return np.asarray(contour.centroid, dtype=np.float64)
 
     def __call__(self, task: CuttingTask) -> np.ndarray:
-        error = task.target_world() - task.tip_positions()[:, :3]
-        move = -self.gain * error
+        move = -self.gain * task.tracking_error()
         move[:, 2] = 0.0  # the gripper moves in the x-y plane (paper A4)
         return np.nan_to_num(move, nan=0.0)
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 
-from warpcut.sim.config import PINCH_CANDIDATES
+from warpcut.sim.config import PINCH_CANDIDATES, randomize_ranges
 
 ALGORITHMS = ("ppo", "apg")
 """How ``warpcut train`` learns: PPO (rsl-rl) or analytic policy gradients through the simulator."""
@@ -305,7 +305,20 @@ class GradConfig:
     es_trials: int = 2
     """Noisy episodes per perturbed plan (es), the same seeds every step, not the evaluation's."""
     es_sigma_mm: float = 0.3
-    """Standard deviation of the es estimator's perturbation of each move (mm)."""
+    """Standard deviation of the es estimator's perturbation of each move (mm) and of each feedback gain
+    (mm of move per mm of tracking error)."""
+    es_feedback_phases: int = 0
+    """es: 0 optimises an open-loop plan. P > 0 adds feedback, a closed-loop policy: every step's move is the
+    plan's plus ``K @ e``, ``e`` the x-y tracking error (mm; the vector from the scissor tip to the contour
+    point it is about to cut, as it lies on the moved sheet, what the analytic controller opposes) and ``K``
+    a 3 x 2 gain matrix, one per phase (the episode split into P equal parts), optimised with the plan from
+    zero (docs/learning.md, "Feedback and domain randomisation in es")."""
+    es_randomize: str = ""
+    """es: physical parameters drawn anew at every step for the ``es_trials`` episodes (comma-separated names
+    of :data:`warpcut.sim.config.RANDOMIZE_RANGES`, over their ranges; every perturbed plan cuts the same
+    draws). Each episode's error is then weighed by the nominal sheet's no-tension error over its own
+    (:class:`warpcut.task.NoTensionReference`, as ``relative_reward`` does), and the validation episodes
+    draw theirs too (seeded, the same every iterate). Empty: the nominal sheet."""
     learning_rate: float = 0.3
     """Adam's step (mm per grasp move); moves are projected back onto ``max_step_mm`` per axis."""
     validation_trials: int = 8
@@ -334,6 +347,17 @@ class GradConfig:
             raise ValueError(f"es_population: must be even, antithetic pairs (got {self.es_population})")
         if self.estimator == "es" and self.optimize_pinch:
             raise ValueError("optimize_pinch: the pinch point moves only with estimator 'tape'; drop one")
+        phases = self.es_feedback_phases
+        if not isinstance(phases, int) or isinstance(phases, bool) or phases < 0:
+            raise ValueError(f"es_feedback_phases: must be an integer >= 0, 0 for open loop (got {phases!r})")
+        try:
+            randomize_ranges(self.es_randomize)
+        except ValueError as error:
+            raise ValueError(f"es_randomize: {str(error).split(': ', 1)[1]}") from None
+        closed_loop = {"es_feedback_phases": self.es_feedback_phases, "es_randomize": self.es_randomize}
+        for name, value in closed_loop.items():
+            if value and self.estimator != "es":
+                raise ValueError(f"{name}: only estimator 'es' has it; use estimator 'es', or drop {name}")
         if self.estimator == "es" and self.validation_trials == 0:
             raise ValueError(
                 "validation_trials: estimator 'es' scores each iterate on held-out episodes only; give at "

@@ -34,8 +34,8 @@ from agents.config import (
 from warpcut.contours import Contour
 from warpcut.planning import ArmModel
 from warpcut.planning.feasibility import pinch_feasible
-from warpcut.sim.config import SimConfig
-from warpcut.task import CuttingTask
+from warpcut.sim.config import SimConfig, randomize_ranges, sample_parameters
+from warpcut.task import CuttingTask, NoTensionReference
 
 if TYPE_CHECKING:
     from agents.evaluation import MethodResult
@@ -66,6 +66,9 @@ class PlanResult:
     env_steps: int = 0
     """Env steps the optimiser simulated forward (episodes x steps; the held-out validation episodes not
     counted); each backward pass of the tape estimator replays as many again."""
+    gains: np.ndarray | None = None
+    """(P, 3, 2) feedback gains (mm of move per mm of x-y tracking error), one matrix per phase of the
+    episode (``GradConfig.es_feedback_phases``); None: an open-loop plan."""
 
     def to_json(self) -> dict:
         return {
@@ -78,24 +81,47 @@ class PlanResult:
             "history": self.history,
             "seconds": self.seconds,
             "env_steps": self.env_steps,
+            "gains": None
+            if self.gains is None
+            else np.asarray(self.gains, np.float32).astype(float).tolist(),
         }
 
     @classmethod
     def from_json(cls, data: dict) -> PlanResult:
         plan = np.asarray(data["plan"], dtype=np.float32).reshape(-1, 3)
+        gains = data.get("gains")  # plans written before session 21 are open loop
         return cls(
             data["contour"], list(data["pinch"]), plan, int(data["best_iteration"]), list(data["history"]),
             float(data["seconds"]), int(data["env_steps"]),
+            None if gains is None else np.asarray(gains, dtype=np.float32).reshape(-1, 3, 2),
         )  # fmt: skip
+
+    @staticmethod
+    def policy(results: Sequence[PlanResult], trials: int) -> PlanPolicy:
+        """The :class:`PlanPolicy` playing ``results`` (contour by contour, ``trials`` envs each), closed
+        loop where they have gains."""
+        return PlanPolicy([r.plan for r in results], trials, [r.gains for r in results])
 
 
 class PlanPolicy:
-    """The ``grad`` tensioner: plays open-loop plans, env ``e`` the plan of contour ``e // trials`` (the
-    layout of :func:`agents.evaluation.run_method`); a plan shorter than the episode holds still after it."""
+    """The ``grad`` tensioner: plays plans, env ``e`` the plan of contour ``e // trials`` (the layout of
+    :func:`agents.evaluation.run_method`); a plan shorter than the episode holds still after it. With
+    ``gains`` (per plan, (P, 3, 2) or None; :attr:`PlanResult.gains`) it is closed loop: each move is the
+    plan's plus the phase's gain matrix times the x-y tracking error (:meth:`CuttingTask.tracking_error`,
+    0 where there is none), clipped to ``max_step_mm`` per axis; the last phase's gains act after the
+    plan's end."""
 
-    def __init__(self, plans: Sequence[np.ndarray], trials: int = 1):
+    def __init__(
+        self, plans: Sequence[np.ndarray], trials: int = 1, gains: Sequence[np.ndarray | None] | None = None
+    ):
         self.plans = [np.asarray(p, dtype=np.float32).reshape(-1, 3) for p in plans]
         self.trials = int(trials)
+        self.gains: list[np.ndarray] | None = None
+        if gains is not None and any(g is not None for g in gains):
+            if len(gains) != len(self.plans):
+                raise ValueError(f"gains: {len(gains)} for {len(self.plans)} plan(s); give one per plan")
+            zero = np.zeros((1, 3, 2), dtype=np.float32)
+            self.gains = [zero if g is None else np.asarray(g, np.float32).reshape(-1, 3, 2) for g in gains]
 
     def __call__(self, task: CuttingTask) -> np.ndarray:
         if task.num_envs != len(self.plans) * self.trials:
@@ -105,7 +131,15 @@ class PlanPolicy:
             )
         t = task.step_index
         moves = [p[t] if t < len(p) else np.zeros(3, np.float32) for p in self.plans]
-        return np.repeat(np.asarray(moves, dtype=np.float32), self.trials, axis=0)
+        moves = np.repeat(np.asarray(moves, dtype=np.float32), self.trials, axis=0)
+        if self.gains is None:
+            return moves
+        pairs = zip(self.plans, self.gains, strict=True)
+        phases = [g[min(t * len(g) // max(len(p), 1), len(g) - 1)] for p, g in pairs]
+        gains = np.repeat(np.asarray(phases), self.trials, axis=0)  # (B, 3, 2)
+        error = np.nan_to_num(task.tracking_error()[:, :2], nan=0.0)
+        step = task.config.max_step_mm
+        return np.clip(moves + np.einsum("bij,bj->bi", gains, error), -step, step).astype(np.float32)
 
 
 def _read_state(state_file: Path | None, identity: dict) -> dict | None:
@@ -176,8 +210,9 @@ class TapeGradient:
     def load(self, state: None) -> None:
         pass
 
-    def step(self, plan: np.ndarray, last: bool) -> tuple[dict, np.ndarray | None]:
-        """``(history fields, gradient)`` for :func:`optimize_plan`; the last iterate has no backward pass."""
+    def step(self, plan: np.ndarray, gains: None, last: bool) -> tuple[dict, np.ndarray | None, None]:
+        """``(history fields, gradient, None)`` for :func:`optimize_plan` (no feedback gains); the last
+        iterate has no backward pass."""
         batch = np.broadcast_to(plan, (self.settings.trials, *plan.shape))
         if last:
             forward, grads = self.rollout.forward(batch, seed=self.seed), None
@@ -189,7 +224,7 @@ class TapeGradient:
             # a diverged episode is NaN (and has no gradient)
             "error_vertices": float(np.nanmean(forward.score.error_vertices)),
         }
-        return record, None if grads is None else grads.actions.mean(axis=0)
+        return record, None if grads is None else grads.actions.mean(axis=0), None
 
 
 class SmoothedGradient:
@@ -207,6 +242,8 @@ class SmoothedGradient:
     def __init__(self, task: CuttingTask, settings: GradConfig, max_step: float, seed: int):
         self.task, self.settings, self.max_step = task, settings, float(max_step)
         self.rng = np.random.default_rng(seed)
+        self.ranges = randomize_ranges(settings.es_randomize)
+        self.weights = RelativeWeights(task.config) if self.ranges else None
 
     @property
     def num_steps(self) -> int:
@@ -218,15 +255,21 @@ class SmoothedGradient:
     def load(self, state: dict) -> None:
         self.rng.bit_generator.state = state
 
-    def step(self, plan: np.ndarray, last: bool) -> tuple[dict, np.ndarray | None]:
-        """``(history fields, gradient)`` for :func:`optimize_plan`; the last iterate is only validated."""
+    def step(
+        self, plan: np.ndarray, gains: np.ndarray | None, last: bool
+    ) -> tuple[dict, np.ndarray | None, np.ndarray | None]:
+        """``(history fields, plan's gradient, gains' gradient)`` for :func:`optimize_plan`; the last
+        iterate is only validated."""
         if last:
-            return {"surrogate": None, "error_vertices": None}, None
-        error, grad = self(plan)
-        return {"surrogate": None, "error_vertices": error}, grad
+            return {"surrogate": None, "error_vertices": None}, None, None
+        error, grad, gains_grad = self(plan, gains)
+        return {"surrogate": None, "error_vertices": error}, grad, gains_grad
 
-    def __call__(self, plan: np.ndarray) -> tuple[float, np.ndarray]:
-        """``(mean error of the perturbed plans in vertices, gradient estimate shaped like plan)``."""
+    def __call__(
+        self, plan: np.ndarray, gains: np.ndarray | None = None
+    ) -> tuple[float, np.ndarray, np.ndarray | None]:
+        """``(mean error of the perturbed plans in vertices (weighed, with es_randomize), gradient estimate
+        shaped like plan, like gains (None without))``."""
         population, trials, sigma = (
             self.settings.es_population,
             self.settings.es_trials,
@@ -235,15 +278,60 @@ class SmoothedGradient:
         half = self.rng.standard_normal((population // 2, *plan.shape)).astype(np.float32)
         eps = np.concatenate([half, -half])
         plans = np.clip(plan + sigma * eps, -self.max_step, self.max_step).astype(np.float32)
-        errors = self.task.run(PlanPolicy(list(plans), trials)).error_vertices.reshape(population, trials)
+        perturbed, eps_gains = None, None
+        if gains is not None:
+            half = self.rng.standard_normal((population // 2, *gains.shape)).astype(np.float32)
+            eps_gains = np.concatenate([half, -half])
+            perturbed = list(gains + sigma * eps_gains)
+        if self.ranges:  # the same draws for every perturbed plan: env p * trials + k draws trial k's
+            draws = sample_parameters(self.rng, self.ranges, trials)
+            self.task.set_params(**{k: np.tile(v, population) for k, v in draws.items()})
+        errors = self.task.run(PlanPolicy(list(plans), trials, perturbed)).error_vertices
+        if self.weights is not None:
+            errors = errors * self.weights(self.task)
+        errors = errors.reshape(population, trials)
         finite = np.isfinite(errors).all(axis=1)
         fitness = np.where(finite, errors.mean(axis=1), np.inf)
         ranks = np.empty(population)
         ranks[np.argsort(fitness, kind="stable")] = np.arange(population)
         centred = ranks / (population - 1) - 0.5  # the highest error +0.5
         grad = np.tensordot(centred, eps, axes=1) / (population * sigma)
+        gains_grad = (
+            None if eps_gains is None else np.tensordot(centred, eps_gains, axes=1) / (population * sigma)
+        )
         mean = float(np.mean(fitness[finite])) if finite.any() else float("nan")
-        return mean, grad
+        return mean, grad, gains_grad
+
+
+class RelativeWeights:
+    """Each env's weight under ``GradConfig.es_randomize``: the nominal sheet's no-tension error over that of
+    the env's own sheet (:class:`warpcut.task.NoTensionReference`), so a sheet that hangs flat counts as much
+    as the nominal one, as in the evaluation's relative improvement."""
+
+    def __init__(self, nominal: SimConfig):
+        self.nominal, self.reference = nominal, NoTensionReference()
+
+    def __call__(self, task: CuttingTask) -> np.ndarray:
+        return self.reference.scale(task, self.nominal)
+
+
+class HeldOut:
+    """The held-out episodes every iterate is scored on (``GradConfig.validation_trials``): their mean path
+    error in vertices; with ``randomize`` (``GradConfig.es_randomize``) they draw their parameters once,
+    seeded by ``seed``, and each error is weighed as the es estimator weighs its own
+    (:class:`RelativeWeights`)."""
+
+    def __init__(self, task: CuttingTask, randomize: str, seed: int):
+        self.task, ranges = task, randomize_ranges(randomize)
+        self.weights = RelativeWeights(task.config) if ranges else None
+        if ranges:
+            task.set_params(**sample_parameters(np.random.default_rng(seed), ranges, task.num_envs))
+
+    def __call__(self, plan: np.ndarray, gains: np.ndarray | None) -> float:
+        errors = self.task.run(PlanPolicy([plan], self.task.num_envs, [gains])).error_vertices
+        if self.weights is not None:
+            errors = errors * self.weights(self.task)
+        return float(np.nanmean(errors))
 
 
 def optimize_plan(
@@ -258,7 +346,8 @@ def optimize_plan(
     log: Callable[[str], None] = lambda _: None,
     state_file: Path | None = None,
 ) -> PlanResult:
-    """Optimise an open-loop plan for cutting ``contour`` with the grasp at ``pinch`` (see the module).
+    """Optimise a plan (open loop, or with feedback gains: ``GradConfig.es_feedback_phases``) for cutting
+    ``contour`` with the grasp at ``pinch`` (see the module).
 
     Args:
         contour: The contour.
@@ -287,15 +376,19 @@ def optimize_plan(
             return SmoothedGradient(task, settings, config.max_step_mm, seed)
         return TapeGradient(task, settings, seed + GRAD_SEED_OFFSET)
 
-    def checker(point: np.ndarray) -> CuttingTask | None:
+    def checker(point: np.ndarray) -> HeldOut | None:
         v, held_out = settings.validation_trials, seed + GRAD_SEED_OFFSET + 1
-        return _episodes(contour, point, segments, config, v, device, held_out) if v else None
+        task = _episodes(contour, point, segments, config, v, device, held_out) if v else None
+        return None if task is None else HeldOut(task, settings.es_randomize, held_out)
 
     rollout, validation = engine(pinch), checker(pinch)
     steps = rollout.num_steps
     max_step = config.max_step_mm
     plan = np.zeros((steps, 3), dtype=np.float32)
+    phases = settings.es_feedback_phases
+    gains = np.zeros((phases, 3, 2), dtype=np.float32) if phases else None
     moves, pinch_moves = Adam(plan.shape, settings.learning_rate), Adam((2,), settings.pinch_learning_rate)
+    gain_moves = Adam((phases, 3, 2), settings.learning_rate)
     history, best, first, elapsed = [], None, 0, 0.0
     identity = {
         "contour": contour.name,
@@ -307,32 +400,39 @@ def optimize_plan(
     if state is not None:
         first, history, elapsed = state["iteration"], state["history"], state["seconds"]
         plan, pinch = np.asarray(state["plan"], np.float32), np.asarray(state["pinch"])
-        moves.load(state["moves"]), pinch_moves.load(state["pinch_moves"])
+        (
+            moves.load(state["moves"]),
+            pinch_moves.load(state["pinch_moves"]),
+            gain_moves.load(state["gain_moves"]),
+        )
         rollout.load(state["estimator"])
-        error, it, best_plan, best_pinch = state["best"]
-        best = (error, it, np.asarray(best_plan, np.float32), np.asarray(best_pinch))
+        gains = None if state["gains"] is None else np.asarray(state["gains"], np.float32)
+        error, it, best_plan, best_pinch, best_gains = state["best"]
+        best_gains = None if best_gains is None else np.asarray(best_gains, np.float32)
+        best = (error, it, np.asarray(best_plan, np.float32), np.asarray(best_pinch), best_gains)
         if not np.allclose(pinch, identity["pinch"]):
             rollout, validation = engine(pinch), checker(pinch)
         log(f"  continuing from iteration {first} ({state_file})")
     start = time.perf_counter() - elapsed
     for iteration in range(first, settings.iterations + 1):
         last = iteration == settings.iterations
-        fields, step = rollout.step(plan, last)
+        fields, step, gains_step = rollout.step(plan, gains, last)
         record = {"iteration": iteration, **fields, "pinch": [float(v) for v in pinch]}
         error = record["error_vertices"]  # es: the perturbed plans'; the plan itself is validated
         if validation is not None:  # model selection on held-out episodes
-            held_out = validation.run(PlanPolicy([plan], settings.validation_trials)).error_vertices
-            error = record["validation_error_vertices"] = float(np.nanmean(held_out))
+            error = record["validation_error_vertices"] = validation(plan, gains)
         record["seconds"] = time.perf_counter() - start
         history.append(record)
         if best is None or error < best[0]:
-            best = (error, iteration, plan.copy(), pinch.copy())
+            best = (error, iteration, plan.copy(), pinch.copy(), None if gains is None else gains.copy())
         if iteration % 5 == 0 or last:
             surrogate = "" if es else f"surrogate {record['surrogate']:.2f} mm^2, "
             log(f"  iteration {iteration}: {surrogate}error {error:.2f} vertices ({record['seconds']:.0f} s)")
         if last:
             break
         plan = np.clip(plan + moves.step(step), -max_step, max_step).astype(np.float32)
+        if gains is not None:
+            gains = (gains + gain_moves.step(gains_step)).astype(np.float32)
         if settings.optimize_pinch:
             moved = pinch + pinch_moves.step(rollout.pinch_grad)
             segments_path = None if segments is None else [np.asarray(s) for s in segments]
@@ -340,20 +440,22 @@ def optimize_plan(
                 pinch = moved
                 rollout, validation = engine(pinch), checker(pinch)
         if state_file is not None:
-            error, it, best_plan, best_pinch = best
+            error, it, best_plan, best_pinch, best_gains = best
+            listed = [None if g is None else g.tolist() for g in (gains, best_gains)]
             state = {
                 "identity": identity, "iteration": iteration + 1, "history": history,
                 "seconds": time.perf_counter() - start, "plan": plan.tolist(), "pinch": pinch.tolist(),
-                "moves": moves.state(), "pinch_moves": pinch_moves.state(),
-                "best": [error, it, best_plan.tolist(), best_pinch.tolist()],
+                "gains": listed[0], "moves": moves.state(), "pinch_moves": pinch_moves.state(),
+                "gain_moves": gain_moves.state(),
+                "best": [error, it, best_plan.tolist(), best_pinch.tolist(), listed[1]],
                 "estimator": rollout.state(),
             }  # fmt: skip
             write_json(state_file, state)
-    _, best_iteration, best_plan, best_pinch = best
+    _, best_iteration, best_plan, best_pinch, best_gains = best
     env_steps = settings.iterations * b * steps if es else (settings.iterations + 1) * b * steps
     return PlanResult(
         contour.name, [float(v) for v in best_pinch], best_plan, best_iteration, history,
-        time.perf_counter() - start, env_steps,
+        time.perf_counter() - start, env_steps, best_gains,
     )  # fmt: skip
 
 
@@ -385,7 +487,7 @@ def grad_result(
         for k, (contour, pinch, cut) in enumerate(zip(contours, pinches, segments, strict=True))
     ]
     method = run_method(
-        contours, [np.asarray(r.pinch) for r in results], PlanPolicy([r.plan for r in results], trials),
+        contours, [np.asarray(r.pinch) for r in results], PlanResult.policy(results, trials),
         trials, config, device, seed, on_step, segments=list(segments),
     )  # fmt: skip
     return method, results
@@ -421,6 +523,12 @@ def cached_plan(
                     f"{done}: a plan optimised with other settings ({data['settings']}, here {wanted}); "
                     "delete it to optimise again, or run with its settings"
                 )
+            started = data["history"][0]["pinch"] if data.get("history") else data["pinch"]
+            if not np.allclose(started, pinch):
+                raise ValueError(
+                    f"{done}: a plan optimised at the pinch point {started}, not {list(pinch)}; delete it to "
+                    "optimise again"
+                )
             return PlanResult.from_json(data)
     log(
         f"  {count}optimising a plan for {contour.name} ({settings.iterations} iterations, "
@@ -453,6 +561,11 @@ def base_plan_options(
     pinch = np.asarray(default_pinch(contour, config, arm) if pinch is None else pinch, dtype=np.float64)
     segments = planned.get("segments")
     segments = None if segments is None else [np.asarray(s, dtype=np.float64) for s in segments]
+    if grad.es_feedback_phases:
+        raise ValueError(
+            "es_feedback_phases: a policy on top of a plan adds its moves to an open-loop plan; optimise the "
+            "base plan with es_feedback_phases=0"
+        )
     result = cached_plan(contour, pinch, segments, config, grad, device, seed, folder, log, arm)
     return {
         "base_plan": np.asarray(result.plan, dtype=np.float64).tolist(),

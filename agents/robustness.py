@@ -30,7 +30,7 @@ import numpy as np
 
 from agents.config import EVALUATION_TRIALS, GRAD_CONFIG, GradConfig
 from agents.evaluation import run_method
-from agents.gradient import PlanPolicy
+from agents.gradient import PlanResult
 from agents.methods import BASELINES, check_methods, tensioner
 from warpcut.contours import Contour, ContourError
 from warpcut.scoring import paired_improvement
@@ -57,7 +57,7 @@ unchanged at every value."""
 
 REPORT_FIELDS = (
     "study", "values", "unit", "metric", "contour", "trials", "nominal", "pinch", "runs", "methods",
-    "seconds", "skipped", "none_error_mm2", "own_order_none",
+    "seconds", "skipped", "none_error_mm2", "own_order_none", "plans",
 )  # fmt: skip
 """The keys of a study's report besides its methods' (:func:`robustness_study`)."""
 RESERVED_LABELS = (*STUDY_METHODS, *REPORT_FIELDS)
@@ -112,6 +112,7 @@ def robustness_study(
     out: Path | None = None,
     *,
     runs: Mapping[str, str | Path] | str | Path | None = None,
+    plans: Mapping[str, str | Path] | None = None,
     methods: Sequence[str] | None = None,
     values: Sequence[float] | None = None,
     trials: int = EVALUATION_TRIALS,
@@ -133,6 +134,10 @@ def robustness_study(
             run sets the pinch point fixed tension holds, the cut order and the nominal simulation (its
             options' nominal parameters). None: fixed tension pinches the plan's point
             (:func:`warpcut.planning.plan_cut`) and no policy runs.
+        plans: Optimised plans of the contour, ``{label: file}`` (``warpcut optimize``'s ``NAME.json``, or
+            ``warpcut evaluate``'s ``grad/NAME.json``): each label is a method, the plan played as it was
+            optimised (open loop, or closed loop with its feedback gains) at its own pinch point, in the
+            study's cut order, at every value.
         methods: The methods to run besides the runs' policies, from :data:`STUDY_METHODS` (default: the
             baselines; ``none`` always runs, the others' improvements are measured against it). ``grad``
             optimises its plan first, at the pinch point and order fixed tension uses, kept in
@@ -165,10 +170,13 @@ def robustness_study(
         if segments_key(cut) != segments_key(segments)
     }
     baselines = check_methods(list(methods or BASELINES), "methods", STUDY_METHODS)
-    chosen = ["none", *[m for m in baselines if m != "none"], *runs]
-    plan = None
+    played = check_plans(plans, contour, runs)
+    chosen = ["none", *[m for m in baselines if m != "none"], *runs, *played]
     if "grad" in chosen:
-        plan = _grad_plan(contour, pinch, segments, config, grad, device, seed, out, log)
+        from agents.gradient import cached_plan
+
+        folder = None if out is None else Path(out) / "grad"
+        played["grad"] = cached_plan(contour, pinch, segments, config, grad, device, seed, folder, log)
     errors: dict[str, np.ndarray] = {m: np.full((len(values), trials), np.nan) for m in chosen}
     own_none = {label: np.full((len(values), trials), np.nan) for label in own_order}
     skipped = []
@@ -186,7 +194,7 @@ def robustness_study(
             for method in chosen:
                 errors[method][batch] = _method_errors(
                     method, contour, pinch, segments, sim, overrides, len(picked), trials, runs, device, seed,
-                    plan,
+                    played,
                 )  # fmt: skip
             done: dict = {}
             for label, cut in own_order.items():
@@ -213,6 +221,7 @@ def robustness_study(
         "nominal": _nominal(study, config),
         "pinch": [float(v) for v in pinch],
         "runs": {label: str(run) for label, run in runs.items()},
+        "plans": {label: str(path) for label, path in (plans or {}).items()},
         "methods": chosen if study == "resolution" else chosen[1:],
         "skipped": [float(v) for v in skipped],
         "own_order_none": sorted(own_order),
@@ -282,6 +291,36 @@ def check_runs(runs: Mapping[str, str | Path] | str | Path | None) -> dict[str, 
     return checked
 
 
+def check_plans(
+    plans: Mapping[str, str | Path] | None, contour: Contour, runs: Mapping[str, Path]
+) -> dict[str, PlanResult]:
+    """``plans`` (``{label: plan file}``) read, each checked to be ``contour``'s; ``ValueError`` naming
+    ``plans`` for a label taken by a method, a run or a report field, a file that is not an optimised plan,
+    or a plan of another contour."""
+    import re
+
+    from warpcut.io import read_json
+
+    checked = {}
+    for label, path in dict(plans or {}).items():
+        if label in RESERVED_LABELS or label in runs or not re.fullmatch(r"[A-Za-z][\w.-]*", str(label)):
+            raise ValueError(
+                f"plans: label {label!r} must be a plain name (letters, digits, - _ .) other than a run's, a "
+                f"method's or a report field's ({', '.join(RESERVED_LABELS)})"
+            )
+        try:
+            result = PlanResult.from_json(read_json(path))
+        except (OSError, ValueError, KeyError, TypeError) as error:
+            raise ValueError(
+                f"plans: {path} is not an optimised plan ({error}); give a NAME.json of 'warpcut optimize' "
+                "(or a grad/NAME.json of 'warpcut evaluate')"
+            ) from None
+        if result.contour != contour.name:
+            raise ValueError(f"plans: {path} is a plan for {result.contour!r}, not {contour.name!r}")
+        checked[str(label)] = result
+    return checked
+
+
 def _scenario(contour, runs: dict[str, Path], config, device, seed, log) -> dict:
     """The contour, nominal simulation, pinch point and segments: the first run's, or planned."""
     from warpcut.contours import load_contour
@@ -339,7 +378,7 @@ def _method_errors(
     runs: dict[str, Path],
     device: str | None,
     seed: int,
-    plan: np.ndarray | None = None,
+    plans: Mapping[str, PlanResult] | None = None,
 ) -> np.ndarray:
     """(settings, trials) errors (mm^2) of ``method``: one batch, env ``s * trials + k`` = setting ``s``,
     trial ``k``, with the same noise streams in every method's batch."""
@@ -351,42 +390,21 @@ def _method_errors(
             overrides=overrides,
         )  # fmt: skip
         return np.asarray(rollouts["error_mm2"], dtype=np.float64).reshape(settings, trials)
-    if method == "analytic":
+    policy = None if method in (plans or {}) else tensioner(method)
+    if method in (plans or {}):  # grad's plan or a given one, at its own pinch point
+        point, policy = np.asarray(plans[method].pinch), PlanResult.policy([plans[method]] * settings, trials)
+    elif method == "analytic":
         from agents.baselines import AnalyticTension
 
         point = AnalyticTension().pinch_point(contour, config)
     else:
         point = None if method == "none" else pinch
-    policy = tensioner(method) if method != "grad" else PlanPolicy([plan] * settings, trials)
     # run_method's layout is contour by contour, trials within: one "contour" per setting.
     result = run_method(
         [contour] * settings, [point] * settings, policy, trials, config, device, seed,
         segments=[segments] * settings,
     )  # fmt: skip
     return np.asarray(result.error_mm2, dtype=np.float64)
-
-
-def _grad_plan(contour, pinch, segments, config, settings, device, seed, out, log) -> np.ndarray:
-    """The ``grad`` method's open-loop plan (T, 3) for the nominal sheet: read from ``out/grad/NAME.json``
-    when a study before optimised it, else optimised (its state kept beside, so an interrupted optimisation
-    continues) and written there."""
-    from agents.gradient import PlanResult, optimize_plan
-    from warpcut.io import read_json, safe_name, write_json
-
-    done = None if out is None else Path(out) / "grad" / f"{safe_name(contour.name)}.json"
-    if done is not None and done.is_file():
-        result = PlanResult.from_json(read_json(done))
-        if np.allclose(result.pinch, pinch) and len(result.history) == settings.iterations + 1:
-            return result.plan
-    log(f"  grad: optimising a plan for {contour.name} at {', '.join(f'{v:.1f}' for v in pinch)}")
-    state = None if done is None else done.with_suffix(".state.json")
-    result = optimize_plan(
-        contour, pinch, segments, config, settings, device=device, seed=seed, log=log, state_file=state
-    )
-    if done is not None:
-        write_json(done, result.to_json())
-        state.unlink(missing_ok=True)
-    return result.plan
 
 
 def robustness_table(report: dict) -> list[str]:
@@ -444,6 +462,7 @@ def robustness(
     out: Path,
     *,
     runs: Mapping[str, str | Path] | str | Path | None = None,
+    plans: Mapping[str, str | Path] | None = None,
     methods: Sequence[str] | None = None,
     values: Sequence[float] | None = None,
     trials: int = EVALUATION_TRIALS,
@@ -468,7 +487,8 @@ def robustness(
     named = None if contour is None else str(getattr(contour, "name", contour))
     _record_request(
         out, "robustness", resume, contour=named,
-        studies=studies, runs={k: str(v) for k, v in runs.items()}, methods=list(methods or BASELINES),
+        studies=studies, runs={k: str(v) for k, v in runs.items()},
+        plans={k: str(v) for k, v in (plans or {}).items()}, methods=list(methods or BASELINES),
         values=values, trials=trials, config=config or SimConfig(), grad=grad, seed=seed,
     )  # fmt: skip
     reports = []
@@ -480,7 +500,8 @@ def robustness(
             continue
         log(f"{study} study")
         report = robustness_study(
-            contour, study, out, runs=runs, methods=methods, values=values, trials=trials, config=config,
+            contour, study, out, runs=runs, plans=plans, methods=methods, values=values, trials=trials,
+            config=config,
             grad=grad, device=device, seed=seed, log=log,
         )  # fmt: skip
         reports.append(report)

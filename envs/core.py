@@ -262,8 +262,8 @@ class PatternCut:
         return moves
 
     def tracking_error(self) -> np.ndarray:
-        """(B, 3) ``target_world() - tip`` (mm) for the next update; NaN while travelling or done."""
-        return self.task.target_world() - self.task.tip_positions()[:, :3]
+        """(B, 3) :meth:`CuttingTask.tracking_error` (mm); NaN while travelling or done."""
+        return self.task.tracking_error()
 
     def _fiducial_corners(self) -> np.ndarray:
         """(B, 4K, 4) state of the fiducials' cell corners, read by a gatherer made once per set of cells

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from agents.evaluation import run_method
-from agents.gradient import PlanPolicy, PlanResult
+from agents.gradient import PlanResult
 from warpcut.contours import load_contour
 from warpcut.io import read_json, safe_name
 from warpcut.sim.config import SimConfig
@@ -48,7 +48,7 @@ def main() -> None:
             for method, where, policy in (
                 ("none", [None] * len(names), None),
                 ("fixed", pinches, None),
-                ("grad", [np.asarray(r.pinch) for r in grad], PlanPolicy([r.plan for r in grad], TRIALS)),
+                ("grad", [np.asarray(r.pinch) for r in grad], PlanResult.policy(grad, TRIALS)),
             )
         }
         none = errors["none"].mean(axis=1)

@@ -139,9 +139,9 @@ def test_the_es_estimator_points_uphill_from_antithetic_ranked_pairs():
     target = np.random.default_rng(1).uniform(-0.5, 0.5, (3, 3))
     task = _QuadraticTask(target)
     plan = np.zeros((3, 3), np.float32)
-    mean, grad = SmoothedGradient(task, settings, max_step=1.0, seed=4)(plan)
+    mean, grad, no_gains = SmoothedGradient(task, settings, max_step=1.0, seed=4)(plan)
     (played,) = task.played
-    assert played.shape == (64, 3, 3)
+    assert played.shape == (64, 3, 3) and no_gains is None
     np.testing.assert_allclose(played[:32] - plan, -(played[32:] - plan), atol=1e-6)  # antithetic pairs
     assert mean == pytest.approx(((played - target) ** 2).sum(axis=(1, 2)).mean())
     true = 2 * (plan - target)  # the error's gradient
@@ -153,7 +153,7 @@ def test_the_es_estimator_points_uphill_from_antithetic_ranked_pairs():
     assert not np.array_equal(other, grad)
     # A diverged plan ranks last (as the worst error), and the mean leaves it out
     nan_task = _QuadraticTask(target, diverge_above=0.15)
-    mean, grad = SmoothedGradient(nan_task, settings, max_step=1.0, seed=4)(plan)
+    mean, grad, _ = SmoothedGradient(nan_task, settings, max_step=1.0, seed=4)(plan)
     assert np.isfinite(mean) and np.isfinite(grad).all()
     # Perturbed plans stay within the move limit
     big = SmoothedGradient(_QuadraticTask(target), dataclasses.replace(settings, es_sigma_mm=5.0), 1.0, 4)

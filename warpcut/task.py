@@ -380,6 +380,11 @@ class CuttingTask:
         world = interpolate_corners(corners, weights)[:, 0]
         return np.where(active[:, None], world, np.nan)
 
+    def tracking_error(self) -> np.ndarray:
+        """(B, 3) ``target_world() - tip`` (mm) for the next update: where the contour point about to be cut
+        lies from the scissor tip (what the analytic controller opposes); NaN while travelling or done."""
+        return self.target_world() - self.tip_positions()[:, :3]
+
     def cut_path(self) -> np.ndarray | None:
         """(B, T, 3) the tips traced so far (:attr:`Simulator.path`): material x, y and status per update;
         None when the path is not traced."""

@@ -50,6 +50,21 @@ from warpcut.sim.config import SimConfig
     help="Standard deviation of es's perturbation of each move (mm).",
 )
 @click.option(
+    "--feedback-phases",
+    default=None,
+    type=click.IntRange(min=0),
+    help="es: 0 (default) optimises an open-loop plan; P adds feedback on the tracking error, one 3 x 2 gain "
+    "matrix per P-th of the cut, optimised with the plan (a closed-loop policy).",
+)
+@click.option(
+    "--randomize",
+    default=None,
+    metavar="PARAMS",
+    help="es: physical parameters drawn anew at every step for the episodes, comma-separated from "
+    "warpcut.sim.config.RANDOMIZE_RANGES (over those ranges); errors weighed by the nominal sheet's "
+    "no-tension error over their own sheet's. Default: the nominal sheet.",
+)
+@click.option(
     "--optimize-pinch",
     is_flag=True,
     help="Also move the pinch point along its gradient (kept feasible).",
@@ -74,6 +89,8 @@ def command(
     population: int,
     population_episodes: int,
     sigma: float,
+    feedback_phases: int | None,
+    randomize: str | None,
     optimize_pinch: bool,
     trials: int,
     candidates: int,
@@ -87,8 +104,8 @@ def command(
     overwrite: bool,
     json_path: Path | None,
 ) -> None:
-    """Optimise grasp moves by gradient descent through the simulator (tape or es gradients), then evaluate
-    them."""
+    """Optimise grasp moves by gradient descent through the simulator (tape or es gradients; with es, also
+    feedback gains), then evaluate them."""
     from agents.gradient import optimize_contour
     from warpcut.io import write_json
     from warpcut.planning import ArmModel
@@ -98,7 +115,7 @@ def command(
     settings = grad_config(
         estimator, iterations=iterations, trials=episodes, learning_rate=learning_rate,
         es_population=population, es_trials=population_episodes, es_sigma_mm=sigma,
-        optimize_pinch=optimize_pinch,
+        es_feedback_phases=feedback_phases, es_randomize=randomize, optimize_pinch=optimize_pinch,
     )  # fmt: skip
     out, claim = common.claim(out, "optimize", resume, overwrite)
     with claim:

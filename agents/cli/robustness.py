@@ -36,6 +36,15 @@ from warpcut.sim.config import SimConfig
     "baselines only, fixed at the plan's pinch point.",
 )
 @click.option(
+    "--plan",
+    "plans",
+    multiple=True,
+    metavar="[LABEL=]FILE",
+    help="An optimised plan of the contour (warpcut optimize's NAME.json, or warpcut evaluate's "
+    "grad/NAME.json), repeatable: each is a method named LABEL (default: the file's name), played as it was "
+    "optimised (open or closed loop) at its own pinch point at every value.",
+)
+@click.option(
     "--methods",
     default=",".join(BASELINES),
     show_default=True,
@@ -61,6 +70,7 @@ def command(
     contour_name: str | None,
     study: str,
     runs: tuple[str, ...],
+    plans: tuple[str, ...],
     methods: str,
     values: str | None,
     trials: int,
@@ -103,7 +113,8 @@ def command(
     out, claim = common.claim(out, f"robustness-{safe_name(name)}", resume, overwrite)
     with claim:
         reports = robustness(
-            contour_name, studies, out, runs=checked, methods=baselines, values=sweep, trials=trials,
+            contour_name, studies, out, runs=checked, plans=_labelled_plans(plans), methods=baselines,
+            values=sweep, trials=trials,
             config=SimConfig(noise_std=noise, score=score), device=device, seed=seed, resume=resume,
             log=common.log,
         )  # fmt: skip
@@ -131,6 +142,19 @@ def _labelled_runs(runs: tuple[str, ...]) -> dict[str, str]:
             label, path = ("rl" if len(runs) == 1 else f"rl-{k + 1}"), item
         if label in labelled:
             raise click.BadParameter(f"label {label!r} given twice", param_hint="--run")
+        labelled[label] = path
+    return labelled
+
+
+def _labelled_plans(plans: tuple[str, ...]) -> dict[str, str]:
+    """``--plan [LABEL=]FILE`` values as ``{label: file}``; an unlabelled one is named after its file."""
+    labelled: dict[str, str] = {}
+    for item in plans:
+        label, sep, path = item.partition("=")
+        if not sep or Path(item).exists():  # a file whose name holds '='
+            label, path = Path(item).stem, item
+        if label in labelled:
+            raise click.BadParameter(f"label {label!r} given twice", param_hint="--plan")
         labelled[label] = path
     return labelled
 
