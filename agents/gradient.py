@@ -346,17 +346,14 @@ def optimize_plan(
     log: Callable[[str], None] = lambda _: None,
     state_file: Path | None = None,
 ) -> PlanResult:
-    """Optimise a plan (open loop, or with feedback gains: ``GradConfig.es_feedback_phases``) for cutting
-    ``contour`` with the grasp at ``pinch`` (see the module).
+    """Optimise a plan (open or closed loop: ``es_feedback_phases``) for ``contour`` at ``pinch`` (module).
 
     Args:
-        contour: The contour.
-        pinch: The pinch point (material mm), e.g. the plan's chosen one.
+        contour, pinch: The contour; the pinch point (material mm), e.g. the plan's chosen one.
         segments: The polylines cut in order (default: the contour as one segment).
         config: Simulation settings (default ``SimConfig()``), with the evaluation's noise.
         settings: The optimiser's (:class:`~agents.config.GradConfig`).
-        device: Warp device.
-        seed: Seed; the episodes use ``seed + GRAD_SEED_OFFSET``.
+        device, seed: Warp device; seed (the episodes use ``seed + GRAD_SEED_OFFSET``).
         arm: The cutting arm whose footprint a moved pinch point must avoid (default: the paper's).
         log: Called with a progress line every few iterations.
         state_file: The optimiser's state is written here (atomically) after every iteration, and an
@@ -557,15 +554,15 @@ def base_plan_options(
     from warpcut.planning.feasibility import default_pinch
 
     grad, arm = settings
-    pinch = planned.get("pinch_point")
-    pinch = np.asarray(default_pinch(contour, config, arm) if pinch is None else pinch, dtype=np.float64)
-    segments = planned.get("segments")
-    segments = None if segments is None else [np.asarray(s, dtype=np.float64) for s in segments]
     if grad.es_feedback_phases:
         raise ValueError(
             "es_feedback_phases: a policy on top of a plan adds its moves to an open-loop plan; optimise the "
             "base plan with es_feedback_phases=0"
         )
+    pinch = planned.get("pinch_point")
+    pinch = np.asarray(default_pinch(contour, config, arm) if pinch is None else pinch, dtype=np.float64)
+    segments = planned.get("segments")
+    segments = None if segments is None else [np.asarray(s, dtype=np.float64) for s in segments]
     result = cached_plan(contour, pinch, segments, config, grad, device, seed, folder, log, arm)
     return {
         "base_plan": np.asarray(result.plan, dtype=np.float64).tolist(),

@@ -169,14 +169,7 @@ def robustness_study(
         for label, cut in scenario.get("run_segments", {}).items()
         if segments_key(cut) != segments_key(segments)
     }
-    baselines = check_methods(list(methods or BASELINES), "methods", STUDY_METHODS)
-    played = check_plans(plans, contour, runs)
-    chosen = ["none", *[m for m in baselines if m != "none"], *runs, *played]
-    if "grad" in chosen:
-        from agents.gradient import cached_plan
-
-        folder = None if out is None else Path(out) / "grad"
-        played["grad"] = cached_plan(contour, pinch, segments, config, grad, device, seed, folder, log)
+    chosen, played = _methods(methods, runs, plans, scenario, grad, device, seed, out, log)
     errors: dict[str, np.ndarray] = {m: np.full((len(values), trials), np.nan) for m in chosen}
     own_none = {label: np.full((len(values), trials), np.nan) for label in own_order}
     skipped = []
@@ -233,6 +226,21 @@ def robustness_study(
 
         write_json(Path(out) / f"robustness-{study}.json", report)
     return report
+
+
+def _methods(methods, runs, plans, scenario, grad, device, seed, out, log) -> tuple[list, dict]:
+    """The methods a study runs, in order, and the plans it plays: ``plans``' and grad's (optimised at the
+    scenario's pinch point and order, or read back from ``out/grad``)."""
+    baselines = check_methods(list(methods or BASELINES), "methods", STUDY_METHODS)
+    played = check_plans(plans, scenario["contour"], runs)
+    chosen = ["none", *[m for m in baselines if m != "none"], *runs, *played]
+    if "grad" in chosen:
+        from agents.gradient import cached_plan
+
+        folder = None if out is None else Path(out) / "grad"
+        contour, config, pinch, segments = (scenario[k] for k in ("contour", "config", "pinch", "segments"))
+        played["grad"] = cached_plan(contour, pinch, segments, config, grad, device, seed, folder, log)
+    return chosen, played
 
 
 def _method_stats(study: str, methods: list[str], errors: dict, own_none: dict, sheet_mm2: float) -> dict:

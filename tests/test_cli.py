@@ -683,6 +683,7 @@ def test_cli_defaults_are_the_library_defaults():
             expected["episodes"] = grad.trials
             expected.update(population=es.es_population, population_episodes=es.es_trials)
             expected["sigma"] = es.es_sigma_mm
+            expected.update(feedback_phases=None, randomize=None)  # the estimator's
             expected.update(trials=optimize["trials"].default, candidates=optimize["candidates"].default)
         for param in command.params:
             if param.name in expected:
@@ -700,6 +701,7 @@ def test_cli_defaults_are_the_library_defaults():
         ("optimize", "estimator"),
         ("optimize", "population"),
         ("optimize", "sigma"),
+        ("optimize", "feedback_phases"),
         ("optimize", "iterations"),
         ("optimize", "episodes"),
         ("optimize", "learning_rate"),
@@ -753,6 +755,19 @@ def test_optimize_by_evolution_strategies_takes_the_es_defaults(tmp_path):
     assert code != 0 and "es_population: must be even" in stderr
     code, _, stderr = invoke(args[:-4] + ["--optimize-pinch", "--out", str(tmp_path / "pinch")])
     assert code != 0 and "optimize_pinch" in stderr and "tape" in stderr
+
+
+def test_optimize_a_closed_loop_policy_under_randomisation(tmp_path):
+    out = tmp_path / "run"
+    args = ["optimize", "--contour", "circle-small", "--estimator", "es", "--iterations", "1"]
+    args += ["--population", "2", "--trials", "2", "--candidates", "2", "--feedback-phases", "2"]
+    code, stdout, _ = invoke(args + ["--randomize", "gravity", "--out", str(out)])
+    assert code == 0, stdout
+    plan = json.loads((out / "circle-small.json").read_text())
+    assert np.asarray(plan["gains"]).shape == (2, 3, 2)
+    assert plan["settings"]["es_feedback_phases"] == 2 and plan["settings"]["es_randomize"] == "gravity"
+    code, _, stderr = invoke(["optimize", "--contour", "circle-small", "--feedback-phases", "1"])
+    assert code != 0 and "es_feedback_phases: only estimator 'es'" in stderr
 
 
 def test_batch_defaults_are_ppos_and_apgs_own():

@@ -294,3 +294,116 @@ def test_optimize_pinch_moves_the_pinch_point_and_keeps_it_feasible():
     assert np.linalg.norm(pinches[-1] - PINCH) > 0.5  # it moved along its gradient
     assert pinch_feasible(pinches, contour, SMALL).all()
     np.testing.assert_allclose(result.pinch, pinches[result.best_iteration])
+
+
+def test_a_plan_with_gains_adds_its_phase_gains_times_the_tracking_error():
+    task = CuttingTask(SMALL, [load_contour("circle-small")] * 2, pinch_points=[PINCH] * 2, seed=0)
+    plan = np.full((6, 3), 0.1, np.float32)
+    gains = np.stack([np.full((3, 2), 0.2), np.full((3, 2), -0.3)]).astype(np.float32)  # two phases
+    closed, still = PlanPolicy([plan], 2, [gains]), PlanPolicy([plan], 2, [None])
+    assert still.gains is None  # no gains: open loop, as before
+    task.reset()
+    seen = []
+    while not task.done:
+        t, error = task.step_index, np.nan_to_num(task.tracking_error()[:, :2], nan=0.0)
+        phase = gains[min(t * 2 // len(plan), 1)]
+        base = plan[t] if t < len(plan) else np.zeros(3, np.float32)
+        expected = np.clip(base + error @ phase.T, -SMALL.max_step_mm, SMALL.max_step_mm)
+        move = closed(task)
+        np.testing.assert_allclose(move, expected, atol=1e-6)
+        seen.append(np.abs(error).max())
+        task.step(move)
+    assert max(seen) > 0.05, "the sheet moved: the feedback had something to act on"
+    with pytest.raises(ValueError, match="gains: 1 for 2 plan"):
+        PlanPolicy([plan, plan], 1, [gains])
+
+
+class _QuadraticGainsTask(_QuadraticTask):
+    """:class:`_QuadraticTask` whose error also counts the gains' squared distance from ``gains_target``."""
+
+    def __init__(self, target: np.ndarray, gains_target: np.ndarray):
+        super().__init__(target)
+        self.gains_target, self.gains_played = gains_target, []
+
+    def run(self, policy: PlanPolicy):
+        result = super().run(policy)
+        gains = np.asarray(policy.gains)
+        self.gains_played.append(gains)
+        extra = ((gains - self.gains_target) ** 2).sum(axis=(1, 2, 3))
+        result.error_vertices = result.error_vertices + np.repeat(extra, policy.trials)
+        return result
+
+
+def test_the_es_estimator_moves_the_gains_downhill_with_the_plan():
+    settings = GradConfig(
+        estimator="es", es_population=512, es_trials=1, es_sigma_mm=0.1, es_feedback_phases=2
+    )
+    rng = np.random.default_rng(2)
+    target, gains_target = rng.uniform(-0.5, 0.5, (3, 3)), rng.uniform(-0.5, 0.5, (2, 3, 2))
+    task = _QuadraticGainsTask(target, gains_target)
+    plan, gains = np.zeros((3, 3), np.float32), np.zeros((2, 3, 2), np.float32)
+    _, grad, gains_grad = SmoothedGradient(task, settings, max_step=1.0, seed=4)(plan, gains)
+    (played,) = task.gains_played
+    assert played.shape == (512, 2, 3, 2) and gains_grad.shape == gains.shape
+    np.testing.assert_allclose(played[:256], -played[256:], atol=1e-6)  # antithetic, around zero gains
+    for estimate, true in ((grad, 2 * (plan - target)), (gains_grad, 2 * (gains - gains_target))):
+        cosine = (estimate * true).sum() / np.linalg.norm(estimate) / np.linalg.norm(true)
+        assert cosine > 0.6, cosine
+
+
+def test_es_with_feedback_under_randomisation_keeps_its_gains_and_resumes_bit_for_bit(tmp_path, monkeypatch):
+    settings = GradConfig(
+        estimator="es", iterations=3, learning_rate=0.2, es_population=4, es_trials=2, validation_trials=3,
+        es_feedback_phases=2, es_randomize="gravity",
+    )  # fmt: skip
+    contour = load_contour("circle-small")
+    whole = optimize_plan(contour, PINCH, config=SMALL, settings=settings)
+    assert whole.gains.shape == (2, 3, 2)
+    if whole.best_iteration:  # the gains moved from zero with the plan
+        assert np.abs(whole.gains).max() > 0
+    restored = PlanResult.from_json(json.loads(json.dumps(whole.to_json())))
+    np.testing.assert_array_equal(restored.gains, whole.gains)
+    assert PlanResult.from_json({**whole.to_json(), "gains": None}).gains is None  # an open-loop plan
+    resumed = _interrupt_and_resume(
+        monkeypatch, SmoothedGradient, "__call__", 3, settings, tmp_path / "s.json"
+    )
+    np.testing.assert_array_equal(resumed.plan, whole.plan)
+    np.testing.assert_array_equal(resumed.gains, whole.gains)
+    assert [h["validation_error_vertices"] for h in resumed.history] == [
+        h["validation_error_vertices"] for h in whole.history
+    ]
+
+
+def test_randomised_episodes_are_weighed_by_their_sheets_no_tension_error():
+    """Under es_randomize each episode's error is weighed by the nominal sheet's no-tension error over its
+    own sheet's: 1 on the nominal sheet, more on a flatter one; held-out episodes draw their sheets once."""
+    from agents.gradient import HeldOut, RelativeWeights
+
+    contour = load_contour("circle-small")
+    task = CuttingTask(SMALL, [contour] * 2, pinch_points=[PINCH] * 2, seed=0)
+    task.set_params(gravity=[SMALL.gravity, SMALL.gravity / 2])
+    weights = RelativeWeights(SMALL)(task)
+    assert weights[0] == pytest.approx(1.0) and weights[1] > 1.0
+    held_out = CuttingTask(SMALL, [contour] * 6, pinch_points=[PINCH] * 6, seed=1)
+    HeldOut(held_out, "gravity", seed=3)
+    assert len(set(np.asarray(held_out.config.gravity).tolist())) > 1  # drawn per episode
+    plan = np.zeros((held_out.num_steps, 3), np.float32)
+    first = HeldOut(held_out, "gravity", seed=3)(plan, None)
+    assert HeldOut(held_out, "gravity", seed=3)(plan, None) == first  # the same draws every time
+
+
+def test_feedback_plans_are_refused_as_a_base_plan_and_a_kept_plan_must_match_its_pinch(tmp_path):
+    from agents.gradient import base_plan_options
+
+    contour = load_contour("circle-small")
+    settings = GradConfig(estimator="es", es_feedback_phases=1)
+    with pytest.raises(ValueError, match="es_feedback_phases: a policy on top of a plan"):
+        base_plan_options(contour, {}, tmp_path, SMALL, (settings, None), None, 0, print)
+    tape = GradConfig(iterations=1, trials=2, validation_trials=2)
+    cached_plan(contour, PINCH, None, SMALL, tape, folder=tmp_path)
+    with pytest.raises(ValueError, match="a plan optimised at the pinch point"):
+        cached_plan(contour, PINCH + 1.0, None, SMALL, tape, folder=tmp_path)
+    with pytest.raises(ValueError, match="es_feedback_phases: only estimator 'es'"):
+        GradConfig(es_feedback_phases=1).validated()
+    with pytest.raises(ValueError, match="es_randomize: unknown parameter 'gravty'"):
+        GradConfig(estimator="es", es_randomize="gravty").validated()

@@ -321,3 +321,51 @@ def test_apg_refuses_randomised_sheets_in_the_library_and_on_the_command_line(tm
         train_contour(options, tmp_path / "apg", cfg, validation_trials=0, progress=False)
     code, _, err = invoke(["train", "--contour", "fls-circle", "--algo", "apg", "--relative-reward"])
     assert code == 2 and APG_FIXED_SHEET in err
+
+
+def test_optimised_plans_are_played_as_methods_closed_loop_included(tmp_path):
+    from agents.config import GradConfig
+    from agents.gradient import optimize_plan
+    from agents.robustness import robustness
+    from warpcut.io import write_json
+    from warpcut.planning import plan_cut
+
+    config = SimConfig(resolution=RES)
+    contour = load_contour("fls-circle")
+    planned = plan_cut(contour, config.replace(noise_std=0.0))
+    settings = GradConfig(
+        estimator="es", iterations=1, es_population=2, es_trials=1, validation_trials=1, es_feedback_phases=1
+    )
+    result = optimize_plan(contour, planned.chosen["pinch"], planned.ordered_segments(), config, settings)
+    result.gains = np.full((1, 3, 2), 0.5, np.float32)  # strong feedback: it must change the cut
+    write_json(tmp_path / "closed.json", result.to_json())
+    write_json(tmp_path / "open.json", {**result.to_json(), "gains": None})
+    plans = {"closed": tmp_path / "closed.json", "open": tmp_path / "open.json"}
+    (report,) = robustness(
+        "fls-circle", "noise", tmp_path / "out", plans=plans, methods=["none"], values=[0.0, 0.03], trials=2,
+        config=config, device="cpu",
+    )  # fmt: skip
+    assert report["methods"] == ["closed", "open"] and report["plans"]["closed"].endswith("closed.json")
+    assert len(report["closed"]["median"]) == 2
+    assert report["closed"]["mean"] != report["open"]["mean"]  # the gains acted
+    write_json(tmp_path / "other.json", {**result.to_json(), "contour": "kidney"})
+    with pytest.raises(ValueError, match="plans: .*other.json is a plan for 'kidney', not 'fls-circle'"):
+        robustness_study("fls-circle", "noise", plans={"x": tmp_path / "other.json"}, config=config)
+    with pytest.raises(ValueError, match="plans: label 'fixed' must be a plain name"):
+        robustness_study("fls-circle", "noise", plans={"fixed": tmp_path / "open.json"}, config=config)
+    (tmp_path / "bad.json").write_text("{}")
+    with pytest.raises(ValueError, match="plans: .*bad.json is not an optimised plan"):
+        robustness_study("fls-circle", "noise", plans={"x": tmp_path / "bad.json"}, config=config)
+
+
+def test_plan_labels_default_to_the_file_name():
+    from agents.cli.robustness import _labelled_plans
+
+    assert _labelled_plans(("a/fls-circle.json", "mine=b/fls-circle.json")) == {
+        "fls-circle": "a/fls-circle.json",
+        "mine": "b/fls-circle.json",
+    }
+    code, _, err = invoke(
+        ["robustness", "--contour", "fls-circle", "--study", "noise", "--plan", "x.json", "--plan", "x.json"]
+    )
+    assert code == 2 and "--plan" in err and "given twice" in err
