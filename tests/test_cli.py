@@ -668,6 +668,7 @@ def test_cli_defaults_are_the_library_defaults():
                 expected[key] = evaluate[key].default
             assert expected["candidates"] == EVALUATION_CANDIDATES
             expected["grad_iterations"] = None  # the estimator's (agents.config.GRAD_CONFIGS)
+            expected["grad_feedback_phases"] = None
             expected["grad_estimator"] = evaluate["grad"].default.estimator
         if name == "train":
             expected["algo"] = train.algorithm

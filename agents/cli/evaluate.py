@@ -56,6 +56,13 @@ from warpcut.sim.config import SimConfig
     "Adam steps per contour of the grad column's optimiser; default "
     f"{GRAD_CONFIGS['tape'].iterations} (tape), {GRAD_CONFIGS['es'].iterations} (es).",
 )
+@click.option(
+    "--grad-feedback-phases",
+    default=None,
+    type=click.IntRange(min=0),
+    help="es: feedback gains on the tracking error for the grad column, one per P-th of the cut (a "
+    "closed-loop policy; warpcut optimize --feedback-phases); default 0, open loop.",
+)
 @common.device_option
 @common.seed_option
 @common.out_option("logs/evaluate-TIMESTAMP; results and trained policies")
@@ -97,6 +104,7 @@ def command(
     num_envs: int,
     grad_estimator: str,
     grad_iterations: int | None,
+    grad_feedback_phases: int | None,
     plan: bool,
     candidates: int,
     arm_length: float,
@@ -139,7 +147,9 @@ def command(
             plan=plan,
             candidates=candidates,
             arm=ArmModel(length_mm=arm_length), analytic_pinch=analytic_pinch,
-            grad=grad_config(grad_estimator, iterations=grad_iterations),
+            grad=grad_config(
+                grad_estimator, iterations=grad_iterations, es_feedback_phases=grad_feedback_phases
+            ),
             device=device,
             seed=seed, log=common.log, stages=stages,
             step_callbacks=with_videos(common.step_callbacks(rec, cuts), vid),
