@@ -313,6 +313,10 @@ class GradConfig:
     point it is about to cut, as it lies on the moved sheet, what the analytic controller opposes) and ``K``
     a 3 x 2 gain matrix, one per phase (the episode split into P equal parts), optimised with the plan from
     zero (docs/learning.md, "Feedback and domain randomisation in es")."""
+    es_feedback_only: bool = False
+    """es with feedback: True keeps the plan at zero and optimises only the gains, a policy that holds still
+    where the sheet does not move from where the scissors expect it (docs/robustness.md, "es: open and closed
+    loop")."""
     es_randomize: str = ""
     """es: physical parameters drawn anew at every step for the ``es_trials`` episodes (comma-separated names
     of :data:`warpcut.sim.config.RANDOMIZE_RANGES`, over their ranges; every perturbed plan cuts the same
@@ -354,7 +358,13 @@ class GradConfig:
             randomize_ranges(self.es_randomize)
         except ValueError as error:
             raise ValueError(f"es_randomize: {str(error).split(': ', 1)[1]}") from None
-        closed_loop = {"es_feedback_phases": self.es_feedback_phases, "es_randomize": self.es_randomize}
+        if self.es_feedback_only and not self.es_feedback_phases:
+            raise ValueError("es_feedback_only: there are no gains to optimise; give es_feedback_phases >= 1")
+        closed_loop = {
+            "es_feedback_phases": self.es_feedback_phases,
+            "es_feedback_only": self.es_feedback_only,
+            "es_randomize": self.es_randomize,
+        }
         for name, value in closed_loop.items():
             if value and self.estimator != "es":
                 raise ValueError(f"{name}: only estimator 'es' has it; use estimator 'es', or drop {name}")

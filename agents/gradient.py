@@ -275,8 +275,11 @@ class SmoothedGradient:
             self.settings.es_trials,
             self.settings.es_sigma_mm,
         )
-        half = self.rng.standard_normal((population // 2, *plan.shape)).astype(np.float32)
-        eps = np.concatenate([half, -half])
+        if self.settings.es_feedback_only:  # the plan stays as it is (zero): only the gains move
+            eps = np.zeros((population, *plan.shape), dtype=np.float32)
+        else:
+            half = self.rng.standard_normal((population // 2, *plan.shape)).astype(np.float32)
+            eps = np.concatenate([half, -half])
         plans = np.clip(plan + sigma * eps, -self.max_step, self.max_step).astype(np.float32)
         perturbed, eps_gains = None, None
         if gains is not None:

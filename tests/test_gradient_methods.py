@@ -407,3 +407,18 @@ def test_feedback_plans_are_refused_as_a_base_plan_and_a_kept_plan_must_match_it
         GradConfig(es_feedback_phases=1).validated()
     with pytest.raises(ValueError, match="es_randomize: unknown parameter 'gravty'"):
         GradConfig(estimator="es", es_randomize="gravty").validated()
+
+
+def test_feedback_only_leaves_the_plan_at_zero_and_moves_the_gains():
+    settings = GradConfig(
+        estimator="es", iterations=2, learning_rate=0.2, es_population=4, es_trials=1, validation_trials=2,
+        es_feedback_phases=1, es_feedback_only=True,
+    )  # fmt: skip
+    result = optimize_plan(load_contour("circle-small"), PINCH, config=SMALL, settings=settings)
+    assert not result.plan.any()
+    task = _QuadraticGainsTask(np.ones((3, 3)), np.ones((1, 3, 2)))
+    plan, gains = np.zeros((3, 3), np.float32), np.zeros((1, 3, 2), np.float32)
+    _, grad, gains_grad = SmoothedGradient(task, settings, max_step=1.0, seed=0)(plan, gains)
+    assert not grad.any() and gains_grad.any() and not np.asarray(task.played).any()
+    with pytest.raises(ValueError, match="es_feedback_only: there are no gains"):
+        GradConfig(estimator="es", es_feedback_only=True).validated()

@@ -57,6 +57,12 @@ from warpcut.sim.config import SimConfig
     "matrix per P-th of the cut, optimised with the plan (a closed-loop policy).",
 )
 @click.option(
+    "--feedback-only",
+    is_flag=True,
+    help="es with --feedback-phases: optimise only the gains, the plan left at zero (a still grasp that "
+    "reacts to the tracking error).",
+)
+@click.option(
     "--randomize",
     default=None,
     metavar="PARAMS",
@@ -90,6 +96,7 @@ def command(
     population_episodes: int,
     sigma: float,
     feedback_phases: int | None,
+    feedback_only: bool,
     randomize: str | None,
     optimize_pinch: bool,
     trials: int,
@@ -115,7 +122,8 @@ def command(
     settings = grad_config(
         estimator, iterations=iterations, trials=episodes, learning_rate=learning_rate,
         es_population=population, es_trials=population_episodes, es_sigma_mm=sigma,
-        es_feedback_phases=feedback_phases, es_randomize=randomize, optimize_pinch=optimize_pinch,
+        es_feedback_phases=feedback_phases, es_feedback_only=feedback_only, es_randomize=randomize,
+        optimize_pinch=optimize_pinch,
     )  # fmt: skip
     out, claim = common.claim(out, "optimize", resume, overwrite)
     with claim:
