@@ -63,6 +63,11 @@ from warpcut.sim.config import SimConfig
     help="es: feedback gains on the tracking error for the grad column, one per P-th of the cut (a "
     "closed-loop policy; warpcut optimize --feedback-phases); default 0, open loop.",
 )
+@click.option(
+    "--grad-feedback-only",
+    is_flag=True,
+    help="es with --grad-feedback-phases: the grad column's gains alone on a still grasp, no plan.",
+)
 @common.device_option
 @common.seed_option
 @common.out_option("logs/evaluate-TIMESTAMP; results and trained policies")
@@ -105,6 +110,7 @@ def command(
     grad_estimator: str,
     grad_iterations: int | None,
     grad_feedback_phases: int | None,
+    grad_feedback_only: bool,
     plan: bool,
     candidates: int,
     arm_length: float,
@@ -148,7 +154,8 @@ def command(
             candidates=candidates,
             arm=ArmModel(length_mm=arm_length), analytic_pinch=analytic_pinch,
             grad=grad_config(
-                grad_estimator, iterations=grad_iterations, es_feedback_phases=grad_feedback_phases
+                grad_estimator, iterations=grad_iterations, es_feedback_phases=grad_feedback_phases,
+                es_feedback_only=grad_feedback_only,
             ),
             device=device,
             seed=seed, log=common.log, stages=stages,
