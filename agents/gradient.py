@@ -11,6 +11,11 @@ Every iterate is also played on ``GradConfig.validation_trials`` held-out episod
 scored with the path score: the iterate with the lowest mean validation error, the initial still grasp
 (iteration 0, fixed tensioning) included, is the result (without validation episodes: the lowest error
 on the optimiser's own episodes).
+
+With es the plan may be closed loop (``GradConfig.es_feedback_phases``: feedback gains on the tracking
+error, optimised with the plan or, with ``es_feedback_only``, alone) and the episodes' sheets randomised
+(``GradConfig.es_randomize``: errors weighed relative to no tension on each sheet, :class:`RelativeWeights`;
+the held-out episodes randomised too, :class:`HeldOut`).
 """
 
 from __future__ import annotations
@@ -59,7 +64,8 @@ class PlanResult:
     history: list[dict] = field(default_factory=list)
     """Per iterate: ``iteration``, ``surrogate`` (mm^2) and ``error_vertices`` (mean over the episodes;
     es: no surrogate, the perturbed plans' mean error, none for the last iterate), ``pinch``,
-    ``validation_error_vertices`` (the held-out episodes', when there are some), ``seconds`` since the
+    ``validation_error_vertices`` (the held-out episodes', when there are some; weighed under
+    ``es_randomize``), ``seconds`` since the
     start."""
     seconds: float = 0.0
     """Wall time of the optimisation."""
