@@ -422,3 +422,36 @@ def test_feedback_only_leaves_the_plan_at_zero_and_moves_the_gains():
     assert not grad.any() and gains_grad.any() and not np.asarray(task.played).any()
     with pytest.raises(ValueError, match="es_feedback_only: there are no gains"):
         GradConfig(estimator="es", es_feedback_only=True).validated()
+
+
+def test_es_learns_feedback_gains_that_beat_a_still_grasp():
+    """A learning test that can fail: six feedback gains learnt by es from a still grasp (their initial
+    policy: zero gains hold still) cut wave-1 better than the still grasp at the same pinch on evaluation
+    trials the optimiser never saw, by more than both CIs (the paired difference's too)."""
+    from warpcut import plan_cut
+    from warpcut.scoring import paired_improvement
+
+    contour = load_contour("wave-1")
+    planned = plan_cut(contour, SMALL.replace(noise_std=0.0), num_candidates=8)
+    pinch, segments = planned.chosen["pinch"], planned.ordered_segments()
+    settings = GradConfig(
+        estimator="es", iterations=15, learning_rate=0.2, es_population=16, es_trials=2, validation_trials=4,
+        es_feedback_phases=1, es_feedback_only=True,
+    )  # fmt: skip
+    result = optimize_plan(contour, pinch, segments, SMALL, settings)
+    assert result.best_iteration > 0 and np.abs(result.gains).max() > 0.1
+
+    def errors(policy, point):
+        points = None if point is None else [point] * 10
+        task = CuttingTask(SMALL, [contour] * 10, pinch_points=points, segments=[segments] * 10, seed=7)
+        return task.run(policy).error_vertices
+
+    none = errors(None, None)
+    still = paired_improvement(none, errors(None, pinch))
+    learnt = paired_improvement(none, errors(PlanResult.policy([result], 10), pinch))
+
+    def ci(values):
+        return 1.96 * np.std(values, ddof=1) / np.sqrt(len(values))
+
+    assert learnt.mean() - still.mean() > ci(learnt) + ci(still), (learnt.mean(), still.mean())
+    assert (learnt - still).mean() - ci(learnt - still) > 0
