@@ -243,6 +243,28 @@ def estimator_option(name: str, what: str):
     )
 
 
+def feedback_options(prefix: str, what: str):
+    """``--PREFIXfeedback-phases P`` and ``--PREFIXfeedback-only``: es's feedback gains for ``what``
+    (``GradConfig.es_feedback_phases``, ``es_feedback_only``; unset: the estimator's default, open loop)."""
+
+    def decorate(f):
+        f = click.option(
+            f"--{prefix}feedback-only",
+            is_flag=True,
+            help=f"es with --{prefix}feedback-phases: {what}'s gains alone, the plan left at zero (a still "
+            "grasp that reacts to the tracking error).",
+        )(f)
+        return click.option(
+            f"--{prefix}feedback-phases",
+            default=None,
+            type=click.IntRange(min=0),
+            help=f"es: {what} with feedback on the tracking error, one 3 x 2 gain matrix per P-th of the "
+            "cut, optimised with the plan (a closed-loop policy); default 0, open loop.",
+        )(f)
+
+    return decorate
+
+
 recipe_option = click.option(
     "--recipe",
     default=next(iter(RECIPES)),

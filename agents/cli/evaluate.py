@@ -56,18 +56,7 @@ from warpcut.sim.config import SimConfig
     "Adam steps per contour of the grad column's optimiser; default "
     f"{GRAD_CONFIGS['tape'].iterations} (tape), {GRAD_CONFIGS['es'].iterations} (es).",
 )
-@click.option(
-    "--grad-feedback-phases",
-    default=None,
-    type=click.IntRange(min=0),
-    help="es: feedback gains on the tracking error for the grad column, one per P-th of the cut (a "
-    "closed-loop policy; warpcut optimize --feedback-phases); default 0, open loop.",
-)
-@click.option(
-    "--grad-feedback-only",
-    is_flag=True,
-    help="es with --grad-feedback-phases: the grad column's gains alone on a still grasp, no plan.",
-)
+@common.feedback_options("grad-", "the grad column")
 @common.device_option
 @common.seed_option
 @common.out_option("logs/evaluate-TIMESTAMP; results and trained policies")

@@ -49,19 +49,7 @@ from warpcut.sim.config import SimConfig
     type=click.FloatRange(min=0.0, min_open=True),
     help="Standard deviation of es's perturbation of each move (mm).",
 )
-@click.option(
-    "--feedback-phases",
-    default=None,
-    type=click.IntRange(min=0),
-    help="es: 0 (default) optimises an open-loop plan; P adds feedback on the tracking error, one 3 x 2 gain "
-    "matrix per P-th of the cut, optimised with the plan (a closed-loop policy).",
-)
-@click.option(
-    "--feedback-only",
-    is_flag=True,
-    help="es with --feedback-phases: optimise only the gains, the plan left at zero (a still grasp that "
-    "reacts to the tracking error).",
-)
+@common.feedback_options("", "the policy")
 @click.option(
     "--randomize",
     default=None,
