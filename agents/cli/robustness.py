@@ -94,7 +94,7 @@ def command(
         studies = parse_studies(study)
     except ValueError as error:
         raise click.BadParameter(str(error).split(": ", 1)[1], param_hint="--study") from None
-    labelled = _labelled_runs(runs)
+    labelled, plan_files = _labelled_runs(runs), _labelled_plans(plans)
     try:
         checked = check_runs(labelled or None)
     except ValueError as error:
@@ -113,7 +113,7 @@ def command(
     out, claim = common.claim(out, f"robustness-{safe_name(name)}", resume, overwrite)
     with claim:
         reports = robustness(
-            contour_name, studies, out, runs=checked, plans=_labelled_plans(plans), methods=baselines,
+            contour_name, studies, out, runs=checked, plans=plan_files, methods=baselines,
             values=sweep, trials=trials,
             config=SimConfig(noise_std=noise, score=score), device=device, seed=seed, resume=resume,
             log=common.log,
