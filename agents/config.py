@@ -312,11 +312,10 @@ class GradConfig:
     plan's plus ``K @ e``, ``e`` the x-y tracking error (mm; the vector from the scissor tip to the contour
     point it is about to cut, as it lies on the moved sheet, what the analytic controller opposes) and ``K``
     a 3 x 2 gain matrix, one per phase (the episode split into P equal parts), optimised with the plan from
-    zero (docs/learning.md, "Feedback and domain randomisation in es")."""
+    zero (docs/learning.md, "Closed loop: es on feedback gains")."""
     es_feedback_only: bool = False
     """es with feedback: True keeps the plan at zero and optimises only the gains, a policy that holds still
-    where the sheet does not move from where the scissors expect it (docs/robustness.md, "es: open and closed
-    loop")."""
+    where the sheet does not move from where the scissors expect it (docs/robustness.md, "es policies")."""
     es_randomize: str = ""
     """es: physical parameters drawn anew at every step for the ``es_trials`` episodes (comma-separated names
     of :data:`warpcut.sim.config.RANDOMIZE_RANGES`, over their ranges; every perturbed plan cuts the same
