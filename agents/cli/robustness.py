@@ -133,30 +133,28 @@ def command(
     click.echo(f"wrote {out}")
 
 
-def _labelled_runs(runs: tuple[str, ...]) -> dict[str, str]:
-    """``--run [LABEL=]DIR`` values as ``{label: dir}``: one unlabelled run is ``rl``, several ``rl-1``..."""
+def _labelled(items: tuple[str, ...], flag: str, default) -> dict[str, str]:
+    """``--FLAG [LABEL=]PATH`` values as ``{label: path}``; an unlabelled item ``k`` (of the list) is named
+    ``default(k, path)``."""
     labelled: dict[str, str] = {}
-    for k, item in enumerate(runs):
+    for k, item in enumerate(items):
         label, sep, path = item.partition("=")
-        if not sep or Path(item).exists():  # a directory whose name holds '='
-            label, path = ("rl" if len(runs) == 1 else f"rl-{k + 1}"), item
+        if not sep or Path(item).exists():  # a path whose name holds '='
+            label, path = default(k, item), item
         if label in labelled:
-            raise click.BadParameter(f"label {label!r} given twice", param_hint="--run")
+            raise click.BadParameter(f"label {label!r} given twice", param_hint=flag)
         labelled[label] = path
     return labelled
+
+
+def _labelled_runs(runs: tuple[str, ...]) -> dict[str, str]:
+    """``--run [LABEL=]DIR`` values as ``{label: dir}``: one unlabelled run is ``rl``, several ``rl-1``..."""
+    return _labelled(runs, "--run", lambda k, _: "rl" if len(runs) == 1 else f"rl-{k + 1}")
 
 
 def _labelled_plans(plans: tuple[str, ...]) -> dict[str, str]:
     """``--plan [LABEL=]FILE`` values as ``{label: file}``; an unlabelled one is named after its file."""
-    labelled: dict[str, str] = {}
-    for item in plans:
-        label, sep, path = item.partition("=")
-        if not sep or Path(item).exists():  # a file whose name holds '='
-            label, path = Path(item).stem, item
-        if label in labelled:
-            raise click.BadParameter(f"label {label!r} given twice", param_hint="--plan")
-        labelled[label] = path
-    return labelled
+    return _labelled(plans, "--plan", lambda _, path: Path(path).stem)
 
 
 def _parse_values(values: str | None) -> list[float] | None:
