@@ -267,11 +267,22 @@ def _nominal(study: str, config: SimConfig) -> float:
     return float(value.reshape(-1)[0])
 
 
+def _check_label(field: str, label, taken: Mapping = ()) -> None:
+    """``ValueError`` naming ``field`` unless ``label`` is a plain name that no method, report field or
+    ``taken`` label (another method's) already has."""
+    import re
+
+    if label in RESERVED_LABELS or label in taken or not re.fullmatch(r"[A-Za-z][\w.-]*", str(label)):
+        also = ", a run's" if taken else ""
+        raise ValueError(
+            f"{field}: label {label!r} must be a plain name (letters, digits, - _ .) other than a method's"
+            f"{also} or a report field's ({', '.join(RESERVED_LABELS)})"
+        )
+
+
 def check_runs(runs: Mapping[str, str | Path] | str | Path | None) -> dict[str, Path]:
     """``runs`` as ``{label: run directory}`` (one run: ``{"rl": run}``), each a trained run; ``ValueError``
     naming ``runs`` for a label that is a baseline's, or not a plain name."""
-    import re
-
     from agents.export import policy_runs
     from agents.rl import is_run
 
@@ -281,11 +292,7 @@ def check_runs(runs: Mapping[str, str | Path] | str | Path | None) -> dict[str, 
         runs = {"rl": runs}
     checked = {}
     for label, run in dict(runs).items():
-        if label in RESERVED_LABELS or not re.fullmatch(r"[A-Za-z][\w.-]*", str(label)):
-            raise ValueError(
-                f"runs: label {label!r} must be a plain name (letters, digits, - _ .) other than a method's "
-                f"or a report field's ({', '.join(RESERVED_LABELS)})"
-            )
+        _check_label("runs", label)
         try:
             found = policy_runs(run) if Path(run).is_dir() else []
         except ValueError:  # holds no policy
@@ -305,17 +312,11 @@ def check_plans(
     """``plans`` (``{label: plan file}``) read, each checked to be ``contour``'s; ``ValueError`` naming
     ``plans`` for a label taken by a method, a run or a report field, a file that is not an optimised plan,
     or a plan of another contour."""
-    import re
-
     from warpcut.io import read_json
 
     checked = {}
     for label, path in dict(plans or {}).items():
-        if label in RESERVED_LABELS or label in runs or not re.fullmatch(r"[A-Za-z][\w.-]*", str(label)):
-            raise ValueError(
-                f"plans: label {label!r} must be a plain name (letters, digits, - _ .) other than a run's, a "
-                f"method's or a report field's ({', '.join(RESERVED_LABELS)})"
-            )
+        _check_label("plans", label, taken=runs)
         try:
             result = PlanResult.from_json(read_json(path))
         except (OSError, ValueError, KeyError, TypeError) as error:
