@@ -15,15 +15,15 @@ come out better (docs/learning.md: it stops the drift, and the surrogate's rough
 nothing).
 
 The policy is rsl-rl's actor, as PPO's (an MLP with observation normalisation and a Gaussian head over
-continuous moves): :class:`ApgRunner` is PPO's runner with the learning iteration replaced, so checkpoints,
-validation, model selection, resume, evaluation and export are the same; its critic and the action noise
-are not trained.
+continuous moves): :class:`ApgRunner` is PPO's runner with the learning iteration replaced
+(:class:`agents.episodic.EpisodeRunner`, shared with evolution strategies), so checkpoints, validation,
+model selection, resume, evaluation and export are the same; its critic and the action noise are not
+trained.
 """
 
 from __future__ import annotations
 
 import copy
-import os
 import time
 from pathlib import Path
 
@@ -32,90 +32,36 @@ import torch
 from rsl_rl.env import VecEnv
 
 from agents.config import APG_FIXED_SHEET
-from agents.train import Runner
+from agents.episodic import EpisodeRunner
 
 
-class ApgRunner(Runner):
-    """:class:`~agents.train.Runner` whose learning iteration is an APG step (see the module)."""
+class ApgRunner(EpisodeRunner):
+    """:class:`~agents.episodic.EpisodeRunner` whose learning iteration is an APG step (see the module)."""
+
+    name = "apg"
+    scalars = ("final_error", "surrogate", "grad_norm")
 
     def __init__(self, env: VecEnv, train_cfg: dict, log_dir: str | Path | None, device: str = "cpu") -> None:
         from warpcut.gradients import DifferentiableRollout
 
         super().__init__(env, train_cfg, log_dir, device)
-        vector = getattr(env, "env", None)
-        scene = getattr(vector, "scene", None)
-        if scene is None:
-            raise ValueError("env: APG needs warpcut's env (envs.rsl.PatternCutRslEnv over PatternCutVecEnv)")
-        options = scene.options
+        options = self.scene.options
         if options.randomize or options.relative_reward:
             raise ValueError(APG_FIXED_SHEET)
-        if options.action_type != "continuous":
-            raise ValueError("action_type: APG differentiates continuous moves; use --actions continuous")
-        if scene.episode_steps < scene.task.num_steps:
-            raise ValueError(
-                f"max_episode_steps: APG runs whole cuts ({scene.task.num_steps} steps), not "
-                f"{scene.episode_steps}; leave max_episode_steps unset"
-            )
-        self.scene = scene
-        self.engine = DifferentiableRollout(scene.task)
-        self.steps_per_iteration = env.num_envs * scene.task.num_steps
-        # Start from holding still (fixed tensioning), as PPO's recipe does with its stay prior: the output
-        # layer is zeroed, so the initial mean move is 0 everywhere (a resume loads its own weights).
-        output = [m for m in self.alg.actor.mlp.modules() if isinstance(m, torch.nn.Linear)][-1]
-        with torch.no_grad():
-            output.weight.zero_()
-            output.bias.zero_()
+        self.engine = DifferentiableRollout(self.scene.task)
+        self.steps_per_iteration = env.num_envs * self.scene.task.num_steps
         algorithm = train_cfg["algorithm"]
         self.apg_optimizer = torch.optim.Adam(self.alg.actor.parameters(), lr=algorithm["learning_rate"])
         self.max_grad_norm = algorithm["max_grad_norm"]
         self.window = train_cfg.get("apg", {}).get("window")
         self.accept = bool(train_cfg.get("apg", {}).get("accept", False))
         self.max_learning_rate = algorithm["learning_rate"]
-        self.episode_rng = vector.np_random  # seeded by train() (env.seed): episodes follow the run's seed
 
-    def _state_bytes(self, infos: dict | None = None) -> bytes:
-        extra = {
-            "apg_optimizer": self.apg_optimizer.state_dict(),
-            "apg_rng": self.episode_rng.bit_generator.state,
-        }
-        return super()._state_bytes({**extra, **(infos or {})})
+    def _extra_state(self) -> dict:
+        return {"apg_optimizer": self.apg_optimizer.state_dict()}
 
-    def load_checkpoint(self, path: str | Path, state: dict | None = None) -> None:
-        from agents.train import read_checkpoint
-
-        state = read_checkpoint(path, map_location=self.device) if state is None else state
-        super().load_checkpoint(path, state)
-        infos = state.get("infos") or {}
-        if "apg_optimizer" not in infos:
-            raise ValueError(f"{path}: not an APG run's checkpoint; resume it with its own --algo")
+    def _load_extra(self, infos: dict) -> None:
         self.apg_optimizer.load_state_dict(infos["apg_optimizer"])
-        self.episode_rng.bit_generator.state = infos["apg_rng"]
-
-    def learn(self, num_learning_iterations: int, init_at_random_ep_len: bool = False) -> None:
-        """``num_learning_iterations`` APG steps, saving checkpoints as PPO's loop does."""
-        self.logger.init_logging_writer()
-        self.alg.train_mode()
-        start = self.current_learning_iteration
-        threads = torch.get_num_threads()
-        torch.set_num_threads(1)  # a 2 x 32 MLP gains nothing from threads; the simulator's replay uses them
-        try:
-            self._learn(start, num_learning_iterations)
-        finally:
-            torch.set_num_threads(threads)
-        if self.logger.writer is not None:
-            self.save(os.path.join(self.logger.log_dir, f"model_{self.current_learning_iteration}.pt"))
-            self.logger.stop_logging_writer()
-
-    def _learn(self, start: int, num_learning_iterations: int) -> None:
-        for it in range(start, start + num_learning_iterations):
-            metrics = self._iteration()
-            self.current_learning_iteration = it
-            if self.logger.writer is not None:
-                for key in ("final_error", "surrogate", "grad_norm"):
-                    self.logger.writer.add_scalar(f"Apg/{key}", metrics[key], it)
-            self._end_iteration(it, metrics)
-            if self.logger.writer is not None and it % self.cfg["save_interval"] == 0:
-                self.save(os.path.join(self.logger.log_dir, f"model_{it}.pt"))
 
     def _iteration(self) -> dict:
         """One episode per env, its backward pass, one Adam step (kept only if it helps, with ``accept``);

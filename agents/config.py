@@ -8,8 +8,12 @@ from dataclasses import dataclass, field
 
 from warpcut.sim.config import PINCH_CANDIDATES, randomize_ranges
 
-ALGORITHMS = ("ppo", "apg")
-"""How ``warpcut train`` learns: PPO (rsl-rl) or analytic policy gradients through the simulator."""
+ALGORITHMS = ("ppo", "apg", "es")
+"""How ``warpcut train`` learns: PPO (rsl-rl), analytic policy gradients through the simulator, or evolution
+strategies on the policy's weights."""
+
+CONTINUOUS_ALGORITHMS = ("apg", "es")
+"""The algorithms that play continuous moves only (``--actions continuous``, their default)."""
 
 
 @dataclass
@@ -23,9 +27,10 @@ class TrainConfig:
     costs per step are spread over four times the envs (docs/learning.md, "Table I"; docs/performance.md,
     section 6)."""
     algorithm: str = "ppo"
-    """"ppo" (rsl-rl's PPO) or "apg": analytic policy gradients through the differentiable simulator
-    (:mod:`agents.apg`; continuous actions; one whole episode per env and iteration, so
-    ``num_steps_per_env`` does not apply)."""
+    """"ppo" (rsl-rl's PPO), "apg": analytic policy gradients through the differentiable simulator
+    (:mod:`agents.apg`), or "es": evolution strategies on the actor's weights (:mod:`agents.es`). APG and es
+    play continuous actions, one whole episode per env and iteration, so ``num_steps_per_env`` does not
+    apply."""
     apg_window: int | None = 5
     """APG only: truncate the gradient to windows of this many env steps (:meth:`~warpcut.gradients.
     DifferentiableRollout.backward`); None: through the whole episode (docs/learning.md, "APG")."""
@@ -35,6 +40,12 @@ class TrainConfig:
     state) and halve the step size; a kept step grows it by 1.5, up to ``learning_rate``. The observation
     normaliser then learns from each iteration's observations after the step, not during the rollout
     (docs/learning.md, "APG that keeps only steps that help")."""
+    es_population: int = 64
+    """es only: perturbed policies per iteration, in antithetic pairs; each plays ``num_envs /
+    es_population`` episodes (256 envs: 4 each)."""
+    es_sigma: float = 0.02
+    """es only: the perturbations' standard deviation in weight space (the actor's output is in units of
+    ``max_step_mm``; docs/learning.md, "es on the neural policy")."""
     iterations: int = 150
     """Total learning iterations of the run, counting those done before a resume. 150: on the Table I suite,
     two seeds of 256 envs x 150 iterations kept a trained policy on 17-18 contours of 26 at RL +43.0-43.3%,
@@ -126,11 +137,12 @@ class TrainConfig:
                 "init_std": self.init_noise_std,
             }
         model = {"class_name": "rsl_rl.models:MLPModel", "activation": self.activation}
-        apg = (
-            {"apg": {"window": self.apg_window, "accept": self.apg_accept}} if self.algorithm == "apg" else {}
-        )
+        own = {
+            "apg": {"apg": {"window": self.apg_window, "accept": self.apg_accept}},
+            "es": {"es": {"population": self.es_population, "sigma": self.es_sigma}},
+        }.get(self.algorithm, {})
         return {
-            **apg,
+            **own,
             "num_steps_per_env": self.num_steps_per_env,
             "save_interval": self.save_interval,
             "obs_groups": {name: list(groups) for name, groups in self.obs_groups.items()},
@@ -217,11 +229,29 @@ APG_BATCH = {"num_envs": 16, "iterations": 30}
 would train APG for about an hour and a half a contour (an APG iteration at 256 envs took 35 s here)."""
 
 
+def es_population_error(population: int, num_envs: int) -> str | None:
+    """Why ``es_population`` does not fit ``num_envs`` (it must be even, antithetic pairs, and divide the
+    envs: each perturbed policy plays as many episodes), with a population that would; None if it fits."""
+    if population >= 2 and population % 2 == 0 and num_envs % population == 0:
+        return None
+    fits = max((p for p in range(2, min(num_envs, 64) + 1, 2) if num_envs % p == 0), default=None)
+    fix = f"e.g. --es-population {fits}" if fits else "give an even --num-envs"
+    return (
+        f"es_population: {population} must be even (antithetic pairs) and divide num_envs ({num_envs}); {fix}"
+    )
+
+
+ES_BATCH = {"num_envs": 256, "iterations": 60}
+"""es's envs and iterations where none are given: 64 perturbed policies x 4 episodes, one whole cut each, an
+iteration; 60 iterations fit issue 16's 60 s a contour on this 2-core CPU (docs/learning.md, "es on the
+neural policy")."""
+
+
 def batch_defaults(algorithm: str) -> dict[str, int]:
-    """``{"num_envs": ..., "iterations": ...}`` a run of ``algorithm`` ("ppo" or "apg") trains with unless
-    told otherwise: :class:`TrainConfig`'s for PPO, :data:`APG_BATCH` for APG."""
-    if algorithm == "apg":
-        return dict(APG_BATCH)
+    """``{"num_envs": ..., "iterations": ...}`` a run of ``algorithm`` (:data:`ALGORITHMS`) trains with unless
+    told otherwise: :class:`TrainConfig`'s for PPO, :data:`APG_BATCH` for APG, :data:`ES_BATCH` for es."""
+    if algorithm in ("apg", "es"):
+        return dict(APG_BATCH if algorithm == "apg" else ES_BATCH)
     return {"num_envs": TrainConfig.num_envs, "iterations": TrainConfig.iterations}
 
 
@@ -231,6 +261,9 @@ APG_LEARNING_RATE = 3e-3
 APG_RESIDUAL_LEARNING_RATE = 1e-3
 """Adam's step of the ``apg-residual`` recipe: on fls-circle's plan 3e-3 left the plan within 5 iterations and
 diverged, 3e-4 did not move it, 1e-3 improved wave-1 and wave-2's plans (docs/learning.md)."""
+
+ES_LEARNING_RATE = 0.01
+"""Adam's step of the ``es`` recipe, in weight space (docs/learning.md, "es on the neural policy")."""
 
 RECIPES = {
     "warpcut": Recipe(
@@ -243,6 +276,9 @@ RECIPES = {
     ),
     "apg": Recipe(
         {**RECIPE, "action_type": "continuous"}, {"algorithm": "apg", "learning_rate": APG_LEARNING_RATE}
+    ),
+    "es": Recipe(
+        {**RECIPE, "action_type": "continuous"}, {"algorithm": "es", "learning_rate": ES_LEARNING_RATE}
     ),
     "grad-residual": Recipe(
         {**RECIPE, "observe_plan": True},
@@ -257,6 +293,13 @@ RECIPES = {
 }
 """``--recipe``: warpcut's (:data:`RECIPE`, the default) or the paper's setting (sparse reward, 12
 fiducials observed, x-y moves of 1 mm, a uniform initial policy, the last policy kept)."""
+
+
+def algorithm_settings(algorithm: str) -> dict:
+    """The :class:`TrainConfig` fields ``warpcut train --algo ALGORITHM`` trains with beyond its flags: those
+    of the recipe of that name (``apg``, ``es``: their learning rates), warpcut's for PPO."""
+    return dict(RECIPES["warpcut" if algorithm == "ppo" else algorithm].train)
+
 
 BUDGETS = {
     # candidates for the pinch search, of which the best rl_candidates (by fixed tension; None: all, as in

@@ -361,13 +361,14 @@ def run_pipeline(
 
 def _settings(budget: str, selector: str, overrides: dict, recipe: Recipe) -> dict:
     """``run_pipeline``'s budget with the ``overrides`` that are not None. The budgets' iterations are PPO's:
-    an APG recipe trains its own (:func:`agents.config.batch_defaults`) unless ``iterations`` is given."""
+    an APG or es recipe trains its own (:func:`agents.config.batch_defaults`) unless ``iterations`` is
+    given."""
     if budget not in BUDGETS:
         raise ValueError(f"budget: choose one of {', '.join(BUDGETS)} (got {budget!r})")
     if selector not in SELECTORS:
         raise ValueError(f"selector: choose one of {', '.join(SELECTORS)} (got {selector!r})")
     chosen = dict(BUDGETS[budget])
-    if recipe.train.get("algorithm") == "apg":
+    if recipe.train.get("algorithm", "ppo") != "ppo":
         chosen["iterations"] = recipe.batch["iterations"]
     return {**chosen, **{k: v for k, v in overrides.items() if v is not None}}
 

@@ -176,9 +176,9 @@ def resume_settings(resume: str | Path) -> dict:
     return {**fixed, "seed": train.get("seed"), "validation_trials": len(baseline) * len(baseline[0])}
 
 
-RESUMED_TRAIN_FIELDS = ("num_envs", "num_steps_per_env", "stay_prior", "algorithm")
+RESUMED_TRAIN_FIELDS = ("num_envs", "num_steps_per_env", "stay_prior", "algorithm", "es_population")
 """The :class:`~agents.config.TrainConfig` fields a resumed run keeps (its batch, the prior its policy
-was initialised with, and how it learns), besides the seed."""
+was initialised with, how it learns, and es's population), besides the seed."""
 
 
 def _run_train_config(run_dir: Path) -> dict:

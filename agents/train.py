@@ -1,5 +1,6 @@
 """PPO training on rsl-rl's ``OnPolicyRunner``, with a run directory that survives Ctrl-C; the same run
-directory and loop for analytic policy gradients (``TrainConfig.algorithm = "apg"``, :mod:`agents.apg`).
+directory and loop for analytic policy gradients and evolution strategies (``TrainConfig.algorithm`` "apg",
+"es": :mod:`agents.apg`, :mod:`agents.es`).
 
 A run directory holds::
 
@@ -69,7 +70,7 @@ from rsl_rl.env import VecEnv
 from rsl_rl.runners import OnPolicyRunner
 from rsl_rl.utils.logger import Logger
 
-from agents.config import ALGORITHMS, TrainConfig
+from agents.config import ALGORITHMS, CONTINUOUS_ALGORITHMS, TrainConfig
 from agents.ppo_speed import speed_up
 from envs.rsl import FINAL_ERROR_KEY
 from warpcut.io import DiskFull, write_atomic, write_json
@@ -199,19 +200,20 @@ def _check_algorithm(cfg: TrainConfig) -> None:
     """``ValueError`` naming ``algorithm`` unless it is known and fits the actions."""
     if cfg.algorithm not in ALGORITHMS:
         raise ValueError(f"algorithm: choose one of {', '.join(ALGORITHMS)} (got {cfg.algorithm!r})")
-    if cfg.algorithm == "apg" and cfg.discrete:
+    if cfg.algorithm in CONTINUOUS_ALGORITHMS and cfg.discrete:
         raise ValueError(
-            "algorithm: apg differentiates continuous moves; set discrete=False (--actions continuous)"
+            f"algorithm: {cfg.algorithm} plays continuous moves; set discrete=False (--actions continuous)"
         )
 
 
 def _runner_class(cfg: TrainConfig) -> type[Runner]:
-    """PPO's :class:`Runner`, or APG's (:class:`agents.apg.ApgRunner`)."""
-    if cfg.algorithm == "apg":
-        from agents.apg import ApgRunner
+    """PPO's :class:`Runner`, APG's (:class:`agents.apg.ApgRunner`) or es's (:class:`agents.es.EsRunner`)."""
+    if cfg.algorithm == "ppo":
+        return Runner
+    from agents.apg import ApgRunner
+    from agents.es import EsRunner
 
-        return ApgRunner
-    return Runner
+    return {"apg": ApgRunner, "es": EsRunner}[cfg.algorithm]
 
 
 def _write_config(

@@ -794,6 +794,29 @@ def test_train_apg_runs_and_refuses_discrete_actions(tmp_path):
     assert code == 2 and "--actions continuous" in stderr
 
 
+def test_train_es_runs_with_its_recipe_and_refuses_a_population_that_does_not_fit(tmp_path):
+    """es trains the neural policy with its recipe's learning rate and its own population; a population
+    that does not divide the envs is refused before anything is written."""
+    from agents.config import RECIPES
+
+    run = tmp_path / "es"
+    args = ["train", "--contour", "circle-small", "--algo", "es", "--iterations", "1", "--num-envs", "8"]
+    code, stdout, _ = invoke(
+        args
+        + ["--es-population", "4", "--eval-trials", "2", "--validation-trials", "2", "--no-progress"]
+        + ["--out", str(run)]
+    )
+    assert code == 0, stdout
+    assert "(8 envs, 1 iterations" in stdout
+    config = json.loads((run / "config.json").read_text())
+    assert config["train"]["algorithm"] == "es" and config["train"]["discrete"] is False
+    assert config["train"]["learning_rate"] == RECIPES["es"].train["learning_rate"]
+    assert config["rsl_rl"]["es"]["population"] == 4
+    code, _, stderr = invoke(args + ["--es-population", "6", "--out", str(tmp_path / "other")])
+    assert code == 2 and "--es-population" in stderr and "e.g. --es-population 8" in stderr
+    assert not (tmp_path / "other").exists()
+
+
 def test_evaluate_trains_apg_on_its_own_default_batch(tmp_path):
     out = tmp_path / "run"
     args = [

@@ -205,10 +205,11 @@ seed_option = click.option(
 DEFAULTS = SimConfig()
 """The library's defaults, which the options below show and pass on (one set for library and CLI)."""
 
-_PPO, _APG = batch_defaults("ppo"), batch_defaults("apg")
+_PPO, _APG, _ES = batch_defaults("ppo"), batch_defaults("apg"), batch_defaults("es")
 BATCH_DEFAULTS_HELP = (
     f"Default: the algorithm's, {_PPO['num_envs']} envs x {_PPO['iterations']} iterations for PPO, "
-    f"{_APG['num_envs']} x {_APG['iterations']} for APG (agents.config.batch_defaults)."
+    f"{_APG['num_envs']} x {_APG['iterations']} for APG, {_ES['num_envs']} x {_ES['iterations']} for es "
+    "(agents.config.batch_defaults)."
 )
 """What ``--num-envs`` and ``--iterations`` default to where the algorithm decides (train, evaluate)."""
 

@@ -1,4 +1,4 @@
-"""``warpcut train``: train a PPO tensioner for one contour into a run directory."""
+"""``warpcut train``: train a tensioner (PPO, APG or es) for one contour into a run directory."""
 
 from __future__ import annotations
 
@@ -10,11 +10,14 @@ from agents.cli import common
 from agents.cli.video import video_option, videos, with_videos
 from agents.config import (
     ALGORITHMS,
+    CONTINUOUS_ALGORITHMS,
     EVALUATION_TRIALS,
     RECIPE,
     VALIDATION_TRIALS,
     TrainConfig,
+    algorithm_settings,
     batch_defaults,
+    es_population_error,
 )
 from warpcut.sim.config import SimConfig
 
@@ -52,8 +55,9 @@ RESUMED_FLAGS = {
     default=TRAIN.algorithm,
     show_default=True,
     type=click.Choice(ALGORITHMS),
-    help="ppo (rsl-rl) or apg: analytic policy gradients through the differentiable simulator (continuous "
-    "moves; one whole episode per env and iteration; docs/learning.md).",
+    help="ppo (rsl-rl); apg: analytic policy gradients through the differentiable simulator; es: evolution "
+    "strategies on the policy's weights, whole cuts scored by the path score (apg and es: continuous moves, "
+    "one whole episode per env and iteration, their recipe's learning rate; docs/learning.md).",
 )
 @common.count_option("num-envs", None, f"Parallel envs. {common.BATCH_DEFAULTS_HELP}")
 @common.count_option(
@@ -62,6 +66,21 @@ RESUMED_FLAGS = {
     f"Iterations in total (a resumed run continues up to this count). {common.BATCH_DEFAULTS_HELP}",
 )
 @common.count_option("steps-per-env", TRAIN.num_steps_per_env, "Env steps per env per PPO iteration.")
+@click.option(
+    "--es-population",
+    default=TRAIN.es_population,
+    show_default=True,
+    type=click.IntRange(min=2),
+    help="es: perturbed policies per iteration (even, dividing --num-envs; each plays num-envs / population "
+    "episodes).",
+)
+@click.option(
+    "--es-sigma",
+    default=TRAIN.es_sigma,
+    show_default=True,
+    type=click.FloatRange(min=0.0, min_open=True),
+    help="es: standard deviation of the weight perturbations.",
+)
 @common.noise_option
 @common.score_option
 @click.option(
@@ -138,6 +157,8 @@ def command(
     num_envs: int | None,
     iterations: int | None,
     steps_per_env: int,
+    es_population: int,
+    es_sigma: float,
     noise: float,
     score: str,
     reward: str,
@@ -161,7 +182,7 @@ def command(
     no_plots: bool,
     no_progress: bool,
 ) -> None:
-    """Train a tensioning policy (2x32 MLP, 1 mm moves) for one contour: PPO, or APG through the simulator."""
+    """Train a tensioning policy (2x32 MLP, 1 mm moves) for one contour: PPO, APG or es."""
     from agents.rl import load_options, train_contour
     from envs.options import PatternCutOptions
     from warpcut.contours import load_contour
@@ -192,10 +213,12 @@ def command(
         kept = _resumed_settings(
             resume, seed=seed, validation_trials=validation_trials, num_envs=num_envs,
             num_steps_per_env=steps_per_env, stay_prior=stay_prior, algorithm=algo,
+            es_population=es_population,
         )  # fmt: skip
         seed, validation_trials, num_envs = kept["seed"], kept["validation_trials"], kept["num_envs"]
         algo = kept["algorithm"]
         steps_per_env, stay_prior = kept["num_steps_per_env"], kept["stay_prior"]
+        es_population = kept["es_population"]
     else:
         if contour_name is None:
             raise click.UsageError("--contour: give the contour to train on (or --resume RUN to continue)")
@@ -217,10 +240,15 @@ def command(
     name, discrete = options.contours(1)[0].name, options.action_type == "discrete"
     batch = batch_defaults(algo)
     num_envs, iterations = num_envs or batch["num_envs"], iterations or batch["iterations"]
-    cfg = TrainConfig(
-        num_envs=num_envs, iterations=iterations, num_steps_per_env=steps_per_env, seed=seed,
-        discrete=discrete, stay_prior=stay_prior if discrete else 0.0, algorithm=algo,
-    )  # fmt: skip
+    cfg = TrainConfig(**{
+        **algorithm_settings(algo), "num_envs": num_envs, "iterations": iterations, "seed": seed,
+        "num_steps_per_env": steps_per_env, "discrete": discrete,
+        "stay_prior": stay_prior if discrete else 0.0, "algorithm": algo, "es_population": es_population,
+        "es_sigma": es_sigma,
+    })  # fmt: skip
+    misfit = es_population_error(es_population, num_envs) if algo == "es" else None
+    if misfit:
+        raise click.BadParameter(misfit.split(": ", 1)[1], param_hint="--es-population")
     out, claim = common.claim(out, "train", resume is not None, overwrite)
     click.echo(f"training {name} with {algo} into {out} ({num_envs} envs, {iterations} iterations, {device})")
     try:
@@ -253,14 +281,14 @@ def command(
 
 
 def _actions_for(algo: str, action_type: str) -> str:
-    """The action type ``algo`` trains: APG needs continuous moves, and takes them by default."""
-    if algo != "apg" or action_type == "continuous":
+    """The action type ``algo`` trains: APG and es need continuous moves, and take them by default."""
+    if algo not in CONTINUOUS_ALGORITHMS or action_type == "continuous":
         return action_type
     if (
         click.get_current_context().get_parameter_source("action_type")
         == click.core.ParameterSource.COMMANDLINE
     ):
-        raise click.UsageError("--algo apg: differentiates continuous moves; use --actions continuous")
+        raise click.UsageError(f"--algo {algo}: plays continuous moves; use --actions continuous")
     return "continuous"
 
 
@@ -317,6 +345,7 @@ RESUMED_SETTINGS = {
     "num_envs": ("num_envs", "--num-envs"),
     "num_steps_per_env": ("steps_per_env", "--steps-per-env"),
     "stay_prior": ("stay_prior", "--stay-prior"),
+    "es_population": ("es_population", "--es-population"),
 }
 """What a resumed run keeps beyond its options (:func:`agents.rl.resume_settings`): its key, the command's
 parameter and flag."""

@@ -1,0 +1,163 @@
+"""Evolution strategies (es) on the tensioning policy's weights: the neural closed-loop policy trained from
+the path score itself through the batched simulator, an alternative to PPO and APG (``warpcut train --algo
+es``, ``--recipe es``; Salimans et al. 2017, "Evolution Strategies as a Scalable Alternative to
+Reinforcement Learning"; Mania et al. 2018 for the observation normalisation).
+
+Each iteration perturbs the actor MLP's weights ``θ`` into ``TrainConfig.es_population`` policies in
+antithetic pairs (``θ ± σε``, ``σ = TrainConfig.es_sigma``), plays every one of them on
+``num_envs / es_population`` episodes in one simulator batch (env ``e`` plays policy ``e // trials``; each
+policy moves by its deterministic output, clipped to one ``max_step_mm`` per axis, as the env and the
+evaluation play it), and scores each whole cut with the evaluation's error (the path score's symmetric
+difference in vertices; with ``relative_reward`` or ``randomize`` weighed by the env's reward scale, so a
+sheet that hangs flat counts as much as the nominal one). The errors are replaced by their centred ranks
+(a diverged cut ranks last) and ``Σ rank_p ε_p / (population σ)`` is the smoothed error's gradient, a step
+of Adam (:class:`agents.gradient.Adam`, ``TrainConfig.learning_rate``). The observation normaliser learns
+from every observation of the iteration after the step (it is frozen within an iteration, so every
+perturbed policy sees the same normalisation).
+
+Forward passes only: no critic, no action noise, no tape; the env's own step does everything a move does
+(analytic share, base plan, randomised sheets), so every option PPO trains with, es trains with. The
+policy is rsl-rl's actor and :class:`EsRunner` PPO's runner with the learning iteration replaced
+(:class:`agents.episodic.EpisodeRunner`), so checkpoints, validation, model selection, resume, evaluation
+and export are PPO's. The actor starts at "hold still" (its output layer zeroed).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from rsl_rl.env import VecEnv
+
+from agents.config import es_population_error
+from agents.episodic import EpisodeRunner
+from agents.gradient import Adam
+
+
+class EsRunner(EpisodeRunner):
+    """:class:`~agents.episodic.EpisodeRunner` whose learning iteration is an es step (see the module)."""
+
+    name = "es"
+    scalars = ("final_error", "best_error", "step_norm")
+
+    def __init__(self, env: VecEnv, train_cfg: dict, log_dir: str | Path | None, device: str = "cpu") -> None:
+        super().__init__(env, train_cfg, log_dir, device)
+        settings = train_cfg.get("es", {})
+        self.population, self.sigma = int(settings["population"]), float(settings["sigma"])
+        error = es_population_error(self.population, env.num_envs)
+        if error:
+            raise ValueError(error)
+        if not (np.isfinite(self.sigma) and self.sigma > 0):
+            raise ValueError(f"es_sigma: must be a finite number > 0 (got {self.sigma}); e.g. 0.02")
+        self.trials = env.num_envs // self.population
+        self.steps_per_iteration = env.num_envs * self.scene.task.num_steps
+        self.layers = [m for m in self.alg.actor.mlp.modules() if isinstance(m, torch.nn.Linear)]
+        self.num_params = sum(p.numel() for layer in self.layers for p in (layer.weight, layer.bias))
+        self.adam = Adam((self.num_params,), float(train_cfg["algorithm"]["learning_rate"]))
+
+    def _extra_state(self) -> dict:
+        return {"es_adam": self.adam.state()}
+
+    def _load_extra(self, infos: dict) -> None:
+        self.adam.load(infos["es_adam"])
+
+    def _theta(self) -> np.ndarray:
+        """The actor MLP's weights and biases, layer by layer, as one float64 vector."""
+        parts = [p.detach().cpu().reshape(-1) for layer in self.layers for p in (layer.weight, layer.bias)]
+        return torch.cat(parts).double().numpy()
+
+    def _set_theta(self, theta: np.ndarray) -> None:
+        offset = 0
+        with torch.no_grad():
+            for layer in self.layers:
+                for p in (layer.weight, layer.bias):
+                    n = p.numel()
+                    p.copy_(torch.as_tensor(theta[offset : offset + n], dtype=p.dtype).reshape(p.shape))
+                    offset += n
+
+    def _unpack(self, thetas: np.ndarray) -> list[tuple[torch.Tensor, torch.Tensor]]:
+        """``(weights (P, out, in), biases (P, out))`` per layer of the ``(P, num_params)`` vectors."""
+        out, offset = [], 0
+        batch = torch.as_tensor(thetas, dtype=torch.float32, device=self.device)
+        for layer in self.layers:
+            w, b = layer.weight.shape, layer.bias.shape
+            weight = batch[:, offset : offset + w.numel()].reshape(len(batch), *w)
+            offset += w.numel()
+            bias = batch[:, offset : offset + b.numel()]
+            offset += b.numel()
+            out.append((weight, bias))
+        return out
+
+    def _moves(self, obs: np.ndarray, layers: list[tuple[torch.Tensor, torch.Tensor]]) -> np.ndarray:
+        """(B, A) actions of env ``e``'s policy ``e // trials`` for the (B, D) observations: the actor's own
+        normalisation and MLP, each policy with its own weights, its deterministic output clipped to 1."""
+        from tensordict import TensorDict
+
+        actor, b = self.alg.actor, self.env.num_envs
+        with torch.inference_mode():
+            tensor = torch.as_tensor(obs, device=self.device)
+            latent = actor.get_latent(TensorDict({"policy": tensor}, batch_size=[b]))
+            h = latent.reshape(self.population, self.trials, -1)
+            linear = iter(layers)
+            for module in actor.mlp:
+                if isinstance(module, torch.nn.Linear):
+                    weight, bias = next(linear)
+                    h = torch.baddbmm(bias.unsqueeze(1), h, weight.transpose(1, 2))
+                else:
+                    h = module(h)
+            out = h.reshape(b, -1)
+            if actor.distribution is not None:
+                out = actor.distribution.deterministic_output(out)
+            return torch.clamp(out, -1.0, 1.0).cpu().numpy()
+
+    def _episode(self, layers) -> tuple[np.ndarray, list[np.ndarray], int]:
+        """Play one whole cut in every env; ``(weighed errors (B,), NaN where diverged; the observations
+        seen; steps)``."""
+        scene = self.scene
+        obs = scene.reset(self.episode_rng, resample_fiducials=scene.options.resample_fiducials)
+        seen, steps, info = [obs], 0, {}
+        while True:
+            obs, _, terminated, truncated, info = scene.step(self._moves(obs, layers))
+            steps += 1
+            if terminated or truncated:
+                break
+            seen.append(obs)
+        errors = np.asarray(info.get("error_vertices", np.full(self.env.num_envs, np.nan)), dtype=np.float64)
+        errors = np.where(scene.diverged, np.nan, errors) * scene.reward_scale
+        return errors, seen, steps
+
+    def _iteration(self) -> dict:
+        """One es step (module docstring); the iteration's metrics."""
+        start = time.perf_counter()
+        theta = self._theta()
+        half = self.episode_rng.standard_normal((self.population // 2, self.num_params))
+        eps = np.concatenate([half, -half])
+        errors, seen, steps = self._episode(self._unpack(theta + self.sigma * eps))
+        collected = time.perf_counter()
+        errors = errors.reshape(self.population, self.trials)
+        finite = np.isfinite(errors).all(axis=1)
+        fitness = np.where(finite, errors.mean(axis=1), np.inf)
+        ranks = np.empty(self.population)
+        ranks[np.argsort(fitness, kind="stable")] = np.arange(self.population)
+        centred = ranks / (self.population - 1) - 0.5  # the highest error +0.5
+        step = self.adam.step(centred @ eps / (self.population * self.sigma))
+        self._set_theta(theta + step)
+        actor = self.alg.actor
+        if actor.obs_normalization:
+            from tensordict import TensorDict
+
+            batch = torch.as_tensor(np.concatenate(seen), device=self.device)
+            actor.update_normalization(TensorDict({"policy": batch}, batch_size=[len(batch)]))
+        elapsed = time.perf_counter() - start
+        total = self.env.num_envs * steps
+        return {
+            "final_error": float(np.mean(fitness[finite])) if finite.any() else float("nan"),
+            "best_error": float(np.min(fitness)),
+            "step_norm": float(np.linalg.norm(step)),
+            "mean_return": None,
+            "mean_episode_length": float(steps),
+            "iteration_steps_per_s": total / elapsed,
+            "collection_steps_per_s": total / (collected - start),
+        }
