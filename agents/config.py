@@ -46,11 +46,12 @@ class TrainConfig:
     es_sigma: float = 0.02
     """es only: the perturbations' standard deviation in weight space (the actor's output is in units of
     ``max_step_mm``; docs/learning.md, "es on the neural policy")."""
-    iterations: int = 150
+    iterations: int | None = 150
     """Total learning iterations of the run, counting those done before a resume. 150: on the Table I suite,
     two seeds of 256 envs x 150 iterations kept a trained policy on 17-18 contours of 26 at RL +43.0-43.3%,
     against 15-16 and +41.1-41.6% with 75; 50-59 s a contour on this 2-core CPU, at the edge of issue 16's
-    60 s (docs/learning.md, "Table I")."""
+    60 s (docs/learning.md, "Table I"). None: the algorithm's default for the env (es: as many whole cuts as
+    PPO's default run simulates env steps, :func:`es_iterations`)."""
     seed: int = 0
     """Seed of Python, NumPy, torch and the env (``env.seed``)."""
     torch_device: str = "cpu"
@@ -114,6 +115,16 @@ class TrainConfig:
     errors of its episode-by-episode difference from the initial policy's (the same held-out episodes), and
     the lowest score is kept. 1: a trained policy must beat the initial one by more than one standard
     error; 0: the lowest mean, however noisy (docs/learning.md, "Model selection")."""
+
+    def check_algorithm(self) -> None:
+        """``ValueError`` naming ``algorithm`` unless it is known and fits the actions."""
+        if self.algorithm not in ALGORITHMS:
+            raise ValueError(f"algorithm: choose one of {', '.join(ALGORITHMS)} (got {self.algorithm!r})")
+        if self.algorithm in CONTINUOUS_ALGORITHMS and self.discrete:
+            raise ValueError(
+                f"algorithm: {self.algorithm} plays continuous moves; set discrete=False "
+                "(--actions continuous)"
+            )
 
     def to_rsl_rl(self, num_action_choices: int | None = None) -> dict:
         """Return rsl-rl 5.5.1's ``OnPolicyRunner`` config.
@@ -241,10 +252,37 @@ def es_population_error(population: int, num_envs: int) -> str | None:
     )
 
 
-ES_BATCH = {"num_envs": 256, "iterations": 60}
+ES_BATCH = {"num_envs": 256, "iterations": None}
 """es's envs and iterations where none are given: 64 perturbed policies x 4 episodes, one whole cut each, an
-iteration; 60 iterations fit issue 16's 60 s a contour on this 2-core CPU (docs/learning.md, "es on the
-neural policy")."""
+iteration; as many iterations as :func:`es_iterations` gives for the contour (resolved by
+:func:`agents.train.train`, where the episode's length is known)."""
+
+ES_ENV_STEPS = TrainConfig.iterations * TrainConfig.num_envs * TrainConfig.num_steps_per_env
+"""es's env steps per policy where no iterations are given: PPO's default run's (150 x 256 x 32 =
+1,228,800). An es iteration plays whole cuts, 48 to 380 steps on the suite, so a fixed count of them would
+cost eight times more on the longest contour than on the shortest."""
+
+ES_MIN_ITERATIONS = 10
+"""The fewest iterations :func:`es_iterations` gives (one validation after the initial one)."""
+
+
+def default_iterations(algorithm: str, env) -> int:
+    """The iterations a run of ``algorithm`` on ``env`` (warpcut's rsl-rl env) trains for where none are
+    given: :func:`es_iterations` of its episode for es, :func:`batch_defaults`' otherwise."""
+    if algorithm == "es":
+        return es_iterations(env.num_envs, env.env.scene.task.num_steps)
+    return int(batch_defaults(algorithm)["iterations"])
+
+
+def iterations_text(iterations: int | None) -> str:
+    """``iterations`` for the logs: ``"150 iterations"``, or for None es's rule (:func:`es_iterations`)."""
+    return f"{iterations} iterations" if iterations is not None else "iterations for PPO's env steps"
+
+
+def es_iterations(num_envs: int, episode_steps: int) -> int:
+    """es's default iterations: :data:`ES_ENV_STEPS` over ``num_envs`` whole cuts of ``episode_steps``,
+    at least :data:`ES_MIN_ITERATIONS`."""
+    return max(ES_MIN_ITERATIONS, round(ES_ENV_STEPS / (num_envs * episode_steps)))
 
 
 def batch_defaults(algorithm: str) -> dict[str, int]:

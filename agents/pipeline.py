@@ -40,6 +40,7 @@ from agents.config import (
     GradConfig,
     Recipe,
     TrainConfig,
+    iterations_text,
 )
 from agents.evaluation import Method, MethodResult, evaluate_suite, run_method
 from agents.gradient import base_plan_options, grad_column
@@ -457,7 +458,7 @@ def _train_candidates(
                 for k, ((run_dir, options), c, s) in enumerate(zip(jobs, listed, cuts, strict=True))
             ]  # fmt: skip
         what = f"an RL policy for each of the best {len(listed)} pinch candidate(s) ({envs} envs each"
-    log(f"[2/3] training {what}, {train['iterations']} PPO iterations)")
+    log(f"[2/3] training {what}, {iterations_text(train['iterations'])})")
     for k, (run_dir, options) in enumerate(jobs):
         label = (
             f"PPO {plan.contour.name}, {len(listed)} candidates"
@@ -754,7 +755,7 @@ def _rl_result(
             kept = training["resume"] and finished_run(run)
             verb = "kept" if kept else "training"
             count = f"[{k + 1}/{len(named)}]"
-            log(f"  {count} {verb} rl for {contour.name} ({training['iterations']} iterations)")
+            log(f"  {count} {verb} rl for {contour.name} ({iterations_text(training['iterations'])})")
             planned = {}
             if plans is not None:
                 planned = {

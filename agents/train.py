@@ -51,7 +51,7 @@ import statistics
 import sys
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -70,7 +70,7 @@ from rsl_rl.env import VecEnv
 from rsl_rl.runners import OnPolicyRunner
 from rsl_rl.utils.logger import Logger
 
-from agents.config import ALGORITHMS, CONTINUOUS_ALGORITHMS, TrainConfig
+from agents.config import TrainConfig, default_iterations
 from agents.ppo_speed import speed_up
 from envs.rsl import FINAL_ERROR_KEY
 from warpcut.io import DiskFull, write_atomic, write_json
@@ -118,7 +118,9 @@ def train(
         The summary also written to ``out_dir/summary.json``.
     """
     cfg = cfg if isinstance(cfg, TrainConfig) else TrainConfig(**cfg)
-    _check_algorithm(cfg)
+    cfg.check_algorithm()
+    if cfg.iterations is None:  # the algorithm's default for this env
+        cfg = replace(cfg, iterations=default_iterations(cfg.algorithm, env))
     if not cfg.selection_margin >= 0:
         raise ValueError(f"selection_margin: must be >= 0 standard errors, got {cfg.selection_margin}")
     if env.num_envs != cfg.num_envs:
@@ -194,16 +196,6 @@ def train(
         }
         _write_summary(out_dir / "summary.json", summary, runner.checkpoint, ending)
     return summary
-
-
-def _check_algorithm(cfg: TrainConfig) -> None:
-    """``ValueError`` naming ``algorithm`` unless it is known and fits the actions."""
-    if cfg.algorithm not in ALGORITHMS:
-        raise ValueError(f"algorithm: choose one of {', '.join(ALGORITHMS)} (got {cfg.algorithm!r})")
-    if cfg.algorithm in CONTINUOUS_ALGORITHMS and cfg.discrete:
-        raise ValueError(
-            f"algorithm: {cfg.algorithm} plays continuous moves; set discrete=False (--actions continuous)"
-        )
 
 
 def _runner_class(cfg: TrainConfig) -> type[Runner]:

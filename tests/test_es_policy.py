@@ -128,3 +128,26 @@ def test_es_learns_a_neural_policy_that_beats_a_still_grasp(tmp_path):
     row = report.table["rows"][0]
     assert row["rl_policy_iteration"] > 0
     assert row["rl_improvement_pct"] - row["rl_ci95"] > row["fixed_improvement_pct"] + row["fixed_ci95"], row
+
+
+def test_es_trains_as_many_whole_cuts_as_ppos_env_steps_unless_told(tmp_path, monkeypatch):
+    """Without iterations es plays PPO's default run's env steps in whole cuts: a contour's iterations
+    follow its episode's length (48 to 380 steps on the suite)."""
+    import json
+
+    import agents.config as config
+    from agents.train import train
+
+    assert (
+        config.ES_ENV_STEPS == TrainConfig.iterations * TrainConfig.num_envs * TrainConfig.num_steps_per_env
+    )
+    assert config.es_iterations(256, 48) == 100 and config.es_iterations(256, 380) == 13
+    assert config.es_iterations(256, 10**5) == config.ES_MIN_ITERATIONS
+    assert batch_defaults("es")["iterations"] is None
+    env, cfg = _es_env(4)
+    steps = env.env.scene.task.num_steps
+    monkeypatch.setattr(config, "ES_ENV_STEPS", 3 * 4 * steps)
+    monkeypatch.setattr(config, "ES_MIN_ITERATIONS", 1)
+    summary = train(env, TrainConfig(**{**cfg.__dict__, "iterations": None}), tmp_path, progress=False)
+    assert summary["iterations"] == 3 and summary["env_steps"] == 3 * 4 * steps
+    assert json.loads((tmp_path / "config.json").read_text())["train"]["iterations"] == 3

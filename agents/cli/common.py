@@ -208,8 +208,8 @@ DEFAULTS = SimConfig()
 _PPO, _APG, _ES = batch_defaults("ppo"), batch_defaults("apg"), batch_defaults("es")
 BATCH_DEFAULTS_HELP = (
     f"Default: the algorithm's, {_PPO['num_envs']} envs x {_PPO['iterations']} iterations for PPO, "
-    f"{_APG['num_envs']} x {_APG['iterations']} for APG, {_ES['num_envs']} x {_ES['iterations']} for es "
-    "(agents.config.batch_defaults)."
+    f"{_APG['num_envs']} x {_APG['iterations']} for APG, {_ES['num_envs']} envs for es, its iterations "
+    "as many whole cuts as PPO's env steps (agents.config.batch_defaults, es_iterations)."
 )
 """What ``--num-envs`` and ``--iterations`` default to where the algorithm decides (train, evaluate)."""
 

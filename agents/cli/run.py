@@ -68,7 +68,8 @@ from warpcut.sim.config import SimConfig
 @common.count_option(
     "iterations",
     None,
-    f"Override the budget's PPO iterations (--recipe apg: APG's own, {APG_BATCH['iterations']}).",
+    f"Override the budget's PPO iterations (--recipe apg: APG's own, {APG_BATCH['iterations']}; --recipe es: "
+    "as many whole cuts as PPO's env steps).",
 )
 @click.option(
     "--validation-trials",
@@ -81,8 +82,8 @@ from warpcut.sim.config import SimConfig
 @common.count_option(
     "num-envs",
     None,
-    "Envs per policy (default: the recipe's algorithm's, PPO 256, APG 16; with --shared-policy at least 8 "
-    "per candidate).",
+    "Envs per policy (default: the recipe's algorithm's, PPO 256, APG 16, es 256; with --shared-policy at "
+    "least 8 per candidate).",
 )
 @common.resolution_option
 @common.noise_option

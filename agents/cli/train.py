@@ -18,6 +18,7 @@ from agents.config import (
     algorithm_settings,
     batch_defaults,
     es_population_error,
+    iterations_text,
 )
 from warpcut.sim.config import SimConfig
 
@@ -250,7 +251,9 @@ def command(
     if misfit:
         raise click.BadParameter(misfit.split(": ", 1)[1], param_hint="--es-population")
     out, claim = common.claim(out, "train", resume is not None, overwrite)
-    click.echo(f"training {name} with {algo} into {out} ({num_envs} envs, {iterations} iterations, {device})")
+    click.echo(
+        f"training {name} with {algo} into {out} ({num_envs} envs, {iterations_text(iterations)}, {device})"
+    )
     try:
         with claim, common.recorder(out, record_envs, colour_by) as rec, videos(out, video_envs) as vid:
             result = train_contour(
