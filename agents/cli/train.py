@@ -184,7 +184,7 @@ def command(
     no_progress: bool,
 ) -> None:
     """Train a tensioning policy (2x32 MLP, 1 mm moves) for one contour: PPO, APG or es."""
-    from agents.rl import load_options, train_contour
+    from agents.rl import train_contour
     from envs.options import PatternCutOptions
     from warpcut.contours import load_contour
     from warpcut.io import safe_name
@@ -193,33 +193,16 @@ def command(
     action_type = _actions_for(algo, action_type)
     randomized, ranges = common.parse_randomization(randomize, randomize_range)
     common.refuse_apg(bool(randomized) or relative_reward, algo)
+    settings = dict(
+        seed=seed, validation_trials=validation_trials, num_envs=num_envs, num_steps_per_env=steps_per_env,
+        stay_prior=stay_prior, algorithm=algo, es_population=es_population,
+    )  # fmt: skip
     if resume is not None:
-        if not resume.is_dir():
-            from agents.train import read_checkpoint
-
-            read_checkpoint(resume)  # a file that is not a checkpoint: named before its directory is read
-        run = resume if resume.is_dir() else resume.parent
-        options, out = load_options(run, device), out or run
         given = dict(
             contour_name=contour_name, pinch=point, noise=noise, score=score, reward=reward, observe=observe,
             action_type=action_type, allow_z=allow_z, randomize=randomized, relative_reward=relative_reward,
         )  # fmt: skip
-        _check_resumed_flags(run, options, given)
-        trained = options.randomized()
-        if any(trained.get(name) != bounds for name, bounds in ranges.items()):
-            raise click.UsageError(
-                f"--randomize-range: the resumed run {run} randomises {trained or 'nothing'} (its "
-                "options.json); drop --randomize-range, or train a new run without --resume"
-            )
-        kept = _resumed_settings(
-            resume, seed=seed, validation_trials=validation_trials, num_envs=num_envs,
-            num_steps_per_env=steps_per_env, stay_prior=stay_prior, algorithm=algo,
-            es_population=es_population,
-        )  # fmt: skip
-        seed, validation_trials, num_envs = kept["seed"], kept["validation_trials"], kept["num_envs"]
-        algo = kept["algorithm"]
-        steps_per_env, stay_prior = kept["num_steps_per_env"], kept["stay_prior"]
-        es_population = kept["es_population"]
+        options, out, settings = _resumed_run(resume, device, out, given, ranges, settings)
     else:
         if contour_name is None:
             raise click.UsageError("--contour: give the contour to train on (or --resume RUN to continue)")
@@ -239,17 +222,8 @@ def command(
         options.per_env(1)  # fail early on a bad contour or an infeasible default pinch
         out = out or common.run_dir(None, f"train-{safe_name(load_contour(contour_name).name)}")
     name, discrete = options.contours(1)[0].name, options.action_type == "discrete"
-    batch = batch_defaults(algo)
-    num_envs, iterations = num_envs or batch["num_envs"], iterations or batch["iterations"]
-    cfg = TrainConfig(**{
-        **algorithm_settings(algo), "num_envs": num_envs, "iterations": iterations, "seed": seed,
-        "num_steps_per_env": steps_per_env, "discrete": discrete,
-        "stay_prior": stay_prior if discrete else 0.0, "algorithm": algo, "es_population": es_population,
-        "es_sigma": es_sigma,
-    })  # fmt: skip
-    misfit = es_population_error(es_population, num_envs) if algo == "es" else None
-    if misfit:
-        raise click.BadParameter(misfit.split(": ", 1)[1], param_hint="--es-population")
+    cfg = _train_config(settings, iterations, discrete, es_sigma)
+    algo, num_envs, iterations = cfg.algorithm, cfg.num_envs, cfg.iterations
     out, claim = common.claim(out, "train", resume is not None, overwrite)
     click.echo(
         f"training {name} with {algo} into {out} ({num_envs} envs, {iterations_text(iterations)}, {device})"
@@ -258,7 +232,7 @@ def command(
         with claim, common.recorder(out, record_envs, colour_by) as rec, videos(out, video_envs) as vid:
             result = train_contour(
                 options, out, cfg, resume=resume, eval_trials=eval_trials, progress=not no_progress,
-                validation_trials=validation_trials,
+                validation_trials=settings["validation_trials"],
                 step_callbacks=with_videos(common.step_callbacks(rec, None), vid),
             )  # fmt: skip
     except KeyboardInterrupt as stop:  # Ctrl-C, SIGTERM, SIGHUP: the checkpoint is saved
@@ -281,6 +255,44 @@ def command(
         common.echo_written(plot_learning_curve(s["history"], s["validation"], out, title=name))
     common.echo_recording(rec)
     click.echo(f"wrote {out}")
+
+
+def _resumed_run(resume: Path, device, out: Path | None, given: dict, ranges: dict, settings: dict):
+    """``(options, out, settings)`` of a resumed run: its options (the flags ``given`` on the command line
+    checked against them), its directory unless ``out``, and the training ``settings`` it keeps."""
+    from agents.rl import load_options
+
+    if not resume.is_dir():
+        from agents.train import read_checkpoint
+
+        read_checkpoint(resume)  # a file that is not a checkpoint: named before its directory is read
+    run = resume if resume.is_dir() else resume.parent
+    options, out = load_options(run, device), out or run
+    _check_resumed_flags(run, options, given)
+    trained = options.randomized()
+    if any(trained.get(name) != bounds for name, bounds in ranges.items()):
+        raise click.UsageError(
+            f"--randomize-range: the resumed run {run} randomises {trained or 'nothing'} (its "
+            "options.json); drop --randomize-range, or train a new run without --resume"
+        )
+    return options, out, _resumed_settings(resume, **settings)
+
+
+def _train_config(settings: dict, iterations: int | None, discrete: bool, es_sigma: float) -> TrainConfig:
+    """The run's :class:`TrainConfig`: the algorithm's batch and recipe settings under the command's; a
+    usage error for an es population that does not fit the envs."""
+    algo = settings["algorithm"]
+    batch = batch_defaults(algo)
+    num_envs, iterations = settings["num_envs"] or batch["num_envs"], iterations or batch["iterations"]
+    misfit = es_population_error(settings["es_population"], num_envs) if algo == "es" else None
+    if misfit:
+        raise click.BadParameter(misfit.split(": ", 1)[1], param_hint="--es-population")
+    return TrainConfig(**{
+        **algorithm_settings(algo), "num_envs": num_envs, "iterations": iterations, "seed": settings["seed"],
+        "num_steps_per_env": settings["num_steps_per_env"], "discrete": discrete,
+        "stay_prior": settings["stay_prior"] if discrete else 0.0, "algorithm": algo,
+        "es_population": settings["es_population"], "es_sigma": es_sigma,
+    })  # fmt: skip
 
 
 def _actions_for(algo: str, action_type: str) -> str:
