@@ -460,10 +460,10 @@ def _train_candidates(
         what = f"an RL policy for each of the best {len(listed)} pinch candidate(s) ({envs} envs each"
     log(f"[2/3] training {what}, {iterations_text(train['iterations'])})")
     for k, (run_dir, options) in enumerate(jobs):
-        label = (
-            f"PPO {plan.contour.name}, {len(listed)} candidates"
+        label = f"{recipe.train.get('algorithm', TrainConfig.algorithm).upper()} {plan.contour.name}, " + (
+            f"{len(listed)} candidates"
             if shared
-            else f"PPO {plan.contour.name}, candidate {k + 1}/{len(jobs)} {point_text(listed[k]['pinch'])}"
+            else f"candidate {k + 1}/{len(jobs)} {point_text(listed[k]['pinch'])}"
         )
         summary = train_policy(
             options, run_dir, recipe, num_envs=envs, progress=progress, label=label, **train

@@ -85,7 +85,7 @@ def train_contour(
         validation_trials: Held-out episodes per validation; 0 disables validation (the run's policy is
             then the last one).
         step_callbacks: Step callbacks of the final evaluation's batches (see :func:`evaluate_run`).
-        label: The progress bar's label (default: "PPO CONTOUR").
+        label: The progress bar's label (default: "ALGORITHM CONTOUR", e.g. "PPO fls-circle").
 
     Returns:
         ``{"summary": training summary, "evaluation": evaluation of the run's policy}``.
@@ -133,7 +133,7 @@ def train_contour(
             """Mean validation error (vertices) per candidate."""
             return validate(actor).mean(axis=0)
 
-    label = label or f"PPO {options.contours(1)[0].name}"
+    label = label or f"{cfg.algorithm.upper()} {options.contours(1)[0].name}"
     summary = train(env, cfg, out_dir, resume=resume, progress=progress, validate=validate, label=label)
     if shared:
         errors = candidate_errors(load_policy(out_dir))
