@@ -9,11 +9,13 @@ antithetic pairs (``θ ± σε``, ``σ = TrainConfig.es_sigma``), plays every on
 policy moves by its deterministic output, clipped to one ``max_step_mm`` per axis, as the env and the
 evaluation play it), and scores each whole cut with the evaluation's error (the path score's symmetric
 difference in vertices; with ``relative_reward`` or ``randomize`` weighed by the env's reward scale, so a
-sheet that hangs flat counts as much as the nominal one). The errors are replaced by their centred ranks
-(a diverged cut ranks last) and ``Σ rank_p ε_p / (population σ)`` is the smoothed error's gradient, a step
-of Adam (:class:`agents.gradient.Adam`, ``TrainConfig.learning_rate``). The observation normaliser learns
-from every observation of the iteration after the step (it is frozen within an iteration, so every
-perturbed policy sees the same normalisation).
+sheet that hangs flat counts as much as the nominal one). Randomised sheets are common random numbers:
+each iteration draws ``trials`` sheets and every perturbed policy cuts the same ones (episode ``k`` of
+each), so the ranking compares policies, not sheets (the process noise still differs from env to env).
+The errors are replaced by their centred ranks (a diverged cut ranks last) and ``Σ rank_p ε_p / (population
+σ)`` is the smoothed error's gradient, a step of Adam (:class:`agents.gradient.Adam`,
+``TrainConfig.learning_rate``). The observation normaliser learns from every observation of the iteration
+after the step (it is frozen within an iteration, so every perturbed policy sees the same normalisation).
 
 Forward passes only: no critic, no action noise, no tape; the env's own step does everything a move does
 (analytic share, base plan, randomised sheets), so every option PPO trains with, es trains with. The
@@ -116,7 +118,7 @@ class EsRunner(EpisodeRunner):
         """Play one whole cut in every env; ``(weighed errors (B,), NaN where diverged; the observations
         seen; steps)``."""
         scene = self.scene
-        obs = scene.reset(self.episode_rng, resample_fiducials=scene.options.resample_fiducials)
+        obs = scene.reset(self.episode_rng, scene.options.resample_fiducials, repeat=self.population)
         seen, steps, info = [obs], 0, {}
         while True:
             obs, _, terminated, truncated, info = scene.step(self._moves(obs, layers))

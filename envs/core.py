@@ -144,12 +144,15 @@ class PatternCut:
         """Steps taken in the current episode."""
         return self.task.step_index
 
-    def reset(self, rng: np.random.Generator, resample_fiducials: bool) -> np.ndarray:
+    def reset(self, rng: np.random.Generator, resample_fiducials: bool, repeat: int = 1) -> np.ndarray:
         """Start an episode with process noise seeded from ``rng``; return (B, D) observations.
 
         Args:
             rng: Random source of the noise seed and of the fiducials.
             resample_fiducials: Draw new fiducials (always done at the first reset).
+            repeat: With randomised parameters, the batch is ``repeat`` copies of ``B / repeat`` sheets: env
+                ``e`` draws the parameters of env ``e % (B / repeat)`` (common random numbers: es compares
+                its perturbed policies, copy by copy, on the same sheets).
         """
         seed = int(rng.integers(2**31 - 1))
         if resample_fiducials or not self._sampled:
@@ -161,7 +164,10 @@ class PatternCut:
                 )
             self._sampled = True
         if self._randomized:
-            self.task.set_params(**sample_parameters(rng, self._randomized, self.num_envs))
+            if repeat < 1 or self.num_envs % repeat:
+                raise ValueError(f"repeat: {repeat} must be >= 1 and divide the {self.num_envs} envs")
+            draws = sample_parameters(rng, self._randomized, self.num_envs // repeat)
+            self.task.set_params(**{name: np.tile(values, repeat) for name, values in draws.items()})
             steps = self.task.num_steps
             self.episode_steps = min(steps, self.options.max_episode_steps or steps)
         if self.options.relative_reward:
