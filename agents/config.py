@@ -260,7 +260,7 @@ iteration; as many iterations as :func:`es_iterations` gives for the contour (re
 
 ES_ENV_STEPS = TrainConfig.iterations * TrainConfig.num_envs * TrainConfig.num_steps_per_env
 """es's env steps per policy where no iterations are given: PPO's default run's (150 x 256 x 32 =
-1,228,800). An es iteration plays whole cuts, 48 to 380 steps on the suite, so a fixed count of them would
+1,228,800). An es iteration plays whole cuts, 41 to 380 steps on the suite, so a fixed count of them would
 cost eight times more on the longest contour than on the shortest."""
 
 ES_MIN_ITERATIONS = 10

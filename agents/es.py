@@ -156,7 +156,7 @@ class EsRunner(EpisodeRunner):
         total = self.env.num_envs * steps
         return {
             "final_error": float(np.mean(fitness[finite])) if finite.any() else float("nan"),
-            "best_error": float(np.min(fitness)),
+            "best_error": float(np.min(fitness)) if finite.any() else float("nan"),
             "step_norm": float(np.linalg.norm(step)),
             "mean_return": None,
             "mean_episode_length": float(steps),

@@ -132,7 +132,7 @@ def test_es_learns_a_neural_policy_that_beats_a_still_grasp(tmp_path):
 
 def test_es_trains_as_many_whole_cuts_as_ppos_env_steps_unless_told(tmp_path, monkeypatch):
     """Without iterations es plays PPO's default run's env steps in whole cuts: a contour's iterations
-    follow its episode's length (48 to 380 steps on the suite)."""
+    follow its episode's length (41 to 380 steps on the suite)."""
     import json
 
     import agents.config as config
