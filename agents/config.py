@@ -290,7 +290,7 @@ def batch_defaults(algorithm: str) -> dict[str, int]:
     """``{"num_envs": ..., "iterations": ...}`` a run of ``algorithm`` (:data:`ALGORITHMS`) trains with unless
     told otherwise: :class:`TrainConfig`'s for PPO, :data:`APG_BATCH` for APG, :data:`ES_BATCH` for es."""
     if algorithm in ("apg", "es"):
-        return dict(APG_BATCH if algorithm == "apg" else ES_BATCH)
+        return dict({"apg": APG_BATCH, "es": ES_BATCH}[algorithm])
     return {"num_envs": TrainConfig.num_envs, "iterations": TrainConfig.iterations}
 
 

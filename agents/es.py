@@ -56,7 +56,8 @@ class EsRunner(EpisodeRunner):
         self.trials = env.num_envs // self.population
         self.steps_per_iteration = env.num_envs * self.scene.task.num_steps
         self.layers = [m for m in self.alg.actor.mlp.modules() if isinstance(m, torch.nn.Linear)]
-        self.num_params = sum(p.numel() for layer in self.layers for p in (layer.weight, layer.bias))
+        self.params = [p for layer in self.layers for p in (layer.weight, layer.bias)]
+        self.num_params = sum(p.numel() for p in self.params)
         self.adam = Adam((self.num_params,), float(train_cfg["algorithm"]["learning_rate"]))
 
     def _extra_state(self) -> dict:
@@ -67,17 +68,12 @@ class EsRunner(EpisodeRunner):
 
     def _theta(self) -> np.ndarray:
         """The actor MLP's weights and biases, layer by layer, as one float64 vector."""
-        parts = [p.detach().cpu().reshape(-1) for layer in self.layers for p in (layer.weight, layer.bias)]
-        return torch.cat(parts).double().numpy()
+        return torch.nn.utils.parameters_to_vector(self.params).detach().cpu().double().numpy()
 
     def _set_theta(self, theta: np.ndarray) -> None:
-        offset = 0
+        vector = torch.as_tensor(theta, dtype=self.params[0].dtype, device=self.params[0].device)
         with torch.no_grad():
-            for layer in self.layers:
-                for p in (layer.weight, layer.bias):
-                    n = p.numel()
-                    p.copy_(torch.as_tensor(theta[offset : offset + n], dtype=p.dtype).reshape(p.shape))
-                    offset += n
+            torch.nn.utils.vector_to_parameters(vector, self.params)
 
     def _unpack(self, thetas: np.ndarray) -> list[tuple[torch.Tensor, torch.Tensor]]:
         """``(weights (P, out, in), biases (P, out))`` per layer of the ``(P, num_params)`` vectors."""
@@ -126,8 +122,9 @@ class EsRunner(EpisodeRunner):
             if terminated or truncated:
                 break
             seen.append(obs)
+        # the score is NaN for a diverged env; an episode that ended with every env diverged has none
         errors = np.asarray(info.get("error_vertices", np.full(self.env.num_envs, np.nan)), dtype=np.float64)
-        errors = np.where(scene.diverged, np.nan, errors) * scene.reward_scale
+        errors = errors * scene.reward_scale
         return errors, seen, steps
 
     def _iteration(self) -> dict:
