@@ -49,7 +49,6 @@ class ApgRunner(EpisodeRunner):
         if options.randomize or options.relative_reward:
             raise ValueError(APG_FIXED_SHEET)
         self.engine = DifferentiableRollout(self.scene.task)
-        self.steps_per_iteration = env.num_envs * self.scene.task.num_steps
         algorithm = train_cfg["algorithm"]
         self.apg_optimizer = torch.optim.Adam(self.alg.actor.parameters(), lr=algorithm["learning_rate"])
         self.max_grad_norm = algorithm["max_grad_norm"]

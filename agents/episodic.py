@@ -16,8 +16,8 @@ from agents.train import Runner
 
 class EpisodeRunner(Runner):
     """:class:`~agents.train.Runner` whose learning iteration is :meth:`_iteration`. Subclasses set
-    :attr:`name` (the ``--algo``), :attr:`scalars` (metrics logged to TensorBoard under ``Name/``) and
-    :attr:`steps_per_iteration`, and keep their own state in :meth:`_extra_state` / :meth:`_load_extra`."""
+    :attr:`name` (the ``--algo``) and :attr:`scalars` (metrics logged to TensorBoard under ``Name/``), and
+    keep their own state in :meth:`_extra_state` / :meth:`_load_extra`."""
 
     name = ""
     scalars: tuple[str, ...] = ()
@@ -37,6 +37,7 @@ class EpisodeRunner(Runner):
                 f"max_episode_steps: {self.name} runs whole cuts ({self.scene.task.num_steps} steps), not "
                 f"{self.scene.episode_steps}; leave max_episode_steps unset"
             )
+        self.steps_per_iteration = env.num_envs * self.scene.task.num_steps  # one whole cut per env
         self.episode_rng = vector.np_random  # seeded by train() (env.seed): episodes follow the run's seed
         # Start from holding still (fixed tensioning), as PPO's recipe does with its stay prior: the output
         # layer is zeroed, so the initial mean move is 0 everywhere (a resume loads its own weights).

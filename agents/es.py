@@ -54,7 +54,6 @@ class EsRunner(EpisodeRunner):
         if not (np.isfinite(self.sigma) and self.sigma > 0):
             raise ValueError(f"es_sigma: must be a finite number > 0 (got {self.sigma}); e.g. 0.02")
         self.trials = env.num_envs // self.population
-        self.steps_per_iteration = env.num_envs * self.scene.task.num_steps
         self.layers = [m for m in self.alg.actor.mlp.modules() if isinstance(m, torch.nn.Linear)]
         self.params = [p for layer in self.layers for p in (layer.weight, layer.bias)]
         self.num_params = sum(p.numel() for p in self.params)
