@@ -3,7 +3,7 @@ the path score itself through the batched simulator, an alternative to PPO and A
 es``, ``--recipe es``; Salimans et al. 2017, "Evolution Strategies as a Scalable Alternative to
 Reinforcement Learning"; Mania et al. 2018 for the observation normalisation).
 
-Each iteration perturbs the actor MLP's weights ``θ`` into ``TrainConfig.es_population`` policies in
+Each iteration perturbs the actor's weights ``θ`` into ``TrainConfig.es_population`` policies in
 antithetic pairs (``θ ± σε``, ``σ = TrainConfig.es_sigma``), plays every one of them on
 ``num_envs / es_population`` episodes in one simulator batch (env ``e`` plays policy ``e // trials``; each
 policy moves by its deterministic output, clipped to one ``max_step_mm`` per axis, as the env and the
@@ -21,7 +21,11 @@ Forward passes only: no critic, no action noise, no tape; the env's own step doe
 (analytic share, base plan, randomised sheets), so every option PPO trains with, es trains with. The
 policy is rsl-rl's actor and :class:`EsRunner` PPO's runner with the learning iteration replaced
 (:class:`agents.episodic.EpisodeRunner`), so checkpoints, validation, model selection, resume, evaluation
-and export are PPO's. The actor starts at "hold still" (its output layer zeroed).
+and export are PPO's. The actor starts at "hold still" (its output layer zeroed). With
+``TrainConfig.actor_feedback`` (the ``es`` recipe's) the actor also has a linear feedback path from the
+tracking error (:class:`agents.models.FeedbackMLP`), zero at the start, whose gains es perturbs with the
+MLP's weights: es finds gains on six numbers quickly (``warpcut optimize --feedback-only``), and through
+two tanh layers slowly (docs/learning.md, "es on the neural policy").
 """
 
 from __future__ import annotations
@@ -54,8 +58,12 @@ class EsRunner(EpisodeRunner):
         if not (np.isfinite(self.sigma) and self.sigma > 0):
             raise ValueError(f"es_sigma: must be a finite number > 0 (got {self.sigma}); e.g. 0.02")
         self.trials = env.num_envs // self.population
-        self.layers = [m for m in self.alg.actor.mlp.modules() if isinstance(m, torch.nn.Linear)]
-        self.params = [p for layer in self.layers for p in (layer.weight, layer.bias)]
+        mlp = self.alg.actor.mlp
+        self.body = getattr(mlp, "body", mlp)  # with actor_feedback: the MLP, then the feedback path
+        self.layers = [m for m in self.body.modules() if isinstance(m, torch.nn.Linear)]
+        if self.feedback_layer is not None:
+            self.layers.append(self.feedback_layer)
+        self.params = [p for layer in self.layers for p in (layer.weight, layer.bias) if p is not None]
         self.num_params = sum(p.numel() for p in self.params)
         self.adam = Adam((self.num_params,), float(train_cfg["algorithm"]["learning_rate"]))
 
@@ -74,16 +82,19 @@ class EsRunner(EpisodeRunner):
         with torch.no_grad():
             torch.nn.utils.vector_to_parameters(vector, self.params)
 
-    def _unpack(self, thetas: np.ndarray) -> list[tuple[torch.Tensor, torch.Tensor]]:
-        """``(weights (P, out, in), biases (P, out))`` per layer of the ``(P, num_params)`` vectors."""
+    def _unpack(self, thetas: np.ndarray) -> list[tuple[torch.Tensor, torch.Tensor | None]]:
+        """``(weights (P, out, in), biases (P, out) or None)`` per layer of the ``(P, num_params)``
+        vectors."""
         out, offset = [], 0
         batch = torch.as_tensor(thetas, dtype=torch.float32, device=self.device)
         for layer in self.layers:
-            w, b = layer.weight.shape, layer.bias.shape
+            w = layer.weight.shape
             weight = batch[:, offset : offset + w.numel()].reshape(len(batch), *w)
             offset += w.numel()
-            bias = batch[:, offset : offset + b.numel()]
-            offset += b.numel()
+            bias = None
+            if layer.bias is not None:
+                bias = batch[:, offset : offset + layer.bias.numel()]
+                offset += layer.bias.numel()
             out.append((weight, bias))
         return out
 
@@ -96,14 +107,19 @@ class EsRunner(EpisodeRunner):
         with torch.inference_mode():
             tensor = torch.as_tensor(obs, device=self.device)
             latent = actor.get_latent(TensorDict({"policy": tensor}, batch_size=[b]))
-            h = latent.reshape(self.population, self.trials, -1)
+            x = h = latent.reshape(self.population, self.trials, -1)
             linear = iter(layers)
-            for module in actor.mlp:
+            for module in self.body:
                 if isinstance(module, torch.nn.Linear):
                     weight, bias = next(linear)
                     h = torch.baddbmm(bias.unsqueeze(1), h, weight.transpose(1, 2))
                 else:
                     h = module(h)
+            feedback = self.feedback_layer
+            if feedback is not None:  # FeedbackMLP's path, each policy with its own gains
+                weight, _ = next(linear)
+                inputs = x[..., actor.mlp.start : actor.mlp.start + actor.mlp.size]
+                h = h + torch.bmm(inputs, weight.transpose(1, 2))
             out = h.reshape(b, -1)
             if actor.distribution is not None:
                 out = actor.distribution.deterministic_output(out)

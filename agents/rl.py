@@ -165,11 +165,13 @@ def resume_settings(resume: str | Path) -> dict:
         ``validation_trials``: its ``train_contour`` argument (for a shared policy, the episodes per
         candidate times the candidates), None where the run never validated; and the PPO batch and prior
         the run was trained with (:data:`RESUMED_TRAIN_FIELDS` of its ``config.json``; None where it
-        holds none).
+        holds none); ``actor_feedback``: whether its actor has the feedback path (read from the checkpoint,
+        so runs from before the field say False).
     """
     checkpoint, state, _ = resume_checkpoint(resume)
     train = _run_train_config(checkpoint.parent)
     fixed = {name: train.get(name) for name in RESUMED_TRAIN_FIELDS}
+    fixed["actor_feedback"] = any(key.startswith("mlp.feedback.") for key in state["actor_state_dict"])
     baseline = (state.get("infos") or {}).get("validation_baseline")
     if not baseline:
         return {**fixed, "seed": train.get("seed"), "validation_trials": None}
@@ -178,7 +180,8 @@ def resume_settings(resume: str | Path) -> dict:
 
 RESUMED_TRAIN_FIELDS = ("num_envs", "num_steps_per_env", "stay_prior", "algorithm", "es_population")
 """The :class:`~agents.config.TrainConfig` fields a resumed run keeps (its batch, the prior its policy
-was initialised with, how it learns, and es's population), besides the seed."""
+was initialised with, how it learns, and es's population), besides the seed and the actor's feedback
+path (:func:`resume_settings`)."""
 
 
 def _run_train_config(run_dir: Path) -> dict:

@@ -131,7 +131,12 @@ def train(
     if hasattr(env, "seed"):
         env.seed(cfg.seed)
     num_action_choices = getattr(env, "num_action_choices", None) if cfg.discrete else None
-    runner = _runner_class(cfg)(env, cfg.to_rsl_rl(num_action_choices), out_dir, cfg.torch_device)
+    feedback = None
+    if cfg.actor_feedback:
+        from agents.models import feedback_inputs
+
+        feedback = feedback_inputs(env)
+    runner = _runner_class(cfg)(env, cfg.to_rsl_rl(num_action_choices, feedback), out_dir, cfg.torch_device)
     runner.selection_margin = cfg.selection_margin
     checkpoint, note = None, None
     if resume is not None:
@@ -704,7 +709,7 @@ def policy_layout(actor_state: dict) -> tuple[int, int]:
     layers = sorted(
         (int(match[1]), value)
         for key, value in actor_state.items()
-        if (match := re.fullmatch(r"mlp\.(\d+)\.weight", key)) and value.ndim == 2
+        if (match := re.fullmatch(r"mlp\.(?:body\.)?(\d+)\.weight", key)) and value.ndim == 2
     )
     if not layers:
         raise ValueError("actor state: no MLP layers (mlp.K.weight); not an rsl-rl MLP actor")

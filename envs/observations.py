@@ -41,6 +41,7 @@ from warpcut.sim.config import SimConfig
 __all__ = [
     "POSITION_LIMIT",
     "observation_names",
+    "TRACKING_ERROR",
     "TRACKING_LIMIT",
     "Fiducials",
     "normalise_positions",
@@ -50,6 +51,9 @@ __all__ = [
 
 POSITION_LIMIT = 2.0
 """Bound on normalised positions (fiducials, tip): 100 mm from the sheet centre on a 100 mm sheet."""
+
+TRACKING_ERROR = ("tracking_dx", "tracking_dy", "tracking_dz")
+"""The names (:func:`observation_names`) of the tracking error's entries (``contour_features``)."""
 
 TRACKING_LIMIT = 5.0
 """Bound on the normalised tracking error: 50 mm at the default ``max_displacement_mm`` of 10 mm."""
@@ -87,7 +91,7 @@ def observation_names(
     names = ["time", "grasp_dx", "grasp_dy", "grasp_dz"]
     names += [f"fiducial_{k}_{axis}" for k in range(num_fiducials) for axis in "xyz"]
     if contour_features:
-        names += ["tip_x", "tip_y", "tip_z", "tip_cutting", "tracking_dx", "tracking_dy", "tracking_dz"]
+        names += ["tip_x", "tip_y", "tip_z", "tip_cutting", *TRACKING_ERROR]
     if observe_pinch:
         names += ["pinch_x", "pinch_y"]
     if observe_plan:

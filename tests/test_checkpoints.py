@@ -408,7 +408,7 @@ def test_resuming_with_other_options_fails_before_touching_the_run(real_copy):
             train_contour(options, real_copy, cfg, resume=real_copy, **kwargs)
     assert resume_settings(real_copy) == {
         "seed": 0, "validation_trials": 1, "num_envs": 2, "num_steps_per_env": 4, "stay_prior": 0.9,
-        "algorithm": "ppo", "es_population": TrainConfig.es_population,
+        "algorithm": "ppo", "es_population": TrainConfig.es_population, "actor_feedback": False,
     }  # fmt: skip
 
 

@@ -812,6 +812,27 @@ def test_train_es_runs_with_its_recipe_and_refuses_a_population_that_does_not_fi
     assert config["train"]["algorithm"] == "es" and config["train"]["discrete"] is False
     assert config["train"]["learning_rate"] == RECIPES["es"].train["learning_rate"]
     assert config["rsl_rl"]["es"]["population"] == 4
+    assert config["train"]["actor_feedback"] is True  # the recipe's feedback path on the tracking error
+    assert config["rsl_rl"]["actor"]["class_name"] == "agents.models:FeedbackMLPModel"
+    # A policy that observes no tracking error trains the plain MLP, and a resume keeps the run's own actor.
+    blind = tmp_path / "blind"
+    common = ["--es-population", "4", "--eval-trials", "1", "--validation-trials", "0", "--no-progress"]
+    code, stdout, _ = invoke(args + common + ["--observe", "fiducials", "--out", str(blind)])
+    assert code == 0, stdout
+    assert json.loads((blind / "config.json").read_text())["train"]["actor_feedback"] is False
+    # An es run without the path (e.g. from before it) that observes the contour resumes without it.
+    from agents.config import TrainConfig
+    from agents.rl import train_contour
+    from envs.options import PatternCutOptions
+
+    plain = tmp_path / "plain"
+    options = PatternCutOptions(contour="circle-small", action_type="continuous", contour_features=True)
+    cfg = TrainConfig(num_envs=8, iterations=1, algorithm="es", discrete=False, es_population=4)
+    train_contour(options, plain, cfg, eval_trials=1, validation_trials=0, progress=False)
+    code, stdout, _ = invoke(["train", "--resume", str(plain), "--iterations", "2"] + common)
+    assert code == 0, stdout
+    assert json.loads((plain / "summary.json").read_text())["iterations"] == 2
+    assert json.loads((plain / "config.json").read_text())["train"]["actor_feedback"] is False
     code, _, stderr = invoke(args + ["--es-population", "6", "--out", str(tmp_path / "other")])
     assert code == 2 and "--es-population" in stderr and "e.g. --es-population 8" in stderr
     assert not (tmp_path / "other").exists()

@@ -151,3 +151,85 @@ def test_es_trains_as_many_whole_cuts_as_ppos_env_steps_unless_told(tmp_path, mo
     summary = train(env, TrainConfig(**{**cfg.__dict__, "iterations": None}), tmp_path, progress=False)
     assert summary["iterations"] == 3 and summary["env_steps"] == 3 * 4 * steps
     assert json.loads((tmp_path / "config.json").read_text())["train"]["iterations"] == 3
+
+
+def test_the_feedback_path_adds_a_gain_matrix_on_the_tracking_error():
+    """``actor_feedback`` (the es recipe's): the actor's output is its MLP's plus ``K`` times the normalised
+    tracking error, ``K`` zero at the start; it sits where the observation names put the tracking error,
+    and a policy that observes none is refused by name."""
+    from tensordict import TensorDict
+
+    from agents.models import FeedbackMLPModel, feedback_inputs
+    from envs.observations import TRACKING_ERROR, observation_names
+    from envs.options import PatternCutOptions
+
+    env, cfg = _es_env(4)
+    names = observation_names(env.cfg.num_fiducials, True)
+    start, size = feedback_inputs(env)
+    assert names[start : start + size] == list(TRACKING_ERROR) and RECIPES["es"].train["actor_feedback"]
+    obs = TensorDict({"policy": torch.randn(8, len(names))}, batch_size=[8])
+    rsl = TrainConfig(**{**cfg.__dict__, "actor_feedback": True}).to_rsl_rl(None, (start, size))
+    model_cfg = {k: v for k, v in rsl["actor"].items() if k != "class_name"}
+    actor = FeedbackMLPModel(obs, rsl["obs_groups"], "actor", 3, **model_cfg)
+    assert torch.equal(actor.mlp.feedback.weight, torch.zeros(3, size))
+    with torch.no_grad():
+        actor.mlp.feedback.weight.normal_()
+        latent = actor.get_latent(obs)
+        expected = actor.mlp.body(latent) + latent[:, start : start + size] @ actor.mlp.feedback.weight.T
+        torch.testing.assert_close(actor(obs), expected)
+        assert (actor(obs) - actor.mlp.body(latent)).abs().max() > 0.1
+    with pytest.raises(ValueError, match="feedback_inputs: \\(60, 3\\) is not a slice of the"):
+        FeedbackMLPModel(obs, rsl["obs_groups"], "actor", 3, **{**model_cfg, "feedback_inputs": [60, 3]})
+    blind = PatternCutOptions(contour="circle-small", sim_config=SMALL, contour_features=False)
+    with pytest.raises(ValueError, match="actor_feedback: the policy observes no tracking error"):
+        feedback_inputs(type("Env", (), {"cfg": blind})())
+    with pytest.raises(ValueError, match="actor_feedback: needs warpcut's env"):
+        feedback_inputs(object())
+
+
+@pytest.mark.filterwarnings("ignore:.*torch.jit.load.* is deprecated:DeprecationWarning")
+def test_es_trains_the_feedback_path_and_its_exports_play_it(tmp_path):
+    """es perturbs the feedback gains with the MLP (the batched forward plays each env's own gains, as the
+    actor does), training moves them off zero, a resume keeps the path, and the TorchScript and ONNX
+    exports give the live actor's actions, the feedback included."""
+    from onnx.reference import ReferenceEvaluator
+    from tensordict import TensorDict
+
+    from agents.es import EsRunner
+    from agents.export import export_policy, load_policy
+    from agents.rl import resume_settings
+    from agents.train import policy_layout, read_checkpoint, train
+
+    env, cfg = _es_env(4, population=2)
+    cfg = TrainConfig(**{**cfg.__dict__, "actor_feedback": True})
+    from agents.models import feedback_inputs
+
+    runner = EsRunner(env, cfg.to_rsl_rl(None, feedback_inputs(env)), None)
+    actor = runner.alg.actor
+    gains = 3 * env.num_actions  # the tracking error's three entries to each move axis
+    assert runner.layers[-1] is actor.mlp.feedback and np.all(runner._theta()[-gains:] == 0)
+    rng = np.random.default_rng(1)
+    thetas = runner._theta() + rng.standard_normal((2, runner.num_params))
+    obs = rng.standard_normal((4, actor.obs_dim)).astype(np.float32)
+    moves = runner._moves(obs, runner._unpack(thetas))
+    for p in range(2):
+        runner._set_theta(thetas[p])
+        with torch.inference_mode():
+            mine = actor(TensorDict({"policy": torch.as_tensor(obs[2 * p : 2 * p + 2])}, batch_size=[2]))
+        np.testing.assert_allclose(moves[2 * p : 2 * p + 2], torch.clamp(mine, -1, 1).numpy(), atol=1e-5)
+
+    env, _ = _es_env(4, population=2)
+    train(env, cfg, tmp_path / "run", progress=False)
+    state = read_checkpoint(tmp_path / "run" / "latest.pt")["actor_state_dict"]
+    assert state["mlp.feedback.weight"].abs().max() > 0
+    assert policy_layout(state) == (actor.obs_dim, env.num_actions)
+    assert resume_settings(tmp_path / "run")["actor_feedback"] is True
+    paths = export_policy(tmp_path / "run", tmp_path / "exported")
+    live_actor = load_policy(tmp_path / "run")
+    x = torch.randn(64, actor.obs_dim) * 2.0
+    live = live_actor(TensorDict({"policy": x}, batch_size=[64]))
+    body = live_actor.mlp.body(live_actor.obs_normalizer(x))
+    assert (live - body).abs().max() > 1e-3  # the feedback path is in play
+    torchscript = torch.jit.load(paths["torchscript"])(x)
+    onnx = torch.from_numpy(ReferenceEvaluator(str(paths["onnx"])).run(None, {"obs": x.numpy()})[0])
+    assert torch.allclose(torchscript, live, atol=1e-6) and torch.allclose(onnx, live, atol=1e-5)

@@ -57,8 +57,9 @@ RESUMED_FLAGS = {
     show_default=True,
     type=click.Choice(ALGORITHMS),
     help="ppo (rsl-rl); apg: analytic policy gradients through the differentiable simulator; es: evolution "
-    "strategies on the policy's weights, whole cuts scored by the path score (apg and es: continuous moves, "
-    "one whole episode per env and iteration, their recipe's learning rate; docs/learning.md).",
+    "strategies on the policy's weights, whole cuts scored by the path score, the MLP plus a linear feedback "
+    "path on the tracking error where the policy observes the contour (apg and es: continuous moves, one "
+    "whole episode per env and iteration, their recipe's learning rate; docs/learning.md).",
 )
 @common.count_option("num-envs", None, f"Parallel envs. {common.BATCH_DEFAULTS_HELP}")
 @common.count_option(
@@ -221,8 +222,8 @@ def command(
         )
         options.per_env(1)  # fail early on a bad contour or an infeasible default pinch
         out = out or common.run_dir(None, f"train-{safe_name(load_contour(contour_name).name)}")
-    name, discrete = options.contours(1)[0].name, options.action_type == "discrete"
-    cfg = _train_config(settings, iterations, discrete, es_sigma)
+    name = options.contours(1)[0].name
+    cfg = _train_config(settings, iterations, options, es_sigma)
     algo, num_envs, iterations = cfg.algorithm, cfg.num_envs, cfg.iterations
     out, claim = common.claim(out, "train", resume is not None, overwrite)
     click.echo(
@@ -278,20 +279,25 @@ def _resumed_run(resume: Path, device, out: Path | None, given: dict, ranges: di
     return options, out, _resumed_settings(resume, **settings)
 
 
-def _train_config(settings: dict, iterations: int | None, discrete: bool, es_sigma: float) -> TrainConfig:
-    """The run's :class:`TrainConfig`: the algorithm's batch and recipe settings under the command's; a
-    usage error for an es population that does not fit the envs."""
-    algo = settings["algorithm"]
+def _train_config(settings: dict, iterations: int | None, options, es_sigma: float) -> TrainConfig:
+    """The run's :class:`TrainConfig`: the algorithm's batch and recipe settings under the command's (the
+    recipe's feedback path only where the policy observes the tracking error; a resumed run's own); a usage
+    error for an es population that does not fit the envs."""
+    algo, discrete = settings["algorithm"], options.action_type == "discrete"
+    recipe = algorithm_settings(algo)
+    feedback = settings.get("actor_feedback")
+    if feedback is None:
+        feedback = recipe.get("actor_feedback", False) and options.contour_features
     batch = batch_defaults(algo)
     num_envs, iterations = settings["num_envs"] or batch["num_envs"], iterations or batch["iterations"]
     misfit = es_population_error(settings["es_population"], num_envs) if algo == "es" else None
     if misfit:
         raise click.BadParameter(misfit.split(": ", 1)[1], param_hint="--es-population")
     return TrainConfig(**{
-        **algorithm_settings(algo), "num_envs": num_envs, "iterations": iterations, "seed": settings["seed"],
+        **recipe, "num_envs": num_envs, "iterations": iterations, "seed": settings["seed"],
         "num_steps_per_env": settings["num_steps_per_env"], "discrete": discrete,
         "stay_prior": settings["stay_prior"] if discrete else 0.0, "algorithm": algo,
-        "es_population": settings["es_population"], "es_sigma": es_sigma,
+        "es_population": settings["es_population"], "es_sigma": es_sigma, "actor_feedback": feedback,
     })  # fmt: skip
 
 
@@ -382,4 +388,4 @@ def _resumed_settings(resume: Path, **values) -> dict:
                 f"a resumed run keeps its settings: drop {flag}, or train a new run without --resume"
             )
         values[name] = fixed[name]
-    return values
+    return {**values, "actor_feedback": fixed["actor_feedback"]}

@@ -1,0 +1,89 @@
+"""The tensioning policy's network beyond rsl-rl's MLP: a linear feedback path from the tracking error.
+
+:class:`FeedbackMLPModel` is rsl-rl's :class:`~rsl_rl.models.MLPModel` whose MLP output gets a linear map of
+the (normalised) tracking error added, ``mlp(x) + K x[tracking]``, ``K`` (actions x 3) zero at the start.
+It is the structure of es's feedback gains (``warpcut optimize --feedback-only``: a still grasp that moves
+by a gain matrix times the tracking error, docs/learning.md "Closed loop: es on feedback gains") inside the
+neural policy: the network can still use every observation, and the gains need not be found through two
+tanh layers. ``TrainConfig.actor_feedback`` turns it on (the ``es`` recipe's; docs/learning.md, "es on the
+neural policy"). The path lives inside ``model.mlp`` (:class:`FeedbackMLP`), so rsl-rl's PPO, the TorchScript
+and ONNX exports and everything else that calls ``model.mlp`` use it unchanged.
+"""
+
+from __future__ import annotations
+
+import torch
+from rsl_rl.models import MLPModel
+from tensordict import TensorDict
+
+from envs.observations import TRACKING_ERROR, observation_names
+
+__all__ = ["FeedbackMLP", "FeedbackMLPModel", "feedback_inputs"]
+
+
+class FeedbackMLP(torch.nn.Module):
+    """``body(x) + feedback(x[..., start : start + size])``: an MLP (``body``, rsl-rl's) plus a bias-free
+    linear map of ``size`` of its inputs, zero-initialised."""
+
+    def __init__(self, body: torch.nn.Sequential, start: int, size: int) -> None:
+        super().__init__()
+        out = [m for m in body.modules() if isinstance(m, torch.nn.Linear)][-1].out_features
+        self.body = body
+        self.start, self.size = int(start), int(size)
+        self.feedback = torch.nn.Linear(self.size, out, bias=False)
+        with torch.no_grad():
+            self.feedback.weight.zero_()
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.body(x) + self.feedback(x[..., self.start : self.start + self.size])
+
+
+class FeedbackMLPModel(MLPModel):
+    """rsl-rl's :class:`~rsl_rl.models.MLPModel` with a :class:`FeedbackMLP` (module docstring).
+
+    Args:
+        feedback_inputs: ``(start, size)``: where in the model's concatenated observation the tracking
+            error lies (:func:`feedback_inputs`); the rest as :class:`~rsl_rl.models.MLPModel`'s.
+    """
+
+    def __init__(
+        self,
+        obs: TensorDict,
+        obs_groups: dict[str, list[str]],
+        obs_set: str,
+        output_dim: int,
+        *args,
+        feedback_inputs: tuple[int, int] | list[int],
+        **kwargs,
+    ) -> None:
+        super().__init__(obs, obs_groups, obs_set, output_dim, *args, **kwargs)
+        start, size = (int(v) for v in feedback_inputs)
+        if not (0 <= start and size > 0 and start + size <= self.obs_dim):
+            raise ValueError(
+                f"feedback_inputs: ({start}, {size}) is not a slice of the {self.obs_dim} observations"
+            )
+        self.mlp = FeedbackMLP(self.mlp, start, size)
+
+
+def feedback_inputs(env) -> tuple[int, int]:
+    """``(start, size)`` of the tracking error in the observation of warpcut's env ``env`` (an rsl-rl
+    adapter, whose ``cfg`` is its :class:`~envs.options.PatternCutOptions`, or the batched env itself).
+
+    Raises:
+        ValueError: ``env`` is not warpcut's, or its policy does not observe the tracking error.
+    """
+    from envs.options import PatternCutOptions
+
+    options = getattr(env, "cfg", None)
+    options = options if isinstance(options, PatternCutOptions) else getattr(env, "options", None)
+    if not isinstance(options, PatternCutOptions):
+        raise ValueError("actor_feedback: needs warpcut's env (its observation's tracking error)")
+    if not options.contour_features:
+        raise ValueError(
+            "actor_feedback: the policy observes no tracking error (contour_features=False, e.g. --observe "
+            "fiducials); observe the contour, or train without the feedback path"
+        )
+    names = observation_names(
+        options.num_fiducials, options.contour_features, options.observe_pinch, options.observe_plan
+    )
+    return names.index(TRACKING_ERROR[0]), len(TRACKING_ERROR)
