@@ -23,7 +23,8 @@ __all__ = ["FeedbackMLP", "FeedbackMLPModel", "feedback_inputs"]
 
 class FeedbackMLP(torch.nn.Module):
     """``body(x) + feedback(x[..., start : start + size])``: an MLP (``body``, rsl-rl's) plus a bias-free
-    linear map of ``size`` of its inputs, zero-initialised."""
+    linear map of ``size`` of its inputs to its last linear layer's outputs (reshaped as the body's output),
+    zero-initialised."""
 
     def __init__(self, body: torch.nn.Sequential, start: int, size: int) -> None:
         super().__init__()
@@ -35,7 +36,8 @@ class FeedbackMLP(torch.nn.Module):
             self.feedback.weight.zero_()
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.body(x) + self.feedback(x[..., self.start : self.start + self.size])
+        out = self.body(x)  # for discrete moves shaped (..., actions, choices) by the MLP's last module
+        return out + self.feedback(x[..., self.start : self.start + self.size]).reshape(out.shape)
 
 
 class FeedbackMLPModel(MLPModel):

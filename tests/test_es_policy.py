@@ -233,3 +233,21 @@ def test_es_trains_the_feedback_path_and_its_exports_play_it(tmp_path):
     torchscript = torch.jit.load(paths["torchscript"])(x)
     onnx = torch.from_numpy(ReferenceEvaluator(str(paths["onnx"])).run(None, {"obs": x.numpy()})[0])
     assert torch.allclose(torchscript, live, atol=1e-6) and torch.allclose(onnx, live, atol=1e-5)
+
+
+@pytest.mark.parametrize("discrete", [True, False], ids=["discrete", "continuous"])
+def test_ppo_trains_the_feedback_path_too(tmp_path, discrete):
+    """``actor_feedback`` is the actor's, not es's: PPO's gradient reaches the gains (logits for
+    discrete moves, the Gaussian's mean for continuous ones)."""
+    from agents.rl import training_env
+    from agents.train import read_checkpoint, train
+    from envs.options import PatternCutOptions
+
+    options = PatternCutOptions(
+        contour="circle-small", sim_config=SMALL, contour_features=True,
+        action_type="discrete" if discrete else "continuous",
+    )  # fmt: skip
+    cfg = TrainConfig(num_envs=4, iterations=1, num_steps_per_env=8, discrete=discrete, actor_feedback=True)
+    train(training_env(options, cfg), cfg, tmp_path, progress=False)
+    state = read_checkpoint(tmp_path / "latest.pt")["actor_state_dict"]
+    assert state["mlp.feedback.weight"].abs().max() > 0
