@@ -41,18 +41,21 @@ class EpisodeRunner(Runner):
         self.episode_rng = vector.np_random  # seeded by train() (env.seed): episodes follow the run's seed
         # Start from holding still (fixed tensioning), as PPO's recipe does with its stay prior: the output
         # layer is zeroed, so the initial mean move is 0 everywhere (a resume loads its own weights).
-        # With actor_feedback the feedback path starts at zero too (agents.models.FeedbackMLP).
+        # A feedback path (actor_feedback) starts at zero by construction (agents.models.FeedbackMLP).
         with torch.no_grad():
             self.output_layer.weight.zero_()
             self.output_layer.bias.zero_()
-            if self.feedback_layer is not None:
-                self.feedback_layer.weight.zero_()
+
+    @property
+    def body(self) -> torch.nn.Sequential:
+        """The actor's MLP (rsl-rl's), without the feedback path where it has one."""
+        mlp = self.alg.actor.mlp
+        return getattr(mlp, "body", mlp)
 
     @property
     def output_layer(self) -> torch.nn.Linear:
         """The actor MLP's last linear layer."""
-        mlp = self.alg.actor.mlp
-        return [m for m in getattr(mlp, "body", mlp).modules() if isinstance(m, torch.nn.Linear)][-1]
+        return [m for m in self.body.modules() if isinstance(m, torch.nn.Linear)][-1]
 
     @property
     def feedback_layer(self) -> torch.nn.Linear | None:

@@ -58,8 +58,7 @@ class EsRunner(EpisodeRunner):
         if not (np.isfinite(self.sigma) and self.sigma > 0):
             raise ValueError(f"es_sigma: must be a finite number > 0 (got {self.sigma}); e.g. 0.02")
         self.trials = env.num_envs // self.population
-        mlp = self.alg.actor.mlp
-        self.body = getattr(mlp, "body", mlp)  # with actor_feedback: the MLP, then the feedback path
+        # With actor_feedback: the MLP's layers, then the feedback path's.
         self.layers = [m for m in self.body.modules() if isinstance(m, torch.nn.Linear)]
         if self.feedback_layer is not None:
             self.layers.append(self.feedback_layer)
