@@ -43,10 +43,18 @@ class TrainConfig:
     es_population: int = 64
     """es only: perturbed policies per iteration, in antithetic pairs; each plays ``num_envs /
     es_population`` episodes (256 envs: 4 each)."""
-    es_sigma: float = 0.05
-    """es only: the perturbations' standard deviation in weight space (the actor's output is in units of
-    ``max_step_mm``). 0.05: on issue 16's six contours (60 iterations) +46.9% against +44.0% with 0.02
-    (docs/learning.md, "es on the neural policy")."""
+    es_sigma: float = 0.005
+    """es only: the perturbations' standard deviation in weight space for the MLP (the actor's output is in
+    units of ``max_step_mm``). 0.005: a perturbed MLP moves the grasp by a near-constant bias that adds up
+    over the episode, so with 0.05 the perturbed population cut e-shape at 80.6 vertices where its centre
+    (the still grasp) cut 43.3 and es learned nothing on long contours; 0.005 gave 52.3 (docs/learning.md,
+    "es with separate steps for the feedback path")."""
+    es_feedback_sigma: float = 0.25
+    """es only, with ``actor_feedback``: the perturbations' standard deviation for the feedback gains (they
+    act on the normalised tracking error, and useful gains are ~0.5-1; docs/learning.md, "es with separate
+    steps for the feedback path")."""
+    es_feedback_learning_rate: float = 0.1
+    """es only, with ``actor_feedback``: Adam's step for the feedback gains (``learning_rate``: the MLP's)."""
     iterations: int | None = 150
     """Total learning iterations of the run, counting those done before a resume. 150: on the Table I suite,
     two seeds of 256 envs x 150 iterations kept a trained policy on 17-18 contours of 26 at RL +43.0-43.3%,
@@ -166,7 +174,14 @@ class TrainConfig:
             actor.update(class_name="agents.models:FeedbackMLPModel", feedback_inputs=list(feedback_inputs))
         own = {
             "apg": {"apg": {"window": self.apg_window, "accept": self.apg_accept}},
-            "es": {"es": {"population": self.es_population, "sigma": self.es_sigma}},
+            "es": {
+                "es": {
+                    "population": self.es_population,
+                    "sigma": self.es_sigma,
+                    "feedback_sigma": self.es_feedback_sigma,
+                    "feedback_learning_rate": self.es_feedback_learning_rate,
+                }
+            },  # fmt: skip
         }.get(self.algorithm, {})
         return {
             **own,
@@ -316,8 +331,10 @@ APG_RESIDUAL_LEARNING_RATE = 1e-3
 """Adam's step of the ``apg-residual`` recipe: on fls-circle's plan 3e-3 left the plan within 5 iterations and
 diverged, 3e-4 did not move it, 1e-3 improved wave-1 and wave-2's plans (docs/learning.md)."""
 
-ES_LEARNING_RATE = 0.01
-"""Adam's step of the ``es`` recipe, in weight space (docs/learning.md, "es on the neural policy")."""
+ES_LEARNING_RATE = 0.001
+"""Adam's step of the ``es`` recipe for the MLP's weights, in weight space: small, so the MLP stays near "hold
+still" while the feedback gains learn (``TrainConfig.es_feedback_learning_rate``; docs/learning.md, "es with
+separate steps for the feedback path")."""
 
 RECIPES = {
     "warpcut": Recipe(

@@ -4,7 +4,8 @@ es``, ``--recipe es``; Salimans et al. 2017, "Evolution Strategies as a Scalable
 Reinforcement Learning"; Mania et al. 2018 for the observation normalisation).
 
 Each iteration perturbs the actor's weights ``θ`` into ``TrainConfig.es_population`` policies in
-antithetic pairs (``θ ± σε``, ``σ = TrainConfig.es_sigma``), plays every one of them on
+antithetic pairs (``θ ± σ⊙ε``; ``σ`` is ``TrainConfig.es_sigma`` for the MLP's weights and
+``es_feedback_sigma`` for the feedback gains), plays every one of them on
 ``num_envs / es_population`` episodes in one simulator batch (env ``e`` plays policy ``e // trials``; each
 policy moves by its deterministic output, clipped to one ``max_step_mm`` per axis, as the env and the
 evaluation play it), and scores each whole cut with the evaluation's error (the path score's symmetric
@@ -14,8 +15,9 @@ each iteration draws ``trials`` sheets and every perturbed policy cuts the same 
 each), so the ranking compares policies, not sheets (the process noise still differs from env to env).
 The errors are replaced by their centred ranks (a diverged cut ranks last) and ``Σ rank_p ε_p / (population
 σ)`` is the smoothed error's gradient, a step of Adam (:class:`agents.gradient.Adam`,
-``TrainConfig.learning_rate``). The observation normaliser learns from every observation of the iteration
-after the step (it is frozen within an iteration, so every perturbed policy sees the same normalisation).
+``TrainConfig.learning_rate`` for the MLP, ``es_feedback_learning_rate`` for the gains). The observation
+normaliser learns from every observation of the iteration after the step (it is frozen within an iteration,
+so every perturbed policy sees the same normalisation).
 
 Forward passes only: no critic, no action noise, no tape; the env's own step does everything a move does
 (analytic share, base plan, randomised sheets), so every option PPO trains with, es trains with. The
@@ -24,8 +26,9 @@ policy is rsl-rl's actor and :class:`EsRunner` PPO's runner with the learning it
 and export are PPO's. The actor starts at "hold still" (its output layer zeroed). With
 ``TrainConfig.actor_feedback`` (the ``es`` recipe's) the actor also has a linear feedback path from the
 tracking error (:class:`agents.models.FeedbackMLP`), zero at the start, whose gains es perturbs with the
-MLP's weights: es finds gains on six numbers quickly (``warpcut optimize --feedback-only``), and through
-two tanh layers slowly (docs/learning.md, "es on the neural policy").
+MLP's weights, with their own σ and step: a perturbed MLP moves the grasp by a near-constant bias that
+adds up over a long cut, so the MLP's σ and step are small and the gains', on the normalised tracking
+error, large (docs/learning.md, "es with separate steps for the feedback path").
 """
 
 from __future__ import annotations
@@ -51,20 +54,34 @@ class EsRunner(EpisodeRunner):
     def __init__(self, env: VecEnv, train_cfg: dict, log_dir: str | Path | None, device: str = "cpu") -> None:
         super().__init__(env, train_cfg, log_dir, device)
         settings = train_cfg.get("es", {})
-        self.population, self.sigma = int(settings["population"]), float(settings["sigma"])
+        self.population = int(settings["population"])
         error = es_population_error(self.population, env.num_envs)
         if error:
             raise ValueError(error)
-        if not (np.isfinite(self.sigma) and self.sigma > 0):
-            raise ValueError(f"es_sigma: must be a finite number > 0 (got {self.sigma}); e.g. 0.02")
+        steps = {
+            "es_sigma": settings["sigma"],
+            "es_feedback_sigma": settings["feedback_sigma"],
+            "learning_rate": train_cfg["algorithm"]["learning_rate"],
+            "es_feedback_learning_rate": settings["feedback_learning_rate"],
+        }
+        for name, value in steps.items():
+            if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
+                raise ValueError(f"{name}: must be a finite number > 0 (got {value!r}); e.g. TrainConfig's")
         self.trials = env.num_envs // self.population
-        # With actor_feedback: the MLP's layers, then the feedback path's.
+        # With actor_feedback: the MLP's layers, then the feedback path's (weights only, its last parameters).
         self.layers = [m for m in self.body.modules() if isinstance(m, torch.nn.Linear)]
         if self.feedback_layer is not None:
             self.layers.append(self.feedback_layer)
         self.params = [p for layer in self.layers for p in (layer.weight, layer.bias) if p is not None]
         self.num_params = sum(p.numel() for p in self.params)
-        self.adam = Adam((self.num_params,), float(train_cfg["algorithm"]["learning_rate"]))
+        gains = self.feedback_layer.weight.numel() if self.feedback_layer is not None else 0
+        body = self.num_params - gains
+
+        def per_weight(mlp: str, feedback: str) -> np.ndarray:
+            return np.concatenate([np.full(body, float(steps[mlp])), np.full(gains, float(steps[feedback]))])
+
+        self.sigmas = per_weight("es_sigma", "es_feedback_sigma")
+        self.adam = Adam((self.num_params,), per_weight("learning_rate", "es_feedback_learning_rate"))
 
     def _extra_state(self) -> dict:
         return {"es_adam": self.adam.state()}
@@ -147,7 +164,7 @@ class EsRunner(EpisodeRunner):
         theta = self._theta()
         half = self.episode_rng.standard_normal((self.population // 2, self.num_params))
         eps = np.concatenate([half, -half])
-        errors, seen, steps = self._episode(self._unpack(theta + self.sigma * eps))
+        errors, seen, steps = self._episode(self._unpack(theta + self.sigmas * eps))
         collected = time.perf_counter()
         errors = errors.reshape(self.population, self.trials)
         finite = np.isfinite(errors).all(axis=1)
@@ -155,7 +172,7 @@ class EsRunner(EpisodeRunner):
         ranks = np.empty(self.population)
         ranks[np.argsort(fitness, kind="stable")] = np.arange(self.population)
         centred = ranks / (self.population - 1) - 0.5  # the highest error +0.5
-        step = self.adam.step(centred @ eps / (self.population * self.sigma))
+        step = self.adam.step(centred @ eps / (self.population * self.sigmas))
         self._set_theta(theta + step)
         actor = self.alg.actor
         if actor.obs_normalization:

@@ -171,7 +171,8 @@ def _episodes(contour, point, segments, config, count: int, device, seed: int) -
 
 
 class Adam:
-    """Adam on a NumPy array (minimising), with the usual bias correction."""
+    """Adam on a NumPy array (minimising), with the usual bias correction; ``learning_rate`` is a number or
+    an array of ``shape`` (a step per parameter)."""
 
     def __init__(self, shape: tuple[int, ...], learning_rate: float, betas=(0.9, 0.999), eps: float = 1e-8):
         self.m, self.v = np.zeros(shape), np.zeros(shape)

@@ -93,6 +93,10 @@ def test_es_refuses_what_it_cannot_train(tmp_path):
         train(env, TrainConfig(**{**cfg.__dict__, "es_population": 8}), tmp_path, progress=False)
     with pytest.raises(ValueError, match="es_sigma: must be a finite number > 0"):
         train(env, TrainConfig(**{**cfg.__dict__, "es_sigma": -1.0}), tmp_path, progress=False)
+    with pytest.raises(ValueError, match="es_feedback_sigma: must be a finite number > 0"):
+        train(env, TrainConfig(**{**cfg.__dict__, "es_feedback_sigma": 0.0}), tmp_path, progress=False)
+    with pytest.raises(ValueError, match="es_feedback_learning_rate: must be a finite number > 0"):
+        train(env, TrainConfig(**{**cfg.__dict__, "es_feedback_learning_rate": float("nan")}), tmp_path)
     assert batch_defaults("es")["num_envs"] % TrainConfig.es_population == 0
     assert algorithm_settings("es")["learning_rate"] == RECIPES["es"].train["learning_rate"]
 
@@ -233,6 +237,30 @@ def test_es_trains_the_feedback_path_and_its_exports_play_it(tmp_path):
     torchscript = torch.jit.load(paths["torchscript"])(x)
     onnx = torch.from_numpy(ReferenceEvaluator(str(paths["onnx"])).run(None, {"obs": x.numpy()})[0])
     assert torch.allclose(torchscript, live, atol=1e-6) and torch.allclose(onnx, live, atol=1e-5)
+
+
+def test_es_perturbs_and_steps_the_feedback_gains_on_their_own_scale():
+    """The feedback gains get ``es_feedback_sigma`` and ``es_feedback_learning_rate``, the MLP's weights
+    ``es_sigma`` and ``learning_rate``: the perturbations and the first Adam step (|step| = its learning
+    rate wherever the gradient estimate is not zero) are on each one's scale."""
+    from agents.es import EsRunner
+    from agents.models import feedback_inputs
+
+    env, cfg = _es_env(4, population=2)
+    cfg = TrainConfig(**{
+        **cfg.__dict__, "actor_feedback": True, "es_sigma": 1e-3, "learning_rate": 1e-4,
+        "es_feedback_sigma": 1.0, "es_feedback_learning_rate": 0.5,
+    })  # fmt: skip
+    runner = EsRunner(env, cfg.to_rsl_rl(None, feedback_inputs(env)), None)
+    gains = runner.feedback_layer.weight.numel()
+    played, unpack = [], runner._unpack
+    runner._unpack = lambda thetas: played.append(thetas) or unpack(thetas)
+    before = runner._theta()
+    runner._iteration()
+    offsets = np.abs(played[0] - before)
+    assert offsets[:, :-gains].max() < 1e-2 and offsets[:, -gains:].max() > 0.3
+    step = np.abs(runner._theta() - before)
+    assert step[:-gains].max() <= 1.01e-4 and step[-gains:].max() > 0.4
 
 
 @pytest.mark.parametrize("discrete", [True, False], ids=["discrete", "continuous"])

@@ -81,7 +81,8 @@ RESUMED_FLAGS = {
     default=TRAIN.es_sigma,
     show_default=True,
     type=click.FloatRange(min=0.0, min_open=True),
-    help="es: standard deviation of the weight perturbations.",
+    help="es: standard deviation of the perturbations of the MLP's weights (the feedback gains have their "
+    "own, TrainConfig.es_feedback_sigma; docs/learning.md).",
 )
 @common.noise_option
 @common.score_option
