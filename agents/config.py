@@ -48,7 +48,8 @@ class TrainConfig:
     units of ``max_step_mm``). 0.005: a perturbed MLP moves the grasp by a near-constant bias that adds up
     over the episode, so with 0.05 the perturbed population cut e-shape at 80.6 vertices where its centre
     (the still grasp) cut 43.3 and es learned nothing on long contours; 0.005 gave 52.3 (docs/learning.md,
-    "es with separate steps for the feedback path")."""
+    "es with separate steps for the feedback path"). ``warpcut train`` gives an MLP without the feedback path
+    :data:`ES_PLAIN_NETWORK`'s instead."""
     es_feedback_sigma: float = 0.25
     """es only, with ``actor_feedback``: the perturbations' standard deviation for the feedback gains (they
     act on the normalised tracking error, and useful gains are ~0.5-1; docs/learning.md, "es with separate
@@ -181,7 +182,7 @@ class TrainConfig:
                     "feedback_sigma": self.es_feedback_sigma,
                     "feedback_learning_rate": self.es_feedback_learning_rate,
                 }
-            },  # fmt: skip
+            },
         }.get(self.algorithm, {})
         return {
             **own,
@@ -335,6 +336,11 @@ ES_LEARNING_RATE = 0.001
 """Adam's step of the ``es`` recipe for the MLP's weights, in weight space: small, so the MLP stays near "hold
 still" while the feedback gains learn (``TrainConfig.es_feedback_learning_rate``; docs/learning.md, "es with
 separate steps for the feedback path")."""
+
+ES_PLAIN_NETWORK = {"es_sigma": 0.05, "learning_rate": 0.01}
+"""es on an actor without the feedback path (a policy that observes no tracking error, or a run trained before
+the path): the MLP is all that learns, so it keeps session 22's σ and Adam step (on issue 16's six contours σ
+0.05 gave +46.9% against +44.0% with 0.02; docs/learning.md, "es on the neural policy")."""
 
 RECIPES = {
     "warpcut": Recipe(

@@ -795,9 +795,10 @@ def test_train_apg_runs_and_refuses_discrete_actions(tmp_path):
 
 
 def test_train_es_runs_with_its_recipe_and_refuses_a_population_that_does_not_fit(tmp_path):
-    """es trains the neural policy with its recipe's learning rate and its own population; a population
-    that does not divide the envs is refused before anything is written."""
-    from agents.config import RECIPES
+    """es trains the neural policy with its recipe's learning rate and its own population (a plain MLP,
+    without the feedback path, with its own σ and step); a population that does not divide the envs is
+    refused before anything is written."""
+    from agents.config import ES_PLAIN_NETWORK, RECIPES
 
     run = tmp_path / "es"
     args = ["train", "--contour", "circle-small", "--algo", "es", "--iterations", "1", "--num-envs", "8"]
@@ -819,7 +820,10 @@ def test_train_es_runs_with_its_recipe_and_refuses_a_population_that_does_not_fi
     common = ["--es-population", "4", "--eval-trials", "1", "--validation-trials", "0", "--no-progress"]
     code, stdout, _ = invoke(args + common + ["--observe", "fiducials", "--out", str(blind)])
     assert code == 0, stdout
-    assert json.loads((blind / "config.json").read_text())["train"]["actor_feedback"] is False
+    blind_train = json.loads((blind / "config.json").read_text())["train"]
+    assert blind_train["actor_feedback"] is False
+    assert {k: blind_train[k] for k in ES_PLAIN_NETWORK} == ES_PLAIN_NETWORK  # the plain MLP's own steps
+    assert config["train"]["es_sigma"] != ES_PLAIN_NETWORK["es_sigma"]
     # An es run without the path (e.g. from before it) that observes the contour resumes without it.
     from agents.config import TrainConfig
     from agents.rl import train_contour
