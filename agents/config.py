@@ -48,8 +48,8 @@ class TrainConfig:
     units of ``max_step_mm``). 0.005: a perturbed MLP moves the grasp by a near-constant bias that adds up
     over the episode, so with 0.05 the perturbed population cut e-shape at 80.6 vertices where its centre
     (the still grasp) cut 43.3 and es learned nothing on long contours; 0.005 gave 52.3 (docs/learning.md,
-    "es with separate steps for the feedback path"). ``warpcut train`` gives an MLP without the feedback path
-    :data:`ES_PLAIN_NETWORK`'s instead."""
+    "es with separate steps for the feedback path"). An MLP without the feedback path learns alone and takes
+    :data:`ES_PLAIN_NETWORK`'s σ instead (:func:`algorithm_settings`, what ``warpcut train`` uses)."""
     es_feedback_sigma: float = 0.25
     """es only, with ``actor_feedback``: the perturbations' standard deviation for the feedback gains (they
     act on the normalised tracking error, and useful gains are ~0.5-1; docs/learning.md, "es with separate
@@ -373,10 +373,17 @@ RECIPES = {
 fiducials observed, x-y moves of 1 mm, a uniform initial policy, the last policy kept)."""
 
 
-def algorithm_settings(algorithm: str) -> dict:
+def algorithm_settings(algorithm: str, feedback: bool | None = None) -> dict:
     """The :class:`TrainConfig` fields ``warpcut train --algo ALGORITHM`` trains with beyond its flags: those
-    of the recipe of that name (``apg``, ``es``: their learning rates), warpcut's for PPO."""
-    return dict(RECIPES["warpcut" if algorithm == "ppo" else algorithm].train)
+    of the recipe of that name (``apg``, ``es``: their learning rates), warpcut's for PPO. ``feedback``:
+    whether the actor gets the feedback path (None: the recipe's choice); es without it learns with the MLP
+    alone, so it takes :data:`ES_PLAIN_NETWORK`'s σ and step."""
+    settings = dict(RECIPES["warpcut" if algorithm == "ppo" else algorithm].train)
+    if feedback is not None:
+        settings["actor_feedback"] = feedback
+    if algorithm == "es" and not settings.get("actor_feedback", False):
+        settings.update(ES_PLAIN_NETWORK)
+    return settings
 
 
 BUDGETS = {

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from agents.config import RECIPES, Recipe, TrainConfig, algorithm_settings, batch_defaults
+from agents.config import ES_PLAIN_NETWORK, RECIPES, Recipe, TrainConfig, algorithm_settings, batch_defaults
 from warpcut import load_contour
 from warpcut.sim.config import SimConfig
 
@@ -99,6 +99,11 @@ def test_es_refuses_what_it_cannot_train(tmp_path):
         train(env, TrainConfig(**{**cfg.__dict__, "es_feedback_learning_rate": float("nan")}), tmp_path)
     assert batch_defaults("es")["num_envs"] % TrainConfig.es_population == 0
     assert algorithm_settings("es")["learning_rate"] == RECIPES["es"].train["learning_rate"]
+    # an actor without the feedback path: the MLP learns alone, on the plain network's own scale
+    plain = TrainConfig(**algorithm_settings("es", feedback=False))
+    assert not plain.actor_feedback and plain.es_sigma == ES_PLAIN_NETWORK["es_sigma"] != TrainConfig.es_sigma
+    assert plain.learning_rate == ES_PLAIN_NETWORK["learning_rate"]
+    assert TrainConfig(**algorithm_settings("es")).es_sigma == TrainConfig.es_sigma
 
 
 def test_es_trains_on_randomised_sheets_weighing_each_cut_by_its_sheet():

@@ -11,7 +11,6 @@ from agents.cli.video import video_option, videos, with_videos
 from agents.config import (
     ALGORITHMS,
     CONTINUOUS_ALGORITHMS,
-    ES_PLAIN_NETWORK,
     EVALUATION_TRIALS,
     RECIPE,
     VALIDATION_TRIALS,
@@ -284,28 +283,26 @@ def _resumed_run(resume: Path, device, out: Path | None, given: dict, ranges: di
 def _train_config(settings: dict, iterations: int | None, options, es_sigma: float) -> TrainConfig:
     """The run's :class:`TrainConfig`: the algorithm's batch and recipe settings under the command's (the
     recipe's feedback path only where the policy observes the tracking error; a resumed run's own; es without
-    it takes :data:`~agents.config.ES_PLAIN_NETWORK`); a usage error for an es population that does not fit
-    the envs."""
+    it: :func:`~agents.config.algorithm_settings`'s plain-network σ and step unless ``--es-sigma`` is given);
+    a usage error for an es population that does not fit the envs."""
     algo, discrete = settings["algorithm"], options.action_type == "discrete"
-    recipe = algorithm_settings(algo)
     feedback = settings.get("actor_feedback")
     if feedback is None:
-        feedback = recipe.get("actor_feedback", False) and options.contour_features
+        feedback = algorithm_settings(algo).get("actor_feedback", False) and options.contour_features
+    recipe = algorithm_settings(algo, feedback)
     batch = batch_defaults(algo)
     num_envs, iterations = settings["num_envs"] or batch["num_envs"], iterations or batch["iterations"]
     misfit = es_population_error(settings["es_population"], num_envs) if algo == "es" else None
     if misfit:
         raise click.BadParameter(misfit.split(": ", 1)[1], param_hint="--es-population")
-    if algo == "es" and not feedback:  # the plain MLP learns alone: its own step and sigma unless given
-        recipe.update(learning_rate=ES_PLAIN_NETWORK["learning_rate"])
-        source = click.get_current_context().get_parameter_source("es_sigma")
-        if source != click.core.ParameterSource.COMMANDLINE:
-            es_sigma = ES_PLAIN_NETWORK["es_sigma"]
+    source = click.get_current_context().get_parameter_source("es_sigma")
+    if source == click.core.ParameterSource.COMMANDLINE or "es_sigma" not in recipe:
+        recipe["es_sigma"] = es_sigma  # the recipe's own (the plain MLP's) unless given
     return TrainConfig(**{
         **recipe, "num_envs": num_envs, "iterations": iterations, "seed": settings["seed"],
         "num_steps_per_env": settings["num_steps_per_env"], "discrete": discrete,
         "stay_prior": settings["stay_prior"] if discrete else 0.0, "algorithm": algo,
-        "es_population": settings["es_population"], "es_sigma": es_sigma, "actor_feedback": feedback,
+        "es_population": settings["es_population"],
     })  # fmt: skip
 
 
