@@ -17,7 +17,8 @@ The errors are replaced by their centred ranks (a diverged cut ranks last) and `
 σ)`` is the smoothed error's gradient, a step of Adam (:class:`agents.gradient.Adam`,
 ``TrainConfig.learning_rate`` for the MLP, ``es_feedback_learning_rate`` for the gains). The observation
 normaliser learns from every observation of the iteration after the step (it is frozen within an iteration,
-so every perturbed policy sees the same normalisation).
+so every perturbed policy sees the same normalisation); a fresh run's first learns from one cut of the initial
+policy in every env, so that the first population is perturbed on the scale the later ones are.
 
 Forward passes only: no critic, no action noise, no tape; the env's own step does everything a move does
 (analytic share, base plan, randomised sheets), so every option PPO trains with, es trains with. The
@@ -158,10 +159,30 @@ class EsRunner(EpisodeRunner):
         errors = errors * scene.reward_scale
         return errors, seen, steps
 
+    def _seed_normalisation(self, theta: np.ndarray) -> None:
+        """A fresh run's observation normaliser learns from one whole cut of the initial policy ``theta`` in
+        every env before es's first step. Otherwise the first population is perturbed on raw observations (the
+        normaliser's start: mean 0, std 1), the second on observations scaled by their real std (~0.1-0.6 for
+        the tracking error), and the gains' effect jumps several-fold between them: the population's mean
+        error rose after the first step on most contours (docs/learning.md, "The normaliser's first
+        iteration")."""
+        thetas = np.repeat(theta[None], self.population, axis=0)
+        _, seen, _ = self._episode(self._unpack(thetas))
+        self._update_normalisation(seen)
+
+    def _update_normalisation(self, seen: list[np.ndarray]) -> None:
+        from tensordict import TensorDict
+
+        batch = torch.as_tensor(np.concatenate(seen), device=self.device)
+        self.alg.actor.update_normalization(TensorDict({"policy": batch}, batch_size=[len(batch)]))
+
     def _iteration(self) -> dict:
         """One es step (module docstring); the iteration's metrics."""
         start = time.perf_counter()
         theta = self._theta()
+        actor = self.alg.actor
+        if actor.obs_normalization and int(actor.obs_normalizer.count) == 0:
+            self._seed_normalisation(theta)
         half = self.episode_rng.standard_normal((self.population // 2, self.num_params))
         eps = np.concatenate([half, -half])
         errors, seen, steps = self._episode(self._unpack(theta + self.sigmas * eps))
@@ -174,12 +195,8 @@ class EsRunner(EpisodeRunner):
         centred = ranks / (self.population - 1) - 0.5  # the highest error +0.5
         step = self.adam.step(centred @ eps / (self.population * self.sigmas))
         self._set_theta(theta + step)
-        actor = self.alg.actor
         if actor.obs_normalization:
-            from tensordict import TensorDict
-
-            batch = torch.as_tensor(np.concatenate(seen), device=self.device)
-            actor.update_normalization(TensorDict({"policy": batch}, batch_size=[len(batch)]))
+            self._update_normalisation(seen)
         elapsed = time.perf_counter() - start
         total = self.env.num_envs * steps
         return {

@@ -262,10 +262,34 @@ def test_es_perturbs_and_steps_the_feedback_gains_on_their_own_scale():
     runner._unpack = lambda thetas: played.append(thetas) or unpack(thetas)
     before = runner._theta()
     runner._iteration()
-    offsets = np.abs(played[0] - before)
+    offsets = np.abs(played[-1] - before)  # the population (after the normaliser's first cut)
     assert offsets[:, :-gains].max() < 1e-2 and offsets[:, -gains:].max() > 0.3
     step = np.abs(runner._theta() - before)
     assert step[:-gains].max() <= 1.01e-4 and step[-gains:].max() > 0.4
+
+
+def test_es_perturbs_its_first_population_on_normalised_observations():
+    """A fresh run's normaliser learns from one cut of the initial policy before the first population plays,
+    so every population sees observations on their own scale; a resumed run (a normaliser that has learned)
+    plays its population at once."""
+    from agents.es import EsRunner
+    from agents.models import feedback_inputs
+
+    env, cfg = _es_env(4, population=2)
+    cfg = TrainConfig(**{**cfg.__dict__, "actor_feedback": True})
+    runner = EsRunner(env, cfg.to_rsl_rl(None, feedback_inputs(env)), None)
+    normaliser, episode = runner.alg.actor.obs_normalizer, runner._episode
+    seen = []  # (the weights played, the normaliser's std when they played)
+    runner._episode = lambda layers: seen.append((layers, normaliser.std.clone())) or episode(layers)
+    before = runner._theta()
+    runner._iteration()
+    (warm, raw), (population, scaled) = seen
+    assert torch.all(raw == 1.0) and not torch.allclose(scaled, raw)  # the population's scale is learned
+    initial = runner._unpack(before[None])  # the warm-up cut: the initial policy in every env
+    assert all(torch.equal(w, w0.expand_as(w)) for (w, _), (w0, _) in zip(warm, initial, strict=True))
+    assert not torch.equal(population[-1][0], initial[-1][0].expand_as(population[-1][0]))  # then perturbed
+    runner._iteration()
+    assert len(seen) == 3  # one cut an iteration once the normaliser has learned
 
 
 @pytest.mark.parametrize("discrete", [True, False], ids=["discrete", "continuous"])
