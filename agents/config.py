@@ -50,10 +50,12 @@ class TrainConfig:
     (the still grasp) cut 43.3 and es learned nothing on long contours; 0.005 gave 52.3 (docs/learning.md,
     "es with separate steps for the feedback path"). An MLP without the feedback path learns alone and takes
     :data:`ES_PLAIN_NETWORK`'s σ instead (:func:`algorithm_settings`, what ``warpcut train`` uses)."""
-    es_feedback_sigma: float = 0.25
+    es_feedback_sigma: float = 0.1
     """es only, with ``actor_feedback``: the perturbations' standard deviation for the feedback gains (they
-    act on the normalised tracking error, and useful gains are ~0.5-1; docs/learning.md, "es with separate
-    steps for the feedback path")."""
+    act on the normalised tracking error, and useful gains are ~0.5-1). 0.1: with the normaliser learned
+    before the first population, 0.25 (session 25's) left the population's mean error far above the still
+    grasp's on short-error contours, and validation kept the still grasp more often (docs/learning.md, "The
+    normaliser's first iteration")."""
     es_feedback_learning_rate: float = 0.1
     """es only, with ``actor_feedback``: Adam's step for the feedback gains (``learning_rate``: the MLP's)."""
     iterations: int | None = 150
