@@ -164,9 +164,9 @@ def resume_settings(resume: str | Path) -> dict:
         ``seed``: the run's PPO seed (its ``config.json``'s; the validation episodes derive from it);
         ``validation_trials``: its ``train_contour`` argument (for a shared policy, the episodes per
         candidate times the candidates), None where the run never validated; and the PPO batch and prior
-        the run was trained with (:data:`RESUMED_TRAIN_FIELDS` of its ``config.json``; None where it
-        holds none); ``actor_feedback``: whether its actor has the feedback path (read from the checkpoint,
-        so runs from before the field say False).
+        the run was trained with, and its step sizes (:data:`RESUMED_TRAIN_FIELDS` of its ``config.json``;
+        None where it holds none); ``actor_feedback``: whether its actor has the feedback path (read from the
+        checkpoint, so runs from before the field say False).
     """
     checkpoint, state, _ = resume_checkpoint(resume)
     train = _run_train_config(checkpoint.parent)
@@ -178,10 +178,14 @@ def resume_settings(resume: str | Path) -> dict:
     return {**fixed, "seed": train.get("seed"), "validation_trials": len(baseline) * len(baseline[0])}
 
 
-RESUMED_TRAIN_FIELDS = ("num_envs", "num_steps_per_env", "stay_prior", "algorithm", "es_population")
+RESUMED_TRAIN_FIELDS = (
+    "num_envs", "num_steps_per_env", "stay_prior", "algorithm", "es_population", "learning_rate", "es_sigma",
+    "es_feedback_sigma", "es_feedback_learning_rate",
+)  # fmt: skip
 """The :class:`~agents.config.TrainConfig` fields a resumed run keeps (its batch, the prior its policy
-was initialised with, how it learns, and es's population), besides the seed and the actor's feedback
-path (:func:`resume_settings`)."""
+was initialised with, how it learns, es's population, and its step sizes: a default changed since the run
+was trained does not change how it goes on), besides the seed and the actor's feedback path
+(:func:`resume_settings`)."""
 
 
 def _run_train_config(run_dir: Path) -> dict:

@@ -409,6 +409,9 @@ def test_resuming_with_other_options_fails_before_touching_the_run(real_copy):
     assert resume_settings(real_copy) == {
         "seed": 0, "validation_trials": 1, "num_envs": 2, "num_steps_per_env": 4, "stay_prior": 0.9,
         "algorithm": "ppo", "es_population": TrainConfig.es_population, "actor_feedback": False,
+        "learning_rate": TrainConfig.learning_rate, "es_sigma": TrainConfig.es_sigma,
+        "es_feedback_sigma": TrainConfig.es_feedback_sigma,
+        "es_feedback_learning_rate": TrainConfig.es_feedback_learning_rate,
     }  # fmt: skip
 
 

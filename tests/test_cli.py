@@ -796,8 +796,8 @@ def test_train_apg_runs_and_refuses_discrete_actions(tmp_path):
 
 def test_train_es_runs_with_its_recipe_and_refuses_a_population_that_does_not_fit(tmp_path):
     """es trains the neural policy with its recipe's learning rate and its own population (a plain MLP,
-    without the feedback path, with its own σ and step); a population that does not divide the envs is
-    refused before anything is written."""
+    without the feedback path, with its own σ and step); a resumed run keeps its own step sizes; a
+    population that does not divide the envs is refused before anything is written."""
     from agents.config import ES_PLAIN_NETWORK, RECIPES
 
     run = tmp_path / "es"
@@ -836,7 +836,21 @@ def test_train_es_runs_with_its_recipe_and_refuses_a_population_that_does_not_fi
     code, stdout, _ = invoke(["train", "--resume", str(plain), "--iterations", "2"] + common)
     assert code == 0, stdout
     assert json.loads((plain / "summary.json").read_text())["iterations"] == 2
-    assert json.loads((plain / "config.json").read_text())["train"]["actor_feedback"] is False
+    resumed = json.loads((plain / "config.json").read_text())["train"]
+    assert resumed["actor_feedback"] is False
+    assert resumed["es_sigma"] == cfg.es_sigma and resumed["learning_rate"] == cfg.learning_rate  # its own
+    # A resumed run keeps its step sizes, whatever the defaults say now; another --es-sigma is refused.
+    path = run / "config.json"
+    trained = json.loads(path.read_text())
+    trained["train"].update(es_feedback_sigma=0.3, es_feedback_learning_rate=0.05)
+    path.write_text(json.dumps(trained))
+    code, stdout, _ = invoke(["train", "--resume", str(run), "--iterations", "2", "--no-progress"])
+    assert code == 0, stdout
+    resumed = json.loads(path.read_text())["train"]
+    assert (resumed["es_feedback_sigma"], resumed["es_feedback_learning_rate"]) == (0.3, 0.05)
+    assert json.loads((run / "config.json").read_text())["rsl_rl"]["es"]["feedback_sigma"] == 0.3
+    code, _, stderr = invoke(["train", "--resume", str(run), "--iterations", "3", "--es-sigma", "0.02"])
+    assert code == 2 and "--es-sigma: the resumed run" in stderr
     code, _, stderr = invoke(args + ["--es-population", "6", "--out", str(tmp_path / "other")])
     assert code == 2 and "--es-population" in stderr and "e.g. --es-population 8" in stderr
     assert not (tmp_path / "other").exists()

@@ -197,7 +197,7 @@ def command(
     common.refuse_apg(bool(randomized) or relative_reward, algo)
     settings = dict(
         seed=seed, validation_trials=validation_trials, num_envs=num_envs, num_steps_per_env=steps_per_env,
-        stay_prior=stay_prior, algorithm=algo, es_population=es_population,
+        stay_prior=stay_prior, algorithm=algo, es_population=es_population, es_sigma=es_sigma,
     )  # fmt: skip
     if resume is not None:
         given = dict(
@@ -224,7 +224,7 @@ def command(
         options.per_env(1)  # fail early on a bad contour or an infeasible default pinch
         out = out or common.run_dir(None, f"train-{safe_name(load_contour(contour_name).name)}")
     name = options.contours(1)[0].name
-    cfg = _train_config(settings, iterations, options, es_sigma)
+    cfg = _train_config(settings, iterations, options)
     algo, num_envs, iterations = cfg.algorithm, cfg.num_envs, cfg.iterations
     out, claim = common.claim(out, "train", resume is not None, overwrite)
     click.echo(
@@ -280,11 +280,11 @@ def _resumed_run(resume: Path, device, out: Path | None, given: dict, ranges: di
     return options, out, _resumed_settings(resume, **settings)
 
 
-def _train_config(settings: dict, iterations: int | None, options, es_sigma: float) -> TrainConfig:
+def _train_config(settings: dict, iterations: int | None, options) -> TrainConfig:
     """The run's :class:`TrainConfig`: the algorithm's batch and recipe settings under the command's (the
-    recipe's feedback path only where the policy observes the tracking error; a resumed run's own; es without
-    it: :func:`~agents.config.algorithm_settings`'s plain-network σ and step unless ``--es-sigma`` is given);
-    a usage error for an es population that does not fit the envs."""
+    recipe's feedback path only where the policy observes the tracking error; a resumed run's own, and its
+    step sizes; es without it: :func:`~agents.config.algorithm_settings`'s plain-network σ and step unless
+    ``--es-sigma`` is given); a usage error for an es population that does not fit the envs."""
     algo, discrete = settings["algorithm"], options.action_type == "discrete"
     feedback = settings.get("actor_feedback")
     if feedback is None:
@@ -297,7 +297,8 @@ def _train_config(settings: dict, iterations: int | None, options, es_sigma: flo
         raise click.BadParameter(misfit.split(": ", 1)[1], param_hint="--es-population")
     source = click.get_current_context().get_parameter_source("es_sigma")
     if source == click.core.ParameterSource.COMMANDLINE or "es_sigma" not in recipe:
-        recipe["es_sigma"] = es_sigma  # the recipe's own (the plain MLP's) unless given
+        recipe["es_sigma"] = settings["es_sigma"]  # the recipe's own (the plain MLP's) unless given
+    recipe.update(settings.get("resumed_steps", {}))  # a resumed run's own step sizes
     return TrainConfig(**{
         **recipe, "num_envs": num_envs, "iterations": iterations, "seed": settings["seed"],
         "num_steps_per_env": settings["num_steps_per_env"], "discrete": discrete,
@@ -372,6 +373,7 @@ RESUMED_SETTINGS = {
     "num_steps_per_env": ("steps_per_env", "--steps-per-env"),
     "stay_prior": ("stay_prior", "--stay-prior"),
     "es_population": ("es_population", "--es-population"),
+    "es_sigma": ("es_sigma", "--es-sigma"),
 }
 """What a resumed run keeps beyond its options (:func:`agents.rl.resume_settings`): its key, the command's
 parameter and flag."""
@@ -379,7 +381,8 @@ parameter and flag."""
 
 def _resumed_settings(resume: Path, **values) -> dict:
     """The training settings of a resumed run: the run's own (its seed and validation episodes, its batch,
-    its prior), whatever the defaults say; a usage error naming a flag given with another value."""
+    its prior, its step sizes: ``resumed_steps``), whatever the defaults say; a usage error naming a flag
+    given with another value."""
     from agents.rl import resume_settings
 
     ctx = click.get_current_context()
@@ -393,4 +396,11 @@ def _resumed_settings(resume: Path, **values) -> dict:
                 f"a resumed run keeps its settings: drop {flag}, or train a new run without --resume"
             )
         values[name] = fixed[name]
-    return {**values, "actor_feedback": fixed["actor_feedback"]}
+    steps = {name: fixed[name] for name in RESUMED_STEPS if fixed.get(name) is not None}
+    if fixed.get("es_sigma") is not None:
+        steps["es_sigma"] = values["es_sigma"]
+    return {**values, "actor_feedback": fixed["actor_feedback"], "resumed_steps": steps}
+
+
+RESUMED_STEPS = ("learning_rate", "es_feedback_sigma", "es_feedback_learning_rate")
+"""The step sizes a resumed run keeps that have no flag here (:data:`agents.rl.RESUMED_TRAIN_FIELDS`)."""
