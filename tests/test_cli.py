@@ -805,7 +805,7 @@ def test_train_es_runs_with_its_recipe_and_refuses_a_population_that_does_not_fi
     code, stdout, _ = invoke(
         args
         + ["--es-population", "4", "--eval-trials", "2", "--validation-trials", "2", "--no-progress"]
-        + ["--out", str(run)]
+        + ["--es-feedback-lr", "0.2", "--out", str(run)]
     )
     assert code == 0, stdout
     assert "(8 envs, 1 iterations" in stdout
@@ -813,6 +813,7 @@ def test_train_es_runs_with_its_recipe_and_refuses_a_population_that_does_not_fi
     assert config["train"]["algorithm"] == "es" and config["train"]["discrete"] is False
     assert config["train"]["learning_rate"] == RECIPES["es"].train["learning_rate"]
     assert config["rsl_rl"]["es"]["population"] == 4
+    assert config["rsl_rl"]["es"]["feedback_learning_rate"] == 0.2  # --es-feedback-lr
     assert config["train"]["actor_feedback"] is True  # the recipe's feedback path on the tracking error
     assert config["rsl_rl"]["actor"]["class_name"] == "agents.models:FeedbackMLPModel"
     # A policy that observes no tracking error trains the plain MLP, and a resume keeps the run's own actor.
@@ -849,8 +850,9 @@ def test_train_es_runs_with_its_recipe_and_refuses_a_population_that_does_not_fi
     resumed = json.loads(path.read_text())["train"]
     assert (resumed["es_feedback_sigma"], resumed["es_feedback_learning_rate"]) == (0.3, 0.05)
     assert json.loads((run / "config.json").read_text())["rsl_rl"]["es"]["feedback_sigma"] == 0.3
-    code, _, stderr = invoke(["train", "--resume", str(run), "--iterations", "3", "--es-sigma", "0.02"])
-    assert code == 2 and "--es-sigma: the resumed run" in stderr
+    for flag in ("--es-sigma", "--es-feedback-sigma"):
+        code, _, stderr = invoke(["train", "--resume", str(run), "--iterations", "3", flag, "0.02"])
+        assert code == 2 and f"{flag}: the resumed run" in stderr
     code, _, stderr = invoke(args + ["--es-population", "6", "--out", str(tmp_path / "other")])
     assert code == 2 and "--es-population" in stderr and "e.g. --es-population 8" in stderr
     assert not (tmp_path / "other").exists()

@@ -82,7 +82,23 @@ RESUMED_FLAGS = {
     show_default=True,
     type=click.FloatRange(min=0.0, min_open=True),
     help="es: standard deviation of the perturbations of the MLP's weights (the feedback gains have their "
-    "own, TrainConfig.es_feedback_sigma; docs/learning.md).",
+    "own, --es-feedback-sigma; docs/learning.md).",
+)
+@click.option(
+    "--es-feedback-sigma",
+    default=TRAIN.es_feedback_sigma,
+    show_default=True,
+    type=click.FloatRange(min=0.0, min_open=True),
+    help="es with the feedback path: standard deviation of the perturbations of the feedback gains (on the "
+    "normalised tracking error).",
+)
+@click.option(
+    "--es-feedback-lr",
+    "es_feedback_learning_rate",
+    default=TRAIN.es_feedback_learning_rate,
+    show_default=True,
+    type=click.FloatRange(min=0.0, min_open=True),
+    help="es with the feedback path: Adam's step for the feedback gains (the MLP's is the recipe's).",
 )
 @common.noise_option
 @common.score_option
@@ -162,6 +178,8 @@ def command(
     steps_per_env: int,
     es_population: int,
     es_sigma: float,
+    es_feedback_sigma: float,
+    es_feedback_learning_rate: float,
     noise: float,
     score: str,
     reward: str,
@@ -198,6 +216,7 @@ def command(
     settings = dict(
         seed=seed, validation_trials=validation_trials, num_envs=num_envs, num_steps_per_env=steps_per_env,
         stay_prior=stay_prior, algorithm=algo, es_population=es_population, es_sigma=es_sigma,
+        es_feedback_sigma=es_feedback_sigma, es_feedback_learning_rate=es_feedback_learning_rate,
     )  # fmt: skip
     if resume is not None:
         given = dict(
@@ -303,7 +322,8 @@ def _train_config(settings: dict, iterations: int | None, options) -> TrainConfi
         **recipe, "num_envs": num_envs, "iterations": iterations, "seed": settings["seed"],
         "num_steps_per_env": settings["num_steps_per_env"], "discrete": discrete,
         "stay_prior": settings["stay_prior"] if discrete else 0.0, "algorithm": algo,
-        "es_population": settings["es_population"],
+        "es_population": settings["es_population"], "es_feedback_sigma": settings["es_feedback_sigma"],
+        "es_feedback_learning_rate": settings["es_feedback_learning_rate"],
     })  # fmt: skip
 
 
@@ -374,6 +394,8 @@ RESUMED_SETTINGS = {
     "stay_prior": ("stay_prior", "--stay-prior"),
     "es_population": ("es_population", "--es-population"),
     "es_sigma": ("es_sigma", "--es-sigma"),
+    "es_feedback_sigma": ("es_feedback_sigma", "--es-feedback-sigma"),
+    "es_feedback_learning_rate": ("es_feedback_learning_rate", "--es-feedback-lr"),
 }
 """What a resumed run keeps beyond its options (:func:`agents.rl.resume_settings`): its key, the command's
 parameter and flag."""
@@ -402,5 +424,5 @@ def _resumed_settings(resume: Path, **values) -> dict:
     return {**values, "actor_feedback": fixed["actor_feedback"], "resumed_steps": steps}
 
 
-RESUMED_STEPS = ("learning_rate", "es_feedback_sigma", "es_feedback_learning_rate")
+RESUMED_STEPS = ("learning_rate",)
 """The step sizes a resumed run keeps that have no flag here (:data:`agents.rl.RESUMED_TRAIN_FIELDS`)."""
