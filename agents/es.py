@@ -171,6 +171,7 @@ class EsRunner(EpisodeRunner):
         self._update_normalisation(seen)
 
     def _update_normalisation(self, seen: list[np.ndarray]) -> None:
+        """The actor's observation normaliser learns from the observations ``seen`` (one array a step)."""
         from tensordict import TensorDict
 
         batch = torch.as_tensor(np.concatenate(seen), device=self.device)

@@ -400,6 +400,9 @@ RESUMED_SETTINGS = {
 """What a resumed run keeps beyond its options (:func:`agents.rl.resume_settings`): its key, the command's
 parameter and flag."""
 
+RESUMED_STEPS = ("learning_rate",)
+"""The step sizes a resumed run keeps that have no flag here (:data:`agents.rl.RESUMED_TRAIN_FIELDS`)."""
+
 
 def _resumed_settings(resume: Path, **values) -> dict:
     """The training settings of a resumed run: the run's own (its seed and validation episodes, its batch,
@@ -422,7 +425,3 @@ def _resumed_settings(resume: Path, **values) -> dict:
     if fixed.get("es_sigma") is not None:
         steps["es_sigma"] = values["es_sigma"]
     return {**values, "actor_feedback": fixed["actor_feedback"], "resumed_steps": steps}
-
-
-RESUMED_STEPS = ("learning_rate",)
-"""The step sizes a resumed run keeps that have no flag here (:data:`agents.rl.RESUMED_TRAIN_FIELDS`)."""
