@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# Issue 20's target on many contours at once (docs/robustness.md, "Every closed contour, and circle-small"):
+# for each contour, es on four gain matrices alone over randomised sheets (warpcut optimize), then the force
+# and noise studies of it against none and fixed (warpcut robustness, 30 trials), then the target check
+# (scripts/robustness_tables.py). With --studies CONTOUR it instead trains the same gains on the nominal
+# sheet too and runs all three studies for both policies on CONTOUR (the demonstration's figure).
+#
+#   bash scripts/robustness_scan.sh [--out DIR] [CONTOUR ...]     (default: the suite's 14 closed contours)
+#   bash scripts/robustness_scan.sh [--out DIR] --studies CONTOUR   (after the scan: reuses DIR/CONTOUR-gains4)
+#
+# WARPCUT and PYTHON name the commands (default: .venv's, else those on PATH).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+WARPCUT=${WARPCUT:-$([ -x .venv/bin/warpcut ] && echo .venv/bin/warpcut || echo warpcut)}
+PYTHON=${PYTHON:-$([ -x .venv/bin/python ] && echo .venv/bin/python || echo python)}
+out=logs/robustness-scan
+studies=""
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --out) out=$2; shift 2 ;;
+    --studies) studies=$2; shift 2 ;;
+    -h|--help) sed -n 2,10p "$0"; exit 0 ;;
+    -*) echo "error: unknown option $1 (see --help)" >&2; exit 2 ;;
+    *) break ;;
+  esac
+done
+mkdir -p "$out"
+gains="--estimator es --feedback-phases 4 --feedback-only"
+randomised() {  # CONTOUR: the randomised gains into $out/CONTOUR-gains4
+  $WARPCUT optimize --contour "$1" $gains --randomize gravity,noise --population-episodes 4 \
+    --out "$out/$1-gains4" --overwrite > "$out/$1-opt.log" 2>&1
+}
+if [ -n "$studies" ]; then
+  c=$studies
+  [ -f "$out/$c-gains4/$c.json" ] || randomised "$c"
+  $WARPCUT optimize --contour "$c" $gains --out "$out/$c-gains4-nominal" --overwrite > "$out/$c-nominal-opt.log" 2>&1
+  $WARPCUT robustness --contour "$c" --study all --methods none,fixed,analytic \
+    --plan gains4="$out/$c-gains4-nominal/$c.json" --plan gains4-rand="$out/$c-gains4/$c.json" \
+    --trials 30 --out "$out/$c-all" --json "$out/$c-all.json" --overwrite > "$out/$c-all.log" 2>&1
+  "$PYTHON" scripts/robustness_tables.py "$out/$c-all.json" --policy gains4 --policy gains4-rand
+  exit 0
+fi
+contours=("$@")
+[ ${#contours[@]} -gt 0 ] || contours=(circle-small circle-large circle-offset ellipse-wide ellipse-tall
+  ellipse-tilted blob-round blob-lumpy blob-wavy kidney crescent flower-3 flower-5 fls-circle)
+for c in "${contours[@]}"; do
+  randomised "$c"
+  $WARPCUT robustness --contour "$c" --study force,noise --methods none,fixed \
+    --plan gains4="$out/$c-gains4/$c.json" --trials 30 --no-plots \
+    --out "$out/$c-studies" --json "$out/$c.json" --overwrite > "$out/$c-rob.log" 2>&1
+  echo "== $c"
+  "$PYTHON" scripts/robustness_tables.py "$out/$c.json" --policy gains4 --policy fixed | tail -4
+done
