@@ -446,6 +446,12 @@ class GradConfig:
     es_feedback_only: bool = False
     """es with feedback: True keeps the plan at zero and optimises only the gains, a policy that holds still
     where the sheet does not move from where the scissors expect it (docs/robustness.md, "es policies")."""
+    es_feedback_sag: bool = False
+    """es with feedback: the gains are scheduled on the sheet's sag. Each phase's matrix is 3 x 4, acting on
+    ``[e, s e]``, ``s`` how far the sheet hangs before the cut (:func:`agents.gradient.sheet_sag`: 0 on a
+    sheet without gravity, ~1.2 on the default one). On a flat sheet only the first half acts, so es over
+    randomised sheets can learn a policy that holds still there (docs/robustness.md, "Gains scheduled on
+    the sag")."""
     es_randomize: str = ""
     """es: physical parameters drawn anew at every step for the ``es_trials`` episodes (comma-separated names
     of :data:`warpcut.sim.config.RANDOMIZE_RANGES`, over their ranges; every perturbed plan cuts the same
@@ -487,11 +493,13 @@ class GradConfig:
             randomize_ranges(self.es_randomize)
         except ValueError as error:
             raise ValueError(f"es_randomize: {str(error).split(': ', 1)[1]}") from None
-        if self.es_feedback_only and not self.es_feedback_phases:
-            raise ValueError("es_feedback_only: there are no gains to optimise; give es_feedback_phases >= 1")
+        for name in ("es_feedback_only", "es_feedback_sag"):
+            if getattr(self, name) and not self.es_feedback_phases:
+                raise ValueError(f"{name}: there are no gains to optimise; give es_feedback_phases >= 1")
         closed_loop = {
             "es_feedback_phases": self.es_feedback_phases,
             "es_feedback_only": self.es_feedback_only,
+            "es_feedback_sag": self.es_feedback_sag,
             "es_randomize": self.es_randomize,
         }
         for name, value in closed_loop.items():

@@ -73,8 +73,9 @@ class PlanResult:
     """Env steps the optimiser simulated forward (episodes x steps; the held-out validation episodes not
     counted); each backward pass of the tape estimator replays as many again."""
     gains: np.ndarray | None = None
-    """(P, 3, 2) feedback gains (mm of move per mm of x-y tracking error), one matrix per phase of the
-    episode (``GradConfig.es_feedback_phases``); None: an open-loop plan."""
+    """(P, 3, F) feedback gains (mm of move per mm of x-y tracking error), one matrix per phase of the
+    episode (``GradConfig.es_feedback_phases``); F = 2, or 4 with gains scheduled on the sheet's sag
+    (``GradConfig.es_feedback_sag``, :func:`feedback_features`); None: an open-loop plan."""
 
     def to_json(self) -> dict:
         return {
@@ -99,7 +100,7 @@ class PlanResult:
         return cls(
             data["contour"], list(data["pinch"]), plan, int(data["best_iteration"]), list(data["history"]),
             float(data["seconds"]), int(data["env_steps"]),
-            None if gains is None else np.asarray(gains, dtype=np.float32).reshape(-1, 3, 2),
+            None if gains is None else _gain_matrices(gains),
         )  # fmt: skip
 
     @staticmethod
@@ -112,10 +113,10 @@ class PlanResult:
 class PlanPolicy:
     """The ``grad`` tensioner: plays plans, env ``e`` the plan of contour ``e // trials`` (the layout of
     :func:`agents.evaluation.run_method`); a plan shorter than the episode holds still after it. With
-    ``gains`` (per plan, (P, 3, 2) or None; :attr:`PlanResult.gains`) it is closed loop: each move is the
-    plan's plus the phase's gain matrix times the x-y tracking error (:meth:`CuttingTask.tracking_error`,
-    0 where there is none), clipped to ``max_step_mm`` per axis; the last phase's gains act after the
-    plan's end."""
+    ``gains`` (per plan, (P, 3, F) or None; :attr:`PlanResult.gains`) it is closed loop: each move is the
+    plan's plus the phase's gain matrix times :func:`feedback_features` (the x-y tracking error, and with
+    F = 4 that error times the sheet's sag), clipped to ``max_step_mm`` per axis; the last phase's gains act
+    after the plan's end. Plans with F = 2 beside plans with F = 4 get zero sag gains."""
 
     def __init__(
         self, plans: Sequence[np.ndarray], trials: int = 1, gains: Sequence[np.ndarray | None] | None = None
@@ -126,8 +127,14 @@ class PlanPolicy:
         if gains is not None and any(g is not None for g in gains):
             if len(gains) != len(self.plans):
                 raise ValueError(f"gains: {len(gains)} for {len(self.plans)} plan(s); give one per plan")
-            zero = np.zeros((1, 3, 2), dtype=np.float32)
-            self.gains = [zero if g is None else np.asarray(g, np.float32).reshape(-1, 3, 2) for g in gains]
+            matrices = [None if g is None else _gain_matrices(g) for g in gains]
+            width = max(g.shape[-1] for g in matrices if g is not None)
+            self.gains = [
+                np.zeros((1, 3, width), np.float32)
+                if g is None
+                else np.pad(g, ((0, 0), (0, 0), (0, width - g.shape[-1])))
+                for g in matrices
+            ]
 
     def __call__(self, task: CuttingTask) -> np.ndarray:
         if task.num_envs != len(self.plans) * self.trials:
@@ -142,10 +149,46 @@ class PlanPolicy:
             return moves
         pairs = zip(self.plans, self.gains, strict=True)
         phases = [g[min(t * len(g) // max(len(p), 1), len(g) - 1)] for p, g in pairs]
-        gains = np.repeat(np.asarray(phases), self.trials, axis=0)  # (B, 3, 2)
-        error = np.nan_to_num(task.tracking_error()[:, :2], nan=0.0)
+        gains = np.repeat(np.asarray(phases), self.trials, axis=0)  # (B, 3, F)
+        features = feedback_features(task, scheduled=gains.shape[-1] == 4)
         step = task.config.max_step_mm
-        return np.clip(moves + np.einsum("bij,bj->bi", gains, error), -step, step).astype(np.float32)
+        return np.clip(moves + np.einsum("bij,bj->bi", gains, features), -step, step).astype(np.float32)
+
+
+SAG_SCALE_MM = 10.0
+"""The unit of :func:`sheet_sag`: the default sheet settles to a mean depth of 12.4 mm (0 mm without gravity,
+16.0 mm at twice the default's)."""
+
+
+def sheet_sag(task: CuttingTask) -> np.ndarray:
+    """(B,) how far each env's sheet hangs, before the grasp or the scissors touch it: the settled sheet's
+    mean depth below its clamped corners, in units of :data:`SAG_SCALE_MM`. What a depth camera sees of the
+    sheet at the start; 0 for a sheet that hangs flat (no gravity)."""
+    return -task.sim.settled_positions()[..., 2].mean(axis=1) / SAG_SCALE_MM
+
+
+def feedback_features(task: CuttingTask, scheduled: bool = False) -> np.ndarray:
+    """(B, 2) the x-y tracking error (mm; :meth:`CuttingTask.tracking_error`, 0 where there is none) that
+    feedback gains act on; ``scheduled``: (B, 4), that error and the error times :func:`sheet_sag`, so a
+    gain matrix of 3 x 4 is scheduled on the sag (``GradConfig.es_feedback_sag``)."""
+    error = np.nan_to_num(task.tracking_error()[:, :2], nan=0.0)
+    if not scheduled:
+        return error
+    return np.concatenate([error, error * sheet_sag(task)[:, None].astype(error.dtype)], axis=1)
+
+
+def _gain_matrices(gains) -> np.ndarray:
+    """``gains`` as (P, 3, F) float32 matrices, F = 2 or 4 (:attr:`PlanResult.gains`); ``ValueError`` naming
+    the field otherwise."""
+    matrices = np.asarray(gains, dtype=np.float32)
+    if matrices.ndim != 3:
+        matrices = matrices.reshape(-1, 3, 2)  # a flat list: the 3 x 2 matrices of plans before session 27
+    if matrices.shape[1:] not in ((3, 2), (3, 4)):
+        raise ValueError(
+            f"gains: expected 3 x 2 or 3 x 4 matrices, one per phase, got shape {matrices.shape}; give the "
+            "gains an optimisation wrote (warpcut optimize), or none"
+        )
+    return matrices
 
 
 def _read_state(state_file: Path | None, identity: dict) -> dict | None:
@@ -393,9 +436,9 @@ def optimize_plan(
     max_step = config.max_step_mm
     plan = np.zeros((steps, 3), dtype=np.float32)
     phases = settings.es_feedback_phases
-    gains = np.zeros((phases, 3, 2), dtype=np.float32) if phases else None
+    shape = (phases, 3, 4 if settings.es_feedback_sag else 2)  # 3 x 4: scheduled on the sag
+    gains, gain_moves = (np.zeros(shape, np.float32) if phases else None), Adam(shape, settings.learning_rate)
     moves, pinch_moves = Adam(plan.shape, settings.learning_rate), Adam((2,), settings.pinch_learning_rate)
-    gain_moves = Adam((phases, 3, 2), settings.learning_rate)
     history, best, first, elapsed = [], None, 0, 0.0
     identity = {
         "contour": contour.name,

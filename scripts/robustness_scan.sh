@@ -8,6 +8,7 @@
 #   bash scripts/robustness_scan.sh [--out DIR] [CONTOUR ...]     (default: the suite's 14 closed contours)
 #   bash scripts/robustness_scan.sh [--out DIR] --studies CONTOUR   (after the scan: reuses DIR/CONTOUR-gains4)
 #
+# --sag schedules the gains on the sheet's sag (warpcut optimize --feedback-sag), for both modes.
 # WARPCUT and PYTHON name the commands (default: .venv's, else those on PATH).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -15,17 +16,19 @@ WARPCUT=${WARPCUT:-$([ -x .venv/bin/warpcut ] && echo .venv/bin/warpcut || echo 
 PYTHON=${PYTHON:-$([ -x .venv/bin/python ] && echo .venv/bin/python || echo python)}
 out=logs/robustness-scan
 studies=""
+sag=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --out) out=$2; shift 2 ;;
     --studies) studies=$2; shift 2 ;;
-    -h|--help) sed -n 2,10p "$0"; exit 0 ;;
+    --sag) sag="--feedback-sag"; shift ;;
+    -h|--help) sed -n 2,12p "$0"; exit 0 ;;
     -*) echo "error: unknown option $1 (see --help)" >&2; exit 2 ;;
     *) break ;;
   esac
 done
 mkdir -p "$out"
-gains="--estimator es --feedback-phases 4 --feedback-only"
+gains="--estimator es --feedback-phases 4 --feedback-only $sag"
 randomised() {  # CONTOUR: the randomised gains into $out/CONTOUR-gains4
   $WARPCUT optimize --contour "$1" $gains --randomize gravity,noise --population-episodes 4 \
     --out "$out/$1-gains4" --overwrite > "$out/$1-opt.log" 2>&1

@@ -762,13 +762,16 @@ def test_optimize_a_closed_loop_policy_under_randomisation(tmp_path):
     out = tmp_path / "run"
     args = ["optimize", "--contour", "circle-small", "--estimator", "es", "--iterations", "1"]
     args += ["--population", "2", "--trials", "2", "--candidates", "2", "--feedback-phases", "2"]
-    code, stdout, _ = invoke(args + ["--randomize", "gravity", "--out", str(out)])
+    code, stdout, _ = invoke(args + ["--randomize", "gravity", "--feedback-sag", "--out", str(out)])
     assert code == 0, stdout
     plan = json.loads((out / "circle-small.json").read_text())
-    assert np.asarray(plan["gains"]).shape == (2, 3, 2)
+    assert np.asarray(plan["gains"]).shape == (2, 3, 4)  # scheduled on the sag: [e, s e]
     assert plan["settings"]["es_feedback_phases"] == 2 and plan["settings"]["es_randomize"] == "gravity"
+    assert plan["settings"]["es_feedback_sag"] is True
     code, _, stderr = invoke(["optimize", "--contour", "circle-small", "--feedback-phases", "1"])
     assert code != 0 and "es_feedback_phases: only estimator 'es'" in stderr
+    code, _, stderr = invoke(["optimize", "--contour", "circle-small", "--estimator", "es", "--feedback-sag"])
+    assert code != 0 and "es_feedback_sag: there are no gains" in stderr
 
 
 def test_batch_defaults_are_ppos_and_apgs_own():

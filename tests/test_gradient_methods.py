@@ -318,6 +318,53 @@ def test_a_plan_with_gains_adds_its_phase_gains_times_the_tracking_error():
         PlanPolicy([plan, plan], 1, [gains])
 
 
+def test_gains_scheduled_on_the_sag_act_on_the_error_and_on_it_times_the_sag():
+    """``es_feedback_sag``: 3 x 4 matrices on ``[e, s e]``, ``s`` the settled sheet's mean depth over
+    SAG_SCALE_MM (0 without gravity); a 3 x 2 plan beside a 3 x 4 one gets zero sag gains; the JSON keeps
+    the width, and another width is refused by name."""
+    from agents.gradient import SAG_SCALE_MM, feedback_features, sheet_sag
+
+    task = CuttingTask(SMALL, [load_contour("circle-small")] * 2, pinch_points=[PINCH] * 2, seed=0)
+    task.sim.set_params(gravity=np.array([0.0, SMALL.gravity], np.float32))
+    task.reset()
+    sag = sheet_sag(task)
+    assert sag[0] == 0.0 and 0.5 < sag[1] * SAG_SCALE_MM / 10.0 < 2.0  # flat, and the default's ~1.2
+    plan = np.zeros((6, 3), np.float32)
+    scheduled = np.zeros((1, 3, 4), np.float32)
+    scheduled[0, :, 2:] = 0.5  # acts only through the sag: a flat sheet is held still
+    plain = np.full((1, 3, 2), 0.2, np.float32)
+    policy = PlanPolicy([plan, plan], 1, [scheduled, plain])
+    assert [g.shape for g in policy.gains] == [(1, 3, 4), (1, 3, 4)]
+    moved = 0.0
+    while not task.done:
+        error = np.nan_to_num(task.tracking_error()[:, :2], nan=0.0)
+        features = feedback_features(task, scheduled=True)
+        np.testing.assert_array_equal(features[:, :2], error)
+        np.testing.assert_allclose(features[:, 2:], error * sag[:, None], rtol=1e-6)
+        move = policy(task)
+        expected = np.clip(np.stack([features[0] @ scheduled[0].T, error[1] @ plain[0].T]), -1.0, 1.0)
+        np.testing.assert_allclose(move, expected, atol=1e-6)
+        assert not move[0].any()  # env 0 hangs flat
+        moved = max(moved, np.abs(move[1]).max())
+        task.step(move)
+    assert moved > 0.01
+    result = PlanResult("circle-small", list(PINCH), plan, 1, gains=scheduled)
+    assert PlanResult.from_json(json.loads(json.dumps(result.to_json()))).gains.shape == (1, 3, 4)
+    with pytest.raises(ValueError, match="gains: expected 3 x 2 or 3 x 4 matrices"):
+        PlanResult.from_json({**result.to_json(), "gains": np.zeros((1, 3, 3)).tolist()})
+    with pytest.raises(ValueError, match="es_feedback_sag: there are no gains"):
+        GradConfig(estimator="es", es_feedback_sag=True).validated()
+
+
+def test_es_optimises_gains_scheduled_on_the_sag():
+    settings = GradConfig(
+        estimator="es", iterations=2, learning_rate=0.2, es_population=4, es_trials=1, validation_trials=2,
+        es_feedback_phases=2, es_feedback_only=True, es_feedback_sag=True, es_randomize="gravity",
+    )  # fmt: skip
+    result = optimize_plan(load_contour("circle-small"), PINCH, config=SMALL, settings=settings)
+    assert result.gains.shape == (2, 3, 4) and not result.plan.any()
+
+
 class _QuadraticGainsTask(_QuadraticTask):
     """:class:`_QuadraticTask` whose error also counts the gains' squared distance from ``gains_target``."""
 

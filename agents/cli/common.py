@@ -245,10 +245,18 @@ def estimator_option(name: str, what: str):
 
 
 def feedback_options(prefix: str, what: str):
-    """``--PREFIXfeedback-phases P`` and ``--PREFIXfeedback-only``: es's feedback gains for ``what``
-    (``GradConfig.es_feedback_phases``, ``es_feedback_only``; unset: the estimator's default, open loop)."""
+    """``--PREFIXfeedback-phases P``, ``--PREFIXfeedback-only`` and ``--PREFIXfeedback-sag``: es's feedback
+    gains for ``what`` (``GradConfig.es_feedback_phases``, ``es_feedback_only``, ``es_feedback_sag``; unset:
+    the estimator's default, open loop)."""
 
     def decorate(f):
+        f = click.option(
+            f"--{prefix}feedback-sag",
+            is_flag=True,
+            help=f"es with --{prefix}feedback-phases: {what}'s gains scheduled on how far the sheet hangs "
+            "before the cut (3 x 4 matrices on the tracking error and on it times the sag), so a sheet "
+            "without gravity can be held still.",
+        )(f)
         f = click.option(
             f"--{prefix}feedback-only",
             is_flag=True,

@@ -100,6 +100,7 @@ def command(
     grad_iterations: int | None,
     grad_feedback_phases: int | None,
     grad_feedback_only: bool,
+    grad_feedback_sag: bool,
     plan: bool,
     candidates: int,
     arm_length: float,
@@ -144,7 +145,7 @@ def command(
             arm=ArmModel(length_mm=arm_length), analytic_pinch=analytic_pinch,
             grad=grad_config(
                 grad_estimator, iterations=grad_iterations, es_feedback_phases=grad_feedback_phases,
-                es_feedback_only=grad_feedback_only,
+                es_feedback_only=grad_feedback_only, es_feedback_sag=grad_feedback_sag,
             ),
             device=device,
             seed=seed, log=common.log, stages=stages,

@@ -85,6 +85,7 @@ def command(
     sigma: float,
     feedback_phases: int | None,
     feedback_only: bool,
+    feedback_sag: bool,
     randomize: str | None,
     optimize_pinch: bool,
     trials: int,
@@ -110,8 +111,8 @@ def command(
     settings = grad_config(
         estimator, iterations=iterations, trials=episodes, learning_rate=learning_rate,
         es_population=population, es_trials=population_episodes, es_sigma_mm=sigma,
-        es_feedback_phases=feedback_phases, es_feedback_only=feedback_only, es_randomize=randomize,
-        optimize_pinch=optimize_pinch,
+        es_feedback_phases=feedback_phases, es_feedback_only=feedback_only, es_feedback_sag=feedback_sag,
+        es_randomize=randomize, optimize_pinch=optimize_pinch,
     )  # fmt: skip
     out, claim = common.claim(out, "optimize", resume, overwrite)
     with claim:
