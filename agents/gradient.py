@@ -198,12 +198,20 @@ def _read_state(state_file: Path | None, identity: dict) -> dict | None:
     if state_file is None or not Path(state_file).is_file():
         return None
     state = read_json(state_file)
-    if state.get("identity") != identity:
+    if _settings_of(state.get("identity")) != identity:
         raise ValueError(
             f"{state_file}: an optimisation of other settings ({state.get('identity')}); delete it, or start "
             "a new run"
         )
     return state
+
+
+def _settings_of(saved: dict | None) -> dict | None:
+    """Settings (or an identity holding them) read from a file, with the :class:`GradConfig` fields it
+    predates at their defaults, the behaviour before each field existed (``es_feedback_sag``, session 27)."""
+    if saved is None or "estimator" not in saved:
+        return saved
+    return {**dataclasses.asdict(GradConfig()), **saved}
 
 
 def _episodes(contour, point, segments, config, count: int, device, seed: int) -> CuttingTask:
@@ -568,7 +576,7 @@ def cached_plan(
         state = done.with_suffix(".state.json")
         if done.is_file():
             data = read_json(done)
-            if data.get("settings", wanted) != wanted:  # plans written before session 20 carry none
+            if _settings_of(data.get("settings", wanted)) != wanted:  # before session 20: none
                 raise ValueError(
                     f"{done}: a plan optimised with other settings ({data['settings']}, here {wanted}); "
                     "delete it to optimise again, or run with its settings"

@@ -8,7 +8,8 @@
 #   bash scripts/robustness_scan.sh [--out DIR] [CONTOUR ...]     (default: the suite's 14 closed contours)
 #   bash scripts/robustness_scan.sh [--out DIR] --studies CONTOUR   (after the scan: reuses DIR/CONTOUR-gains4)
 #
-# --sag schedules the gains on the sheet's sag (warpcut optimize --feedback-sag), for both modes.
+# --sag schedules the gains on the sheet's sag (warpcut optimize --feedback-sag), for both modes;
+# --episodes N: episodes per perturbed policy (--population-episodes, default 4).
 # WARPCUT and PYTHON name the commands (default: .venv's, else those on PATH).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -17,12 +18,14 @@ PYTHON=${PYTHON:-$([ -x .venv/bin/python ] && echo .venv/bin/python || echo pyth
 out=logs/robustness-scan
 studies=""
 sag=""
+episodes=4
 while [ $# -gt 0 ]; do
   case "$1" in
     --out) out=$2; shift 2 ;;
     --studies) studies=$2; shift 2 ;;
     --sag) sag="--feedback-sag"; shift ;;
-    -h|--help) sed -n 2,12p "$0"; exit 0 ;;
+    --episodes) episodes=$2; shift 2 ;;
+    -h|--help) sed -n 2,13p "$0"; exit 0 ;;
     -*) echo "error: unknown option $1 (see --help)" >&2; exit 2 ;;
     *) break ;;
   esac
@@ -30,7 +33,7 @@ done
 mkdir -p "$out"
 gains="--estimator es --feedback-phases 4 --feedback-only $sag"
 randomised() {  # CONTOUR: the randomised gains into $out/CONTOUR-gains4
-  $WARPCUT optimize --contour "$1" $gains --randomize gravity,noise --population-episodes 4 \
+  $WARPCUT optimize --contour "$1" $gains --randomize gravity,noise --population-episodes "$episodes" \
     --out "$out/$1-gains4" --overwrite > "$out/$1-opt.log" 2>&1
 }
 if [ -n "$studies" ]; then

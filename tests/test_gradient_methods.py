@@ -203,6 +203,15 @@ def test_a_kept_plan_of_other_settings_is_refused(tmp_path):
     other = dataclasses.replace(settings, estimator="es", es_population=2, es_trials=1)
     with pytest.raises(ValueError, match="circle-small.json: a plan optimised with other settings"):
         cached_plan(contour, PINCH, None, SMALL, other, folder=tmp_path)
+    kept = tmp_path / "circle-small.json"  # written before es_feedback_sag existed: read at its default
+    data = json.loads(kept.read_text())
+    del data["settings"]["es_feedback_sag"]
+    kept.write_text(json.dumps(data))
+    np.testing.assert_array_equal(
+        cached_plan(contour, PINCH, None, SMALL, settings, folder=tmp_path).plan, first.plan
+    )
+    with pytest.raises(ValueError, match="a plan optimised with other settings"):
+        cached_plan(contour, PINCH, None, SMALL, dataclasses.replace(settings, trials=3), folder=tmp_path)
 
 
 def _apg_env(num_envs: int):
