@@ -181,9 +181,9 @@ def _gain_matrices(gains) -> np.ndarray:
     """``gains`` as (P, 3, F) float32 matrices, F = 2 or 4 (:attr:`PlanResult.gains`); ``ValueError`` naming
     the field otherwise."""
     matrices = np.asarray(gains, dtype=np.float32)
-    if matrices.ndim != 3:
+    if matrices.ndim != 3 and matrices.size % 6 == 0:
         matrices = matrices.reshape(-1, 3, 2)  # a flat list: the 3 x 2 matrices of plans before session 27
-    if matrices.shape[1:] not in ((3, 2), (3, 4)):
+    if matrices.ndim != 3 or matrices.shape[1:] not in ((3, 2), (3, 4)):
         raise ValueError(
             f"gains: expected 3 x 2 or 3 x 4 matrices, one per phase, got shape {matrices.shape}; give the "
             "gains an optimisation wrote (warpcut optimize), or none"
