@@ -47,8 +47,8 @@ if [ -n "$studies" ]; then
   exit 0
 fi
 contours=("$@")
-[ ${#contours[@]} -gt 0 ] || contours=(circle-small circle-large circle-offset ellipse-wide ellipse-tall
-  ellipse-tilted blob-round blob-lumpy blob-wavy kidney crescent flower-3 flower-5 fls-circle)
+[ ${#contours[@]} -gt 0 ] || mapfile -t contours < <("$PYTHON" -c "from warpcut.contours import builtin_contours
+print('\n'.join(name for name, c in builtin_contours().items() if c.closed))")
 for c in "${contours[@]}"; do
   randomised "$c"
   $WARPCUT robustness --contour "$c" --study force,noise --methods none,fixed \
