@@ -33,7 +33,7 @@ from agents.evaluation import run_method
 from agents.gradient import PlanResult
 from agents.methods import BASELINES, check_methods, tensioner
 from warpcut.contours import Contour, ContourError
-from warpcut.scoring import paired_improvement
+from warpcut.scoring import bootstrap_ci, bootstrap_difference_ci, paired_improvement
 from warpcut.sim.config import GRAVITY_MM_S2, SimConfig
 from warpcut.task import segments_key
 
@@ -76,14 +76,19 @@ def _override(study: str, values: Sequence[float], trials: int) -> dict:
     return {STUDY_FIELDS[study]: per_env}
 
 
-def _stats(values: np.ndarray) -> dict[str, list[float | None]]:
-    """Per setting (rows of ``values``, trials along columns): median and quartiles of the finite trials."""
-    out: dict[str, list[float | None]] = {"median": [], "q25": [], "q75": [], "mean": []}
+def _stats(values: np.ndarray) -> dict[str, list]:
+    """Per setting (rows of ``values``, trials along columns): median and quartiles of the finite trials,
+    the median's 95% bootstrap interval (None for fewer than two trials) and every trial's value (None where
+    undefined), so intervals of other statistics can be computed from the report."""
+    out: dict[str, list] = {k: [] for k in ("median", "q25", "q75", "mean", "median_ci95", "per_trial")}
     for row in np.asarray(values, dtype=np.float64):
         finite = row[np.isfinite(row)]
         for key, q in (("median", 50), ("q25", 25), ("q75", 75)):
             out[key].append(float(np.percentile(finite, q)) if finite.size else None)
         out["mean"].append(float(finite.mean()) if finite.size else None)
+        interval = bootstrap_ci(finite, "median")
+        out["median_ci95"].append(None if interval is None else list(interval))
+        out["per_trial"].append([float(v) if np.isfinite(v) else None for v in row])
     return out
 
 
@@ -434,6 +439,102 @@ def robustness_table(report: dict) -> list[str]:
     return lines
 
 
+TARGET_BAND = 0.1
+"""Issue 20's noise half: a policy's improvement stays within this fraction of its nominal improvement."""
+
+
+def _trials(report: dict, method: str, k: int) -> np.ndarray:
+    """Value ``k``'s per-trial statistics of ``method`` (NaN where undefined); empty for a report written
+    before the reports kept them."""
+    rows = report[method].get("per_trial")
+    return np.array([] if rows is None else rows[k], dtype=np.float64)
+
+
+def _verdict(interval: tuple[float, float] | None, low: float, high: float = float("inf")) -> str:
+    """``in`` when the 95% ``interval`` lies within ``[low, high]``, ``out`` when it lies wholly outside,
+    ``open`` when it straddles an edge or there is none (too few trials)."""
+    if interval is None:
+        return "open"
+    if interval[0] >= low and interval[1] <= high:
+        return "in"
+    return "out" if interval[1] < low or interval[0] > high else "open"
+
+
+def robustness_target(reports: Mapping[str, dict], policy: str, band: float = TARGET_BAND) -> dict:
+    """Issue 20's target for the method ``policy`` in the force and noise reports of one contour
+    (:func:`robustness_study`'s, by study name): never below no tension in the force sweep, and within
+    ``band`` of its nominal improvement across the noise sweep, judged two ways.
+
+    - ``median``: on the medians over trials, as the target reads.
+    - ``ci``: on 95% bootstrap intervals: a force value is ``in`` if its median's interval lies at or above
+      0, ``out`` if wholly below it, ``open`` if it straddles 0; a noise value compares the interval of its
+      median minus the nominal one with ``+- band x |nominal median|`` (``in`` inside it, ``out`` outside
+      it, ``open`` across an edge; ``one_sided`` with the lower edge only). Values whose trials all agree
+      (a deterministic sheet, e.g. no noise) are listed in ``deterministic``: their interval is the nominal
+      one's alone, and their one outcome stands for a chaotic distribution.
+
+    Returns ``{"force": {...}, "noise": {...}}`` for the studies present, each with ``values``, the median
+    reading (``median_met``; force ``below``, noise ``within`` / ``not_below`` counts and the band) and the
+    interval reading (``ci``: a verdict per value; ``ci_met``: "yes" when every value is ``in``, "no" when
+    one is ``out``, else "open"). ``ValueError`` names a missing policy."""
+    out: dict = {}
+    force, noise = reports.get("force"), reports.get("noise")
+    for study, report in (("force", force), ("noise", noise)):
+        if report is not None and policy not in report:
+            methods = ", ".join(report["methods"])
+            raise ValueError(f"policy: {policy!r} is not in the {study} report (methods: {methods})")
+    if force is not None:
+        medians = force[policy]["median"]
+        cis = force[policy].get("median_ci95") or [None] * len(medians)
+        verdicts = [_verdict(None if ci is None else tuple(ci), 0.0) for ci in cis]
+        out["force"] = {
+            "values": force["values"],
+            "lowest_median": min(m for m in medians if m is not None),
+            "below": [v for v, m in zip(force["values"], medians, strict=True) if m is not None and m < 0],
+            "median_met": all(m is None or m >= 0 for m in medians),
+            "ci": verdicts,
+            "ci_met": _overall(verdicts),
+        }
+    if noise is not None:
+        values, medians = noise["values"], noise[policy]["median"]
+        k0 = int(np.argmin([abs(v - noise["nominal"]) for v in values]))
+        nominal, width = medians[k0], band * abs(medians[k0])
+        reference = _trials(noise, policy, k0)
+        two, one, deterministic = [], [], []
+        for k, value in enumerate(values):
+            if k == k0:
+                continue
+            trials = _trials(noise, policy, k)
+            finite = trials[np.isfinite(trials)]
+            if finite.size > 1 and np.all(finite == finite[0]):
+                deterministic.append(value)
+            interval = bootstrap_difference_ci(trials, reference) if trials.size else None
+            two.append(_verdict(interval, -width, width))
+            one.append(_verdict(interval, -width))
+        others = [m for k, m in enumerate(medians) if k != k0]
+        out["noise"] = {
+            "values": [v for k, v in enumerate(values) if k != k0],
+            "nominal": values[k0],
+            "nominal_median": nominal,
+            "band": width,
+            "within": sum(m is not None and abs(m - nominal) <= width for m in others),
+            "not_below": sum(m is not None and m >= nominal - width for m in others),
+            "median_met": all(m is not None and abs(m - nominal) <= width for m in others),
+            "median_met_one_sided": all(m is not None and m >= nominal - width for m in others),
+            "ci": two,
+            "ci_one_sided": one,
+            "ci_met": _overall(two),
+            "ci_met_one_sided": _overall(one),
+            "deterministic": deterministic,
+        }
+    return out
+
+
+def _overall(verdicts: Sequence[str]) -> str:
+    """ "yes" if every verdict is ``in``, "no" if one is ``out``, else "open"."""
+    return "no" if "out" in verdicts else "yes" if all(v == "in" for v in verdicts) else "open"
+
+
 __all__ = [
     "STUDIES",
     "REPORT_FIELDS",
@@ -447,6 +548,7 @@ __all__ = [
     "robustness",
     "robustness_study",
     "robustness_table",
+    "robustness_target",
 ]
 
 

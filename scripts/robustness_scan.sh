@@ -10,6 +10,8 @@
 #
 # --sag schedules the gains on the sheet's sag (warpcut optimize --feedback-sag), for both modes;
 # --episodes N: episodes per perturbed policy (--population-episodes, default 4).
+# --gains-from DIR: reuse the gains a scan wrote to DIR (DIR/CONTOUR-gains4) instead of optimising them again,
+# and only run the studies (e.g. to rescore an earlier scan with today's report: per-trial values, intervals).
 # WARPCUT and PYTHON name the commands (default: .venv's, else those on PATH).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -19,20 +21,27 @@ out=logs/robustness-scan
 studies=""
 sag=""
 episodes=4
+gains_from=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --out) out=$2; shift 2 ;;
     --studies) studies=$2; shift 2 ;;
     --sag) sag="--feedback-sag"; shift ;;
     --episodes) episodes=$2; shift 2 ;;
-    -h|--help) sed -n 2,13p "$0"; exit 0 ;;
+    --gains-from) gains_from=$2; shift 2 ;;
+    -h|--help) sed -n 2,15p "$0"; exit 0 ;;
     -*) echo "error: unknown option $1 (see --help)" >&2; exit 2 ;;
     *) break ;;
   esac
 done
 mkdir -p "$out"
 gains="--estimator es --feedback-phases 4 --feedback-only $sag"
-randomised() {  # CONTOUR: the randomised gains into $out/CONTOUR-gains4
+randomised() {  # CONTOUR: the randomised gains into $out/CONTOUR-gains4 (with --gains-from: copied from there)
+  if [ -n "$gains_from" ]; then
+    [ -f "$gains_from/$1-gains4/$1.json" ] || { echo "error: --gains-from: no $gains_from/$1-gains4/$1.json" >&2; exit 2; }
+    mkdir -p "$out/$1-gains4" && cp "$gains_from/$1-gains4/$1.json" "$out/$1-gains4/"
+    return
+  fi
   $WARPCUT optimize --contour "$1" $gains --randomize gravity,noise --population-episodes "$episodes" \
     --out "$out/$1-gains4" --overwrite > "$out/$1-opt.log" 2>&1
 }
@@ -55,5 +64,5 @@ for c in "${contours[@]}"; do
     --plan gains4="$out/$c-gains4/$c.json" --trials 30 --no-plots \
     --out "$out/$c-studies" --json "$out/$c.json" --overwrite > "$out/$c-rob.log" 2>&1
   echo "== $c"
-  "$PYTHON" scripts/robustness_tables.py "$out/$c.json" --policy gains4 --policy fixed | tail -4
+  "$PYTHON" scripts/robustness_tables.py "$out/$c.json" --policy gains4 --policy fixed | tail -8
 done

@@ -12,6 +12,8 @@ import json
 import math
 from pathlib import Path
 
+from agents.robustness import robustness_target
+
 
 def table(report: dict) -> list[str]:
     methods = report["methods"]
@@ -34,33 +36,48 @@ def table(report: dict) -> list[str]:
     return lines
 
 
+def _counts(verdicts: list[str]) -> str:
+    return ", ".join(f"{verdicts.count(v)} {v}" for v in ("in", "open", "out"))
+
+
 def targets(reports: dict[str, dict], policy: str) -> list[str]:
+    """The issue-20 target check (agents.robustness.robustness_target) as lines: the medians' reading, then
+    the 95% intervals' (per value: in, open = undecided at these trials, out)."""
+    result = robustness_target(reports, policy)
     out = []
-    force = reports.get("force")
-    if force and policy in force:
-        medians = force[policy]["median"]
+    force = result.get("force")
+    if force:
+        medians = reports["force"][policy]["median"]
         worst = min((m, v) for m, v in zip(medians, force["values"], strict=True) if m is not None)
-        below = [v for m, v in zip(medians, force["values"], strict=True) if m is not None and m < 0]
         out.append(
             f"force: {policy}'s lowest median improvement {worst[0]:+.1f}% (at {worst[1]:g}); below no "
-            f"tension at {', '.join(f'{v:g}' for v in below) or 'no value'}"
+            f"tension at {', '.join(f'{v:g}' for v in force['below']) or 'no value'}"
         )
-    noise = reports.get("noise")
-    if noise and policy in noise:
-        medians = noise[policy]["median"]
-        k = min(range(len(noise["values"])), key=lambda i: abs(noise["values"][i] - noise["nominal"]))
-        nominal = medians[k]
-        gaps = [
-            (abs(m - nominal), v, m) for m, v in zip(medians, noise["values"], strict=True) if m is not None
+        verdict = f"{_counts(force['ci'])}: {force['ci_met']}"
+        out.append(f"force, 95% intervals of the medians against 0: {verdict}")
+    noise = result.get("noise")
+    if noise:
+        medians = reports["noise"][policy]["median"]
+        nominal, width = noise["nominal_median"], noise["band"]
+        values = reports["noise"]["values"]
+        k0 = values.index(noise["nominal"])
+        pairs = [
+            (m, v) for k, (m, v) in enumerate(zip(medians, values, strict=True)) if k != k0 and m is not None
         ]
+        gaps = [(abs(m - nominal), v, m) for m, v in pairs]
         worst = max(gaps)
-        within = sum(1 for g, _, _ in gaps if g <= 0.1 * abs(nominal))
-        not_below = sum(1 for _, _, m in gaps if m >= nominal - 0.1 * abs(nominal))
         out.append(
-            f"noise: {policy}'s median improvement at the nominal {noise['values'][k]:g} mm is "
-            f"{nominal:+.1f}%; within 10% of it ({0.1 * abs(nominal):.1f} points) at {within} of {len(gaps)} "
-            f"values (no more than that below it at {not_below}); farthest {worst[2]:+.1f}% at "
-            f"{worst[1]:g} mm"
+            f"noise: {policy}'s median improvement at the nominal {noise['nominal']:g} mm is "
+            f"{nominal:+.1f}%; within 10% of it ({width:.1f} points) at {noise['within'] + 1} of "
+            f"{len(gaps) + 1} values (no more than that below it at {noise['not_below'] + 1}); farthest "
+            f"{worst[2]:+.1f}% at {worst[1]:g} mm"
+        )
+        one = ", ".join(f"{v:g}" for v in noise["deterministic"])
+        deterministic = f"; deterministic (one outcome): {one}"
+        out.append(
+            f"noise, 95% intervals of each median minus the nominal against +-{width:.1f}: "
+            f"{_counts(noise['ci'])}: {noise['ci_met']}; one-sided {_counts(noise['ci_one_sided'])}: "
+            f"{noise['ci_met_one_sided']}" + (deterministic if noise["deterministic"] else "")
         )
     return out
 

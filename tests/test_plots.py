@@ -19,7 +19,6 @@ from warpcut.task import CuttingTask
 from warpcut.viz.plots import (
     FinalCuts,
     aggregate_improvements,
-    bootstrap_mean_ci,
     candidate_counts,
     candidate_summary,
     feasible_grid,
@@ -242,17 +241,6 @@ def test_improvement_of_one_contour_has_no_mean_group_and_old_reports_get_clippe
     fig = drawn(improvement_figure(suite_report(contours=2, trials=1), ["fixed"]))
     assert not whisker_tops(fig.subfigs[0].axes[0])
     assert "no whisker where a contour has one trial" in fig.subfigs[0].axes[0].get_title()
-
-
-def test_bootstrap_mean_ci():
-    assert bootstrap_mean_ci([5.0]) is None and bootstrap_mean_ci([np.nan, 3.0]) is None
-    assert bootstrap_mean_ci([90.0, 100.0]) == (90.0, 100.0)  # two values: the mean lies between them
-    values = np.random.default_rng(1).normal(50.0, 10.0, 40)
-    low, high = bootstrap_mean_ci(values)
-    assert values.min() <= low < values.mean() < high <= values.max()
-    half = stats.t.ppf(0.975, 39) * values.std(ddof=1) / np.sqrt(40)
-    assert high - low == pytest.approx(2 * half, rel=0.15)  # close to the t interval for many trials
-    assert bootstrap_mean_ci(values) == (low, high)  # seeded
 
 
 def test_aggregate_improvements_mean_and_iqm():

@@ -9,7 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from agents.cli import main
-from agents.robustness import check_runs, check_study, parse_studies, robustness_study
+from agents.robustness import check_runs, check_study, parse_studies, robustness_study, robustness_target
 from envs.options import PatternCutOptions
 from envs.vector import PatternCutVecEnv
 from warpcut.contours import load_contour
@@ -152,6 +152,51 @@ def test_force_study_is_one_batch_with_a_sheet_per_gravity():
         )
     flat, hanging = report["none_error_mm2"]["median"]
     assert flat < 0.25 * hanging
+    # Every trial is kept, and the median's interval is computed from them.
+    for method in ("fixed", "none_error_mm2"):
+        per_trial, cis = report[method]["per_trial"], report[method]["median_ci95"]
+        assert [len(row) for row in per_trial] == [2, 2]
+        for row, (low, high), median in zip(per_trial, cis, report[method]["median"], strict=True):
+            assert min(row) <= low <= median <= high <= max(row)
+
+
+def _study(study: str, values: list[float], nominal: float, rows: list[list[float]]) -> dict:
+    """A study report with one method, ``p``, as robustness_study writes them (the statistics used)."""
+    rows_ = np.asarray(rows, dtype=np.float64)
+    return {
+        "study": study, "values": values, "nominal": nominal, "methods": ["p"],
+        "p": {
+            "median": [float(np.median(r)) for r in rows_],
+            "median_ci95": [list(np.percentile(r, [2.5, 97.5])) for r in rows_],  # stands in for bootstrap
+            "per_trial": rows_.tolist(),
+        },
+    }  # fmt: skip
+
+
+def test_robustness_target_reads_medians_and_intervals():
+    """The target's two readings: medians alone, and 95% intervals that tell a clear miss from one the
+    trials cannot decide."""
+    rng = np.random.default_rng(0)
+    spread = rng.normal(0.0, 1.0, 30)
+    force = _study("force", [0.0, 521.0], 521.0, [list(-20.0 + spread), list(40.0 + spread)])
+    noise = _study(
+        "noise", [0.0, 0.03, 0.06, 0.09], 0.03,
+        [[30.0] * 30, list(50.0 + 20 * spread), list(49.0 + 20 * spread[::-1]), list(20.0 + spread)],
+    )  # fmt: skip
+    result = robustness_target({"force": force, "noise": noise}, "p")
+    assert result["force"]["below"] == [0.0] and not result["force"]["median_met"]
+    assert result["force"]["ci"] == ["out", "in"] and result["force"]["ci_met"] == "no"
+    n = result["noise"]
+    assert n["nominal"] == 0.03 and n["values"] == [0.0, 0.06, 0.09]
+    assert n["band"] == pytest.approx(0.1 * abs(np.median(50.0 + 20 * spread)))
+    # 0.06 is close to the nominal by its median, but 30 noisy trials cannot show it within 10%: open.
+    assert n["ci"][1] == "open" and n["ci"][2] == "out" and n["ci_met"] == "no"
+    assert n["deterministic"] == [0.0]  # thirty identical trials: one outcome
+    assert not n["median_met"] and n["within"] == 1
+    both_fine = robustness_target({"force": _study("force", [0.0], 521.0, [list(5.0 + spread)])}, "p")
+    assert both_fine["force"]["ci_met"] == "yes" and both_fine["force"]["median_met"]
+    with pytest.raises(ValueError, match="policy: 'q' is not in the force report"):
+        robustness_target({"force": force}, "q")
 
 
 def test_resolution_study_skips_a_mesh_too_coarse_for_the_contour():

@@ -10,6 +10,8 @@ import shapely
 from warpcut.scoring import (
     Separation,
     achieved_mask,
+    bootstrap_ci,
+    bootstrap_difference_ci,
     improvement_pct,
     intended_mask,
     mean_ci95,
@@ -275,3 +277,37 @@ def test_shape_validation():
         intended_mask(shapely.LineString([(0, 0), (1, 1)]), grid)
     with pytest.raises(TypeError, match="region: expected a shapely Polygon"):
         symmetric_difference(np.ones(v, dtype=bool), shapely.Point(0, 0), grid)
+
+
+def test_bootstrap_ci_of_the_mean_and_the_median():
+    from scipy import stats
+
+    assert bootstrap_ci([5.0]) is None and bootstrap_ci([np.nan, 3.0]) is None
+    assert bootstrap_ci([90.0, 100.0]) == (90.0, 100.0)  # two values: the mean lies between them
+    values = np.random.default_rng(1).normal(50.0, 10.0, 40)
+    low, high = bootstrap_ci(values)
+    assert values.min() <= low < values.mean() < high <= values.max()
+    half = stats.t.ppf(0.975, 39) * values.std(ddof=1) / np.sqrt(40)
+    assert high - low == pytest.approx(2 * half, rel=0.15)  # close to the t interval for many trials
+    assert bootstrap_ci(values) == (low, high)  # seeded
+    low, high = bootstrap_ci(values, "median")
+    assert low < np.median(values) < high
+    # The median's interval ignores an outlier that drags the mean's.
+    skewed = np.append(values, [1e4])
+    assert bootstrap_ci(skewed, "median")[1] < 60.0 < bootstrap_ci(skewed)[1]
+    # All equal (a deterministic outcome repeated): a point, one sample, not a certainty.
+    assert bootstrap_ci([7.0] * 30, "median") == (7.0, 7.0)
+    with pytest.raises(ValueError, match="statistic: must be one of mean, median"):
+        bootstrap_ci(values, "mode")
+
+
+def test_bootstrap_difference_ci_covers_the_true_difference_and_separates_clear_ones():
+    rng = np.random.default_rng(3)
+    a, b = rng.normal(50.0, 10.0, 30), rng.normal(50.0, 10.0, 30)
+    low, high = bootstrap_difference_ci(a, b)
+    assert low < 0.0 < high  # the same distribution: no difference
+    assert low < np.median(a) - np.median(b) < high
+    low, high = bootstrap_difference_ci(a + 30.0, b)
+    assert 15.0 < low < 30.0 < high  # a clear shift is resolved
+    assert bootstrap_difference_ci(a, [1.0]) is None and bootstrap_difference_ci([np.nan] * 3, b) is None
+    assert bootstrap_difference_ci(a, b, "mean") != bootstrap_difference_ci(a, b, "median")

@@ -389,6 +389,54 @@ def mean_ci95(values: np.ndarray) -> tuple[float, float]:
     return mean, ci95(values)
 
 
+BOOTSTRAP_RESAMPLES = 10_000
+"""Resamples of the percentile-bootstrap 95% confidence intervals (:func:`bootstrap_ci`; seeded: an interval
+is the same every time)."""
+
+BOOTSTRAP_STATISTICS = {"mean": np.mean, "median": np.median}
+"""The statistics :func:`bootstrap_ci` and :func:`bootstrap_difference_ci` take, by name."""
+
+
+def _finite(values) -> np.ndarray:
+    values = np.asarray(values, dtype=np.float64).ravel()
+    return values[np.isfinite(values)]
+
+
+def _statistic(name: str):
+    if name not in BOOTSTRAP_STATISTICS:
+        raise ValueError(f"statistic: must be one of {', '.join(BOOTSTRAP_STATISTICS)} (got {name!r})")
+    return BOOTSTRAP_STATISTICS[name]
+
+
+def bootstrap_ci(
+    values, statistic: str = "mean", resamples: int = BOOTSTRAP_RESAMPLES, seed: int = 0
+) -> tuple[float, float] | None:
+    """The 95% percentile-bootstrap confidence interval of the ``statistic`` (``mean`` or ``median``) of the
+    finite ``values``; None for fewer than two. It lies within ``[min, max]`` of the values, and is a point
+    when they are all equal (a deterministic outcome repeated: one sample, not a certainty)."""
+    function, values = _statistic(statistic), _finite(values)
+    if values.size < 2:
+        return None
+    draws = np.random.default_rng(seed).integers(0, values.size, size=(resamples, values.size))
+    low, high = np.percentile(function(values[draws], axis=1), [2.5, 97.5])
+    return float(low), float(high)
+
+
+def bootstrap_difference_ci(
+    a, b, statistic: str = "median", resamples: int = BOOTSTRAP_RESAMPLES, seed: int = 0
+) -> tuple[float, float] | None:
+    """The 95% percentile-bootstrap confidence interval of ``statistic(a) - statistic(b)`` for two independent
+    samples (each resampled on its own; finite values only); None when either has fewer than two."""
+    function, a, b = _statistic(statistic), _finite(a), _finite(b)
+    if a.size < 2 or b.size < 2:
+        return None
+    rng = np.random.default_rng(seed)
+    draws_a = rng.integers(0, a.size, size=(resamples, a.size))
+    draws_b = rng.integers(0, b.size, size=(resamples, b.size))
+    low, high = np.percentile(function(a[draws_a], axis=1) - function(b[draws_b], axis=1), [2.5, 97.5])
+    return float(low), float(high)
+
+
 def _batch_mask(mask: np.ndarray, name: str, grid: SheetGrid, batch: int | None = None) -> np.ndarray:
     """``mask`` as a (B, V) bool array, (1, V) for a 1-D mask; with ``batch`` given, B must be 1 or it."""
     mask = np.asarray(mask, dtype=bool)

@@ -27,7 +27,7 @@ from matplotlib.ticker import MaxNLocator
 from warpcut.contours import Contour, ring
 from warpcut.io import DiskFull, safe_name, write_atomic
 from warpcut.planning import Plan, pinch_feasible
-from warpcut.scoring import Score, paired_improvement
+from warpcut.scoring import BOOTSTRAP_RESAMPLES, Score, bootstrap_ci, paired_improvement
 from warpcut.sim.config import SheetGrid, SimConfig
 from warpcut.task import CuttingTask
 
@@ -71,11 +71,6 @@ def save_figure(fig: Figure, out_dir: str | os.PathLike, name: str) -> list[Path
                 exc.__cause__
             )
     return paths
-
-
-BOOTSTRAP_RESAMPLES = 10_000
-"""Resamples of the percentile-bootstrap 95% confidence intervals the figures draw (seeded: a figure is the
-same every time)."""
 
 
 def plot_improvements(
@@ -153,20 +148,6 @@ def _trial_improvements(row: dict, method: str) -> np.ndarray | None:
     return values[np.isfinite(values)]
 
 
-def bootstrap_mean_ci(
-    values: np.ndarray, resamples: int = BOOTSTRAP_RESAMPLES, seed: int = 0
-) -> tuple[float, float] | None:
-    """The 95% percentile-bootstrap confidence interval of the mean of the finite ``values``; None for
-    fewer than two. It lies within ``[min, max]`` of the values."""
-    values = np.asarray(values, dtype=np.float64)
-    values = values[np.isfinite(values)]
-    if values.size < 2:
-        return None
-    draws = np.random.default_rng(seed).integers(0, values.size, size=(resamples, values.size))
-    low, high = np.percentile(values[draws].mean(axis=1), [2.5, 97.5])
-    return float(low), float(high)
-
-
 def _contour_ci(row: dict, method: str, resamples: int) -> tuple[float, float, str]:
     """``(low, high, how)``: the 95% interval of a contour's mean improvement (NaN where none), and how it
     was made: ``"bootstrap"``, ``"single"`` (one trial) or ``"t-clipped"`` (no per-trial errors)."""
@@ -174,7 +155,7 @@ def _contour_ci(row: dict, method: str, resamples: int) -> tuple[float, float, s
     if trials is None:
         mean, half = row[f"{method}_improvement_pct"], row[f"{method}_ci95"]
         return mean - half, min(mean + half, 100.0), "t-clipped"
-    interval = bootstrap_mean_ci(trials, resamples)
+    interval = bootstrap_ci(trials, "mean", resamples)
     return (np.nan, np.nan, "single") if interval is None else (*interval, "bootstrap")
 
 
