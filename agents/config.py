@@ -6,7 +6,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 
-from warpcut.sim.config import PINCH_CANDIDATES, randomize_ranges
+from warpcut.sim.config import PINCH_CANDIDATES, RANDOMIZE_ALIASES, randomize_ranges
 
 ALGORITHMS = ("ppo", "apg", "es")
 """How ``warpcut train`` learns: PPO (rsl-rl), analytic policy gradients through the simulator, or evolution
@@ -458,6 +458,10 @@ class GradConfig:
     draws). Each episode's error is then weighed by the nominal sheet's no-tension error over its own
     (:class:`warpcut.task.NoTensionReference`, as ``relative_reward`` does), and the validation episodes
     draw theirs too (seeded, the same every iterate). Empty: the nominal sheet."""
+    es_randomize_ranges: dict[str, list[float]] | None = None
+    """es: the range of a randomised parameter, ``{name: [low, high]}`` in its units, where it differs from
+    :data:`warpcut.sim.config.RANDOMIZE_RANGES` (``warpcut optimize --randomize-range``); None: the
+    defaults."""
     learning_rate: float = 0.3
     """Adam's step (mm per grasp move); moves are projected back onto ``max_step_mm`` per axis."""
     validation_trials: int = 8
@@ -490,9 +494,10 @@ class GradConfig:
         if not isinstance(phases, int) or isinstance(phases, bool) or phases < 0:
             raise ValueError(f"es_feedback_phases: must be an integer >= 0, 0 for open loop (got {phases!r})")
         try:
-            randomize_ranges(self.es_randomize)
+            chosen = randomize_ranges(self.es_randomize, self.es_randomize_ranges)
         except ValueError as error:
-            raise ValueError(f"es_randomize: {str(error).split(': ', 1)[1]}") from None
+            field = "es_randomize_ranges" if str(error).startswith("randomize_ranges") else "es_randomize"
+            raise ValueError(f"{field}: {str(error).split(': ', 1)[1]}") from None
         for name in ("es_feedback_only", "es_feedback_sag"):
             if getattr(self, name) and not self.es_feedback_phases:
                 raise ValueError(f"{name}: there are no gains to optimise; give es_feedback_phases >= 1")
@@ -518,6 +523,11 @@ class GradConfig:
             value = getattr(self, name)
             if not (isinstance(value, int | float) and 0 < value < float("inf")):
                 raise ValueError(f"{name}: must be a positive number of mm (got {value!r})")
+        if self.es_randomize_ranges:  # one spelling, lists of floats, so a saved run's settings compare equal
+            names = [RANDOMIZE_ALIASES.get(k, k) for k in self.es_randomize_ranges]
+            canonical = {k: list(chosen[k]) for k in names}
+            if canonical != self.es_randomize_ranges:
+                return dataclasses.replace(self, es_randomize_ranges=canonical)
         return self
 
 

@@ -300,7 +300,7 @@ class SmoothedGradient:
     def __init__(self, task: CuttingTask, settings: GradConfig, max_step: float, seed: int):
         self.task, self.settings, self.max_step = task, settings, float(max_step)
         self.rng = np.random.default_rng(seed)
-        self.ranges = randomize_ranges(settings.es_randomize)
+        self.ranges = randomize_ranges(settings.es_randomize, settings.es_randomize_ranges)
         self.weights = RelativeWeights(task.config) if self.ranges else None
 
     @property
@@ -378,12 +378,12 @@ class RelativeWeights:
 
 class HeldOut:
     """The held-out episodes every iterate is scored on (``GradConfig.validation_trials``): their mean path
-    error in vertices; with ``randomize`` (``GradConfig.es_randomize``) they draw their parameters once,
-    seeded by ``seed``, and each error is weighed as the es estimator weighs its own
+    error in vertices; with ``settings.es_randomize`` (over ``es_randomize_ranges``) they draw their
+    parameters once, seeded by ``seed``, and each error is weighed as the es estimator weighs its own
     (:class:`RelativeWeights`)."""
 
-    def __init__(self, task: CuttingTask, randomize: str, seed: int):
-        self.task, ranges = task, randomize_ranges(randomize)
+    def __init__(self, task: CuttingTask, settings: GradConfig, seed: int):
+        self.task, ranges = task, randomize_ranges(settings.es_randomize, settings.es_randomize_ranges)
         self.weights = RelativeWeights(task.config) if ranges else None
         if ranges:
             task.set_params(**sample_parameters(np.random.default_rng(seed), ranges, task.num_envs))
@@ -437,7 +437,7 @@ def optimize_plan(
     def checker(point: np.ndarray) -> HeldOut | None:
         v, held_out = settings.validation_trials, seed + GRAD_SEED_OFFSET + 1
         task = _episodes(contour, point, segments, config, v, device, held_out) if v else None
-        return None if task is None else HeldOut(task, settings.es_randomize, held_out)
+        return None if task is None else HeldOut(task, settings, held_out)
 
     rollout, validation = engine(pinch), checker(pinch)
     steps = rollout.num_steps

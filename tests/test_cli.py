@@ -762,12 +762,19 @@ def test_optimize_a_closed_loop_policy_under_randomisation(tmp_path):
     out = tmp_path / "run"
     args = ["optimize", "--contour", "circle-small", "--estimator", "es", "--iterations", "1"]
     args += ["--population", "2", "--trials", "2", "--candidates", "2", "--feedback-phases", "2"]
-    code, stdout, _ = invoke(args + ["--randomize", "gravity", "--feedback-sag", "--out", str(out)])
+    ranged = ["--randomize", "gravity,noise", "--randomize-range", "noise=0,0.27"]
+    code, stdout, _ = invoke(args + ranged + ["--feedback-sag", "--out", str(out)])
     assert code == 0, stdout
     plan = json.loads((out / "circle-small.json").read_text())
     assert np.asarray(plan["gains"]).shape == (2, 3, 4)  # scheduled on the sag: [e, s e]
-    assert plan["settings"]["es_feedback_phases"] == 2 and plan["settings"]["es_randomize"] == "gravity"
+    assert plan["settings"]["es_feedback_phases"] == 2 and plan["settings"]["es_randomize"] == "gravity,noise"
     assert plan["settings"]["es_feedback_sag"] is True
+    assert plan["settings"]["es_randomize_ranges"] == {"noise_std": [0.0, 0.27]}
+    code, stdout, _ = invoke(args + ranged + ["--feedback-sag", "--out", str(out), "--resume"])
+    assert code == 0, stdout  # the saved settings read back equal
+    bad = ["--randomize", "gravity", "--randomize-range", "noise=0,0.27", "--out", str(tmp_path / "bad")]
+    code, _, stderr = invoke(args + bad)
+    assert code != 0 and "--randomize-range" in stderr and "noise_std not randomised" in stderr
     code, _, stderr = invoke(["optimize", "--contour", "circle-small", "--feedback-phases", "1"])
     assert code != 0 and "es_feedback_phases: only estimator 'es'" in stderr
     code, _, stderr = invoke(["optimize", "--contour", "circle-small", "--estimator", "es", "--feedback-sag"])

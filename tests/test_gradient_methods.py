@@ -441,11 +441,20 @@ def test_randomised_episodes_are_weighed_by_their_sheets_no_tension_error():
     weights = RelativeWeights(SMALL)(task)
     assert weights[0] == pytest.approx(1.0) and weights[1] > 1.0
     held_out = CuttingTask(SMALL, [contour] * 6, pinch_points=[PINCH] * 6, seed=1)
-    HeldOut(held_out, "gravity", seed=3)
+    settings = GradConfig(estimator="es", es_randomize="gravity")
+    HeldOut(held_out, settings, seed=3)
     assert len(set(np.asarray(held_out.config.gravity).tolist())) > 1  # drawn per episode
     plan = np.zeros((held_out.num_steps, 3), np.float32)
-    first = HeldOut(held_out, "gravity", seed=3)(plan, None)
-    assert HeldOut(held_out, "gravity", seed=3)(plan, None) == first  # the same draws every time
+    first = HeldOut(held_out, settings, seed=3)(plan, None)
+    assert HeldOut(held_out, settings, seed=3)(plan, None) == first  # the same draws every time
+    # A range of its own (es_randomize_ranges) is where the draws come from, for validation and es alike.
+    narrow = grad_config("es", es_randomize="gravity,noise", es_randomize_ranges={"noise": (0.2, 0.27)})
+    assert narrow.es_randomize_ranges == {"noise_std": [0.2, 0.27]}  # one spelling, saved runs compare equal
+    HeldOut(held_out, narrow, seed=3)
+    noise = np.asarray(held_out.config.noise_std)
+    assert noise.min() >= 0.2 and noise.max() <= 0.27 and len(set(noise.tolist())) > 1
+    with pytest.raises(ValueError, match="es_randomize_ranges: noise not randomised"):
+        grad_config("es", es_randomize="gravity", es_randomize_ranges={"noise": (0.0, 0.27)})
 
 
 def test_feedback_plans_are_refused_as_a_base_plan_and_a_kept_plan_must_match_its_pinch(tmp_path):

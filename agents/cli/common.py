@@ -389,6 +389,17 @@ resolution_option = click.option(
 )
 
 
+def randomize_range_option(f):
+    """``--randomize-range NAME=LOW,HIGH`` (repeatable; :func:`parse_randomization` reads it)."""
+    return click.option(
+        "--randomize-range",
+        "randomize_range",
+        multiple=True,
+        metavar="NAME=LOW,HIGH",
+        help="The range of a randomised parameter, in its units (repeatable), e.g. gravity=0,1042.",
+    )(f)
+
+
 def randomize_options(f):
     """``--randomize PARAMS`` and ``--randomize-range NAME=LOW,HIGH`` (domain randomisation while training;
     :func:`parse_randomization` reads them)."""
@@ -401,13 +412,7 @@ def randomize_options(f):
         "10x): with --randomize, a sheet that hangs flat counts as much as the nominal one, as in the "
         "evaluation's relative improvement (docs/robustness.md).",
     )(f)
-    f = click.option(
-        "--randomize-range",
-        "randomize_range",
-        multiple=True,
-        metavar="NAME=LOW,HIGH",
-        help="The range of a randomised parameter, in its units (repeatable), e.g. gravity=0,1042.",
-    )(f)
+    f = randomize_range_option(f)
     return click.option(
         "--randomize",
         default=None,

@@ -55,9 +55,10 @@ from warpcut.sim.config import SimConfig
     default=None,
     metavar="PARAMS",
     help="es: physical parameters drawn anew at every step for the episodes, comma-separated from "
-    "warpcut.sim.config.RANDOMIZE_RANGES (over those ranges); errors weighed by the nominal sheet's "
-    "no-tension error over their own sheet's. Default: the nominal sheet.",
+    "warpcut.sim.config.RANDOMIZE_RANGES (over those ranges, or --randomize-range's); errors weighed by the "
+    "nominal sheet's no-tension error over their own sheet's. Default: the nominal sheet.",
 )
+@common.randomize_range_option
 @click.option(
     "--optimize-pinch",
     is_flag=True,
@@ -87,6 +88,7 @@ def command(
     feedback_only: bool,
     feedback_sag: bool,
     randomize: str | None,
+    randomize_range: tuple[str, ...],
     optimize_pinch: bool,
     trials: int,
     candidates: int,
@@ -107,12 +109,13 @@ def command(
     from warpcut.planning import ArmModel
 
     point = common.parse_point(pinch, "--pinch")
+    _, ranges = common.parse_randomization(randomize, randomize_range)
     common.check_outputs({"--json": json_path}, [contour_name])
     settings = grad_config(
         estimator, iterations=iterations, trials=episodes, learning_rate=learning_rate,
         es_population=population, es_trials=population_episodes, es_sigma_mm=sigma,
         es_feedback_phases=feedback_phases, es_feedback_only=feedback_only, es_feedback_sag=feedback_sag,
-        es_randomize=randomize, optimize_pinch=optimize_pinch,
+        es_randomize=randomize, es_randomize_ranges=ranges or None, optimize_pinch=optimize_pinch,
     )  # fmt: skip
     out, claim = common.claim(out, "optimize", resume, overwrite)
     with claim:
