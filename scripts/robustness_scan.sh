@@ -10,6 +10,8 @@
 #
 # --sag schedules the gains on the sheet's sag (warpcut optimize --feedback-sag), for both modes;
 # --episodes N: episodes per perturbed policy (--population-episodes, default 4).
+# --trials N: trials per value of each study (default 30); --range NAME=LOW,HIGH: a randomised parameter's range
+# while optimising (warpcut optimize --randomize-range; repeatable).
 # --gains-from DIR: reuse the gains a scan wrote to DIR (DIR/CONTOUR-gains4) instead of optimising them again,
 # and only run the studies (e.g. to rescore an earlier scan with today's report: per-trial values, intervals).
 # WARPCUT and PYTHON name the commands (default: .venv's, else those on PATH).
@@ -22,6 +24,8 @@ studies=""
 sag=""
 episodes=4
 gains_from=""
+trials=30
+ranges=()
 while [ $# -gt 0 ]; do
   case "$1" in
     --out) out=$2; shift 2 ;;
@@ -29,7 +33,9 @@ while [ $# -gt 0 ]; do
     --sag) sag="--feedback-sag"; shift ;;
     --episodes) episodes=$2; shift 2 ;;
     --gains-from) gains_from=$2; shift 2 ;;
-    -h|--help) sed -n 2,15p "$0"; exit 0 ;;
+    --trials) trials=$2; shift 2 ;;
+    --range) ranges+=(--randomize-range "$2"); shift 2 ;;
+    -h|--help) sed -n 2,17p "$0"; exit 0 ;;
     -*) echo "error: unknown option $1 (see --help)" >&2; exit 2 ;;
     *) break ;;
   esac
@@ -42,7 +48,7 @@ randomised() {  # CONTOUR: the randomised gains into $out/CONTOUR-gains4 (with -
     mkdir -p "$out/$1-gains4" && cp "$gains_from/$1-gains4/$1.json" "$out/$1-gains4/"
     return
   fi
-  $WARPCUT optimize --contour "$1" $gains --randomize gravity,noise --population-episodes "$episodes" \
+  $WARPCUT optimize --contour "$1" $gains --randomize gravity,noise --population-episodes "$episodes" "${ranges[@]}" \
     --out "$out/$1-gains4" --overwrite > "$out/$1-opt.log" 2>&1
 }
 if [ -n "$studies" ]; then
@@ -51,7 +57,7 @@ if [ -n "$studies" ]; then
   $WARPCUT optimize --contour "$c" $gains --out "$out/$c-gains4-nominal" --overwrite > "$out/$c-nominal-opt.log" 2>&1
   $WARPCUT robustness --contour "$c" --study all --methods none,fixed,analytic \
     --plan gains4="$out/$c-gains4-nominal/$c.json" --plan gains4-rand="$out/$c-gains4/$c.json" \
-    --trials 30 --out "$out/$c-all" --json "$out/$c-all.json" --overwrite > "$out/$c-all.log" 2>&1
+    --trials "$trials" --out "$out/$c-all" --json "$out/$c-all.json" --overwrite > "$out/$c-all.log" 2>&1
   "$PYTHON" scripts/robustness_tables.py "$out/$c-all.json" --policy gains4 --policy gains4-rand
   exit 0
 fi
@@ -61,7 +67,7 @@ print('\n'.join(name for name, c in builtin_contours().items() if c.closed))")
 for c in "${contours[@]}"; do
   randomised "$c"
   $WARPCUT robustness --contour "$c" --study force,noise --methods none,fixed \
-    --plan gains4="$out/$c-gains4/$c.json" --trials 30 --no-plots \
+    --plan gains4="$out/$c-gains4/$c.json" --trials "$trials" --no-plots \
     --out "$out/$c-studies" --json "$out/$c.json" --overwrite > "$out/$c-rob.log" 2>&1
   echo "== $c"
   "$PYTHON" scripts/robustness_tables.py "$out/$c.json" --policy gains4 --policy fixed | tail -8
