@@ -3,6 +3,7 @@ issue-20 target check for a policy label: never below no tension in the force sw
 10% of its nominal improvement across the noise sweep.
 
     python scripts/robustness_tables.py logs/robust/fls-circle-studies.json [--policy randomized]
+    python scripts/robustness_tables.py --summary gains4 logs/robust-scan/*.json   (one row per contour)
 """
 
 from __future__ import annotations
@@ -82,13 +83,54 @@ def targets(reports: dict[str, dict], policy: str) -> list[str]:
     return out
 
 
+def _read(path: Path) -> dict[str, dict]:
+    data = json.loads(path.read_text())
+    return data["studies"] if "studies" in data else {data["study"]: data}
+
+
+def summary(paths: list[Path], policy: str) -> list[str]:
+    """One markdown row per report (a contour's force and noise studies): the nominal improvement, the lowest
+    force median, and the target by medians and by 95% intervals (in / open / out values; met: yes, no, or
+    open when no value misses clearly but some cannot be decided at these trials)."""
+    lines = [
+        "| contour | trials | nominal (%) | force: lowest median (at) | force by medians | force by intervals"
+        " (in/open/out) | noise by medians (within, not below, of 9) | noise by intervals, two-sided |"
+        " one-sided |",
+        "|---" * 9 + "|",
+    ]
+    for path in paths:
+        reports = _read(path)
+        result, force = robustness_target(reports, policy), reports["force"]
+        f, n = result["force"], result["noise"]
+        low = min(
+            (m, v) for m, v in zip(force[policy]["median"], force["values"], strict=True) if m is not None
+        )
+
+        def ci(verdicts, met):
+            return f"{verdicts.count('in')}/{verdicts.count('open')}/{verdicts.count('out')}: {met}"
+
+        lines.append(
+            f"| {force['contour']} | {force['trials']} | {n['nominal_median']:+.1f} | "
+            f"{low[0]:+.1f} ({low[1]:g}) | {'met' if f['median_met'] else 'no'} | "
+            f"{ci(f['ci'], f['ci_met'])} | "
+            f"{n['within']}, {n['not_below']} | {ci(n['ci'], n['ci_met'])} | "
+            f"{ci(n['ci_one_sided'], n['ci_met_one_sided'])} |"
+        )
+    return lines
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("report", type=Path)
+    parser.add_argument("report", type=Path, nargs="+")
     parser.add_argument("--policy", action="append", default=None)
+    parser.add_argument("--summary", metavar="POLICY", help="one row per report for POLICY (see summary())")
     args = parser.parse_args()
-    data = json.loads(args.report.read_text())
-    reports = data["studies"] if "studies" in data else {data["study"]: data}
+    if args.summary:
+        print("\n".join(summary(args.report, args.summary)))
+        return
+    if len(args.report) != 1:
+        parser.error("give one report, or --summary POLICY with several")
+    reports = _read(args.report[0])
     for report in reports.values():
         print("\n".join(table(report)), end="\n\n")
     for policy in args.policy or []:
