@@ -171,7 +171,9 @@ class Simulator(StateReads):
         cores = os.cpu_count() or 1
         self.threads = max(1, min(threads or cores, blocks))
         self._slices = [(len(c), int(c[0])) for c in np.array_split(np.arange(blocks), self.threads)]
-        self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
+        # The calling thread steps the first slice itself; the pool's threads step the others (a handoff
+        # and a wake-up fewer per update than a pool of one thread per slice).
+        self._pool = ThreadPoolExecutor(self.threads - 1) if self.threads > 1 else None
 
     @property
     def first_noise_stream(self) -> int:
@@ -496,10 +498,12 @@ class Simulator(StateReads):
                     device=self.device,
                 )
 
-        if self._pool is None:
+        others = [] if self._pool is None else [self._pool.submit(step_part, s) for s in self._slices[1:]]
+        try:
             step_part(self._slices[0])
-        else:
-            list(self._pool.map(step_part, self._slices))
+        finally:
+            for future in others:
+                future.result()
         self._flat_current = False
 
     def _sync_flat(self) -> None:
