@@ -155,13 +155,11 @@ def robustness_study(
 
     Returns:
         ``{"study", "values", "unit", "metric", "contour", "trials", "nominal", "pinch", "runs", "methods",
-        "seconds", "skipped": [value], METHOD: {"median", "q25", "q75", "mean", "median_ci95", "per_trial"}
-        (one entry per value: the median's 95% bootstrap interval, every trial's value)}``, the
-        metric being ``improvement_pct`` (noise, force) or ``error_pct_of_sheet`` (resolution; then
-        ``none`` is a method too). Noise and force add ``none_error_mm2``, the same statistics of no
-        tension's error. A run cut in another order than the first run (e.g. one that chose another pinch
-        candidate) is paired with no tension cut in its own order: ``own_order_none`` names those runs.
-    """
+        "seconds", "skipped": [value], METHOD: {"median", "q25", "q75", "mean", "median_ci95", "per_trial"}}``
+        (per value; the median's 95% bootstrap interval, every trial's value), the metric being
+        ``improvement_pct`` (noise, force) or ``error_pct_of_sheet`` (resolution; then ``none`` is a method
+        too). Noise and force add ``none_error_mm2``, no tension's error. A run cut in another order than
+        the first (another pinch) is paired with no tension cut in its own order (``own_order_none``)."""
     start = time.perf_counter()
     values = check_study(study, values)
     if not isinstance(trials, int) or trials < 1:
