@@ -473,9 +473,10 @@ def robustness_target(reports: Mapping[str, dict], policy: str, band: float = TA
       one's alone, and their one outcome stands for a chaotic distribution.
 
     Returns ``{"force": {...}, "noise": {...}}`` for the studies present, each with ``values``, the median
-    reading (``median_met``; force ``below``, noise ``within`` / ``not_below`` counts and the band) and the
-    interval reading (``ci``: a verdict per value; ``ci_met``: "yes" when every value is ``in``, "no" when
-    one is ``out``, else "open"). ``ValueError`` names a missing policy."""
+    reading (``median_met``; force ``lowest`` [median, value] and ``below``, noise ``within`` /
+    ``not_below`` counts and the band) and the interval reading (``ci``: a verdict per value; ``ci_met``:
+    "yes" when every value is ``in``, "no" when one is ``out``, else "open"). ``ValueError`` names a missing
+    policy."""
     out: dict = {}
     force, noise = reports.get("force"), reports.get("noise")
     for study, report in (("force", force), ("noise", noise)):
@@ -488,7 +489,9 @@ def robustness_target(reports: Mapping[str, dict], policy: str, band: float = TA
         verdicts = [_verdict(None if ci is None else tuple(ci), 0.0) for ci in cis]
         out["force"] = {
             "values": force["values"],
-            "lowest_median": min(m for m in medians if m is not None),
+            "lowest": list(
+                min((m, v) for m, v in zip(medians, force["values"], strict=True) if m is not None)
+            ),
             "below": [v for v, m in zip(force["values"], medians, strict=True) if m is not None and m < 0],
             "median_met": all(m is None or m >= 0 for m in medians),
             "ci": verdicts,

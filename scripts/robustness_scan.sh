@@ -5,7 +5,7 @@
 # (scripts/robustness_tables.py). With --studies CONTOUR it instead trains the same gains on the nominal
 # sheet too and runs all three studies for both policies on CONTOUR (the demonstration's figure).
 #
-#   bash scripts/robustness_scan.sh [--out DIR] [CONTOUR ...]     (default: the suite's 14 closed contours)
+#   bash scripts/robustness_scan.sh [--out DIR] [CONTOUR ...]     (default: the suite's closed contours)
 #   bash scripts/robustness_scan.sh [--out DIR] --studies CONTOUR   (after the scan: reuses DIR/CONTOUR-gains4)
 #
 # --sag schedules the gains on the sheet's sag (warpcut optimize --feedback-sag), for both modes;

@@ -37,8 +37,14 @@ def table(report: dict) -> list[str]:
     return lines
 
 
-def _counts(verdicts: list[str]) -> str:
-    return ", ".join(f"{verdicts.count(v)} {v}" for v in ("in", "open", "out"))
+def _counts(verdicts: list[str], table: bool = False) -> str:
+    """How many values are in, open and out: "3 in, 6 open, 0 out", or "3/6/0" for a table."""
+    counts = [verdicts.count(v) for v in ("in", "open", "out")]
+    return (
+        "/".join(map(str, counts))
+        if table
+        else ", ".join(f"{c} {v}" for c, v in zip(counts, ("in", "open", "out"), strict=True))
+    )
 
 
 def targets(reports: dict[str, dict], policy: str) -> list[str]:
@@ -48,8 +54,7 @@ def targets(reports: dict[str, dict], policy: str) -> list[str]:
     out = []
     force = result.get("force")
     if force:
-        medians = reports["force"][policy]["median"]
-        worst = min((m, v) for m, v in zip(medians, force["values"], strict=True) if m is not None)
+        worst = force["lowest"]
         out.append(
             f"force: {policy}'s lowest median improvement {worst[0]:+.1f}% (at {worst[1]:g}); below no "
             f"tension at {', '.join(f'{v:g}' for v in force['below']) or 'no value'}"
@@ -102,12 +107,10 @@ def summary(paths: list[Path], policy: str) -> list[str]:
         reports = _read(path)
         result, force = robustness_target(reports, policy), reports["force"]
         f, n = result["force"], result["noise"]
-        low = min(
-            (m, v) for m, v in zip(force[policy]["median"], force["values"], strict=True) if m is not None
-        )
+        low = f["lowest"]
 
         def ci(verdicts, met):
-            return f"{verdicts.count('in')}/{verdicts.count('open')}/{verdicts.count('out')}: {met}"
+            return f"{_counts(verdicts, table=True)}: {met}"
 
         lines.append(
             f"| {force['contour']} | {force['trials']} | {n['nominal_median']:+.1f} | "
