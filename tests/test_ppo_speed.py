@@ -40,3 +40,24 @@ def test_mini_batches_match_rsl_rl_bit_for_bit():
     torch.manual_seed(12)
     other = next(types.MethodType(mini_batches, storage)(3, 2))
     assert not torch.equal(other.observations["policy"], expected[0].observations["policy"])
+
+
+def _spin_count_after(code: str, env: dict[str, str]) -> str:
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "GOMP_SPINCOUNT"} | env
+    script = code + "; import os; print(os.environ.get('GOMP_SPINCOUNT', 'unset'))"
+    out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
+    return out.stdout.strip()
+
+
+def test_importing_agents_before_torch_shortens_openmp_spinning():
+    from agents import OPENMP_SPIN_COUNT
+
+    assert int(OPENMP_SPIN_COUNT) < 300_000  # libgomp's default
+    assert _spin_count_after("import agents, torch", {}) == OPENMP_SPIN_COUNT
+    assert _spin_count_after("import agents", {"GOMP_SPINCOUNT": "123"}) == "123"  # the user's value stands
+    # once torch (and libgomp) is loaded the variable is no longer read: agents does not pretend to set it
+    assert _spin_count_after("import torch, agents", {}) == "unset"
