@@ -108,6 +108,7 @@ def run_method(
     seed: int,
     on_step: StepCallback | None = None,
     segments: Sequence[list[np.ndarray] | None] | None = None,
+    allow_diverged: bool = False,
 ) -> MethodResult:
     """A tensioner on every (contour, trial): one simulator batch for everything.
 
@@ -121,13 +122,16 @@ def run_method(
         seed: Seed of the process noise.
         on_step: Passed to :meth:`CuttingTask.run`.
         segments: Per contour, the polylines cut in order (None: the default single segment).
+        allow_diverged: Return trials whose simulation diverged (NaN errors, flagged in ``diverged``)
+            instead of raising (the sensitivity studies, which count them).
 
     Raises:
         ValueError: The batch (``trials`` x contours envs) would not fit in memory (the message names
             ``trials``, the estimate and the limit: :mod:`warpcut.sim.memory`), or a pinch point is not
             finite.
-        SimulationDiverged: Some trials diverged (non-finite or runaway vertex positions); the message
-            counts them per contour and names the parameters to lower. No error is averaged over them.
+        SimulationDiverged: Some trials diverged (non-finite or runaway vertex positions), unless
+            ``allow_diverged``; the message counts them per contour and names the parameters to lower. No
+            error is averaged over them.
     """
     contours = list(contours)
     if not isinstance(trials, int | np.integer) or trials < 1:
@@ -162,7 +166,7 @@ def run_method(
         score.dropped_fraction.reshape(shape),
         task.diverged().reshape(shape),
     )
-    if result.diverged_trials().any():
+    if result.diverged_trials().any() and not allow_diverged:
         reasons = [r for r in task.divergence_reasons() if r is not None]
         raise divergence_error(contours, result.diverged_trials(), config, sorted(set(reasons)))
     return result

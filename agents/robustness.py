@@ -18,6 +18,11 @@ improvement over no tension per trial (%), as the paper's Fig. 5b-c; the resolut
 itself, no tension included. ``rl`` is a trained run's policy (``warpcut train``), at the run's pinch point
 and cut order; fixed tension holds the same pinch point, analytic tension pinches its own (the feasible
 centroid), no tension none.
+
+A trial whose simulation diverges (at large noise, say) is not refused: its error is undefined, so it is
+left out of its pair (a method's trial k and no tension's), and every method's count of diverged trials per
+value is in the report (``diverged``) and in its table. :func:`robustness_target` counts a value where the
+policy diverged in more trials than no tension against the policy.
 """
 
 from __future__ import annotations
@@ -57,7 +62,7 @@ unchanged at every value."""
 
 REPORT_FIELDS = (
     "study", "values", "unit", "metric", "contour", "trials", "nominal", "pinch", "runs", "methods",
-    "seconds", "skipped", "none_error_mm2", "own_order_none", "plans",
+    "seconds", "skipped", "none_error_mm2", "own_order_none", "plans", "diverged",
 )  # fmt: skip
 """The keys of a study's report besides its methods' (:func:`robustness_study`)."""
 RESERVED_LABELS = (*STUDY_METHODS, *REPORT_FIELDS)
@@ -134,11 +139,10 @@ def robustness_study(
             another is refused.
         study: ``resolution``, ``noise`` or ``force`` (module docstring).
         out: Where ``robustness-STUDY.json`` goes (None: nowhere).
-        runs: Trained run directories (``warpcut train``/``run``) of the contour, ``{label: run}`` (a single
-            run: ``{"rl": run}``): each label is a method, its policy at its run's pinch point. The first
-            run sets the pinch point fixed tension holds, the cut order and the nominal simulation (its
-            options' nominal parameters). None: fixed tension pinches the plan's point
-            (:func:`warpcut.planning.plan_cut`) and no policy runs.
+        runs: Trained runs of the contour (``warpcut train``/``run``), ``{label: run}`` (one run: ``{"rl":
+            run}``): each label a method, its policy at its run's pinch point. The first run sets the pinch
+            point fixed tension holds, the cut order and the nominal simulation (its options' nominal
+            parameters). None: fixed tension pinches the plan's point (:func:`warpcut.planning.plan_cut`).
         plans: Optimised plans of the contour, ``{label: file}`` (``warpcut optimize``'s ``NAME.json``, or
             ``warpcut evaluate``'s ``grad/NAME.json``): each label is a method, the plan played as it was
             optimised (open loop, or closed loop with its feedback gains) at its own pinch point, in the
@@ -147,16 +151,15 @@ def robustness_study(
             baselines; ``none`` always runs, the others' improvements are measured against it). ``grad``
             optimises its plan first, at the pinch point and order fixed tension uses, kept in
             ``out/grad/CONTOUR.json`` (and reused by the next study).
-        values: The sweep (default :data:`STUDY_VALUES`).
-        trials: Seeded noisy trials per value and method (the default protocol's).
+        values, trials: The sweep (default :data:`STUDY_VALUES`); seeded noisy trials per value and method.
         config: The nominal simulation without a run (default ``SimConfig()``).
         grad: The ``grad`` method's optimiser settings.
         device, seed: Warp device; seed of the process noise (and of the plan).
 
-    Returns:
-        ``{"study", "values", "unit", "metric", "contour", "trials", "nominal", "pinch", "runs", "methods",
-        "seconds", "skipped": [value], METHOD: {"median", "q25", "q75", "mean", "median_ci95", "per_trial"}}``
-        (per value; the median's 95% bootstrap interval, every trial's value), the metric being
+    Returns: ``{"study", "values", "unit", "metric", "contour", "trials", "nominal", "pinch", "runs",
+        "methods", "seconds", "skipped": [value], "diverged": {METHOD: [count]}, METHOD: {"median", "q25",
+        "q75", "mean", "median_ci95", "per_trial"}}`` (per value; diverged trials, the median's 95%
+        bootstrap interval, every trial's value), the metric being
         ``improvement_pct`` (noise, force) or ``error_pct_of_sheet`` (resolution; then ``none`` is a method
         too). Noise and force add ``none_error_mm2``, no tension's error. A run cut in another order than
         the first (another pinch) is paired with no tension cut in its own order (``own_order_none``)."""
@@ -201,6 +204,7 @@ def robustness_study(
                         "none", contour, pinch, cut, sim, overrides, len(picked), trials, runs, device, seed
                     )
                 own_none[label][batch] = done[key]
+            _log_diverged(log, study, picked, {m: errors[m][batch] for m in chosen})
         except (ContourError, ValueError) as error:
             if study != "resolution" or not str(error).startswith(("resolution", "contour")):
                 raise
@@ -222,6 +226,7 @@ def robustness_study(
         "methods": chosen if study == "resolution" else chosen[1:],
         "skipped": [float(v) for v in skipped],
         "own_order_none": sorted(own_order),
+        "diverged": {m: _diverged_counts(values, skipped, errors[m]) for m in chosen},
     }
     report.update(_method_stats(study, chosen, errors, own_none, config.width_mm * config.height_mm))
     report["seconds"] = time.perf_counter() - start
@@ -394,7 +399,7 @@ def _method_errors(
     plans: Mapping[str, PlanResult] | None = None,
 ) -> np.ndarray:
     """(settings, trials) errors (mm^2) of ``method``: one batch, env ``s * trials + k`` = setting ``s``,
-    trial ``k``, with the same noise streams in every method's batch."""
+    trial ``k``, with the same noise streams in every method's batch; NaN where the trial diverged."""
     if method in runs:
         from agents.rl import rollout_errors
 
@@ -415,9 +420,34 @@ def _method_errors(
     # run_method's layout is contour by contour, trials within: one "contour" per setting.
     result = run_method(
         [contour] * settings, [point] * settings, policy, trials, config, device, seed,
-        segments=[segments] * settings,
+        segments=[segments] * settings, allow_diverged=True,
     )  # fmt: skip
-    return np.asarray(result.error_mm2, dtype=np.float64)
+    return np.where(result.diverged_trials(), np.nan, np.asarray(result.error_mm2, dtype=np.float64))
+
+
+def _log_diverged(log: Callable[[str], None], study: str, values: list, errors: Mapping[str, np.ndarray]):
+    """Log, per value of a batch, the methods with diverged trials (NaN errors) and how many."""
+    for k, value in enumerate(values):
+        counts = {m: int(np.sum(~np.isfinite(e[k]))) for m, e in errors.items()}
+        if any(counts.values()):
+            which = ", ".join(f"{m} {n}" for m, n in counts.items() if n)
+            log(f"  {study} {value:g}: diverged trials (left out of their pairs): {which}")
+
+
+def _diverged_counts(values: list, skipped: list, errors: np.ndarray) -> list[int]:
+    """Per value, the trials whose error is undefined (diverged); 0 for a skipped value."""
+    rows = zip(values, errors, strict=True)
+    return [0 if v in skipped else int(np.sum(~np.isfinite(row))) for v, row in rows]
+
+
+def _diverged_more(report: dict, policy: str) -> list[bool]:
+    """Per value: the policy diverged in more trials than no tension did (False for a report without
+    counts)."""
+    counts = report.get("diverged") or {}
+    mine, none = counts.get(policy), counts.get("none")
+    if mine is None or none is None:
+        return [False] * len(report["values"])
+    return [a > b for a, b in zip(mine, none, strict=True)]
 
 
 def robustness_table(report: dict) -> list[str]:
@@ -435,6 +465,11 @@ def robustness_table(report: dict) -> list[str]:
             cells.append(f"{'-':>22}" if med is None else f"{med:>8.1f} [{lo:>5.1f}, {hi:>5.1f}]")
         mark = " (nominal)" if np.isclose(value, report["nominal"]) else ""
         lines.append(f"{value:>20g} " + " ".join(cells) + mark)
+    counts = report.get("diverged") or {}
+    for k, value in enumerate(report["values"]):
+        which = ", ".join(f"{m} {c[k]}" for m, c in counts.items() if c[k])
+        if which:
+            lines.append(f"diverged trials at {value:g} (left out of their pairs): {which}")
     return lines
 
 
@@ -472,6 +507,9 @@ def robustness_target(reports: Mapping[str, dict], policy: str, band: float = TA
       (a deterministic sheet, e.g. no noise) are listed in ``deterministic``: their interval is the nominal
       one's alone, and their one outcome stands for a chaotic distribution.
 
+    A value where the policy diverged in more trials than no tension (the report's ``diverged`` counts) is
+    ``out`` in both readings and listed in ``diverged_more``.
+
     Returns ``{"force": {...}, "noise": {...}}`` for the studies present, each with ``values``, the median
     reading (``median_met``; force ``lowest`` [median, value] and ``below``, noise ``within`` /
     ``not_below`` counts and the band) and the interval reading (``ci``: a verdict per value; ``ci_met``:
@@ -486,14 +524,19 @@ def robustness_target(reports: Mapping[str, dict], policy: str, band: float = TA
     if force is not None:
         medians = force[policy]["median"]
         cis = force[policy].get("median_ci95") or [None] * len(medians)
-        verdicts = [_verdict(None if ci is None else tuple(ci), 0.0) for ci in cis]
+        more = _diverged_more(force, policy)
+        verdicts = [
+            "out" if worse else _verdict(None if ci is None else tuple(ci), 0.0)
+            for ci, worse in zip(cis, more, strict=True)
+        ]
         out["force"] = {
             "values": force["values"],
             "lowest": list(
                 min((m, v) for m, v in zip(medians, force["values"], strict=True) if m is not None)
             ),
             "below": [v for v, m in zip(force["values"], medians, strict=True) if m is not None and m < 0],
-            "median_met": all(m is None or m >= 0 for m in medians),
+            "diverged_more": [v for v, worse in zip(force["values"], more, strict=True) if worse],
+            "median_met": all(m is None or m >= 0 for m in medians) and not any(more),
             "ci": verdicts,
             "ci_met": _overall(verdicts),
         }
@@ -502,6 +545,7 @@ def robustness_target(reports: Mapping[str, dict], policy: str, band: float = TA
         k0 = int(np.argmin([abs(v - noise["nominal"]) for v in values]))
         nominal, width = medians[k0], band * abs(medians[k0])
         reference = _trials(noise, policy, k0)
+        more = _diverged_more(noise, policy)
         two, one, deterministic = [], [], []
         for k, value in enumerate(values):
             if k == k0:
@@ -511,14 +555,16 @@ def robustness_target(reports: Mapping[str, dict], policy: str, band: float = TA
             if finite.size > 1 and np.all(finite == finite[0]):
                 deterministic.append(value)
             interval = bootstrap_difference_ci(trials, reference) if trials.size else None
-            two.append(_verdict(interval, -width, width))
-            one.append(_verdict(interval, -width))
-        others = [m for k, m in enumerate(medians) if k != k0]
+            two.append("out" if more[k] else _verdict(interval, -width, width))
+            one.append("out" if more[k] else _verdict(interval, -width))
+        # a value where the policy diverged more often than no tension counts as outside the band
+        others = [None if more[k] else m for k, m in enumerate(medians) if k != k0]
         out["noise"] = {
             "values": [v for k, v in enumerate(values) if k != k0],
             "nominal": values[k0],
             "nominal_median": nominal,
             "band": width,
+            "diverged_more": [v for v, worse in zip(values, more, strict=True) if worse],
             "within": sum(m is not None and abs(m - nominal) <= width for m in others),
             "not_below": sum(m is not None and m >= nominal - width for m in others),
             "median_met": all(m is not None and abs(m - nominal) <= width for m in others),

@@ -85,6 +85,10 @@ def targets(reports: dict[str, dict], policy: str) -> list[str]:
             f"{_counts(noise['ci'])}: {noise['ci_met']}; one-sided {_counts(noise['ci_one_sided'])}: "
             f"{noise['ci_met_one_sided']}" + (deterministic if noise["deterministic"] else "")
         )
+    for study, reading in result.items():
+        if reading.get("diverged_more"):
+            at = ", ".join(f"{v:g}" for v in reading["diverged_more"])
+            out.append(f"{study}: {policy} diverged in more trials than no tension at {at} (counted as out)")
     return out
 
 
@@ -109,14 +113,15 @@ def summary(paths: list[Path], policy: str) -> list[str]:
         f, n = result["force"], result["noise"]
         low = f["lowest"]
 
-        def ci(verdicts, met):
-            return f"{_counts(verdicts, table=True)}: {met}"
+        def ci(verdicts, met, reading=None):
+            more = ", ".join(f"{v:g}" for v in (reading or {}).get("diverged_more", []))
+            return f"{_counts(verdicts, table=True)}: {met}" + (f" (diverged more at {more})" if more else "")
 
         lines.append(
             f"| {force['contour']} | {force['trials']} | {n['nominal_median']:+.1f} | "
             f"{low[0]:+.1f} ({low[1]:g}) | {'met' if f['median_met'] else 'no'} | "
-            f"{ci(f['ci'], f['ci_met'])} | "
-            f"{n['within']}, {n['not_below']} | {ci(n['ci'], n['ci_met'])} | "
+            f"{ci(f['ci'], f['ci_met'], f)} | "
+            f"{n['within']}, {n['not_below']} | {ci(n['ci'], n['ci_met'], n)} | "
             f"{ci(n['ci_one_sided'], n['ci_met_one_sided'])} |"
         )
     return lines

@@ -9,7 +9,14 @@ import pytest
 from click.testing import CliRunner
 
 from agents.cli import main
-from agents.robustness import check_runs, check_study, parse_studies, robustness_study, robustness_target
+from agents.robustness import (
+    check_runs,
+    check_study,
+    parse_studies,
+    robustness_study,
+    robustness_table,
+    robustness_target,
+)
 from envs.options import PatternCutOptions
 from envs.vector import PatternCutVecEnv
 from warpcut.contours import load_contour
@@ -197,6 +204,48 @@ def test_robustness_target_reads_medians_and_intervals():
     assert both_fine["force"]["ci_met"] == "yes" and both_fine["force"]["median_met"]
     with pytest.raises(ValueError, match="policy: 'q' is not in the force report"):
         robustness_target({"force": force}, "q")
+
+
+def test_robustness_target_counts_diverging_more_often_than_no_tension_against_the_policy():
+    """A value where the policy's sheet diverged in more trials than no tension's is out in both readings,
+    whatever the remaining trials say."""
+    spread = np.random.default_rng(1).normal(0.0, 1.0, 30)
+    force = _study("force", [0.0, 521.0], 521.0, [list(5.0 + spread), list(40.0 + spread)])
+    noise = _study("noise", [0.03, 0.27], 0.03, [list(50.0 + spread), list(50.0 + spread[::-1])])
+    fine = robustness_target({"force": force, "noise": noise}, "p")
+    assert fine["force"]["ci_met"] == "yes" and fine["noise"]["ci_met"] == "yes"
+    assert fine["force"]["diverged_more"] == [] and fine["noise"]["median_met"]
+    force["diverged"] = {"none": [1, 0], "p": [1, 2]}  # as many as none at 0, more at 521
+    noise["diverged"] = {"none": [0, 0], "p": [0, 1]}
+    result = robustness_target({"force": force, "noise": noise}, "p")
+    f, n = result["force"], result["noise"]
+    assert f["diverged_more"] == [521.0] and f["ci"] == ["in", "out"] and f["ci_met"] == "no"
+    assert not f["median_met"] and f["below"] == []  # the medians alone are above 0
+    assert n["diverged_more"] == [0.27] and n["ci"] == ["out"] and n["ci_one_sided"] == ["out"]
+    assert n["within"] == 0 and not n["median_met"] and not n["median_met_one_sided"]
+
+
+def test_a_study_scores_the_trials_that_did_not_diverge_and_counts_the_rest():
+    """At an absurd process noise some sheets blow up: the study goes on, leaves each diverged trial out
+    of its pair with no tension, and counts them per method and value (report, log and table)."""
+    lines = []
+    report = robustness_study(
+        "fls-circle", "noise", values=[0.03, 30.0], trials=6, methods=["none", "fixed"],
+        config=SimConfig(resolution=RES), device="cpu", log=lines.append,
+    )  # fmt: skip
+    diverged = report["diverged"]
+    assert diverged["none"][0] == diverged["fixed"][0] == 0
+    assert (
+        0 < max(diverged["none"][1], diverged["fixed"][1])
+        and min(diverged["none"][1], diverged["fixed"][1]) < 6
+    )
+    left_out = sum(v is None for v in report["fixed"]["per_trial"][1])
+    assert max(diverged["none"][1], diverged["fixed"][1]) <= left_out < 6  # a pair goes if either diverged
+    assert report["fixed"]["median"][1] is not None and np.isfinite(report["fixed"]["median"][1])
+    assert any(re.search(r"noise 30: diverged trials \(left out of their pairs\): none \d", x) for x in lines)
+    assert any(
+        x.startswith("diverged trials at 30 (left out of their pairs)") for x in robustness_table(report)
+    )
 
 
 def test_resolution_study_skips_a_mesh_too_coarse_for_the_contour():
