@@ -425,13 +425,18 @@ def _method_errors(
     return np.where(result.diverged_trials(), np.nan, np.asarray(result.error_mm2, dtype=np.float64))
 
 
+def _diverged_words(counts: Mapping[str, int]) -> str:
+    """``"diverged trials (left out of their pairs): METHOD N, ..."`` for the methods with any; else ""."""
+    which = ", ".join(f"{m} {n}" for m, n in counts.items() if n)
+    return f"diverged trials (left out of their pairs): {which}" if which else ""
+
+
 def _log_diverged(log: Callable[[str], None], study: str, values: list, errors: Mapping[str, np.ndarray]):
     """Log, per value of a batch, the methods with diverged trials (NaN errors) and how many."""
     for k, value in enumerate(values):
-        counts = {m: int(np.sum(~np.isfinite(e[k]))) for m, e in errors.items()}
-        if any(counts.values()):
-            which = ", ".join(f"{m} {n}" for m, n in counts.items() if n)
-            log(f"  {study} {value:g}: diverged trials (left out of their pairs): {which}")
+        words = _diverged_words({m: int(np.sum(~np.isfinite(e[k]))) for m, e in errors.items()})
+        if words:
+            log(f"  {study} {value:g}: {words}")
 
 
 def _diverged_counts(values: list, skipped: list, errors: np.ndarray) -> list[int]:
@@ -467,9 +472,9 @@ def robustness_table(report: dict) -> list[str]:
         lines.append(f"{value:>20g} " + " ".join(cells) + mark)
     counts = report.get("diverged") or {}
     for k, value in enumerate(report["values"]):
-        which = ", ".join(f"{m} {c[k]}" for m, c in counts.items() if c[k])
-        if which:
-            lines.append(f"diverged trials at {value:g} (left out of their pairs): {which}")
+        words = _diverged_words({m: c[k] for m, c in counts.items()})
+        if words:
+            lines.append(f"at {value:g}: {words}")
     return lines
 
 

@@ -244,7 +244,7 @@ def test_a_study_scores_the_trials_that_did_not_diverge_and_counts_the_rest():
     assert report["fixed"]["median"][1] is not None and np.isfinite(report["fixed"]["median"][1])
     assert any(re.search(r"noise 30: diverged trials \(left out of their pairs\): none \d", x) for x in lines)
     assert any(
-        x.startswith("diverged trials at 30 (left out of their pairs)") for x in robustness_table(report)
+        x.startswith("at 30: diverged trials (left out of their pairs)") for x in robustness_table(report)
     )
 
 
