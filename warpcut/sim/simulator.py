@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 
 import numpy as np
 
@@ -501,9 +501,11 @@ class Simulator(StateReads):
         others = [] if self._pool is None else [self._pool.submit(step_part, s) for s in self._slices[1:]]
         try:
             step_part(self._slices[0])
-        finally:
-            for future in others:
-                future.result()
+        finally:  # the other slices finish before anything reads the state; this slice's error comes first
+            if others:
+                wait(others)
+        for future in others:
+            future.result()
         self._flat_current = False
 
     def _sync_flat(self) -> None:
