@@ -47,7 +47,7 @@ from agents.gradient import base_plan_options, grad_column
 from agents.methods import SELECTORS, TABLE_METHODS, StepCallbacks, check_methods, point_text
 from agents.rl import check_policy_run, is_run, nominal_validation_error, rollout_errors, train_contour
 from envs.options import PatternCutOptions
-from warpcut.contours import Contour, builtin_names, load_contour
+from warpcut.contours import Contour, load_contour, resolve_contours
 from warpcut.io import claim_run_dir, finite_json, read_json, safe_name, write_json
 from warpcut.planning import ArmModel, Plan, plan_cut
 from warpcut.sim.config import SimConfig
@@ -493,28 +493,6 @@ def _train_candidates(
 # --- evaluate_table -------------------------------------------------------------------------------------
 
 
-def resolve_contours(specs: str | Sequence[str]) -> list[tuple[str, Contour]]:
-    """``(spec, contour)`` for each name or file in ``specs`` (one string or several, comma-separated
-    allowed); ``all``: the built-in suite (after any other given)."""
-    specs = [specs] if isinstance(specs, str) else specs
-    names = [s.strip() for arg in specs for s in arg.split(",") if s.strip()]
-    if "all" in names:
-        names = [s for s in names if s != "all"] + [n for n in builtin_names() if n not in names]
-    if not names:
-        raise ValueError("contours: give at least one contour name or file, or 'all'")
-    named = [(s, load_contour(s)) for s in names]
-    seen: dict[str, str] = {}
-    for spec, contour in named:
-        key = safe_name(contour.name)
-        if key in seen:
-            raise ValueError(
-                f"contours: {seen[key]!r} and {spec!r} are both named {contour.name!r} (their runs and plots "
-                "would share files); rename one in its file"
-            )
-        seen[key] = spec
-    return named
-
-
 @dataclass
 class TableReport:
     """What :func:`evaluate_table` measured; :meth:`to_json` is the run directory's ``results.json``."""
@@ -592,8 +570,8 @@ def evaluate_table(
         contours: Built-in names or contour files (``all``: the built-in suite).
         out: Run directory: ``plans.json``, ``results.json``, ``policies/`` (a run per contour, named by
             ``safe_name``). Locked while it runs; refused if it holds another run (``claim_run_dir``).
-        resume: Continue the run in ``out`` (started with the same arguments, ``request.json``): policies
-            trained to the end are kept, interrupted ones continue from their checkpoints.
+        resume: Continue the run in ``out`` (started with the same arguments, ``request.json``): its plans
+            and the policies trained to the end are kept, interrupted ones continue from their checkpoints.
         overwrite: Delete what ``out`` holds first.
         methods, trials: Names from :data:`agents.methods.METHODS`; trials per contour and method.
         config: Simulation settings (default ``SimConfig()``); plans are searched noise-free.
@@ -632,7 +610,7 @@ def evaluate_table(
     )  # fmt: skip
     start = time.perf_counter()
     settings = dict(num_candidates=candidates, seed=seed, device=device, arm=arm)
-    plans = _table_plans(plan, loaded, config, settings, out, log, stages)
+    plans = _table_plans(plan, loaded, config, settings, out, log, stages, resume)
     specs, runs, notes = [Method(m) for m in methods], [], []  # notes: add a column's own fields to the table
     for spec in specs:
         if spec.name == "fixed" and plans is not None:
@@ -699,9 +677,12 @@ def _table_plans(
     out: Path,
     log: Callable[[str], None],
     stages: Stages,
+    resume: bool = False,
 ) -> list[Plan] | None:
     """:func:`evaluate_table`'s plans: the ones given (checked against the contours), or made now with the
-    plan search's ``settings`` (noise-free; written to ``out/plans.json``), or None (``plan`` False)."""
+    plan search's ``settings`` (noise-free; written to ``out/plans.json``), or None (``plan`` False). With
+    ``resume``, the plans ``out/plans.json`` holds are read back instead of searched again: the request
+    (checked already) names the same contours, points and settings, and the search is deterministic."""
     if isinstance(plan, list | tuple):  # plans made already, one per contour
         plans = list(plan)
         if [p.contour.name for p in plans] != [c.name for c in contours]:
@@ -709,8 +690,20 @@ def _table_plans(
         return plans
     if not plan:
         return None
-    plans = _plan_all(contours, config.replace(noise_std=0.0), settings, log, stages)
-    write_json(out / "plans.json", {p.contour.name: p.to_json() for p in plans})
+    config, path = config.replace(noise_std=0.0), out / "plans.json"
+    if resume and path.is_file():
+        try:
+            saved = read_json(path)
+            plans = [Plan.from_json(saved[c.name], c, config) for c in contours]
+        except (OSError, KeyError, TypeError, ValueError) as exc:
+            why = f"no plan for {exc.args[0]!r}" if isinstance(exc, KeyError) else " ".join(str(exc).split())
+            log(f"  planning again: {path} cannot be kept ({why})")
+        else:
+            stages("planning", len(contours), len(contours))
+            log(f"  kept the {len(plans)} plan(s) in {path}")
+            return plans
+    plans = _plan_all(contours, config, settings, log, stages)
+    write_json(path, {p.contour.name: p.to_json() for p in plans})
     return plans
 
 

@@ -98,6 +98,35 @@ def test_evaluate_table_trains_with_the_papers_recipe_and_records_the_kept_itera
     ]
 
 
+def test_evaluate_table_resumes_with_the_plans_it_saved(tmp_path, monkeypatch):
+    import agents.pipeline as pipeline
+
+    kwargs = dict(methods=["none", "fixed"], trials=1, config=SMALL, candidates=2)
+    first = evaluate_table(["circle-small", "wave-1"], tmp_path, **kwargs)
+    planned = []
+    real = pipeline.plan_cut
+    monkeypatch.setattr(pipeline, "plan_cut", lambda contour, *a, **kw: planned.append(contour.name))
+    lines = []
+    again = evaluate_table(["circle-small", "wave-1"], tmp_path, resume=True, log=lines.append, **kwargs)
+    assert planned == [] and any("kept the 2 plan(s)" in line for line in lines)
+    assert again.table["rows"] == first.table["rows"]  # the same pinch points and orders, the same cuts
+    assert [p.to_json() for p in again.plans] == [p.to_json() for p in first.plans]
+    saved = json.loads((tmp_path / "plans.json").read_text())
+    del saved["wave-1"]  # e.g. a run that stopped while writing it (it is written whole, atomically)
+    (tmp_path / "plans.json").write_text(json.dumps(saved))
+    monkeypatch.setattr(
+        pipeline,
+        "plan_cut",
+        lambda contour, *a, **kw: planned.append(contour.name) or real(contour, *a, **kw),
+    )
+    lines.clear()
+    third = evaluate_table(["circle-small", "wave-1"], tmp_path, resume=True, log=lines.append, **kwargs)
+    assert planned == ["circle-small", "wave-1"]
+    assert any("planning again" in line and "no plan for 'wave-1'" in line for line in lines)
+    assert third.table["rows"] == first.table["rows"]
+    assert set(json.loads((tmp_path / "plans.json").read_text())) == {"circle-small", "wave-1"}
+
+
 def test_evaluate_table_reports_each_stage_as_it_advances(tmp_path):
     seen = []
 

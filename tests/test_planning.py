@@ -10,6 +10,7 @@ import pytest
 
 from warpcut import SimConfig
 from warpcut.contours import load_contour
+from warpcut.io import read_json, write_json
 from warpcut.planning import (
     ArmModel,
     Plan,
@@ -177,6 +178,29 @@ def test_plan_json_shape(small_plan):
     assert chosen["pinch"] in [c["point"] for c in feasible]
     polylines = small_plan.ordered_segments()
     assert [p.tolist() for p in polylines] == [data["segments"][k]["points"] for k in data["order"]]
+
+
+def test_plan_json_reads_back_bit_for_bit(small_plan, tmp_path):
+    write_json(tmp_path / "plan.json", small_plan.to_json())
+    data = read_json(tmp_path / "plan.json")
+    again = Plan.from_json(data, small_plan.contour, small_plan.config)
+    assert again.to_json() == small_plan.to_json()
+    np.testing.assert_array_equal(again.errors, small_plan.errors)
+    assert again.errors.shape == small_plan.errors.shape
+    assert again.order == small_plan.order and again.orders == small_plan.orders
+    assert again.arm == small_plan.arm and again.rejected[0]["violates"] == small_plan.rejected[0]["violates"]
+    for a, b in zip(again.segments, small_plan.segments, strict=True):
+        np.testing.assert_array_equal(a.points, b.points)
+    for a, b in zip(again.candidates, small_plan.candidates, strict=True):
+        np.testing.assert_array_equal(a["point"], b["point"])
+        assert a["best_order"] == tuple(b["best_order"]) and a["error_vertices"] == b["error_vertices"]
+    np.testing.assert_array_equal(again.chosen["pinch"], small_plan.chosen["pinch"])
+    np.testing.assert_array_equal(again.analytic_pinch, small_plan.analytic_pinch)
+    with pytest.raises(ValueError, match="it is 'circle-offset''s plan, not 'wave-1''s"):
+        Plan.from_json(data, load_contour("wave-1"), small_plan.config)
+    del data["errors_vertices"]  # a plan written before the errors were
+    with pytest.raises(ValueError, match="missing 'errors_vertices'"):
+        Plan.from_json(data, small_plan.contour, small_plan.config)
 
 
 def test_many_segments_use_the_heuristic_orders_with_a_warning():

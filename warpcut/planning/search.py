@@ -209,10 +209,70 @@ class Plan:
                 "error_vertices": float(self.chosen["error_vertices"]),
             },
             "orders_searched": [[int(k) for k in o] for o in self.orders],
+            "errors_vertices": self.errors.tolist(),
             "heuristic_orders": self.heuristic_orders,
             "arm_radius_mm": self.arm.radius_mm,
             "arm_length_mm": None if math.isinf(self.arm.length_mm) else self.arm.length_mm,
         }
+
+    @classmethod
+    def from_json(cls, data: dict, contour: Contour, config: SimConfig) -> Plan:
+        """The plan :meth:`to_json` wrote (read back from JSON), for ``contour`` as planned with ``config``:
+        the same segments, candidates, orders and errors, bit for bit (JSON's floats round-trip).
+
+        Raises:
+            ValueError: when ``data`` is not a plan of ``contour`` with everything :meth:`to_json` writes
+                (a plan written before ``errors_vertices`` was added, for one: plan again).
+        """
+        try:
+            if data["contour"] != contour.name:
+                raise ValueError(f"it is {data['contour']!r}'s plan, not {contour.name!r}'s")
+            listed = data["pinch_candidates"]
+            length = data["arm_length_mm"]
+            plan = cls(
+                contour=contour,
+                segments=[Segment(np.asarray(s["points"], dtype=np.float64)) for s in data["segments"]],
+                order=tuple(int(k) for k in data["order"]),
+                candidates=[
+                    {
+                        "point": np.asarray(c["point"], dtype=np.float64),
+                        "feasible": True,
+                        "error_vertices": float(c["error_vertices"]),
+                        "best_order": tuple(int(k) for k in c["best_order"]),
+                    }
+                    for c in listed
+                    if c["feasible"]
+                ],
+                chosen={
+                    "pinch": np.asarray(data["chosen"]["pinch"], dtype=np.float64),
+                    "order": tuple(int(k) for k in data["chosen"]["order"]),
+                    "error_vertices": float(data["chosen"]["error_vertices"]),
+                },
+                orders=[tuple(int(k) for k in o) for o in data["orders_searched"]],
+                errors=np.asarray(data["errors_vertices"], dtype=np.float64),
+                rejected=[
+                    {
+                        "point": np.asarray(c["point"], dtype=np.float64),
+                        "feasible": False,
+                        "violates": c["violates"],
+                    }
+                    for c in listed
+                    if not c["feasible"]
+                ],
+                arm=ArmModel(
+                    radius_mm=data["arm_radius_mm"], length_mm=math.inf if length is None else length
+                ),
+                config=config,
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            what = f"missing {exc}" if isinstance(exc, KeyError) else str(exc)
+            raise ValueError(f"plan: not a warpcut plan of {contour.name!r} ({what}); plan it again") from exc
+        if plan.errors.shape != (len(plan.candidates), len(plan.orders)):
+            raise ValueError(
+                f"plan: errors_vertices has shape {plan.errors.shape}, not (candidates, orders) = "
+                f"({len(plan.candidates)}, {len(plan.orders)}); plan {contour.name!r} again"
+            )
+        return plan
 
 
 def plan_cut(
