@@ -513,7 +513,8 @@ def robustness_target(reports: Mapping[str, dict], policy: str, band: float = TA
       one's alone, and their one outcome stands for a chaotic distribution.
 
     A value where the policy diverged in more trials than no tension (the report's ``diverged`` counts) is
-    ``out`` in both readings and listed in ``diverged_more``.
+    ``out`` in both readings and listed in ``diverged_more``; at the noise sweep's nominal value, which has
+    no verdict of its own, it fails the noise half (``nominal_diverged_more``).
 
     Returns ``{"force": {...}, "noise": {...}}`` for the studies present, each with ``values``, the median
     reading (``median_met``; force ``lowest`` [median, value] and ``below``, noise ``within`` /
@@ -562,14 +563,18 @@ def robustness_target(reports: Mapping[str, dict], policy: str, band: float = TA
             interval = bootstrap_difference_ci(trials, reference) if trials.size else None
             two.append("out" if more[k] else _verdict(interval, -width, width))
             one.append("out" if more[k] else _verdict(interval, -width))
-        # a value where the policy diverged more often than no tension counts as outside the band
-        others = [None if more[k] else m for k, m in enumerate(medians) if k != k0]
+        # a value where the policy diverged more often than no tension counts as outside the band; at the
+        # nominal one, the band's reference itself is a policy that fails more often: no value is within
+        others = [None if more[k] or more[k0] else m for k, m in enumerate(medians) if k != k0]
+        if more[k0]:
+            two, one = ["out"] * len(two), ["out"] * len(one)
         out["noise"] = {
             "values": [v for k, v in enumerate(values) if k != k0],
             "nominal": values[k0],
             "nominal_median": nominal,
             "band": width,
             "diverged_more": [v for v, worse in zip(values, more, strict=True) if worse],
+            "nominal_diverged_more": bool(more[k0]),
             "within": sum(m is not None and abs(m - nominal) <= width for m in others),
             "not_below": sum(m is not None and m >= nominal - width for m in others),
             "median_met": all(m is not None and abs(m - nominal) <= width for m in others),

@@ -223,6 +223,12 @@ def test_robustness_target_counts_diverging_more_often_than_no_tension_against_t
     assert not f["median_met"] and f["below"] == []  # the medians alone are above 0
     assert n["diverged_more"] == [0.27] and n["ci"] == ["out"] and n["ci_one_sided"] == ["out"]
     assert n["within"] == 0 and not n["median_met"] and not n["median_met_one_sided"]
+    assert not n["nominal_diverged_more"] and not fine["noise"]["nominal_diverged_more"]
+    noise["diverged"] = {"none": [0, 0], "p": [1, 0]}  # the policy fails more often at the nominal value
+    n = robustness_target({"noise": noise}, "p")["noise"]
+    assert n["nominal_diverged_more"] and n["diverged_more"] == [0.03]
+    assert n["ci"] == ["out"] and n["ci_met"] == "no" and n["ci_met_one_sided"] == "no"
+    assert n["within"] == 0 and not n["median_met"] and not n["median_met_one_sided"]
 
 
 def test_a_study_scores_the_trials_that_did_not_diverge_and_counts_the_rest():
