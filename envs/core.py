@@ -193,6 +193,8 @@ class PatternCut:
             score (module docstring); ``diverged`` once an env diverged. ``terminated`` is also True once
             every env has diverged.
         """
+        if not self._sampled:
+            raise RuntimeError("step: call reset() first")
         if self._over or self.task.done or self.step_index >= self.episode_steps:
             raise RuntimeError("step: the episode is over; call reset() first")
         first_update = self.task.update_index

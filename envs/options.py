@@ -131,7 +131,21 @@ class PatternCutOptions:
         unknown = sorted(set(kwargs) - names)
         if unknown:
             raise TypeError(f"unknown option(s) {', '.join(unknown)}; choose from {', '.join(sorted(names))}")
-        return dataclasses.replace(options or cls(), **kwargs)
+        if options is not None and not isinstance(options, cls):
+            raise ValueError(
+                f"options: expected PatternCutOptions (got {type(options).__name__}); pass its fields as "
+                "keyword arguments, or read a dict with PatternCutOptions.from_dict"
+            )
+        for name, value in kwargs.items():
+            problem = _field_problem(name, value)
+            if problem is None and name == "sim_config" and not isinstance(value, SimConfig):
+                problem = "give a SimConfig (PatternCutOptions.from_dict reads one from a dict)"
+            if problem:
+                raise ValueError(f"{name}: {problem} (got {value!r:.80})")
+        built = dataclasses.replace(options or cls(), **kwargs)
+        if any(name in SIM_OVERRIDES or name == "sim_config" for name in kwargs):
+            built.config()  # the simulation settings, checked now (ConfigError names the field)
+        return built
 
     def config(self) -> SimConfig:
         """``sim_config`` with the given overrides, validated."""
@@ -274,11 +288,11 @@ class PatternCutOptions:
 
 
 def _is_number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool)
+    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
 
 
 def _is_count(value: Any, least: int) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool) and value >= least
+    return isinstance(value, int | np.integer) and not isinstance(value, bool) and value >= least
 
 
 _FLAGS = (
@@ -341,7 +355,18 @@ def _field_problem(name: str, value: Any) -> str | None:
         return "give {parameter: [low, high]}, or null"
     if name in ("fixture", "device") and value is not None and not isinstance(value, str):
         return "must be a string, or null"
+    if name in _PER_ENV and value is not None:
+        try:
+            values = list(np.ravel(value)) if isinstance(value, list | tuple | np.ndarray) else [value]
+        except ValueError:  # ragged
+            values = []
+        if not values or not all(_is_number(v) for v in values):
+            return "give a number, or a list of one number per env, or null"
     return None
+
+
+_PER_ENV = ("damping", "dt", "gravity", "elasticity", "noise_std")
+"""The physical parameters that take one value for all envs or one per env."""
 
 
 def _contour_spec(contour: ContourSpec) -> str | dict:

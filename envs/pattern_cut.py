@@ -114,7 +114,7 @@ class PatternCutEnv(gym.Env):
         that diverges ends the episode: ``terminated``, ``info["diverged"]`` True, a NaN score and a zero
         observation and reward."""
         obs, rewards, terminated, truncated, info = self.scene.step(np.asarray(action)[None])
-        scalars = {k: bool(v[0]) if k == "diverged" else float(v[0]) for k, v in info.items()}
+        scalars = {k: np.asarray(v)[0].item() for k, v in info.items()}  # bools stay bools, counts ints
         if self._window is not None:
             self._show()
         return obs[0], float(rewards[0]), terminated, truncated, scalars

@@ -12,9 +12,10 @@ Actions, a tensor on any device:
 ``step`` returns ``dones`` (B,) long, 1 where an episode ended (all envs together: they share one clock)
 and the env has already reset. ``extras["time_outs"]`` (B,) bool is True only where the episode was cut
 short by ``max_episode_steps``: a completed cut is a true terminal state (its reward is final), so PPO must
-not bootstrap past it. On the step where cuts complete, ``extras["log"]`` holds one value per env of
-``Episode/final_error`` (:data:`FINAL_ERROR_KEY`: ``error_mm2 / area_mm2``, minus the final reward),
-``Cut/error_mm2`` and ``Cut/error_vertices``; rsl-rl's logger records their means under those names. The
+not bootstrap past it, nor past an env that diverged (it ended when it diverged, and idled since). On the
+step where cuts complete, ``extras["log"]`` holds one value per env of ``Episode/final_error``
+(:data:`FINAL_ERROR_KEY`: ``error_mm2 / area_mm2``, minus the final reward), ``Cut/error_mm2`` and
+``Cut/error_vertices``; rsl-rl's logger records their means under those names. The
 key is absent on other steps (and after truncated episodes, which have no score).
 """
 
@@ -22,6 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 import torch
+from gymnasium.vector import AutoresetMode
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
@@ -50,6 +52,13 @@ class PatternCutRslEnv(VecEnv):
     """
 
     def __init__(self, env: PatternCutVecEnv, torch_device: str | torch.device = "cpu", seed: int | None = 0):
+        if not isinstance(env, PatternCutVecEnv):
+            raise ValueError(f"env: expected an envs.PatternCutVecEnv (got {type(env).__name__})")
+        if env.autoreset_mode is not AutoresetMode.SAME_STEP:
+            raise ValueError(
+                "env: rsl-rl resets envs inside step, so the batched env needs "
+                f"autoreset_mode=AutoresetMode.SAME_STEP (the default; got {env.autoreset_mode!r})"
+            )
         self.env = env
         self.device = torch.device(torch_device)
         self.cfg: PatternCutOptions = env.options

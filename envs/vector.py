@@ -29,8 +29,10 @@ An env whose simulation diverges (:mod:`envs.core`, "Divergence") is terminated 
 observation and ``info["final_info"]`` holds ``diverged`` (with ``_final_info``, ``_final_obs`` and
 ``_diverged`` True for the envs that ended there); it has no score. It cannot restart before the others (one
 clock), so until the batch's episode ends it idles: zero observations, zero rewards, its actions ignored; at
-the batch's end it is reset with the others, its ``terminated`` True but (SAME_STEP) its ``_final_obs`` and
-``_final_info`` False, or (NEXT_STEP, DISABLED) its score masks False: nothing more to report. Every step's
+the batch's end it is reset with the others, its ``terminated`` True (also where the batch's episode is
+truncated: it ended when it diverged, so nothing is to be bootstrapped) but (SAME_STEP) its ``_final_obs``
+and ``_final_info`` False, or (NEXT_STEP, DISABLED) its score masks False: nothing more to report. An env
+that diverges on the step that truncates the batch is likewise terminated, not truncated. Every step's
 info has ``diverged`` (with its mask) once an env has diverged.
 
 Resets take Gymnasium's forms: ``seed`` is an int, None, or a list of B ints (or of B Nones). The batch has
@@ -103,6 +105,9 @@ class PatternCutVecEnv(VectorEnv):
         render_view: str = "top",
         **kwargs: Any,
     ):
+        if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or num_envs < 1:
+            raise ValueError(f"num_envs: must be an integer >= 1 (got {num_envs!r})")
+        num_envs = int(num_envs)
         self.autoreset_mode = _autoreset_mode(autoreset_mode)
         check_render_mode(render_mode, VECTOR_RENDER_MODES)
         if render_envs is not None and (
@@ -151,6 +156,11 @@ class PatternCutVecEnv(VectorEnv):
         options = check_reset_options(options, allowed=("reset_mask",))
         seed = batch_seed(seed, self.num_envs)
         if "reset_mask" in options and not self._resets_all(options["reset_mask"]):
+            if seed is not None:
+                raise ValueError(
+                    "reset: options['reset_mask'] resets no env here, so the seed would be dropped; reset "
+                    "every env to seed the batch (a mask of all True, or no options)"
+                )
             return self._obs, {}
         super().reset(seed=seed)
         self._started, self._over = True, False
@@ -174,8 +184,11 @@ class PatternCutVecEnv(VectorEnv):
         step_keys = [k for k in ("cut_deviation_mm", "running_path_error_mm2", "diverged") if k in info]
         infos: dict[str, Any] = {k: info[k] for k in step_keys}
         infos.update({f"_{k}": every_env for k in step_keys})
-        ended = np.full(b, terminated)
+        ended, cut_short = np.full(b, terminated), np.full(b, truncated)
         same_step = self.autoreset_mode is AutoresetMode.SAME_STEP
+        if truncated:  # an env that diverged, now or before, ended then: terminated, nothing to bootstrap
+            gone = self._ended | self.scene.newly_diverged
+            ended, cut_short = gone.copy(), ~gone
         if terminated or truncated:
             ending = ~self._ended  # envs that ended earlier (diverged) have nothing more to report
             if same_step:
@@ -195,7 +208,7 @@ class PatternCutVecEnv(VectorEnv):
             if same_step:
                 infos |= self._final(obs, newly, {"diverged": info["diverged"], "_diverged": newly.copy()})
         self._obs = obs
-        return obs, rewards, ended, np.full(b, truncated), infos
+        return obs, rewards, ended, cut_short, infos
 
     def render(self) -> tuple[np.ndarray, ...] | None:
         """Images of the first ``render_envs`` envs as they are now, each (H, W, 3) uint8, in

@@ -161,6 +161,50 @@ def test_a_fiducial_on_the_contour_is_cut_away_and_stays_put():
     assert not np.allclose(obs[0, 7:10], first[3:])
 
 
+@pytest.mark.parametrize(
+    "field, value, message",
+    [
+        ("dense_reward", "no", "dense_reward: must be true or false"),  # a truthy string, not a flag
+        ("allow_z", "false", "allow_z: must be true or false"),
+        ("num_fiducials", True, "num_fiducials: must be a non-negative integer"),
+        ("max_episode_steps", 2.5, "max_episode_steps: must be an integer >= 1"),
+        ("max_episode_steps", "3", "max_episode_steps: must be an integer >= 1"),
+        ("residual_gain", None, "residual_gain: must be a number >= 0"),
+        ("shaft_radius_mm", "5", "shaft_radius_mm: must be a number >= 0"),
+        ("noise_std", "0.1", "noise_std: give a number, or a list of one number per env"),
+        ("gravity", [1.0, "x"], "gravity: give a number, or a list of one number per env"),
+        ("noise_std", -1.0, "noise_std: must be >= 0"),
+        ("contour", 123, "contour: give a built-in name, a contour file"),
+        ("pinch_point", [1, 2, 3], r"pinch_point: give \[x_mm, y_mm\]"),
+        ("sim_config", {}, "sim_config: give a SimConfig"),
+    ],
+)
+def test_options_of_the_wrong_type_are_refused_by_name(field, value, message):
+    for make in (PatternCutEnv, lambda **kw: PatternCutVecEnv(2, **kw)):
+        with pytest.raises(ValueError, match=message):
+            make(device="cpu", **{**SMALL, field: value})
+    with pytest.raises(
+        ValueError, match="options: expected PatternCutOptions .* PatternCutOptions.from_dict"
+    ):
+        PatternCutEnv(options={"dense_reward": True})
+    for num_envs in (0, -1, 2.0, True, "2"):
+        with pytest.raises(ValueError, match="num_envs: must be an integer >= 1"):
+            PatternCutVecEnv(num_envs, device="cpu", **SMALL)
+
+
+def test_stepping_before_the_first_reset_is_refused_and_info_keeps_its_types():
+    env = PatternCutEnv(device="cpu", **SMALL)
+    with pytest.raises(RuntimeError, match="step: call reset\\(\\) first"):
+        env.step(0)
+    assert env.scene.step_index == 0  # nothing was simulated
+    env.reset(seed=0)
+    terminated = False
+    while not terminated:
+        _, _, terminated, _, info = env.step(0)
+    assert isinstance(info["separated"], bool) and isinstance(info["error_vertices"], int | float)
+    assert isinstance(info["cut_deviation_mm"], float)
+
+
 def test_invalid_actions_raise_and_continuous_actions_are_clipped():
     env = PatternCutEnv(device="cpu", **SMALL)
     env.reset(seed=0)

@@ -54,6 +54,39 @@ def test_a_diverged_env_under_next_step_reports_once_then_idles_to_the_batch_end
     assert not terminated.any() and np.isfinite(obs).all() and not vec.scene.diverged.any()
 
 
+@pytest.mark.parametrize("mode", ["same_step", "next_step"])
+def test_an_env_that_diverged_is_terminated_at_a_truncated_batch_end_not_truncated(mode):
+    """Diverging before the batch's episode is cut short, or on the step that cuts it short, ends that env
+    (terminated: nothing to bootstrap); the envs still running are truncated."""
+    import torch
+
+    from envs.rsl import PatternCutRslEnv
+
+    for first in ([0.03, 1e30, 0.03], [0.03, 0.03, 0.03]):  # diverging at step 1, or (set below) at step 3
+        vec = PatternCutVecEnv(3, autoreset_mode=mode, noise_std=first, max_episode_steps=3, **SMALL)
+        vec.reset(seed=0)
+        for step in range(3):
+            if step == 2 and not vec.scene.diverged.any():
+                vec.task.sim.set_params(noise_std=np.array([0.03, 1e30, 0.03]))  # env 1 blows up at the end
+            obs, rewards, terminated, truncated, info = vec.step(np.ones(3, dtype=int))
+        assert terminated.tolist() == [False, True, False] and truncated.tolist() == [True, False, True]
+        assert info["diverged"].tolist() == [False, True, False]
+    rsl = PatternCutRslEnv(PatternCutVecEnv(3, noise_std=[0.03, 1e30, 0.03], max_episode_steps=3, **SMALL))
+    for _ in range(3):
+        _, _, dones, extras = rsl.step(torch.ones(3, dtype=torch.long))
+    assert dones.tolist() == [1, 1, 1] and extras["time_outs"].tolist() == [True, False, True]
+
+
+def test_the_rsl_adapter_refuses_envs_that_do_not_reset_inside_step():
+    from envs.rsl import PatternCutRslEnv
+
+    for mode in ("next_step", "disabled"):
+        with pytest.raises(ValueError, match="rsl-rl resets envs inside step.*SAME_STEP"):
+            PatternCutRslEnv(PatternCutVecEnv(2, autoreset_mode=mode, **SMALL))
+    with pytest.raises(ValueError, match="env: expected an envs.PatternCutVecEnv"):
+        PatternCutRslEnv(gym.make(ENV_ID, **SMALL))
+
+
 def test_disabled_autoreset_waits_for_reset():
     vec = PatternCutVecEnv(2, autoreset_mode="Disabled", max_episode_steps=3, **SMALL)
     vec.reset(seed=0)
@@ -134,6 +167,8 @@ def test_reset_masks_reset_all_or_nothing():
     kept, info = vec.reset(options={"reset_mask": np.zeros(3, dtype=bool)})
     np.testing.assert_array_equal(kept, obs)
     assert info == {} and vec.scene.step_index == 1
+    with pytest.raises(ValueError, match="resets no env here, so the seed would be dropped"):
+        vec.reset(seed=5, options={"reset_mask": np.zeros(3, dtype=bool)})
     with pytest.raises(ValueError, match="share one episode clock"):
         vec.reset(options={"reset_mask": np.array([True, False, False])})
     with pytest.raises(ValueError, match=r"\(3,\) bool array"):
