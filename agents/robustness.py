@@ -651,6 +651,8 @@ def robustness(
     studies = parse_studies(studies)
     if values is not None and len(studies) != 1:
         raise ValueError("values: give the values of one study (or leave them out: each study's defaults)")
+    for study in studies:  # before the request is recorded: bad values leave no run behind
+        check_study(study, values)
     runs = check_runs(runs)
     out = Path(out)
     named = None if contour is None else str(getattr(contour, "name", contour))

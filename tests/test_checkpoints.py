@@ -140,7 +140,7 @@ def test_exporting_a_file_that_is_not_a_checkpoint_is_one_line(run, tmp_path, ca
     assert f"{alone / 'config.json'}: missing" in err
     # A file where the output directory should be.
     err = cli_error(capfd, "export", str(run), "--out", str(notes / "sub"))
-    assert f"{notes}: is a file, not a directory" in err
+    assert f"--out: cannot write {notes / 'sub'} ({notes} is not a directory)" in err
     (run / "exported" / "policy.pt").mkdir(parents=True)
     with pytest.raises(ValueError, match=r"policy.pt: is a directory"):
         export_policy(run)

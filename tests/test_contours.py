@@ -500,6 +500,8 @@ def test_svg_lengths_with_units_inside(tmp_path):
             '<g transform="scale(1e100)"><circle cx="50" cy="50" r="10"/></g>',
             "a curve of the path leaves the sheet by 6e\\+101 mm",
         ),
+        ('<circle cx="50" cy="50" r="-20"/>', r"<circle> r='-20' is negative; a circle's r must be >= 0"),
+        ('<rect x="5" y="5" width="abc" height="5"/>', r"<rect> width='abc' is not a length"),
     ],
     ids=[
         "cut-short",
@@ -513,6 +515,8 @@ def test_svg_lengths_with_units_inside(tmp_path):
         "overflowing-circle",
         "infinite-ellipse",
         "huge-transform",
+        "negative-radius",
+        "unreadable-width",
     ],
 )
 def test_svg_errors_name_the_file_on_one_line(tmp_path, body, message):

@@ -101,6 +101,58 @@ def test_an_existing_run_is_refused_unless_resumed_or_overwritten(tmp_path):
     assert code == 2 and "--out" in output
 
 
+def test_bad_inputs_are_refused_before_any_work_and_leave_no_run_behind(tmp_path):
+    """NaN through a float range, a seed past 32 bits, an output that cannot be written, --resume of a run
+    that does not exist, and a study's bad values: each one line naming the flag, before anything runs."""
+    fresh = str(tmp_path / "new")
+    for args, message in [
+        (
+            ["train", "--contour", "circle-small", "--stay-prior", "nan"],
+            "'--stay-prior': nan is not a finite",
+        ),
+        (["optimize", "--contour", "circle-small", "--lr", "inf"], "'--lr': inf is not a finite number"),
+        (["simulate", "--contour", "circle-small", "--noise", "nan"], "'--noise': nan is not a finite"),
+        (["train", "--contour", "circle-small", "--seed", str(2**40)], "'--seed': 1099511627776 is not in"),
+        (
+            ["plan", "--contour", "circle-small", "--json", "/proc/x.json"],
+            "--json: cannot write /proc/x.json",
+        ),
+        (["contours", "--json", "/proc/x.json"], "--json: cannot write /proc/x.json"),
+        (["optimize", "--contour", "circle-small", "--resume", "--out", fresh], "holds no run to continue"),
+        (
+            ["evaluate", "--contours", "circle-small", "--resume", "--out", fresh],
+            "drop --resume to start one",
+        ),
+        (
+            ["run", "--contour", "circle-small", "--policy", "fixed", "--rl-candidates", "3"],
+            "only with --policy rl",
+        ),
+        (
+            ["evaluate", "--contours", "circle-small", "--methods", "none", "--iterations", "5"],
+            "rl in --methods",
+        ),
+        (
+            ["evaluate", "--methods", "rl", "--grad-feedback-phases", "2"],
+            "--grad-feedback-phases: only with grad",
+        ),
+        (
+            ["run", "--recipe", "apg", "--randomize", "gravity"],
+            "one fixed sheet; choose a PPO or es --recipe",
+        ),
+        (["run", "--recipe", "es", "--num-envs", "2"], "--num-envs: es plays 64 perturbed policies"),
+        (["evaluate", "--recipe", "es", "--num-envs", "96"], "give a multiple of 64"),
+    ]:
+        code, output = invoke(args)
+        assert code == 2 and message in output, (args, output)
+    assert not Path(fresh).exists()
+    out = tmp_path / "study"
+    args = ["robustness", "--contour", "circle-small", "--study", "noise", "--trials", "1", "--no-plots",
+            "--out", str(out)]  # fmt: skip
+    code, output = invoke([*args, "--values", "-1"])
+    assert code != 0 and "values: noise -1" in output
+    assert not (out / "request.json").exists()  # so the same --out takes the corrected command
+
+
 def test_a_run_directory_is_locked_while_a_process_writes_it(tmp_path):
     out = tmp_path / "run"
     holder = subprocess.Popen(

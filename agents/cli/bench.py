@@ -38,6 +38,7 @@ def command(
     """Measure simulator and PPO throughput (medians over repeats, all in one run)."""
     from agents.rl import benchmark_training
 
+    common.check_outputs({"--json": json_path})
     result = bench.run_bench(
         device,
         repeats=repeats,

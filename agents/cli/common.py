@@ -187,6 +187,26 @@ def _resolve_device(ctx: click.Context, param: click.Parameter, value: str | Non
     return resolve_device(value)
 
 
+class FloatRange(click.FloatRange):
+    """click's ``FloatRange`` that also refuses NaN, which its bounds let through (NaN compares false with
+    every bound), and the infinities unless ``allow_inf`` (e.g. ``--arm-length inf``)."""
+
+    def __init__(self, *args, allow_inf: bool = False, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.allow_inf = allow_inf
+
+    def convert(self, value, param, ctx):
+        number = super().convert(value, param, ctx)
+        if math.isnan(number) or (math.isinf(number) and not self.allow_inf):
+            self.fail(f"{number} is not a finite number.", param, ctx)
+        return number
+
+
+SEED_RANGE = (0, 2**31 - 1)
+"""``--seed``'s range: derived seeds (the seed plus an offset, e.g. validation's) stay within the 32 bits that
+NumPy's ``RandomState`` and torch's generators take."""
+
+
 device_option = click.option(
     "--device",
     default=None,
@@ -197,8 +217,8 @@ seed_option = click.option(
     "--seed",
     default=0,
     show_default=True,
-    type=click.IntRange(min=0),
-    help="Seed of everything random (noise, sampling, PPO); a non-negative integer.",
+    type=click.IntRange(*SEED_RANGE),
+    help=f"Seed of everything random (noise, sampling, PPO); an integer in [0, {SEED_RANGE[1]}].",
 )
 
 
@@ -217,7 +237,7 @@ noise_option = click.option(
     "--noise",
     default=DEFAULTS.noise_std,
     show_default=True,
-    type=click.FloatRange(min=0.0),
+    type=FloatRange(min=0.0),
     help="Process noise sigma (mm per update): seeded trials differ by their noise stream; 0: noise-free.",
 )
 score_option = click.option(
@@ -294,7 +314,7 @@ arm_length_option = click.option(
     "--arm-length",
     default=ARM_LENGTH_MM,
     show_default=True,
-    type=click.FloatRange(min=0.0),
+    type=FloatRange(min=0.0, allow_inf=True),
     help="Reach of the cutting arm's footprint from the scissor tip toward +x (mm), for pinch feasibility; "
     "inf (the paper's cylinder): the whole way, so the grasp never holds the piece being cut; a short "
     "footprint (e.g. 15) lets it hold the piece (docs/learning.md).",
@@ -352,22 +372,67 @@ def claim(out: Path | None, prefix: str, resume: bool, overwrite: bool):
 
     if resume and out is None:
         raise click.BadParameter("give the run directory to continue with --out", param_hint="--resume")
+    if resume and not (out.is_dir() and any(out.iterdir())):
+        raise click.BadParameter(
+            f"{out} holds no run to continue; drop --resume to start one", param_hint="--resume"
+        )
     out = run_dir(out, prefix)
+    check_outputs({"--out": out})
     return out, claim_run_dir(out, resume=resume, overwrite=overwrite)
 
 
-def check_outputs(outputs: dict[str, Path | None], inputs: list[str]) -> None:
-    """Refuse an output file (``{option: path}``) that is one of the input files (contour files): writing
-    it would destroy the input."""
+def check_outputs(outputs: dict[str, Path | None], inputs: list[str] = ()) -> None:
+    """Refuse, before any work, an output path (``{option: path}``, files or directories) that cannot be
+    written, or a file that is one of the input files (contour files): writing it would destroy the input."""
     files = [Path(i) for i in inputs if Path(i).is_file()]
     for option, path in outputs.items():
-        if path is None or not path.exists():
+        if path is None:
+            continue
+        problem = _unwritable(path)
+        if problem:
+            raise click.BadParameter(
+                f"cannot write {path} ({problem}); choose another path", param_hint=option
+            )
+        if not path.exists():
             continue
         for given in files:
             if path.resolve() == given.resolve():
                 raise click.BadParameter(
                     f"{path} is an input (a contour file); choose another file", param_hint=option
                 )
+
+
+def _unwritable(path: Path) -> str | None:
+    """Why ``path`` (a file or directory to write, and the directories it needs) cannot be written, or
+    None: a temporary file is made and removed in the deepest directory of it that exists."""
+    import tempfile
+
+    existing = path if path.is_dir() else path.parent
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        return f"{existing} is not a directory"
+    try:
+        fd, probe = tempfile.mkstemp(dir=existing, prefix=".warpcut-probe-")
+    except OSError as exc:
+        return f"{existing}: {exc.strerror or exc}"
+    os.close(fd)
+    os.unlink(probe)
+    return None
+
+
+def refuse_unused(names: list[str], why: str) -> None:
+    """A UsageError naming the options among ``names`` (parameter names) given on the command line, which
+    this invocation would ignore (``why``: when they apply), instead of ignoring them without a word."""
+    ctx = click.get_current_context()
+    given = [
+        param.opts[0]
+        for param in ctx.command.params
+        if param.name in names
+        and ctx.get_parameter_source(param.name) == click.core.ParameterSource.COMMANDLINE
+    ]
+    if given:
+        raise click.UsageError(f"{', '.join(given)}: {why}; drop {'them' if len(given) > 1 else 'it'}")
 
 
 def count_option(name: str, default: int | None, help: str):
@@ -447,13 +512,30 @@ def parse_randomization(names: str | None, ranges: tuple[str, ...]) -> tuple[lis
     return list(chosen), {k: v for k, v in chosen.items() if k in given}
 
 
-def refuse_apg(randomized: bool, algorithm: str | None) -> None:
+def refuse_apg(randomized: bool, algorithm: str | None, fix: str | None = None) -> None:
     """A usage error for domain randomisation (or a relative reward) with APG, before anything is written
-    (:data:`agents.config.APG_FIXED_SHEET`)."""
+    (:data:`agents.config.APG_FIXED_SHEET`; ``fix``: what to do instead in this command, if not its
+    ``--algo ppo``)."""
     if randomized and algorithm == "apg":
         from agents.config import APG_FIXED_SHEET
 
-        raise click.UsageError(f"--{APG_FIXED_SHEET}")
+        message = APG_FIXED_SHEET if fix is None else f"{APG_FIXED_SHEET.split(';')[0]}; {fix}"
+        raise click.UsageError(f"--{message}")
+
+
+def check_es_batch(recipe, num_envs: int | None) -> None:
+    """A usage error for a ``--num-envs`` the es recipe's population does not divide (each perturbed policy
+    plays as many episodes), before anything is planned or written."""
+    from agents.config import TrainConfig, es_population_error
+
+    population = recipe.train.get("es_population", TrainConfig.es_population)
+    if recipe.train.get("algorithm") == "es" and num_envs is not None:
+        if es_population_error(population, num_envs):
+            raise click.BadParameter(
+                f"es plays {population} perturbed policies, each the same number of episodes: give a "
+                f"multiple of {population} (got {num_envs})",
+                param_hint="--num-envs",
+            )
 
 
 def randomized_recipe(recipe, names: str | None, ranges: tuple[str, ...], relative_reward: bool = False):
@@ -465,7 +547,7 @@ def randomized_recipe(recipe, names: str | None, ranges: tuple[str, ...], relati
     randomized, given = parse_randomization(names, ranges)
     if not randomized and not relative_reward:
         return recipe
-    refuse_apg(randomized or relative_reward, recipe.train.get("algorithm"))
+    refuse_apg(randomized or relative_reward, recipe.train.get("algorithm"), "choose a PPO or es --recipe")
     options = {**recipe.options, "randomize": randomized, "randomize_ranges": given or None}
     if relative_reward:
         options["relative_reward"] = True

@@ -13,8 +13,10 @@ import click
 )
 def command(json_path: Path | None) -> None:
     """List the built-in contours (name, closed/open, length)."""
+    from agents.cli.common import check_outputs
     from warpcut.contours import builtin_contours
 
+    check_outputs({"--json": json_path})
     rows = [
         {
             "name": c.name,

@@ -123,6 +123,16 @@ def command(
     from warpcut.planning import ArmModel
 
     names = common.parse_methods(methods, "--methods", tuple(METHODS))
+    common.check_es_batch(RECIPES[recipe], num_envs)
+    if "rl" not in names:
+        training = ["checkpoints", "allow_partial", "recipe", "iterations", "num_envs"]
+        common.refuse_unused(training, "only with rl in --methods (they train or load its policies)")
+    if "grad" not in names and not (RECIPES[recipe].base_plan and "rl" in names):
+        grad = ["grad_estimator", "grad_iterations", "grad_feedback_phases", "grad_feedback_only"]
+        common.refuse_unused(
+            [*grad, "grad_feedback_sag"],
+            "only with grad in --methods, or a --recipe on grad plans",
+        )
     record_envs = _first_contour_envs("--record", record_envs, trials, "recording")
     video_envs = _first_contour_envs("--video", video_envs, trials, "filming")
     common.check_outputs({"--json": json_path, "--markdown": markdown_path}, list(contour_args))

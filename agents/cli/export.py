@@ -23,8 +23,10 @@ def command(run_dir: Path, out: Path | None) -> None:
     RUN_DIR is a run directory of 'warpcut train' (its validated best.pt, else its newest checkpoint), of
     'warpcut run' (the chosen candidate's policy) or of 'warpcut evaluate' (every contour's policy), or a
     .pt checkpoint."""
+    from agents.cli.common import check_outputs
     from agents.export import export_run
 
+    check_outputs({"--out": out})
     for exported in export_run(run_dir, out):
         click.echo(f"exported {exported['policy']}")
         for kind in ("torchscript", "onnx"):

@@ -34,7 +34,7 @@ from warpcut.sim.config import SimConfig
     "--lr",
     "learning_rate",
     default=None,
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=common.FloatRange(min=0.0, min_open=True),
     help=f"Adam's step (mm per grasp move); default {GRAD_CONFIGS['tape'].learning_rate} (tape), "
     f"{GRAD_CONFIGS['es'].learning_rate} (es).",
 )
@@ -46,7 +46,7 @@ from warpcut.sim.config import SimConfig
     "--sigma",
     default=GRAD_CONFIGS["es"].es_sigma_mm,
     show_default=True,
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=common.FloatRange(min=0.0, min_open=True),
     help="Standard deviation of es's perturbation of each move (mm).",
 )
 @common.feedback_options("", "the policy")

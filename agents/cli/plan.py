@@ -24,7 +24,7 @@ from warpcut.sim.config import ARM_RADIUS_MM, SEGMENT_TOLERANCE_MM, SimConfig
     "--arm-radius",
     default=ARM_RADIUS_MM,
     show_default=True,
-    type=click.FloatRange(min=0.0),
+    type=common.FloatRange(min=0.0),
     help="Radius of the cutting arm (mm) whose sweep pinch points must avoid.",
 )
 @common.arm_length_option
@@ -32,7 +32,7 @@ from warpcut.sim.config import ARM_RADIUS_MM, SEGMENT_TOLERANCE_MM, SimConfig
     "--tolerance",
     default=SEGMENT_TOLERANCE_MM,
     show_default=True,
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=common.FloatRange(min=0.0, min_open=True),
     help="Segmentation tolerance (mm): x reversals smaller than this are ignored.",
 )
 @common.resolution_option

@@ -136,8 +136,13 @@ def command(
     from warpcut.io import safe_name, write_json
     from warpcut.planning import ArmModel
 
+    if run_policy != "rl":
+        training = ["shared_policy", "recipe", "randomize", "randomize_range", "relative_reward"]
+        training += ["rl_candidates", "iterations", "validation_trials"]
+        common.refuse_unused(training, f"only with --policy rl (--policy {run_policy} trains no policy)")
     common.check_outputs({"--json": json_path}, [contour_name])
     chosen_recipe = common.randomized_recipe(RECIPES[recipe], randomize, randomize_range, relative_reward)
+    common.check_es_batch(chosen_recipe, num_envs)
     if shared_policy and chosen_recipe.base_plan:
         raise click.UsageError(f"--{SHARED_BASE_PLAN}")
     if validation_trials is not None:

@@ -83,7 +83,7 @@ def command(
 
     names = parse_methods(policies, "--policy", BASELINES)
     point = parse_point(pinch, "--pinch")
-    check_outputs({"--json": json_path}, [contour_name])
+    check_outputs({"--json": json_path, "--export-mesh": mesh_dir}, [contour_name])
     contour = load_contour(contour_name)
     config = SimConfig(resolution=resolution, fixture=fixture, noise_std=noise, score=score).validated()
     out = json_path.parent if json_path else run_dir(None, "simulate")

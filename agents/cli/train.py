@@ -80,7 +80,7 @@ RESUMED_FLAGS = {
     "--es-sigma",
     default=TRAIN.es_sigma,
     show_default=True,
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=common.FloatRange(min=0.0, min_open=True),
     help="es: standard deviation of the perturbations of the MLP's weights (the feedback gains have their "
     "own, --es-feedback-sigma; docs/learning.md).",
 )
@@ -88,7 +88,7 @@ RESUMED_FLAGS = {
     "--es-feedback-sigma",
     default=TRAIN.es_feedback_sigma,
     show_default=True,
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=common.FloatRange(min=0.0, min_open=True),
     help="es with the feedback path: standard deviation of the perturbations of the feedback gains (on the "
     "normalised tracking error).",
 )
@@ -97,7 +97,7 @@ RESUMED_FLAGS = {
     "es_feedback_learning_rate",
     default=TRAIN.es_feedback_learning_rate,
     show_default=True,
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=common.FloatRange(min=0.0, min_open=True),
     help="es with the feedback path: Adam's step for the feedback gains (the MLP's is the recipe's).",
 )
 @common.noise_option
@@ -137,7 +137,7 @@ RESUMED_FLAGS = {
     "--stay-prior",
     default=TRAIN.stay_prior,
     show_default=True,
-    type=click.FloatRange(0.0, 1.0, max_open=True),
+    type=common.FloatRange(0.0, 1.0, max_open=True),
     help="Discrete: initial probability of 'stay', so training starts from holding still (fixed "
     "tensioning); 0: a uniform start (paper).",
 )

@@ -163,6 +163,7 @@ def _load_svg(path: Path, sheet_size: tuple[float, float]) -> Contour:
     for element in root.iter():
         if _local_tag(element.tag) == "path" and element.get("d"):
             _check_path_data(where, element.get("d"))
+        _check_sizes(where, element)
     shape = _first_shape(where, root, ppi, viewport)
     pieces, closed = _shape_pieces(where, shape)
     width, height = check_sheet_size(sheet_size)
@@ -241,6 +242,30 @@ def _view_box_transform(
         share = {"Min": 0.0, "Mid": 0.5, "Max": 1.0}.get(align.partition(name)[2][:3], 0.0)
         offset[axis] += share * spare[axis]
     return scale, offset
+
+
+_SIZES = {"circle": ("r",), "ellipse": ("rx", "ry"), "rect": ("width", "height", "rx", "ry")}
+"""The shapes' size attributes, which must be lengths >= 0 (svgelements would take a negative radius's
+absolute value, and skip an unreadable one without a word)."""
+_SIZE = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([A-Za-z]*|%)\s*")
+
+
+def _check_sizes(where: str, element: ET.Element) -> None:
+    """Refuse a circle, ellipse or rect whose size attribute is negative or not a length."""
+    tag = _local_tag(element.tag)
+    for name in _SIZES.get(tag, ()):
+        value = element.get(name)
+        if value is None or value.strip() == "auto":
+            continue
+        match = _SIZE.fullmatch(value)
+        if match is None:
+            raise ContourError(
+                f"{where}: <{tag}> {name}={value!r} is not a length; give a number (with a unit)"
+            )
+        if float(match.group(1)) < 0:
+            raise ContourError(
+                f"{where}: <{tag}> {name}={value!r} is negative; a {tag}'s {name} must be >= 0"
+            )
 
 
 def _check_path_data(where: str, d: str) -> None:
