@@ -346,6 +346,9 @@ def test_unknown_name_lists_the_built_ins():
 def test_unsupported_file_type(tmp_path):
     with pytest.raises(ContourError, match=r"'.txt' is not a supported file type; give a built-in name"):
         load_contour(write(tmp_path, "shape.txt", "M 0 0"))
+    (tmp_path / "folder.json").mkdir()
+    with pytest.raises(ContourError, match=r"and a directory, not a contour file; give a built-in name"):
+        load_contour(tmp_path / "folder.json")
 
 
 def test_svg_with_several_subpaths(tmp_path):

@@ -65,6 +65,8 @@ def test_resolve_contours_expands_all_after_the_named_ones():
     assert names[:2] == ["wave-3", "fls-circle"] and sorted(names) == sorted(builtin_names())
     with pytest.raises(ValueError, match="contours: give at least one"):
         resolve_contours([" , "])
+    with pytest.raises(ValueError, match="both named 'wave-3' .*; give it once"):
+        resolve_contours("wave-3,fls-circle,wave-3")
 
 
 def test_evaluate_table_without_a_plan_pairs_every_method_with_no_tension(tmp_path):

@@ -67,7 +67,13 @@ def load_contour(
         return _load_json(path, sheet_size)
     if path.is_file() and suffix == ".svg":
         return _load_svg(path, sheet_size)
-    why = "no such file" if not path.is_file() else f"'{path.suffix}' is not a supported file type"
+    why = (
+        "a directory, not a contour file"
+        if path.is_dir()
+        else "no such file"
+        if not path.is_file()
+        else f"'{path.suffix}' is not a supported file type"
+    )
     raise ContourError(
         f"unknown contour {key!r}: not a built-in name (known: {', '.join(builtin_names())}) and {why}; "
         "give a built-in name or a path to a .json or .svg contour"
@@ -427,9 +433,10 @@ def resolve_contours(specs: str | Sequence[str]) -> list[tuple[str, Contour]]:
     for spec, contour in named:
         key = safe_name(contour.name)
         if key in seen:
+            fix = "give it once" if spec == seen[key] else "rename one in its file"
             raise ValueError(
                 f"contours: {seen[key]!r} and {spec!r} are both named {contour.name!r} (their runs and plots "
-                "would share files); rename one in its file"
+                f"would share files); {fix}"
             )
         seen[key] = spec
     return named
