@@ -753,7 +753,7 @@ def test_optimize_by_evolution_strategies_takes_the_es_defaults(tmp_path):
     assert report["optimized"]["env_steps"] == 2 * 4 * es["es_trials"] * len(report["optimized"]["plan"])
     assert json.loads((out / "circle-small.json").read_text())["settings"] == report["settings"]
     code, _, stderr = invoke(args[:-4] + ["--population", "3", "--out", str(tmp_path / "odd")])
-    assert code != 0 and "es_population: must be even" in stderr
+    assert code != 0 and "--population: must be even" in stderr
     code, _, stderr = invoke(args[:-4] + ["--optimize-pinch", "--out", str(tmp_path / "pinch")])
     assert code != 0 and "optimize_pinch" in stderr and "tape" in stderr
 
@@ -776,9 +776,9 @@ def test_optimize_a_closed_loop_policy_under_randomisation(tmp_path):
     code, _, stderr = invoke(args + bad)
     assert code != 0 and "--randomize-range" in stderr and "noise_std not randomised" in stderr
     code, _, stderr = invoke(["optimize", "--contour", "circle-small", "--feedback-phases", "1"])
-    assert code != 0 and "es_feedback_phases: only estimator 'es'" in stderr
+    assert code != 0 and "--feedback-phases: only --estimator 'es'" in stderr
     code, _, stderr = invoke(["optimize", "--contour", "circle-small", "--estimator", "es", "--feedback-sag"])
-    assert code != 0 and "es_feedback_sag: there are no gains" in stderr
+    assert code != 0 and "--feedback-sag: there are no gains" in stderr
 
 
 def test_batch_defaults_are_ppos_and_apgs_own():

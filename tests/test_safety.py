@@ -141,6 +141,8 @@ def test_bad_inputs_are_refused_before_any_work_and_leave_no_run_behind(tmp_path
         ),
         (["run", "--recipe", "es", "--num-envs", "2"], "--num-envs: es plays 64 perturbed policies"),
         (["evaluate", "--recipe", "es", "--num-envs", "96"], "give a multiple of 64"),
+        (["evaluate", "--methods", "grad", "--grad-feedback-sag"], "give --grad-feedback-phases >= 1"),
+        (["optimize", "--contour", "circle-small", "--population", "3"], "--population: must be even"),
     ]:
         code, output = invoke(args)
         assert code == 2 and message in output, (args, output)

@@ -523,6 +523,19 @@ def refuse_apg(randomized: bool, algorithm: str | None, fix: str | None = None) 
         raise click.UsageError(f"--{message}")
 
 
+def flag_error(error: ValueError, flags: dict[str, str]) -> click.UsageError:
+    """``error`` (a library ``ValueError`` naming settings by their field names) as a usage error naming this
+    command's flags instead (``flags``: field name -> flag). Plain words (no underscore, e.g. ``trials``)
+    are renamed only where they lead the message, the field it is about."""
+    text = str(error)
+    for field in sorted(flags, key=len, reverse=True):
+        if "_" in field or field == "estimator":
+            text = re.sub(rf"\b{field}\b", flags[field], text)
+        elif text.startswith(f"{field}: "):
+            text = flags[field] + text[len(field) :]
+    return click.UsageError(text)
+
+
 def check_es_batch(recipe, num_envs: int | None) -> None:
     """A usage error for a ``--num-envs`` the es recipe's population does not divide (each perturbed policy
     plays as many episodes), before anything is planned or written."""

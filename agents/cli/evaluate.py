@@ -12,6 +12,13 @@ from agents.config import EVALUATION_CANDIDATES, EVALUATION_TRIALS, GRAD_CONFIGS
 from agents.methods import METHODS, TABLE_METHODS
 from warpcut.sim.config import SimConfig
 
+GRAD_FLAGS = {
+    "estimator": "--grad-estimator", "iterations": "--grad-iterations",
+    "es_feedback_phases": "--grad-feedback-phases", "es_feedback_only": "--grad-feedback-only",
+    "es_feedback_sag": "--grad-feedback-sag",
+}  # fmt: skip
+"""The grad column's settings (:class:`agents.config.GradConfig` fields) by the flags that set them."""
+
 
 @click.command("evaluate")
 @click.option(
@@ -136,6 +143,16 @@ def command(
     record_envs = _first_contour_envs("--record", record_envs, trials, "recording")
     video_envs = _first_contour_envs("--video", video_envs, trials, "filming")
     common.check_outputs({"--json": json_path, "--markdown": markdown_path}, list(contour_args))
+    try:
+        grad = grad_config(
+            grad_estimator,
+            iterations=grad_iterations,
+            es_feedback_phases=grad_feedback_phases,
+            es_feedback_only=grad_feedback_only,
+            es_feedback_sag=grad_feedback_sag,
+        )
+    except ValueError as error:
+        raise common.flag_error(error, GRAD_FLAGS) from None
     out, claim = common.claim(out, "evaluate", resume, overwrite)
     cuts = common.final_cuts(no_plots)
     bars = common.stage_bars()
@@ -153,10 +170,7 @@ def command(
             plan=plan,
             candidates=candidates,
             arm=ArmModel(length_mm=arm_length), analytic_pinch=analytic_pinch,
-            grad=grad_config(
-                grad_estimator, iterations=grad_iterations, es_feedback_phases=grad_feedback_phases,
-                es_feedback_only=grad_feedback_only, es_feedback_sag=grad_feedback_sag,
-            ),
+            grad=grad,
             device=device,
             seed=seed, log=common.log, stages=stages,
             step_callbacks=with_videos(common.step_callbacks(rec, cuts), vid),

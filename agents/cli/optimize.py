@@ -12,6 +12,15 @@ from agents.config import EVALUATION_CANDIDATES, EVALUATION_TRIALS, GRAD_CONFIG,
 from agents.methods import point_text
 from warpcut.sim.config import SimConfig
 
+GRAD_FLAGS = {
+    "estimator": "--estimator", "iterations": "--iterations", "trials": "--episodes", "learning_rate": "--lr",
+    "es_population": "--population", "es_trials": "--population-episodes", "es_sigma_mm": "--sigma",
+    "es_feedback_phases": "--feedback-phases", "es_feedback_only": "--feedback-only",
+    "es_feedback_sag": "--feedback-sag", "es_randomize": "--randomize",
+    "es_randomize_ranges": "--randomize-range", "optimize_pinch": "--optimize-pinch",
+}  # fmt: skip
+"""The optimiser's settings (:class:`agents.config.GradConfig` fields) by the flags that set them."""
+
 
 @click.command("optimize")
 @common.contour_option
@@ -111,12 +120,15 @@ def command(
     point = common.parse_point(pinch, "--pinch")
     _, ranges = common.parse_randomization(randomize, randomize_range)
     common.check_outputs({"--json": json_path}, [contour_name])
-    settings = grad_config(
-        estimator, iterations=iterations, trials=episodes, learning_rate=learning_rate,
-        es_population=population, es_trials=population_episodes, es_sigma_mm=sigma,
-        es_feedback_phases=feedback_phases, es_feedback_only=feedback_only, es_feedback_sag=feedback_sag,
-        es_randomize=randomize, es_randomize_ranges=ranges or None, optimize_pinch=optimize_pinch,
-    )  # fmt: skip
+    try:
+        settings = grad_config(
+            estimator, iterations=iterations, trials=episodes, learning_rate=learning_rate,
+            es_population=population, es_trials=population_episodes, es_sigma_mm=sigma,
+            es_feedback_phases=feedback_phases, es_feedback_only=feedback_only, es_feedback_sag=feedback_sag,
+            es_randomize=randomize, es_randomize_ranges=ranges or None, optimize_pinch=optimize_pinch,
+        )  # fmt: skip
+    except ValueError as error:
+        raise common.flag_error(error, GRAD_FLAGS) from None
     out, claim = common.claim(out, "optimize", resume, overwrite)
     with claim:
         report = optimize_contour(
