@@ -114,6 +114,13 @@ class PatternCutOptions:
     pinch point is observed (``observe_pinch``). :meth:`at_candidate` is the options of one candidate."""
 
     def __post_init__(self):
+        for f in dataclasses.fields(self):  # wrong types named here, not deep inside the env
+            value = getattr(self, f.name)
+            problem = _field_problem(f.name, value)
+            if problem is None and f.name == "sim_config" and not isinstance(value, SimConfig):
+                problem = "give a SimConfig (PatternCutOptions.from_dict reads one from a dict)"
+            if problem:
+                raise ValueError(f"{f.name}: {problem} (got {value!r:.80})")
         if self.candidates is None:
             return
         if not self.candidates or any(not isinstance(c, dict) or "pinch" not in c for c in self.candidates):
@@ -136,13 +143,7 @@ class PatternCutOptions:
                 f"options: expected PatternCutOptions (got {type(options).__name__}); pass its fields as "
                 "keyword arguments, or read a dict with PatternCutOptions.from_dict"
             )
-        for name, value in kwargs.items():
-            problem = _field_problem(name, value)
-            if problem is None and name == "sim_config" and not isinstance(value, SimConfig):
-                problem = "give a SimConfig (PatternCutOptions.from_dict reads one from a dict)"
-            if problem:
-                raise ValueError(f"{name}: {problem} (got {value!r:.80})")
-        built = dataclasses.replace(options or cls(), **kwargs)
+        built = dataclasses.replace(options or cls(), **kwargs)  # fields checked in __post_init__
         if any(name in SIM_OVERRIDES or name == "sim_config" for name in kwargs):
             built.config()  # the simulation settings, checked now (ConfigError names the field)
         return built
@@ -326,15 +327,15 @@ def _field_problem(name: str, value: Any) -> str | None:
         return "must be a non-negative integer"
     if name == "max_episode_steps" and value is not None and not _is_count(value, 1):
         return "must be an integer >= 1, or null"
-    if name in ("residual_gain", "shaft_radius_mm") and not (_is_number(value) and value >= 0):
-        return "must be a number >= 0"
+    if name in ("residual_gain", "shaft_radius_mm") and not (_is_number(value) and 0 <= value < np.inf):
+        return "must be a finite number >= 0"
     if name == "base_plan" and value is not None:
         try:
             plan = np.asarray(value, dtype=np.float64)
         except (TypeError, ValueError):
             plan = None
         if plan is None or plan.ndim != 2 or plan.shape[1] != 3 or not len(plan):
-            return "give a list of [dx, dy, dz] grasp moves (mm), one per env step, or null"
+            return "give (T, 3) grasp moves (mm): a list of [dx, dy, dz], one per env step, or null"
     lists = ("pinch_point", "segments", "candidates")
     if name in lists and value is not None and not isinstance(value, list | tuple | np.ndarray):
         return "must be a list, or null"
@@ -346,7 +347,7 @@ def _field_problem(name: str, value: Any) -> str | None:
         if points is None or points.ndim not in (1, 2) or points.shape[-1] != 2:
             return "give [x_mm, y_mm], or one such pair per env"
         if not np.isfinite(points).all():
-            return "must be finite numbers (mm)"
+            return f"{points.tolist()} is not finite; give material coordinates (x, y) on the sheet (mm)"
     if name == "randomize" and not (
         isinstance(value, list | tuple) and all(isinstance(v, str) for v in value)
     ):

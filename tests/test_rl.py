@@ -339,7 +339,7 @@ def test_a_bad_base_plan_is_named(plan, message):
             1, PatternCutOptions(contour="circle-small", resolution=9, device="cpu", base_plan=plan)
         )
     if "give" in message:
-        with pytest.raises(ValueError, match="options: base_plan: give a list of"):
+        with pytest.raises(ValueError, match=r"options: base_plan: give \(T, 3\) grasp moves"):
             PatternCutOptions.from_dict({"base_plan": plan})
 
 
