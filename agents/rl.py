@@ -113,8 +113,8 @@ def train_contour(
     if not shared:
         pinch = options.per_env(1)[1][0]
         options = dataclasses.replace(options, pinch_point=[float(v) for v in pinch])
+    env = training_env(options, cfg)  # before options.json: options the env refuses leave no run behind
     write_json(out_dir / OPTIONS_FILE, dataclasses.replace(options, device=None).to_dict())
-    env = training_env(options, cfg)
     validate = None
     if validation_trials > 0:
         validation_env = PatternCutVecEnv(

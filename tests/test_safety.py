@@ -153,6 +153,10 @@ def test_bad_inputs_are_refused_before_any_work_and_leave_no_run_behind(tmp_path
     code, output = invoke([*args, "--values", "-1"])
     assert code != 0 and "values: noise -1" in output
     assert not (out / "request.json").exists()  # so the same --out takes the corrected command
+    run = tmp_path / "train"
+    code, output = invoke(["train", "--contour", "circle-small", "--pinch", "500,500", "--out", str(run)])
+    assert code != 0 and "lies off the 100 x 100 mm sheet" in output
+    assert not (run / "options.json").exists()  # the env refused the options before the run was written
 
 
 def test_a_run_directory_is_locked_while_a_process_writes_it(tmp_path):
