@@ -400,7 +400,7 @@ DEFAULT_CONTOUR = "fls-circle"
 """The contour ``warpcut run`` cuts unless told otherwise: the FLS pattern-cutting circle."""
 
 DEFAULT_BUDGET = "fast"
-"""The budget of ``run_pipeline`` (``warpcut run``): a few minutes on 2 CPU cores."""
+"""The budget of ``run_pipeline`` (``warpcut run``): about a minute on 2 CPU cores (README)."""
 
 DEFAULT_SELECTOR = "rl"
 """The tensioner that chooses ``run_pipeline``'s pinch candidate."""

@@ -12,7 +12,7 @@ import click
     "--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the list here."
 )
 def command(json_path: Path | None) -> None:
-    """List the built-in contours (name, closed/open, length)."""
+    """List the built-in contours (name, closed/open, length, area)."""
     from agents.cli.common import check_outputs
     from warpcut.contours import builtin_contours
 

@@ -39,7 +39,7 @@ from warpcut.sim.config import SimConfig
         + f", {b['iterations']} PPO iterations each, {b['trials']} trials"
         for name, b in BUDGETS.items()
     )
-    + ". fast: a minute or two on 2 CPU cores; paper: hours.",
+    + ". fast: about a minute on 2 CPU cores; paper: hours.",
 )
 @click.option(
     "--policy",

@@ -5,8 +5,8 @@ masks, anchors, and the SIMD backend's packed copy: ~110 bytes a vertex), per up
 scissor trajectory, its targets and the traced cut path (~50 bytes), and, while it is scored, read-backs
 and shapely geometry. Measured peak resident memory of whole runs (``CuttingTask`` built, run and scored,
 CPU, fls-circle and e-shape, 13 x 13 to 50 x 50 vertices, 1024 to 4096 envs) is about
-``130 * vertices + 200 * updates + 8 kB`` per env: 112 kB for the default 25 x 25 sheet and a 160-update
-cut, so 10^6 trials would need ~110 GB. :func:`check_batch_memory` refuses a batch whose estimate exceeds
+``130 * vertices + 200 * updates + 8 kB`` per env: 121 kB for the default 25 x 25 sheet and a 160-update
+cut, so 10^6 trials would need ~120 GB. :func:`check_batch_memory` refuses a batch whose estimate exceeds
 the memory available (``MemAvailable`` of ``/proc/meminfo``, or the cgroup's limit if lower; on a CUDA
 device, also the device's free memory for the device arrays) with a ``ValueError`` that names the
 parameter to lower, the estimate and the limit. ``WARPCUT_MEMORY_LIMIT_GB`` replaces the host limit (e.g.
