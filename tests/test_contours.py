@@ -505,6 +505,14 @@ def test_svg_lengths_with_units_inside(tmp_path):
         ),
         ('<circle cx="50" cy="50" r="-20"/>', r"<circle> r='-20' is negative; a circle's r must be >= 0"),
         ('<rect x="5" y="5" width="abc" height="5"/>', r"<rect> width='abc' is not a length"),
+        (
+            '<g transform="rotate(abc)"><circle cx="50" cy="50" r="10"/></g>',
+            r"<g> transform='rotate\(abc\)' cannot be read; give matrix\(\), translate\(\)",
+        ),
+        (
+            '<g transform="translate(5-3) scale(0)"><circle cx="50" cy="50" r="10"/></g>',
+            r"<g> transform='translate\(5-3\) scale\(0\)' collapses the drawing to a line or a point",
+        ),
     ],
     ids=[
         "cut-short",
@@ -520,6 +528,8 @@ def test_svg_lengths_with_units_inside(tmp_path):
         "huge-transform",
         "negative-radius",
         "unreadable-width",
+        "unreadable-transform",
+        "zero-scale",
     ],
 )
 def test_svg_errors_name_the_file_on_one_line(tmp_path, body, message):

@@ -170,6 +170,7 @@ def _load_svg(path: Path, sheet_size: tuple[float, float]) -> Contour:
         if _local_tag(element.tag) == "path" and element.get("d"):
             _check_path_data(where, element.get("d"))
         _check_sizes(where, element)
+        _check_transform(where, element)
     shape = _first_shape(where, root, ppi, viewport)
     pieces, closed = _shape_pieces(where, shape)
     width, height = check_sheet_size(sheet_size)
@@ -272,6 +273,46 @@ def _check_sizes(where: str, element: ET.Element) -> None:
             raise ContourError(
                 f"{where}: <{tag}> {name}={value!r} is negative; a {tag}'s {name} must be >= 0"
             )
+
+
+_TRANSFORM = re.compile(r"\s*(matrix|translate|scale|rotate|skewX|skewY)\s*\(([^)]*)\)\s*,?")
+_TRANSFORM_ARGS = {
+    "matrix": (6,),
+    "translate": (1, 2),
+    "scale": (1, 2),
+    "rotate": (1, 3),
+    "skewX": (1,),
+    "skewY": (1,),
+}
+"""How many numbers each SVG transform function takes."""
+
+
+def _check_transform(where: str, element: ET.Element) -> None:
+    """Refuse a ``transform`` that is not a list of SVG transform functions with numbers (svgelements fails
+    on one deep inside, or skips it), or that collapses the drawing (a zero scale or a singular matrix)."""
+    value = element.get("transform")
+    if value is None:
+        return
+    tag, pos = _local_tag(element.tag), 0
+    fix = "give matrix(), translate(), scale(), rotate(), skewX() or skewY() with numbers"
+    while pos < len(value.rstrip()):
+        match = _TRANSFORM.match(value, pos)
+        numbers = None if match is None else _SIZE_NUMBER.findall(match.group(2))
+        only_numbers = match is not None and re.fullmatch(r"[\s,]*", _SIZE_NUMBER.sub(" ", match.group(2)))
+        if not only_numbers or len(numbers) not in _TRANSFORM_ARGS[match.group(1)]:
+            raise ContourError(f"{where}: <{tag}> transform={value!r} cannot be read; {fix}")
+        name, args = match.group(1), [float(v) for v in numbers]
+        a, b, c, d = (
+            args[:4] if name == "matrix" else (args[0], 0, 0, args[-1]) if name == "scale" else (1, 0, 0, 1)
+        )
+        if a * d - b * c == 0:
+            raise ContourError(
+                f"{where}: <{tag}> transform={value!r} collapses the drawing to a line or a point"
+            )
+        pos = match.end()
+
+
+_SIZE_NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 
 
 def _check_path_data(where: str, d: str) -> None:
