@@ -15,7 +15,7 @@ import numpy as np
 from warpcut.contours import Contour, builtin_names, contour_from_json, load_contour
 from warpcut.fiducials import NUM_FIDUCIALS, SHAFT_RADIUS_MM
 from warpcut.planning import default_pinch
-from warpcut.sim.config import PerEnv, SimConfig, randomize_ranges
+from warpcut.sim.config import PHYSICAL_PARAMETERS, PerEnv, SimConfig, randomize_ranges
 from warpcut.task import default_segments
 
 ContourSpec = str | os.PathLike | Contour
@@ -356,7 +356,7 @@ def _field_problem(name: str, value: Any) -> str | None:
         return "give {parameter: [low, high]}, or null"
     if name in ("fixture", "device") and value is not None and not isinstance(value, str):
         return "must be a string, or null"
-    if name in _PER_ENV and value is not None:
+    if name in PHYSICAL_PARAMETERS and value is not None:
         try:
             values = list(np.ravel(value)) if isinstance(value, list | tuple | np.ndarray) else [value]
         except ValueError:  # ragged
@@ -364,10 +364,6 @@ def _field_problem(name: str, value: Any) -> str | None:
         if not values or not all(_is_number(v) for v in values):
             return "give a number, or a list of one number per env, or null"
     return None
-
-
-_PER_ENV = ("damping", "dt", "gravity", "elasticity", "noise_std")
-"""The physical parameters that take one value for all envs or one per env."""
 
 
 def _contour_spec(contour: ContourSpec) -> str | dict:

@@ -209,7 +209,9 @@ def _view_box(where: str, root: ET.Element) -> tuple[float, float, float, float]
 
 _MM_PER = {"mm": 1.0, "cm": 10.0, "q": 0.25, "in": 25.4, "pt": 25.4 / 72.0, "pc": 25.4 / 6.0}
 """Millimetres per physical CSS unit (``width="100mm"``); px and plain numbers are not physical."""
-_LENGTH = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([A-Za-z]+)\s*")
+_NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+"""A number as SVG writes one."""
+_LENGTH = re.compile(rf"\s*({_NUMBER})\s*([A-Za-z]+)\s*")
 
 
 def _physical_size(where: str, root: ET.Element) -> tuple[float, float] | None:
@@ -254,7 +256,7 @@ def _view_box_transform(
 _SIZES = {"circle": ("r",), "ellipse": ("rx", "ry"), "rect": ("width", "height", "rx", "ry")}
 """The shapes' size attributes, which must be lengths >= 0 (svgelements would take a negative radius's
 absolute value, and skip an unreadable one without a word)."""
-_SIZE = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([A-Za-z]*|%)\s*")
+_SIZE = re.compile(rf"\s*({_NUMBER})\s*([A-Za-z]*|%)\s*")
 
 
 def _check_sizes(where: str, element: ET.Element) -> None:
@@ -285,6 +287,7 @@ _TRANSFORM_ARGS = {
     "skewY": (1,),
 }
 """How many numbers each SVG transform function takes."""
+_NUMBERS = re.compile(_NUMBER)
 
 
 def _check_transform(where: str, element: ET.Element) -> None:
@@ -297,8 +300,8 @@ def _check_transform(where: str, element: ET.Element) -> None:
     fix = "give matrix(), translate(), scale(), rotate(), skewX() or skewY() with numbers"
     while pos < len(value.rstrip()):
         match = _TRANSFORM.match(value, pos)
-        numbers = None if match is None else _SIZE_NUMBER.findall(match.group(2))
-        only_numbers = match is not None and re.fullmatch(r"[\s,]*", _SIZE_NUMBER.sub(" ", match.group(2)))
+        numbers = None if match is None else _NUMBERS.findall(match.group(2))
+        only_numbers = match is not None and re.fullmatch(r"[\s,]*", _NUMBERS.sub(" ", match.group(2)))
         if not only_numbers or len(numbers) not in _TRANSFORM_ARGS[match.group(1)]:
             raise ContourError(f"{where}: <{tag}> transform={value!r} cannot be read; {fix}")
         name, args = match.group(1), [float(v) for v in numbers]
@@ -310,9 +313,6 @@ def _check_transform(where: str, element: ET.Element) -> None:
                 f"{where}: <{tag}> transform={value!r} collapses the drawing to a line or a point"
             )
         pos = match.end()
-
-
-_SIZE_NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 
 
 def _check_path_data(where: str, d: str) -> None:
