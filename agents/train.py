@@ -15,7 +15,10 @@ A run directory holds::
     summary.json       status (completed, interrupted, failed), iterations, env steps, speed, last metrics,
                        ``checkpoint`` (the newest one written whole), ``error`` (why a failed run stopped),
                        ``resumed_from``, ``history`` (every iteration's metrics) and ``validation`` (the
-                       validation scores)
+                       validation scores); ``wall_time_s``: training seconds of the whole run, the runs
+                       before a resume included (up to the checkpoint it resumed), ``run_wall_time_s``: this
+                       run's alone (``steps_per_s`` is its rate), ``earlier_wall_time_s``: the earlier runs'
+                       (None if the checkpoint predates the field: ``wall_time_s`` then counts this run only)
 
 Every checkpoint is read through :func:`read_checkpoint`: a damaged, truncated or empty file, or one that is
 not a checkpoint, is a ``ValueError`` naming the file and what to use instead. A full disk while writing one
@@ -147,7 +150,8 @@ def train(
         runner.checkpoint = checkpoint if checkpoint.parent.resolve() == out_dir.resolve() else None
     _write_config(out_dir, cfg, runner, env, num_action_choices, checkpoint)
 
-    start_iterations, start_time, status = runner.iterations_done, time.monotonic(), "failed"
+    start_iterations, status = runner.iterations_done, "failed"
+    runner.started = start_time = time.monotonic()
     try:
         steps = runner.steps_per_iteration
         with _progress_display(bool(progress), cfg.iterations, start_iterations, steps, label) as report:
@@ -182,7 +186,9 @@ def train(
             "status": status,
             "iterations": runner.iterations_done,
             "env_steps": runner.iterations_done * steps_per_iteration,
-            "wall_time_s": wall_time,
+            "wall_time_s": wall_time + (runner.earlier_wall_time or 0.0),
+            "run_wall_time_s": wall_time,
+            "earlier_wall_time_s": runner.earlier_wall_time,
             "steps_per_s": new_steps / max(wall_time, 1e-9),
             **runner.metrics,
             "checkpoint": None if runner.checkpoint is None else runner.checkpoint.name,
@@ -356,6 +362,15 @@ class Runner(OnPolicyRunner):
         self.best_iterations: int | None = None
         self.validation_baseline: list | None = None
         self.selection_margin = 0.0
+        self.earlier_wall_time: float | None = 0.0
+        """Training seconds of the runs before this one, up to the checkpoint it resumed (0 for a new run;
+        None if that checkpoint predates the field, so the run's total time is unknown)."""
+        self.started = time.monotonic()
+        """When this run's training started (:func:`train` sets it); checkpoints record the time since."""
+
+    def wall_time(self) -> float:
+        """Training seconds so far, the runs before a resume included (those unknown count 0)."""
+        return (self.earlier_wall_time or 0.0) + time.monotonic() - self.started
 
     def _state_bytes(self, infos: dict | None = None) -> bytes:
         state = self.alg.save()
@@ -368,6 +383,7 @@ class Runner(OnPolicyRunner):
             "best_score": self.best_score,
             "best_iterations": self.best_iterations,
             "validation_baseline": self.validation_baseline,
+            "wall_time_s": None if self.earlier_wall_time is None else self.wall_time(),
             **(infos or {}),
         }
         buffer = io.BytesIO()
@@ -510,6 +526,7 @@ class Runner(OnPolicyRunner):
         self.best_score = infos.get("best_score", self.best_error)
         self.best_iterations = infos.get("best_iterations")
         self.validation_baseline = infos.get("validation_baseline")
+        self.earlier_wall_time = infos.get("wall_time_s")
 
     def _end_iteration(self, it: int, metrics: dict) -> None:
         self.iterations_done = it + 1

@@ -234,8 +234,10 @@ def test_trained_policy_beats_random(trained_run):
 
 
 def test_resume_continues_from_checkpoint(tmp_path):
-    train(ReachEnv(NUM_ENVS), tiny_config(), tmp_path, progress=False)
+    first = train(ReachEnv(NUM_ENVS), tiny_config(), tmp_path, progress=False)
     saved = torch.load(tmp_path / "latest.pt", weights_only=True)
+    assert first["earlier_wall_time_s"] == 0 and first["wall_time_s"] == first["run_wall_time_s"] > 0
+    assert 0 < saved["infos"]["wall_time_s"] <= first["wall_time_s"]
 
     # Ctrl-C on the first step of the resumed run saves the state it started from.
     env = ReachEnv(NUM_ENVS)
@@ -257,6 +259,24 @@ def test_resume_continues_from_checkpoint(tmp_path):
     assert [h["iteration"] for h in summary["history"]] == [1, 2, 3, 4, 5]  # carried over the resume
     assert summary["checkpoint"] == "model_4.pt"
     assert torch.load(tmp_path / "model_4.pt", weights_only=True)["infos"]["iterations_done"] == 5
+    # The time counts the run before the resume, up to the checkpoint it resumed.
+    assert summary["earlier_wall_time_s"] == saved["infos"]["wall_time_s"]
+    assert summary["wall_time_s"] == pytest.approx(
+        summary["earlier_wall_time_s"] + summary["run_wall_time_s"]
+    )
+    # A checkpoint from before the field: the earlier time is unknown, said as None, not counted as 0.
+    old = torch.load(tmp_path / "latest.pt", weights_only=True)
+    del old["infos"]["wall_time_s"]
+    torch.save(old, tmp_path / "old.pt")
+    summary = train(
+        ReachEnv(NUM_ENVS),
+        tiny_config(iterations=6),
+        tmp_path / "old",
+        resume=tmp_path / "old.pt",
+        progress=False,
+    )
+    assert summary["earlier_wall_time_s"] is None and summary["wall_time_s"] == summary["run_wall_time_s"]
+    assert torch.load(tmp_path / "old" / "latest.pt", weights_only=True)["infos"]["wall_time_s"] is None
     steps = [event.step for event in _scalars(tmp_path, "Loss/surrogate")]
     assert sorted(steps) == [0, 1, 2, 3, 4]
 
