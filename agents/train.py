@@ -53,28 +53,19 @@ import re
 import statistics
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
 import torch
-from rich.console import Console
-from rich.markup import escape
-from rich.progress import (
-    BarColumn,
-    MofNCompleteColumn,
-    Progress,
-    TextColumn,
-    TimeElapsedColumn,
-    TimeRemainingColumn,
-)
 from rsl_rl.env import VecEnv
 from rsl_rl.runners import OnPolicyRunner
 from rsl_rl.utils.logger import Logger
 
 from agents.config import TrainConfig, default_iterations
 from agents.ppo_speed import speed_up
+from agents.progress import training_progress
 from envs.rsl import FINAL_ERROR_KEY
 from warpcut.io import DiskFull, write_atomic, write_json
 
@@ -150,11 +141,10 @@ def train(
         runner.checkpoint = checkpoint if checkpoint.parent.resolve() == out_dir.resolve() else None
     _write_config(out_dir, cfg, runner, env, num_action_choices, checkpoint)
 
-    start_iterations, status = runner.iterations_done, "failed"
-    runner.started = start_time = time.monotonic()
+    start_iterations, status, steps = runner.iterations_done, "failed", runner.steps_per_iteration
+    runner.started = time.monotonic()
     try:
-        steps = runner.steps_per_iteration
-        with _progress_display(bool(progress), cfg.iterations, start_iterations, steps, label) as report:
+        with training_progress(bool(progress), cfg.iterations, start_iterations, steps, label) as report:
             if validate is None:
                 runner.on_iteration = report
             else:
@@ -179,17 +169,15 @@ def train(
         if runner.logger.writer is not None:
             _log_hparams(runner.logger.writer, cfg, runner)
             runner.logger.writer.close()
-        wall_time = time.monotonic() - start_time
-        steps_per_iteration = runner.steps_per_iteration
-        new_steps = (runner.iterations_done - start_iterations) * steps_per_iteration
+        wall_time = time.monotonic() - runner.started
         summary = {
             "status": status,
             "iterations": runner.iterations_done,
-            "env_steps": runner.iterations_done * steps_per_iteration,
+            "env_steps": runner.iterations_done * steps,
             "wall_time_s": wall_time + (runner.earlier_wall_time or 0.0),
             "run_wall_time_s": wall_time,
             "earlier_wall_time_s": runner.earlier_wall_time,
-            "steps_per_s": new_steps / max(wall_time, 1e-9),
+            "steps_per_s": (runner.iterations_done - start_iterations) * steps / max(wall_time, 1e-9),
             **runner.metrics,
             "checkpoint": None if runner.checkpoint is None else runner.checkpoint.name,
             "error": None if ending is None or isinstance(ending, KeyboardInterrupt) else _one_line(ending),
@@ -771,44 +759,3 @@ def _mean_log_value(ep_extras: list[dict], key: str) -> float | None:
     values = [torch.as_tensor(e[key], dtype=torch.float).reshape(-1).cpu() for e in ep_extras if key in e]
     values = torch.cat(values) if values else torch.empty(0)
     return float(values.mean()) if values.numel() else None
-
-
-@contextlib.contextmanager
-def _progress_display(
-    enabled: bool, total: int, completed: int, steps_per_iteration: int, label: str = "PPO"
-) -> Iterator[Callable[[int, dict], None]]:
-    """Yield a callback ``(iterations_done, metrics)`` that advances a progress bar labelled ``label``, or
-    does nothing. The bar shows env steps/s since it started (not one iteration's rate, which swings with
-    validation and evaluation), the last known final error and return, the elapsed time and the ETA."""
-    if not enabled:
-        yield lambda iterations_done, metrics: None
-        return
-    columns = (
-        TextColumn(escape(label)),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TextColumn("{task.fields[steps_per_s]} steps/s"),
-        TextColumn("final error {task.fields[final_error]}"),
-        TextColumn("return {task.fields[mean_return]}"),
-        TimeElapsedColumn(),
-        TextColumn("ETA"),
-        TimeRemainingColumn(),
-    )
-    start = time.monotonic()
-    # stderr: rsl-rl's report is swallowed by redirecting stdout, which must not catch the bar's redraws.
-    with Progress(*columns, console=Console(stderr=True)) as bar:
-        task = bar.add_task(
-            "train", total=total, completed=completed, steps_per_s="-", final_error="-", mean_return="-"
-        )
-
-        def report(iterations_done: int, metrics: dict) -> None:
-            # Keep the last known episode metrics through iterations in which no episode ended.
-            known = {
-                key: f"{metrics[key]:.3f}"
-                for key in ("final_error", "mean_return")
-                if metrics[key] is not None
-            }
-            rate = (iterations_done - completed) * steps_per_iteration / max(time.monotonic() - start, 1e-9)
-            bar.update(task, completed=iterations_done, steps_per_s=f"{rate:,.0f}", **known)
-
-        yield report

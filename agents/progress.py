@@ -1,0 +1,60 @@
+"""The progress bar of a training run (:func:`agents.train.train`): iterations, env steps/s, the last final
+error and return, elapsed time and ETA, on stderr."""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from collections.abc import Callable, Iterator
+
+from rich.console import Console
+from rich.markup import escape
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
+
+
+@contextlib.contextmanager
+def training_progress(
+    enabled: bool, total: int, completed: int, steps_per_iteration: int, label: str = "PPO"
+) -> Iterator[Callable[[int, dict], None]]:
+    """Yield a callback ``(iterations_done, metrics)`` that advances a progress bar labelled ``label``, or
+    does nothing. The bar shows env steps/s since it started (not one iteration's rate, which swings with
+    validation and evaluation), the last known final error and return, the elapsed time and the ETA."""
+    if not enabled:
+        yield lambda iterations_done, metrics: None
+        return
+    columns = (
+        TextColumn(escape(label)),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[steps_per_s]} steps/s"),
+        TextColumn("final error {task.fields[final_error]}"),
+        TextColumn("return {task.fields[mean_return]}"),
+        TimeElapsedColumn(),
+        TextColumn("ETA"),
+        TimeRemainingColumn(),
+    )
+    start = time.monotonic()
+    # stderr: rsl-rl's report is swallowed by redirecting stdout, which must not catch the bar's redraws.
+    with Progress(*columns, console=Console(stderr=True)) as bar:
+        task = bar.add_task(
+            "train", total=total, completed=completed, steps_per_s="-", final_error="-", mean_return="-"
+        )
+
+        def report(iterations_done: int, metrics: dict) -> None:
+            # Keep the last known episode metrics through iterations in which no episode ended.
+            known = {
+                key: f"{metrics[key]:.3f}"
+                for key in ("final_error", "mean_return")
+                if metrics[key] is not None
+            }
+            rate = (iterations_done - completed) * steps_per_iteration / max(time.monotonic() - start, 1e-9)
+            bar.update(task, completed=iterations_done, steps_per_s=f"{rate:,.0f}", **known)
+
+        yield report
