@@ -60,10 +60,10 @@ class TrainConfig:
     """es only, with ``actor_feedback``: Adam's step for the feedback gains (``learning_rate``: the MLP's)."""
     iterations: int | None = 150
     """Total learning iterations of the run, counting those done before a resume. 150: on the Table I suite,
-    two seeds of 256 envs x 150 iterations kept a trained policy on 17-18 contours of 26 at RL +43.0-43.3%,
-    against 15-16 and +41.1-41.6% with 75; 50-59 s a contour on this 2-core CPU, at the edge of issue 16's
-    60 s (docs/learning.md, "Table I"). None: the algorithm's default for the env (es: as many whole cuts as
-    PPO's default run simulates env steps, :func:`es_iterations`)."""
+    two seeds of 256 envs x 150 iterations (5 epochs) kept a trained policy on 17-18 contours of 26 at RL
+    +43.0-43.3%, against 15-16 and +41.1-41.6% with 75; 50-59 s a contour on this 2-core CPU, at the edge of
+    issue 16's 60 s (docs/learning.md, "Table I"). None: the algorithm's default for the env (es: as many
+    whole cuts as PPO's default run simulates env steps, :func:`es_iterations`)."""
     seed: int = 0
     """Seed of Python, NumPy, torch and the env (``env.seed``)."""
     torch_device: str = "cpu"
@@ -94,8 +94,13 @@ class TrainConfig:
     """Initial action standard deviation (continuous only), in the env's action units."""
     num_steps_per_env: int = 32
     """Env steps per env per iteration; an iteration collects ``num_envs * num_steps_per_env`` steps."""
-    num_learning_epochs: int = 5
-    """Passes over each rollout."""
+    num_learning_epochs: int = 3
+    """Passes over each rollout. 3 (rsl-rl's usual 5 until session 31): the update's cost is nearly
+    proportional to it (at 256 envs 112 → 66 ms an update, of an iteration of ~330), and the adaptive
+    schedule keeps each update's KL near ``desired_kl`` either way. On the Table I suite at two seeds 3 epochs
+    gave RL +44.1% and +43.6%, trained policies kept on 19 and 18 contours, against 5's +43.0% and +43.3%,
+    17 and 18; PPO's rate rose from 45% to 51.5% of the simulator's (docs/learning.md, "Table I with 3 PPO
+    epochs"; docs/performance.md, section 6)."""
     num_mini_batches: int = 4
     """Mini-batches per pass."""
     learning_rate: float = 1e-3
