@@ -99,8 +99,8 @@ class TrainConfig:
     proportional to it (at 256 envs 112 → 66 ms an update, of an iteration of ~330), and the adaptive
     schedule keeps each update's KL near ``desired_kl`` either way. On the Table I suite at two seeds 3 epochs
     gave RL +44.1% and +43.6%, trained policies kept on 19 and 18 contours, against 5's +43.0% and +43.3%,
-    17 and 18; PPO's rate rose from 45% to 51.5% of the simulator's (docs/learning.md, "Table I with 3 PPO
-    epochs"; docs/performance.md, section 6)."""
+    17 and 18; PPO's rate rose from 45% to 51.5% of the simulator's in alternating runs (docs/learning.md,
+    "Table I with 3 PPO epochs"; docs/performance.md, section 6)."""
     num_mini_batches: int = 4
     """Mini-batches per pass."""
     learning_rate: float = 1e-3
