@@ -1,5 +1,5 @@
-"""The progress bar of a training run (:func:`agents.train.train`): iterations, env steps/s, the last final
-error and return, elapsed time and ETA, on stderr."""
+"""warpcut's progress bars, on stderr: a training run's (:func:`training_progress`: iterations, env steps/s,
+the last final error and return, elapsed time and ETA) and a pipeline's stages (:func:`stage_bars`)."""
 
 from __future__ import annotations
 
@@ -58,3 +58,26 @@ def training_progress(
             bar.update(task, completed=iterations_done, steps_per_s=f"{rate:,.0f}", **known)
 
         yield report
+
+
+@contextlib.contextmanager
+def stage_bars(enabled: bool = True):
+    """A pipeline's ``stages(stage, done, total)`` callback (:data:`agents.pipeline.Stages`) drawing one
+    progress bar per stage (planning, training, evaluating) with elapsed time and ETA, on stderr; a no-op
+    when not ``enabled``."""
+    if not enabled:
+        yield lambda stage, done, total: None
+        return
+    columns = (
+        TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+        TextColumn("ETA"), TimeRemainingColumn(),
+    )  # fmt: skip
+    with Progress(*columns, console=Console(stderr=True), transient=False) as bars:
+        tasks: dict[str, int] = {}
+
+        def stages(stage: str, done: int, total: int) -> None:
+            if stage not in tasks:
+                tasks[stage] = bars.add_task(stage, total=total)
+            bars.update(tasks[stage], completed=done, total=total)
+
+        yield stages

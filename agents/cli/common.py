@@ -669,39 +669,6 @@ def log(line: str) -> None:
     click.echo(line, err=True)
 
 
-@contextlib.contextmanager
-def stage_bars(enabled: bool = True):
-    """A pipeline's ``stages(stage, done, total)`` callback (:data:`agents.pipeline.Stages`) drawing one
-    progress bar per stage (planning, training, evaluating) with elapsed time and ETA, on stderr; a no-op
-    when not ``enabled``."""
-    if not enabled:
-        yield lambda stage, done, total: None
-        return
-    from rich.console import Console
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
-
-    columns = (
-        TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-        TextColumn("ETA"), TimeRemainingColumn(),
-    )  # fmt: skip
-    with Progress(*columns, console=Console(stderr=True), transient=False) as bars:
-        tasks: dict[str, int] = {}
-
-        def stages(stage: str, done: int, total: int) -> None:
-            if stage not in tasks:
-                tasks[stage] = bars.add_task(stage, total=total)
-            bars.update(tasks[stage], completed=done, total=total)
-
-        yield stages
-
-
 def plot_learning_curves(runs: dict[Path, str]) -> list[Path]:
     """Each training run's learning curve (``learning_curve.png/svg`` in it), titled as given."""
     from warpcut.io import read_json

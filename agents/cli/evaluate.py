@@ -155,7 +155,9 @@ def command(
         raise common.flag_error(error, GRAD_FLAGS) from None
     out, claim = common.claim(out, "evaluate", resume, overwrite)
     cuts = common.final_cuts(no_plots)
-    bars = common.stage_bars()
+    from agents.progress import stage_bars
+
+    bars = stage_bars()
     with (
         claim,
         bars as stages,
