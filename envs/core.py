@@ -302,8 +302,10 @@ class PatternCut:
             parts.append(np.broadcast_to(self.plan_move() / self.config.max_step_mm, (self.num_envs, 3)))
         obs = np.concatenate(parts, axis=1).astype(np.float32)
         obs[self.diverged] = 0.0  # a diverged env's state means nothing (and may be NaN)
-        obs = np.nan_to_num(obs, nan=0.0)
-        return np.clip(obs, self.observation_space.low, self.observation_space.high)
+        # NaN to 0 and the rest clipped to the bounds (infinities to them): np.nan_to_num then np.clip, the
+        # same values with two passes fewer (the envs observe every step).
+        np.copyto(obs, 0.0, where=np.isnan(obs))
+        return np.clip(obs, self.observation_space.low, self.observation_space.high, out=obs)
 
 
 def _score_info(score) -> dict[str, np.ndarray]:

@@ -30,6 +30,38 @@ def test_trajectory_spacing_and_non_cutting_travel_between_segments():
     assert travel[:, 0].min() > 20.0 and travel[:, 0].max() < 80.0
 
 
+def test_target_world_and_cut_deviation_follow_the_sheet(device):
+    """What the envs observe and reward every step, from what the task precomputes once per layout, against
+    the same quantities computed from scratch: each update's target interpolated on the sheet as it is now,
+    and the distance between where the scissors cut and where they meant to (both contours, cutting and
+    travelling updates, and past the horizon)."""
+    contours = [load_contour("fls-circle"), load_contour("wave-1")]
+    task = CuttingTask(
+        SimConfig(resolution=13), contours, pinch_points=[[50.0, 50.0], [50.0, 30.0]], device=device
+    )
+    task.reset()
+    targets = task.target_points()
+    while not task.done:
+        u, t = task.update_index, min(task.update_index, task.horizon_updates - 1)
+        positions = task.sim.positions()
+        for env in range(2):
+            if np.isfinite(targets[env, t]).all() and u < task.horizon_updates:
+                expected = material_to_world(targets[env, t][None], positions[env], task.grid)[0]
+                np.testing.assert_allclose(task.target_world()[env], expected, rtol=0, atol=1e-9)
+            else:
+                assert np.isnan(task.target_world()[env]).all()
+        task.step(None)
+        path = task.cut_path()[:, u : task.update_index]
+        target = targets[:, u : task.update_index]
+        mapped = (path[..., 2] > 0.5) & np.isfinite(target).all(axis=-1)
+        distance = np.linalg.norm(np.where(mapped[..., None], path[..., :2] - target, 0.0), axis=-1)
+        mean, count = task.cut_deviation(u, task.update_index)
+        np.testing.assert_array_equal(count, mapped.sum(axis=1))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            np.testing.assert_array_equal(mean, np.where(count > 0, distance.sum(axis=1) / count, np.nan))
+    assert np.isnan(task.target_world()).all()  # done: nothing left to cut
+
+
 def test_scissors_do_not_cut_while_travelling(device):
     contour = load_contour("wave-1")
     config = SimConfig(resolution=21, gravity=0.0)

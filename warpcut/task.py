@@ -225,6 +225,10 @@ class CuttingTask:
             self._tips[env, t:, :3] = trajectory.tip[-1, :3]  # parked, not cutting, once done
             self._targets[env, :t] = trajectory.material
         self._targets.flags.writeable = False
+        # What every update's target needs, once per layout (read every step: target_world, cut_deviation).
+        self._target_finite = np.all(np.isfinite(self._targets), axis=2)
+        self._target_cells = material_cells(np.nan_to_num(self._targets), self.grid)  # (B, horizon, 4) each
+        self._target_reader: Callable[..., np.ndarray] | None = None  # made at the first read
         self._arc_mm = self._compute_target_arcs()
         if self._trace:
             self.sim.trace_path(self.horizon_updates)
@@ -373,11 +377,12 @@ class CuttingTask:
         """(B, 3) current world position of the material point each tip is about to cut (NaN when
         travelling or finished): the contour as the sheet has moved it."""
         t = min(self.update_index, self.horizon_updates - 1)
-        targets = self._targets[:, t]
-        active = np.all(np.isfinite(targets), axis=1) & (self.update_index < self.horizon_updates)
-        vertices, weights = material_cells(np.nan_to_num(targets)[:, None], self.grid)
-        corners = self.sim.gather(vertices[:, 0])[:, None, :, :3]  # (B, 1, 4, 3): the cells' corners only
-        world = interpolate_corners(corners, weights)[:, 0]
+        active = self._target_finite[:, t] & (self.update_index < self.horizon_updates)
+        vertices, weights = self._target_cells
+        if self._target_reader is None:  # one reader of every update's target cell: (B, 4 * horizon)
+            self._target_reader = self.sim.gatherer(vertices.reshape(self.num_envs, -1))
+        corners = self._target_reader(slice(4 * t, 4 * t + 4))[:, None, :, :3]  # (B, 1, 4, 3): corners only
+        world = interpolate_corners(corners, weights[:, t : t + 1])[:, 0]
         return np.where(active[:, None], world, np.nan)
 
     def tracking_error(self) -> np.ndarray:
@@ -405,8 +410,10 @@ class CuttingTask:
             return np.full(self.num_envs, np.nan), np.zeros(self.num_envs, dtype=np.int64)
         path = self.sim.path[:, first_update:stop_update].numpy()  # on a GPU only this slice is copied
         target = self._targets[:, first_update:stop_update]
-        mapped = (path[..., 2] > 0.5) & np.all(np.isfinite(target), axis=-1)
-        distance = np.linalg.norm(np.where(mapped[..., None], path[..., :2] - target, 0.0), axis=-1)
+        mapped = (path[..., 2] > 0.5) & self._target_finite[:, first_update:stop_update]
+        offset = np.where(mapped[..., None], path[..., :2] - target, 0.0)
+        # np.linalg.norm over the last axis, written out: the same values, bit for bit, without its overhead.
+        distance = np.sqrt(offset[..., 0] * offset[..., 0] + offset[..., 1] * offset[..., 1])
         count = mapped.sum(axis=1)
         with np.errstate(invalid="ignore", divide="ignore"):
             mean = np.where(count > 0, distance.sum(axis=1) / count, np.nan)
