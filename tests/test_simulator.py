@@ -341,3 +341,36 @@ def test_process_noise_is_standard_normal_and_independent():
     assert np.abs(flat).max() < 3.5
     corr = np.corrcoef([x[0, :, 0], x[0, :, 1], x[0, :, 2], x[1, :, 0], np.roll(x[0, :, 0], 1), x[2, :, 2]])
     assert np.abs(corr - np.eye(len(corr))).max() < 0.03
+
+
+def test_a_launch_record_replays_what_a_launch_computes():
+    """:class:`LaunchRecord` (the per-update launches, replayed): the same results as ``launch`` while its
+    arrays are the same objects and their contents change, a changed number re-packed, a new array (or a
+    NumPy array, copied at each launch) launched afresh."""
+    from warpcut.sim import kernels
+    from warpcut.sim._warp import LaunchRecord, launch
+
+    rng = np.random.default_rng(0)
+    disp = wp.array(rng.normal(size=(5, 3)), dtype=wp.vec3, device="cpu")
+    action = wp.array(rng.normal(size=(5, 3)), dtype=wp.vec3, device="cpu")
+    out, expected = (wp.zeros(5, dtype=wp.vec3, device="cpu") for _ in range(2))
+    record = LaunchRecord()
+
+    def check(max_step: float, act) -> None:
+        record(kernels.move_grasp_kernel, 5, [max_step, 10.0, disp, act], [out], "cpu")
+        launch(kernels.move_grasp_kernel, 5, [max_step, 10.0, disp, act], [expected], "cpu")
+        np.testing.assert_array_equal(out.numpy(), expected.numpy())
+
+    check(0.5, action)
+    first = out.numpy().copy()
+    action.assign(rng.normal(size=(5, 3)))  # the same array, new contents: replayed
+    check(0.5, action)
+    assert not np.array_equal(out.numpy(), first)
+    check(0.25, action)  # a number changed: re-packed
+    assert np.abs(out.numpy() - disp.numpy()).max() <= 0.25 + 1e-6
+    check(0.25, wp.array(rng.normal(size=(5, 3)), dtype=wp.vec3, device="cpu"))  # another array: anew
+    moves = rng.normal(size=(5, 3)).astype(np.float32)
+    check(0.5, moves)
+    moves[:] = 0.0  # a NumPy array is copied at every launch, never replayed stale
+    check(0.5, moves)
+    np.testing.assert_array_equal(out.numpy(), disp.numpy())

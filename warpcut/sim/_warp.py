@@ -20,6 +20,7 @@ import os
 import shlex
 import sys
 
+import numpy as np
 import warp as wp
 
 
@@ -90,9 +91,71 @@ def launch(kernel: wp.Kernel, dim, inputs=(), outputs=(), device: str | None = N
     wp.launch(kernel, dim=dim, inputs=inputs, outputs=outputs, device=device, **options)
 
 
+_NUMBERS = (bool, int, float, np.number)
+
+
+class LaunchRecord:
+    """One call site's :func:`launch`, recorded once (``wp.launch(..., record_cmd=True)``) and replayed.
+
+    ``wp.launch`` packs every argument into its C form in Python at every call (the ``simd`` update's 23
+    arguments and the tip tracing's 8 cost more than a 64-env update's own work on this 2-core CPU;
+    docs/performance.md, section 6). A record replays the packed launch while its arrays and structs are the
+    same objects (taken by identity: their contents may change, a struct must not be changed in place) and
+    re-packs only the numbers whose values changed (a noise seed, an update index). Any other argument that
+    changed records the launch again. The same kernel, arguments and launch bounds as :func:`launch`, so the
+    same results bit for bit.
+
+    Not for launches that a ``wp.Tape`` must see (a replay is not recorded on the tape), and one thread at a
+    time: give each thread (each slice of a batch) its own.
+    """
+
+    __slots__ = ("_args", "_cmd", "_dim")
+
+    def __init__(self) -> None:
+        self._cmd = None
+        self._args: list = []
+        self._dim = None
+
+    def __call__(self, kernel: wp.Kernel, dim, inputs=(), outputs=(), device: str | None = None) -> None:
+        args = [*inputs, *outputs]
+        cmd, old = self._cmd, self._args
+        if cmd is None or cmd.kernel is not kernel or dim != self._dim or not _replayable(args, old):
+            if any(isinstance(a, np.ndarray) for a in args):  # copied to Warp at each launch: not replayable
+                launch(kernel, dim, inputs, outputs, device)
+                self._cmd = None
+                return
+            load_module(kernel.module, device)
+            cmd = wp.launch(kernel, dim=dim, inputs=inputs, outputs=outputs, device=device, record_cmd=True)
+            self._cmd, self._args, self._dim = cmd, args, dim
+        else:
+            for index, (a, b) in enumerate(zip(args, old, strict=True)):
+                if a is not b and not (type(a) is type(b) and a == b):  # a number that changed (or NaN)
+                    cmd.set_param_at_index(index, a)
+                    old[index] = a
+        cmd.launch()
+
+
+def _replayable(args: list, recorded: list) -> bool:
+    """Whether a launch with ``args`` can replay one recorded with ``recorded``: the same objects throughout
+    but for numbers, which may have changed."""
+    return len(args) == len(recorded) and all(
+        a is b or (isinstance(a, _NUMBERS) and isinstance(b, _NUMBERS))
+        for a, b in zip(args, recorded, strict=True)
+    )
+
+
+class LaunchRecords(dict):
+    """A :class:`LaunchRecord` per key (a call site, and the slice of the batch it launches for), made at the
+    first use of the key."""
+
+    def __missing__(self, key) -> LaunchRecord:
+        record = self[key] = LaunchRecord()
+        return record
+
+
 if not os.environ.get("WARPCUT_VERBOSE"):
     wp.config.log_level = wp.LOG_WARNING
     if not _cuda_driver_loadable():
         _init_quietly()
 
-__all__ = ["KernelCacheError", "launch", "load_module", "wp"]
+__all__ = ["KernelCacheError", "LaunchRecord", "LaunchRecords", "launch", "load_module", "wp"]

@@ -35,7 +35,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from warpcut.sim._warp import launch, wp
+from warpcut.sim._warp import LaunchRecords, launch, wp
 from warpcut.sim.config import SheetGrid, SimConfig
 from warpcut.sim.kernels import NOISE_SCALE_VALUE, PIN_FREE, PIN_GRASP, TipSearch, tip_locator
 from warpcut.sim.springs import colour_springs
@@ -682,6 +682,7 @@ class SimdState:
         row 1 beyond the bounds (``kernels.cut_kernel``)."""
         self.any_noise = 0
         self._lanes_view: np.ndarray | None = None
+        self._launches = LaunchRecords()  # the per-update launches, replayed (one per slice for step)
 
     def load(self, x: wp.array, x_prev: wp.array, alive: wp.array, pin: wp.array, anchor: wp.array) -> None:
         """Env-major state (``B * n`` entries each, as the simulator holds it) into blocks."""
@@ -704,7 +705,7 @@ class SimdState:
 
     def load_controls(self, displacement: wp.array, tip: wp.array) -> None:
         """(B,) ``vec3`` grasp displacements and (B,) ``vec4`` tips; call after every change."""
-        launch(
+        self._launches["controls"](
             self.kernels.pack_controls,
             dim=self.blocks,
             inputs=[self.num_envs, displacement, tip, self.lane_params],
@@ -757,7 +758,7 @@ class SimdState:
         count = self.blocks - block_offset if block_count is None else block_count
         if model.chebyshev and self.older.shape[0] < 2 * self.blocks * self.n:
             raise ValueError("model: Chebyshev sweeps need SimdState(..., chebyshev=True)")
-        launch(
+        self._launches["update", block_offset](
             self.kernels.update,
             dim=count,
             inputs=[

@@ -15,7 +15,7 @@ from concurrent.futures import ThreadPoolExecutor, wait
 import numpy as np
 
 from warpcut.sim import kernels
-from warpcut.sim._warp import launch, wp
+from warpcut.sim._warp import LaunchRecords, launch, wp
 from warpcut.sim.checks import DIVERGENCE_REASONS, check_pinch_points
 from warpcut.sim.config import PHYSICAL_PARAMETERS, SheetGrid, SimConfig, SimulationDiverged
 from warpcut.sim.kernels_simd import SimdModel, SimdState
@@ -174,6 +174,7 @@ class Simulator(StateReads):
         # The calling thread steps the first slice itself; the pool's threads step the others (a handoff
         # and a wake-up fewer per update than a pool of one thread per slice).
         self._pool = ThreadPoolExecutor(self.threads - 1) if self.threads > 1 else None
+        self._launches = LaunchRecords()  # replayed: the grasp moves, the simd update's tip tracing per slice
 
     @property
     def first_noise_stream(self) -> int:
@@ -403,7 +404,7 @@ class Simulator(StateReads):
         # that wp.Tape keeps the history.
         taped = self.displacement.requires_grad
         out = wp.empty_like(self.displacement) if taped else self.displacement
-        launch(
+        (launch if taped else self._launches["move_grasp"])(  # a replay is not on the tape
             kernels.move_grasp_kernel,
             dim=self.num_envs,
             inputs=[
@@ -483,7 +484,7 @@ class Simulator(StateReads):
                 status=self._status,
             )
             if tracing:
-                launch(
+                self._launches["map_tip", offset](
                     state.kernels.map_tip,
                     dim=count,
                     inputs=[
