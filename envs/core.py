@@ -136,8 +136,8 @@ class PatternCut:
         self.newly_diverged = np.zeros(num_envs, dtype=bool)
         """(B,) bool: envs that diverged in the last step."""
         self._over = False
-        self._fiducial_reader: tuple[tuple, Callable[[], np.ndarray]] | None = None
-        """The fiducials' cells and a ``Simulator.gatherer`` of their corners (:meth:`_fiducial_corners`)."""
+        self._fiducial_reader: tuple[tuple, Callable[[], tuple[np.ndarray, np.ndarray]]] | None = None
+        """The fiducials' cells and a ``Simulator.interpolator`` of them (:meth:`_fiducial_cells`)."""
 
     @property
     def step_index(self) -> int:
@@ -273,20 +273,19 @@ class PatternCut:
         """(B, 3) :meth:`CuttingTask.tracking_error` (mm); NaN while travelling or done."""
         return self.task.tracking_error()
 
-    def _fiducial_corners(self) -> np.ndarray:
-        """(B, 4K, 4) state of the fiducials' cell corners, read by a gatherer made once per set of cells
-        (a reset, or fiducials placed by hand and reset)."""
+    def _fiducial_cells(self) -> tuple[np.ndarray, np.ndarray]:
+        """The fiducials' world positions (B, K, 3) and whether their cells are whole (B, K), read by an
+        interpolator made once per set of cells (a reset, or fiducials placed by hand and reset)."""
         cells = self.fiducials.cells
         if self._fiducial_reader is None or self._fiducial_reader[0] is not cells:
-            self._fiducial_reader = (cells, self.task.sim.gatherer(self.fiducials.cell_vertices))
+            self._fiducial_reader = (cells, self.task.sim.interpolator(*cells))
         return self._fiducial_reader[1]()
 
     def observe(self) -> np.ndarray:
         """(B, D) float32 observations of the current state (layout: :mod:`envs.observations`)."""
         u = self.task.update_index
         tip = self.task.tip_positions(max(u - 1, 0))  # where the scissors are now
-        corners = self._fiducial_corners()  # the fiducials' cells only
-        fiducials = self.fiducials.track_corners(corners.reshape(self.num_envs, -1, 4, 4), tip)
+        fiducials = self.fiducials.track_cells(*self._fiducial_cells(), tip)
         parts = [
             np.full((self.num_envs, 1), self.step_index / self.task.num_steps),
             self.task.sim.displacements() / self.config.max_displacement_mm,

@@ -374,3 +374,32 @@ def test_a_launch_record_replays_what_a_launch_computes():
     moves[:] = 0.0  # a NumPy array is copied at every launch, never replayed stale
     check(0.5, moves)
     np.testing.assert_array_equal(out.numpy(), disp.numpy())
+    empty = wp.zeros(0, dtype=wp.vec3, device="cpu")
+    for _ in range(2):  # an empty launch (no fiducials, say) has nothing to record or run
+        LaunchRecord()(kernels.move_grasp_kernel, 0, [0.5, 10.0, empty, empty], [empty], "cpu")
+
+
+@pytest.mark.parametrize("backend", ["simd", "colours"])
+def test_an_interpolator_reads_what_gather_and_interpolation_give(backend):
+    """:meth:`Simulator.interpolator` (the ``simd`` backend's kernel over its packed blocks; the others gather
+    and interpolate in NumPy): the world positions ``interpolate_corners`` gives for the gathered corners,
+    bit for bit, and whether each cell is whole, straight after a reset and after cutting updates."""
+    from warpcut.sim.material import interpolate_corners, material_cells
+
+    sim = Simulator(SimConfig(resolution=9), 11, backend=backend, seed=2)
+    sim.reset(np.tile([[50.0, 50.0]], (11, 1)))
+    points = np.random.default_rng(3).uniform(0.0, 100.0, size=(11, 6, 2))
+    vertices, weights = material_cells(points, sim.grid)
+    read = sim.interpolator(vertices, weights)
+    for _ in range(2):
+        for _ in range(3):
+            state = sim.gather(vertices.reshape(11, -1)).reshape(11, 6, 4, 4)
+            world, whole = read()
+            np.testing.assert_array_equal(world, interpolate_corners(state[..., :3], weights))
+            np.testing.assert_array_equal(whole, (state[..., 3] != 0).all(axis=-1))
+            sim.set_tip(np.tile([[50.0, 50.0, -5.0, 1.0]], (11, 1)))
+            sim.update()
+        assert not whole.all()  # the comparison covered cut cells
+        sim.reset(np.tile([[50.0, 50.0]], (11, 1)))
+    with pytest.raises(ValueError, match=r"vertices, weights: expected \(11, K, 4\) each"):
+        sim.interpolator(vertices[:, :, :3], weights[:, :, :3])

@@ -56,11 +56,19 @@ def visible_corners(
     ``shaft_radius_mm`` from each ``tip`` toward +x) does not cover the point."""
     # Written out component by component (the values of np.linalg.norm and np.all over the last axis, bit
     # for bit, in a third of their time: the envs observe this every step).
-    dy, dz = world[..., 1] - tip[:, None, 1], world[..., 2] - tip[:, None, 2]
-    shaded = (world[..., 0] > tip[:, None, 0]) & (np.sqrt(dy * dy + dz * dz) < shaft_radius_mm)
     whole = corner_alive[..., 0] != 0
     for corner in range(1, corner_alive.shape[-1]):
         whole &= corner_alive[..., corner] != 0
+    return visible_cells(world, whole, tip, shaft_radius_mm)
+
+
+def visible_cells(
+    world: np.ndarray, whole: np.ndarray, tip: np.ndarray, shaft_radius_mm: float
+) -> np.ndarray:
+    """:func:`visible` from whether each fiducial's cell is whole, ``whole`` (B, K) bool, instead of the
+    sheet's alive flags (e.g. from :meth:`warpcut.Simulator.interpolator`)."""
+    dy, dz = world[..., 1] - tip[:, None, 1], world[..., 2] - tip[:, None, 2]
+    shaded = (world[..., 0] > tip[:, None, 0]) & (np.sqrt(dy * dy + dz * dz) < shaft_radius_mm)
     return whole & ~shaded
 
 
@@ -164,6 +172,11 @@ class Fiducials:
         """:meth:`track` from the state (B, K, 4, 4) of each fiducial's cell corners only: x, y, z (mm) and
         alive (non-zero where uncut); ``Simulator.gather(cell_vertices)`` reshaped."""
         world = interpolate_corners(state[..., :3], self._cells[1])
-        self.visible = visible_corners(world, state[..., 3], tip, self.shaft_radius_mm)
+        return self.track_cells(world, (state[..., 3] != 0).all(axis=-1), tip)
+
+    def track_cells(self, world: np.ndarray, whole: np.ndarray, tip: np.ndarray) -> np.ndarray:
+        """:meth:`track` from the fiducials' world positions now (B, K, 3) and whether their cells are whole
+        (B, K) bool: what ``Simulator.interpolator(*cells)`` reads (the envs' observations)."""
+        self.visible = visible_cells(world, whole, tip, self.shaft_radius_mm)
         self.last_visible = np.where(self.visible[..., None], world, self.last_visible)
         return self.last_visible.copy()

@@ -127,6 +127,8 @@ class LaunchRecord:
             load_module(kernel.module, device)
             cmd = wp.launch(kernel, dim=dim, inputs=inputs, outputs=outputs, device=device, record_cmd=True)
             self._cmd, self._args, self._dim = cmd, args, dim
+            if cmd is None:  # an empty launch (a zero dimension): Warp has nothing to record or run
+                return
         else:
             for index, (a, b) in enumerate(zip(args, old, strict=True)):
                 if a is not b and not (type(a) is type(b) and a == b):  # a number that changed (or NaN)

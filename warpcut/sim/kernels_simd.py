@@ -236,6 +236,7 @@ def simd_kernels(lanes: int = DEFAULT_LANES) -> SimpleNamespace:
         update=_update_kernel(types, module),
         **_packing_kernels(types, module),
         map_tip=_map_tip_kernel(types, module),
+        interpolate_cells=_interpolate_cells_kernel(types, module),
     )
 
 
@@ -599,6 +600,51 @@ def _map_tip_kernel(types: SimpleNamespace, module: str) -> wp.Kernel:
                 )
 
     return map_tip_kernel
+
+
+def _interpolate_cells_kernel(types: SimpleNamespace, module: str) -> wp.Kernel:
+    """Material points' world positions from the packed state: the corners of each point's cell, bilinearly
+    weighted (:func:`warpcut.sim.material.interpolate_corners`, the same products and sums in the same order,
+    in float64, so the same bits), and whether the cell is whole (all four corners uncut). ``packed`` is the
+    blocks as flat floats (:meth:`SimdState.packed_view`: block, vertex, field x, y, z, alive, free, lane)."""
+    L = types.lanes  # noqa: N806 (a constant, as the kernel reads it)
+
+    @wp.func
+    def corner(packed: wp.array(dtype=float), i: int) -> wp.vec3d:
+        return wp.vec3d(wp.float64(packed[i]), wp.float64(packed[i + L]), wp.float64(packed[i + 2 * L]))
+
+    @wp.kernel(enable_backward=False, module=module)
+    def interpolate_cells_kernel(
+        # Model:
+        n: int,
+        vertices: wp.array3d(dtype=wp.int32),
+        weights: wp.array3d(dtype=wp.float64),
+        # Data in:
+        packed: wp.array(dtype=float),
+        # Data out:
+        world: wp.array3d(dtype=wp.float64),
+        whole: wp.array2d(dtype=wp.int32),
+    ):
+        env, k = wp.tid()
+        base = (env // L) * n
+        lane = env % L
+        i0 = (base + vertices[env, k, 0]) * 5 * L + lane  # field x of the corner's vertex, in its lane
+        i1 = (base + vertices[env, k, 1]) * 5 * L + lane
+        i2 = (base + vertices[env, k, 2]) * 5 * L + lane
+        i3 = (base + vertices[env, k, 3]) * 5 * L + lane
+        p0 = weights[env, k, 0] * corner(packed, i0)
+        p1 = weights[env, k, 1] * corner(packed, i1)
+        p2 = weights[env, k, 2] * corner(packed, i2)
+        p3 = weights[env, k, 3] * corner(packed, i3)
+        point = (p0 + p1) + (p2 + p3)
+        world[env, k, 0] = point[0]
+        world[env, k, 1] = point[1]
+        world[env, k, 2] = point[2]
+        a = 3 * L  # field alive
+        cut = packed[i0 + a] == 0.0 or packed[i1 + a] == 0.0 or packed[i2 + a] == 0.0 or packed[i3 + a] == 0.0
+        whole[env, k] = wp.where(cut, 0, 1)
+
+    return interpolate_cells_kernel
 
 
 @dataclass

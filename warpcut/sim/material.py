@@ -43,10 +43,14 @@ def interpolate(positions: np.ndarray, vertices: np.ndarray, weights: np.ndarray
 
 def interpolate_corners(corners: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """World positions (B, K, 3) of material points from their cells' corner positions (B, K, 4, 3) (e.g.
-    :meth:`warpcut.Simulator.gather` of the ``vertices`` of :func:`material_cells`) and ``weights``: a
-    batched (1 x 4) @ (4 x 3) product per point (half the time of the equivalent ``einsum`` at 256 x 12
-    points; the envs interpolate every step)."""
-    return (weights[..., None, :] @ corners)[..., 0, :]
+    :meth:`warpcut.Simulator.gather` of the ``vertices`` of :func:`material_cells`) and ``weights``.
+
+    Each corner's weighted position, summed in pairs: ``(p0 + p1) + (p2 + p3)``. That is the order of the
+    batched (1 x 4) @ (4 x 3) product NumPy computed here before (OpenBLAS's, bit for bit on this machine),
+    written out so that it does not depend on a BLAS build, and the order of the ``simd`` backend's kernel
+    (:meth:`warpcut.Simulator.interpolator`), which the envs' observations use: the same bits either way."""
+    products = weights[..., :, None] * corners
+    return (products[..., 0, :] + products[..., 1, :]) + (products[..., 2, :] + products[..., 3, :])
 
 
 def material_to_world(points: np.ndarray, positions: np.ndarray, grid: SheetGrid) -> np.ndarray:

@@ -22,6 +22,7 @@ class StateReads:
     (``_flat_current`` False)."""
 
     num_envs: int
+    device: str
     grid: SheetGrid
     x: wp.array
     alive: wp.array
@@ -108,6 +109,66 @@ class StateReads:
         the envs' observations read every step: fiducials, the scissors' target; docs/performance.md). To
         read the same vertices every step, make a :meth:`gatherer` once."""
         return self.gatherer(vertices)()
+
+    def interpolator(
+        self, vertices: np.ndarray, weights: np.ndarray
+    ) -> Callable[[], tuple[np.ndarray, np.ndarray]]:
+        """A function ``read()`` that returns where material points are now and whether their cells are
+        whole: ``(world, whole)``, (B, K, 3) float64 positions (mm) and (B, K) bool, for points whose cells
+        are ``vertices`` and ``weights`` (B, K, 4) each (:func:`warpcut.sim.material.material_cells`).
+
+        The values of ``interpolate_corners(state[..., :3], weights)`` and ``(state[..., 3] != 0).all(-1)``
+        for ``state = gather(vertices)``, bit for bit. The ``simd`` backend computes them in one kernel from
+        its packed blocks (the envs observe the fiducials every step: the gather and the interpolation in
+        NumPy cost as much as the rest of an observation; docs/performance.md, section 6); otherwise they
+        are computed so.
+        """
+        from warpcut.sim._warp import LaunchRecord, wp
+        from warpcut.sim.material import interpolate_corners
+
+        vertices = np.asarray(vertices, dtype=np.intp)
+        weights = np.asarray(weights, dtype=np.float64)
+        b = self.num_envs
+        if (
+            vertices.ndim != 3
+            or vertices.shape[0] != b
+            or vertices.shape[2] != 4
+            or weights.shape != vertices.shape
+        ):
+            raise ValueError(
+                f"vertices, weights: expected ({b}, K, 4) each, got {vertices.shape} and {weights.shape}"
+            )
+        gather = self.gatherer(vertices.reshape(b, -1))  # checks the indices
+
+        def read_gathered() -> tuple[np.ndarray, np.ndarray]:
+            state = gather().reshape(vertices.shape + (4,))
+            return interpolate_corners(state[..., :3], weights), (state[..., 3] != 0).all(axis=-1)
+
+        if self._simd is None or not self._is_cpu:
+            return read_gathered
+        k = vertices.shape[1]
+        cells = wp.array(vertices.astype(np.int32), dtype=wp.int32, device=self.device)
+        cell_weights = wp.array(weights, dtype=wp.float64, device=self.device)
+        world = wp.empty((b, k, 3), dtype=wp.float64, device=self.device)
+        whole = wp.empty((b, k), dtype=wp.int32, device=self.device)
+        world_view, whole_view = world.numpy(), whole.numpy()  # zero-copy on the CPU
+        launch = LaunchRecord()
+        packed: dict = {}  # of the blocks last read: their state object and a flat float array of them
+
+        def read() -> tuple[np.ndarray, np.ndarray]:
+            simd = self._simd
+            if self._flat_current or simd is None:
+                return read_gathered()
+            if packed.get("state") is not simd:
+                flat = wp.array(
+                    simd.packed_view().reshape(-1), dtype=wp.float32, device=self.device, copy=False
+                )
+                packed.update(state=simd, flat=flat)
+            kernel = simd.kernels.interpolate_cells
+            launch(kernel, (b, k), [simd.n, cells, cell_weights, packed["flat"]], [world, whole], self.device)
+            return world_view.copy(), whole_view != 0
+
+        return read
 
     def gatherer(self, vertices: np.ndarray) -> Callable[..., np.ndarray]:
         """A function ``read(columns=None)`` that returns what ``gather(vertices[:, columns])`` returns at the
