@@ -227,8 +227,8 @@ class CuttingTask:
         self._targets.flags.writeable = False
         # What every update's target needs, once per layout (read every step: target_world, cut_deviation).
         self._target_finite = np.all(np.isfinite(self._targets), axis=2)
-        self._target_cells = material_cells(np.nan_to_num(self._targets), self.grid)  # (B, horizon, 4) each
-        self._target_reader: Callable[..., np.ndarray] | None = None  # made at the first read
+        vertices, weights = material_cells(np.nan_to_num(self._targets), self.grid)  # (B, horizon, 4) each
+        self._target_cells = (vertices.astype(np.int32), weights)
         self._arc_mm = self._compute_target_arcs()
         if self._trace:
             self.sim.trace_path(self.horizon_updates)
@@ -379,9 +379,7 @@ class CuttingTask:
         t = min(self.update_index, self.horizon_updates - 1)
         active = self._target_finite[:, t] & (self.update_index < self.horizon_updates)
         vertices, weights = self._target_cells
-        if self._target_reader is None:  # one reader of every update's target cell: (B, 4 * horizon)
-            self._target_reader = self.sim.gatherer(vertices.reshape(self.num_envs, -1))
-        corners = self._target_reader(slice(4 * t, 4 * t + 4))[:, None, :, :3]  # (B, 1, 4, 3): corners only
+        corners = self.sim.gather(vertices[:, t])[:, None, :, :3]  # (B, 1, 4, 3): the cells' corners only
         world = interpolate_corners(corners, weights[:, t : t + 1])[:, 0]
         return np.where(active[:, None], world, np.nan)
 

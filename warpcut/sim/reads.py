@@ -170,12 +170,10 @@ class StateReads:
 
         return read
 
-    def gatherer(self, vertices: np.ndarray) -> Callable[..., np.ndarray]:
-        """A function ``read(columns=None)`` that returns what ``gather(vertices[:, columns])`` returns at the
-        time of the call (``columns``: a slice; None: all), with the indices checked and their offsets in the
-        packed blocks computed once, here (the envs read the fiducials' cells every step, and the scissors'
-        target cell of each update from one reader made for all of them: the offsets cost as much as the
-        read; docs/performance.md, section 6).
+    def gatherer(self, vertices: np.ndarray) -> Callable[[], np.ndarray]:
+        """A function ``read()`` that returns what ``gather(vertices)`` returns at the time of the call, with
+        the indices checked and their offsets in the packed blocks computed once, here (for a reader of the
+        same vertices every step: the offsets cost as much as the read; docs/performance.md, section 6).
         """
         vertices = np.asarray(vertices, dtype=np.intp)
         n = self.grid.num_vertices
@@ -186,8 +184,7 @@ class StateReads:
         vertices = vertices.copy()  # the caller's array may change; this reader's vertices do not
         offsets: dict = {}  # of the packed blocks last read: their state object and the flat indices
 
-        def read(columns: slice | None = None) -> np.ndarray:
-            cols = slice(None) if columns is None else columns
+        def read() -> np.ndarray:
             simd = self._simd
             if not self._flat_current and simd is not None and self._is_cpu:
                 view = simd.packed_view()  # (blocks, n, fields, lanes), contiguous
@@ -196,14 +193,13 @@ class StateReads:
                     env = np.arange(self.num_envs)[:, None]
                     first = ((env // lanes) * n + vertices) * (fields * lanes) + env % lanes
                     offsets.update(state=simd, index=first[..., None] + lanes * np.arange(4))
-                return np.take(view.reshape(-1), offsets["index"][:, cols])  # a float32 copy
+                return np.take(view.reshape(-1), offsets["index"])  # a float32 copy
             self._sync_flat()
             x = self.x.numpy().reshape(self.num_envs, n, 3)
             alive = self.alive.numpy().reshape(self.num_envs, n)
-            chosen = vertices[:, cols]
-            out = np.empty(chosen.shape + (4,), dtype=np.float32)
-            out[..., :3] = np.take_along_axis(x, chosen[..., None], axis=1)
-            out[..., 3] = np.take_along_axis(alive, chosen, axis=1) != 0
+            out = np.empty(vertices.shape + (4,), dtype=np.float32)
+            out[..., :3] = np.take_along_axis(x, vertices[..., None], axis=1)
+            out[..., 3] = np.take_along_axis(alive, vertices, axis=1) != 0
             return out
 
         return read
