@@ -20,7 +20,7 @@ import shapely
 
 from warpcut.contours import Contour
 from warpcut.sim.config import SheetGrid, SimConfig
-from warpcut.sim.material import interpolate, interpolate_corners, material_cells
+from warpcut.sim.material import interpolate, interpolate_state, material_cells
 
 NUM_FIDUCIALS = 12
 """Fiducials per sheet (the paper's 12)."""
@@ -171,8 +171,7 @@ class Fiducials:
     def track_corners(self, state: np.ndarray, tip: np.ndarray) -> np.ndarray:
         """:meth:`track` from the state (B, K, 4, 4) of each fiducial's cell corners only: x, y, z (mm) and
         alive (non-zero where uncut); ``Simulator.gather(cell_vertices)`` reshaped."""
-        world = interpolate_corners(state[..., :3], self._cells[1])
-        return self.track_cells(world, (state[..., 3] != 0).all(axis=-1), tip)
+        return self.track_cells(*interpolate_state(state, self._cells[1]), tip)
 
     def track_cells(self, world: np.ndarray, whole: np.ndarray, tip: np.ndarray) -> np.ndarray:
         """:meth:`track` from the fiducials' world positions now (B, K, 3) and whether their cells are whole

@@ -53,6 +53,13 @@ def interpolate_corners(corners: np.ndarray, weights: np.ndarray) -> np.ndarray:
     return (products[..., 0, :] + products[..., 1, :]) + (products[..., 2, :] + products[..., 3, :])
 
 
+def interpolate_state(state: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(world, whole)`` from the state (B, K, 4, 4) of material points' cell corners (x, y, z in mm and
+    alive, non-zero where uncut; e.g. ``Simulator.gather`` of their cells, reshaped) and ``weights``: the
+    points' world positions (B, K, 3) (:func:`interpolate_corners`) and whether each cell is whole (B, K)."""
+    return interpolate_corners(state[..., :3], weights), (state[..., 3] != 0).all(axis=-1)
+
+
 def material_to_world(points: np.ndarray, positions: np.ndarray, grid: SheetGrid) -> np.ndarray:
     """World positions of material points on one sheet, by bilinear interpolation over their cells.
 

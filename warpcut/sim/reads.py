@@ -117,14 +117,14 @@ class StateReads:
         whole: ``(world, whole)``, (B, K, 3) float64 positions (mm) and (B, K) bool, for points whose cells
         are ``vertices`` and ``weights`` (B, K, 4) each (:func:`warpcut.sim.material.material_cells`).
 
-        The values of ``interpolate_corners(state[..., :3], weights)`` and ``(state[..., 3] != 0).all(-1)``
-        for ``state = gather(vertices)``, bit for bit. The ``simd`` backend computes them in one kernel from
+        The values of ``interpolate_state(gather(vertices), weights)`` (:mod:`warpcut.sim.material`), bit for
+        bit. The ``simd`` backend computes them in one kernel from
         its packed blocks (the envs observe the fiducials every step: the gather and the interpolation in
         NumPy cost as much as the rest of an observation; docs/performance.md, section 6); otherwise they
         are computed so.
         """
         from warpcut.sim._warp import LaunchRecord, wp
-        from warpcut.sim.material import interpolate_corners
+        from warpcut.sim.material import interpolate_state
 
         vertices = np.asarray(vertices, dtype=np.intp)
         weights = np.asarray(weights, dtype=np.float64)
@@ -141,8 +141,7 @@ class StateReads:
         gather = self.gatherer(vertices.reshape(b, -1))  # checks the indices
 
         def read_gathered() -> tuple[np.ndarray, np.ndarray]:
-            state = gather().reshape(vertices.shape + (4,))
-            return interpolate_corners(state[..., :3], weights), (state[..., 3] != 0).all(axis=-1)
+            return interpolate_state(gather().reshape(vertices.shape + (4,)), weights)
 
         if self._simd is None or not self._is_cpu:
             return read_gathered
