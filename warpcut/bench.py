@@ -26,11 +26,11 @@ REPEATS = 3
 ROLLOUT_ENVS = 256
 """Batch of the fls-circle rollout measurements."""
 ENV_STEP_ENVS = (64, 256)
-"""Batches of the tensioned env-step measurement (``sim_env_steps_per_s``) and of PPO's beside it: 64, the
-training batch until session 13, and 256, the envs a training run steps by default
+"""Batches of the tensioned env-step measurement (``sim_env_steps_per_s``) and of PPO's beside it: 64, a
+small training batch, and 256, the envs a training run steps by default
 (``agents.config.TrainConfig.num_envs``; docs/performance.md, section 6)."""
 PAPER_SWEEPS = SimConfig(springs=("structural",), sweeps=5, chebyshev_rho=0.0, noise_std=0.0)
-"""The issue's and the paper's unit of work: one update = integrate + 5 structural relaxation sweeps,
+"""The paper's unit of work: one update = integrate + 5 structural relaxation sweeps,
 without process noise (the authors' code had none)."""
 NOISE_FREE = SimConfig(noise_std=0.0)
 """The default physics without its process noise: what the noise costs (one hashed draw per vertex)."""

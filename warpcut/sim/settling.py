@@ -3,6 +3,9 @@ and kept for the envs (and later episodes) that share it."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 
 from warpcut.sim.checks import check_settled
@@ -15,9 +18,17 @@ SETTLE_CACHE_SHEETS = 4096
 
 
 class SettledSheets:
-    """Settled sheets by their (damping, dt, gravity, elasticity), at most :data:`SETTLE_CACHE_SHEETS`."""
+    """Settled sheets by their (damping, dt, gravity, elasticity), at most :data:`SETTLE_CACHE_SHEETS`.
 
-    def __init__(self):
+    Args:
+        simulator: What settles a batch: called as ``simulator(config, num_envs, device)``, it returns a
+            batch with ``reset_flat``, ``update``, ``positions`` and ``divergence``
+            (:class:`~warpcut.sim.simulator.Simulator`, which passes itself in: the simulator uses this
+            cache, so this module does not import it).
+    """
+
+    def __init__(self, simulator: Callable[[SimConfig, int, str], Any]):
+        self._simulator = simulator
         self._sheets: dict[tuple[float, ...], np.ndarray] = {}
 
     def __len__(self) -> int:
@@ -27,14 +38,12 @@ class SettledSheets:
         """(G, N, 3) the settled sheet of each row of ``group_params`` (G, 4), in :data:`SETTLE_PARAMETERS`
         order, after ``config.settle_updates`` noise-free updates; those not kept yet are settled as one
         batch (:class:`~warpcut.sim.config.SimulationDiverged` if one does not hang)."""
-        from warpcut.sim.simulator import Simulator
-
         keys = [tuple(float(v) for v in row) for row in group_params]
         missing = [g for g, key in enumerate(keys) if key not in self._sheets]
         if missing:
             rows = group_params[missing]
             changes = {k: rows[:, c].tolist() for c, k in enumerate(SETTLE_PARAMETERS)}
-            sheet = Simulator(config.replace(**changes, noise_std=0.0), len(rows), device)
+            sheet = self._simulator(config.replace(**changes, noise_std=0.0), len(rows), device)
             sheet.reset_flat()
             for _ in range(config.settle_updates):
                 sheet.update()

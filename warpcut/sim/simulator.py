@@ -111,7 +111,7 @@ class Simulator(StateReads):
         self.fixture = self.grid.fixture_mask(self.config.fixture)
         self.update_count = 0
         self._settled: np.ndarray | None = None
-        self._settle_cache = SettledSheets()  # what set_params brings back is not settled again
+        self._settle_cache = SettledSheets(Simulator)  # what set_params brings back is not settled again
         n = self.grid.num_vertices * num_envs
         self._buffers = [wp.zeros(n, dtype=wp.vec3, device=self.device) for _ in range(3)]
         self._alive = [wp.zeros(n, dtype=wp.int32, device=self.device) for _ in range(2)]

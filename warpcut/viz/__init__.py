@@ -7,8 +7,9 @@ Recording (a step callback of :meth:`warpcut.task.CuttingTask.run` writes one ``
 * :mod:`~warpcut.viz.frames`: what the step callback copies (a frame per step, a setup per episode);
 * :mod:`~warpcut.viz.transport`: how the copies reach the writer (a recorder process, a worker thread or
   the step callback itself) and a frame's wire format on the pipe to the process;
-* :mod:`~warpcut.viz.process`: the recorder process, its start-up (standard library only, so that the CLI
-  can start it before importing anything slow) and the server that runs in it;
+* :mod:`~warpcut.viz.process`: the recorder process, its start-up and the pipes to it (standard library
+  only, so that the CLI can start it before importing anything slow);
+* :mod:`~warpcut.viz.server`: the server that runs in the recorder process;
 * :mod:`~warpcut.viz.rerun_writer`: the rerun encoding of a batch of frames, and the file;
 * :mod:`~warpcut.viz.columns`: rerun component columns built from numpy buffers;
 * :mod:`~warpcut.viz.colours`: vertex colours (strain, height) and the fixed colours;

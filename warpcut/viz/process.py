@@ -1,11 +1,12 @@
-"""The recorder process behind ``Recorder(background="process")``: starting it and the pipes to and from it
-(the stepping process's side), and :func:`serve`, what runs in it.
+"""The recorder process behind ``Recorder(background="process")``, from the stepping process's side:
+starting it, the pipes to and from it and their messages, and the recording's errors and final file
+(:func:`place_file`, which the writer uses too). What runs in the process is :func:`warpcut.viz.server.serve`.
 
-At module level this imports only the standard library, so that :func:`start_recorder_process` can start
-the process before its caller has imported anything slow (the CLI calls it first thing when ``--record``
-is given): the process's own start-up (Python, numpy, scipy, shapely and rerun) then overlaps the
-caller's. The server's own imports (the writer, the frame wire format) are made in the process, which
-imports them while it starts (:func:`~warpcut.viz.rerun_writer.import_rerun`).
+This imports only the standard library, so that :func:`start_recorder_process` can start the process
+before its caller has imported anything slow (the CLI calls it first thing when ``--record`` is given):
+the process's own start-up (Python, numpy, scipy, shapely and rerun) then overlaps the caller's. The
+server's own imports (the writer, the frame wire format) are made in the process, which imports them
+while it starts (:mod:`warpcut.viz.server`, :func:`~warpcut.viz.rerun_writer.import_rerun`).
 """
 
 from __future__ import annotations
@@ -18,7 +19,6 @@ import subprocess
 import sys
 import threading
 import time
-import traceback
 from pathlib import Path
 
 PROCESS_NICE = 10
@@ -271,8 +271,8 @@ import os, signal, sys
 signal.signal(signal.SIGINT, signal.SIG_IGN)
 sys.path[0] = {source!r}
 try:
-    from warpcut.viz.process import serve
     from warpcut.viz.rerun_writer import import_rerun
+    from warpcut.viz.server import serve
 
     import_rerun()
 except BaseException as exc:
@@ -286,108 +286,3 @@ except OSError:
     pass
 serve({cmd}, {reply})
 """
-
-
-def serve(cmd_fd: int, reply_fd: int) -> None:
-    """The recorder process: serve recordings one after the other until the pipe from the stepping
-    process ends (it closed us, or it died: the recording it held open is finished then)."""
-    messages = MessageReader(cmd_fd)
-
-    def reply(*message) -> None:
-        try:
-            os.write(reply_fd, pickled_message(message))
-        except OSError:  # the stepping process is gone; the file is finished anyway
-            pass
-
-    while (message := messages.next()) is not None:
-        command, *args = pickle.loads(message[1])
-        if command != "open":
-            reply("failed", "RuntimeError", f"protocol: expected 'open', got {command!r}", "")
-            return
-        if not _serve_recording(messages, reply, *args):
-            return
-
-
-def _serve_recording(
-    messages: MessageReader, reply, tmp: str, path: str, application_id: str, colour_by: str
-) -> bool:
-    """Write one recording from the messages; whether the stepping process closed it (else the pipe
-    ended). The frames are scored and sent a group at a time once no further message is waiting, so
-    that a process that has fallen behind (no core free) catches up in fewer, larger batches. The first
-    failure is reported at once; the frames after it are read and dropped."""
-    from warpcut.viz.rerun_writer import RerunWriter
-    from warpcut.viz.transport import FLUSH_FRAMES, decode_frame
-
-    failure: list = []
-    pending: dict[int, list] = {}
-    ready: set[int] = set()  # keys whose pending frames end with a whole group
-    shapes: dict[int, tuple[int, int]] = {}
-    writer: RerunWriter | None = None
-
-    def report(exc: Exception) -> None:
-        """Report ``exc`` to the stepping process, unless something failed already."""
-        if not failure:
-            failure[:] = [type(exc).__name__, str(exc), traceback.format_exc()]
-            reply("failed", *failure)
-
-    def send(key: int) -> None:
-        ready.discard(key)
-        frames = pending.pop(key, None)
-        if frames and not failure:
-            try:
-                writer.frames(key, frames)
-            except Exception as exc:  # noqa: BLE001 - reported to the stepping process
-                report(exc)
-
-    try:
-        writer = RerunWriter(Path(tmp), Path(path), application_id, colour_by, background=True)
-    except Exception as exc:  # noqa: BLE001 - reported to the stepping process
-        report(exc)
-    closed = False
-    while True:
-        message = messages.next(block=False)
-        if message is None and not messages.eof:
-            for key in list(ready):  # nothing else is waiting: send the whole groups
-                send(key)
-            message = messages.next()
-        if message is None:
-            break
-        kind, payload = message
-        try:
-            if kind == b"F":
-                key, frame, group_end = decode_frame(payload, shapes)
-                frames = pending.setdefault(key, [])
-                frames.append(frame)
-                if group_end:
-                    ready.add(key)
-                    if len(frames) >= FLUSH_FRAMES:
-                        send(key)
-                continue
-            command, *args = pickle.loads(payload)
-            if command == "close":
-                closed = True
-                (keep,) = args
-                break
-            if command != "start":
-                raise RuntimeError(f"protocol: unexpected message {command!r}")
-            for key in list(pending):
-                send(key)
-            key, method, setup = args
-            shapes[key] = (len(setup.envs), setup.grid.num_vertices)
-            if not failure:
-                writer.start(key, method, setup)
-        except Exception as exc:  # noqa: BLE001 - reported to the stepping process
-            report(exc)
-    for key in list(pending):
-        send(key)
-    if not closed:  # the stepping process died: keep what it recorded, if anything
-        keep = bool(shapes)
-    try:
-        if writer is not None:
-            writer.finish(complete=not failure, keep=keep)
-        else:
-            place_file(tmp, path, keep)
-    except Exception as exc:  # noqa: BLE001 - reported to the stepping process
-        report(exc)
-    reply("closed", time.process_time())
-    return closed

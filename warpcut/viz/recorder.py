@@ -44,7 +44,7 @@ path as it was). :meth:`Recorder.close` returns once the file is complete. The r
 Ctrl-C (it runs in its own process group) and finishes the file when the recorder closes, or on its own
 when the stepping process dies. Use a recorder as a context manager::
 
-    with Recorder("logs/run/recording.rrd", envs=2) as recorder:
+    with Recorder("recording.rrd", envs=2) as recorder:
         task.run(policy, on_step=recorder.step_callback("fixed"))
 """
 

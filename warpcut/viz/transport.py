@@ -142,7 +142,7 @@ class ThreadSink:
 
 class ProcessSink:
     """``background="process"``: the frames go through a pipe to a recorder process
-    (:func:`warpcut.viz.process.serve`), which scores them, writes the file and moves it into place."""
+    (:func:`warpcut.viz.server.serve`), which scores them, writes the file and moves it into place."""
 
     def __init__(self, path: Path, tmp: Path, application_id: str, colour_by: str):
         self.path, self.tmp = path, tmp

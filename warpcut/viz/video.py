@@ -4,9 +4,9 @@
 (``FOLDER/METHOD-env_K.mp4``; a second episode through the same callback adds ``-2``, ...), encoded by
 ffmpeg (the binary that imageio-ffmpeg ships) in its own process::
 
-    with VideoRecorder("logs/run", envs=2) as videos:
+    with VideoRecorder("videos", envs=2) as videos:
         task.run(policy, on_step=videos.step_callback("fixed"))
-    videos.written  # [logs/run/fixed-env_0.mp4, logs/run/fixed-env_1.mp4]
+    videos.written  # [videos/fixed-env_0.mp4, videos/fixed-env_1.mp4]
 
 A video plays at the simulated time (one frame per step, :func:`~warpcut.viz.render.step_fps`). Each file
 is written beside its target under a temporary name and moved into place when its episode ends or the
