@@ -1,9 +1,9 @@
 """Markdown tables of ``warpcut robustness --json`` reports, as docs/robustness.md quotes them, and the
-issue-20 target check for a policy label: never below no tension in the force sweep (median), and within
+robustness target check for a policy label: never below no tension in the force sweep (median), and within
 10% of its nominal improvement across the noise sweep.
 
-    python scripts/robustness_tables.py logs/robust/fls-circle-studies.json [--policy randomized]
-    python scripts/robustness_tables.py --summary gains4 logs/robust-scan/*.json   (one row per contour)
+    python scripts/robustness_tables.py REPORT.json [--policy LABEL ...]
+    python scripts/robustness_tables.py --summary gains4 DIR/*.json   (one row per contour)
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ def _counts(verdicts: list[str], table: bool = False) -> str:
 
 
 def targets(reports: dict[str, dict], policy: str) -> list[str]:
-    """The issue-20 target check (agents.robustness.robustness_target) as lines: the medians' reading, then
+    """The robustness target check (agents.robustness.robustness_target) as lines: the medians' reading, then
     the 95% intervals' (per value: in, open = undecided at these trials, out)."""
     result = robustness_target(reports, policy)
     out = []
