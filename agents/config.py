@@ -1,201 +1,156 @@
-"""The settings of agents that the command line reads without loading torch: PPO's
-:class:`TrainConfig` and the pipelines' presets (:data:`RECIPE`, :data:`BUDGETS`, ...)."""
+"""The settings of agents, torch-free so that the command line reads them without loading torch: how a policy
+is trained (:class:`TrainConfig`, with each learner's own section), the gradient optimiser's
+(:class:`GradConfig`), and the pipelines' presets (:data:`BUDGETS`, trials, candidates).
+
+Every default has its home here or in the learners' own configs (:mod:`agents.ppo.config`,
+:mod:`agents.es.config`, :mod:`agents.apg.config`); the library, the command line and a run directory's
+``config.json`` all read them from there.
+"""
 
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 
+from agents.algorithms import DEFAULT_ALGORITHM, algorithm, default_iterations
+from agents.apg.config import ApgConfig
+from agents.es.config import EsConfig
+from agents.ppo.config import PpoConfig
 from warpcut.sim.config import PINCH_CANDIDATES, RANDOMIZE_ALIASES, randomize_ranges
 
-ALGORITHMS = ("ppo", "apg", "es")
-"""How ``warpcut train`` learns: PPO (rsl-rl), analytic policy gradients through the simulator, or evolution
-strategies on the policy's weights."""
+EVALUATION_TRIALS = 10
+"""Seeded trials per method of an evaluation (the paper's Table I: 10)."""
 
-CONTINUOUS_ALGORITHMS = ("apg", "es")
-"""The algorithms that play continuous moves only (``--actions continuous``, their default)."""
+VALIDATION_TRIALS = 16
+"""Held-out episodes scoring a policy during training (model selection, ``best.pt``)."""
+
+OBS_GROUPS = {"actor": ["policy"], "critic": ["policy"]}
+"""The observation groups of warpcut's env (:mod:`envs.rsl`) that feed the actor and the critic."""
 
 
 @dataclass
 class TrainConfig:
-    """PPO training settings; :meth:`to_rsl_rl` turns them into rsl-rl's nested config dict."""
+    """How a policy is trained: the learner and its batch, the policy network, and model selection; each
+    learner's own settings in its section (``ppo``, ``es``, ``apg``; only the chosen one's are used)."""
 
-    num_envs: int = 256
-    """Parallel envs; must equal the env's ``num_envs`` (the caller builds the env with it). 256: on the
-    Table I suite, two seeds of 256 envs x 75 iterations kept a trained policy on 15-16 contours of 26 and
-    averaged +41.1-41.6%, against 10-14 and +40.1% for 64 envs x 150 in as much wall time; PPO's fixed
-    costs per step are spread over four times the envs (docs/learning.md, "Table I"; docs/performance.md,
-    section 6)."""
-    algorithm: str = "ppo"
-    """"ppo" (rsl-rl's PPO), "apg": analytic policy gradients through the differentiable simulator
-    (:mod:`agents.apg`), or "es": evolution strategies on the actor's weights (:mod:`agents.es`). APG and es
-    play continuous actions, one whole episode per env and iteration, so ``num_steps_per_env`` does not
-    apply."""
-    apg_window: int | None = 5
-    """APG only: truncate the gradient to windows of this many env steps (:meth:`~warpcut.gradients.
-    DifferentiableRollout.backward`); None: through the whole episode (docs/learning.md, "APG")."""
-    apg_accept: bool = False
-    """APG only: keep a step only if it lowers the iteration's mean path error on the same episodes (run
-    again with the new weights: the same noise and fiducials); otherwise revert it (weights and Adam's
-    state) and halve the step size; a kept step grows it by 1.5, up to ``learning_rate``. The observation
-    normaliser then learns from each iteration's observations after the step, not during the rollout
-    (docs/learning.md, "APG that keeps only steps that help")."""
-    es_population: int = 64
-    """es only: perturbed policies per iteration, in antithetic pairs; each plays ``num_envs /
-    es_population`` episodes (256 envs: 4 each)."""
-    es_sigma: float = 0.005
-    """es only: the perturbations' standard deviation in weight space for the MLP (the actor's output is in
-    units of ``max_step_mm``). 0.005: a perturbed MLP moves the grasp by a near-constant bias that adds up
-    over the episode, so with 0.05 the perturbed population cut e-shape at 80.6 vertices where its centre
-    (the still grasp) cut 43.3 and es learned nothing on long contours; 0.005 gave 52.3 (docs/learning.md,
-    "es with separate steps for the feedback path"). An MLP without the feedback path learns alone and takes
-    :data:`ES_PLAIN_NETWORK`'s σ instead (:func:`algorithm_settings`, what ``warpcut train`` uses)."""
-    es_feedback_sigma: float = 0.1
-    """es only, with ``actor_feedback``: the perturbations' standard deviation for the feedback gains (they
-    act on the normalised tracking error, and useful gains are ~0.5-1). 0.1: with the normaliser learned
-    before the first population, 0.25 (session 25's) left the population's mean error far above the still
-    grasp's on short-error contours, and validation kept the still grasp more often (docs/learning.md, "The
-    normaliser's first iteration")."""
-    es_feedback_learning_rate: float = 0.1
-    """es only, with ``actor_feedback``: Adam's step for the feedback gains (``learning_rate``: the MLP's)."""
-    iterations: int | None = 150
-    """Total learning iterations of the run, counting those done before a resume. 150: on the Table I suite,
-    two seeds of 256 envs x 150 iterations (5 epochs) kept a trained policy on 17-18 contours of 26 at RL
-    +43.0-43.3%, against 15-16 and +41.1-41.6% with 75; 50-59 s a contour on this 2-core CPU, at the edge of
-    issue 16's 60 s (docs/learning.md, "Table I"). None: the algorithm's default for the env (es: as many
-    whole cuts as PPO's default run simulates env steps, :func:`es_iterations`)."""
-    seed: int = 0
-    """Seed of Python, NumPy, torch and the env (``env.seed``)."""
-    torch_device: str = "cpu"
-    """Torch device of the policy and the PPO update; the simulator's Warp device is the env's own
-    (``PatternCutOptions.device``). The CPU by default, wherever the simulator runs: the policy is a 2 x 32
-    MLP and its observations arrive as NumPy arrays each step."""
-    discrete: bool = True
-    """Categorical actions (the paper's 1 mm moves) if True, else a Gaussian over continuous actions."""
-    actor_hidden_dims: list[int] = field(default_factory=lambda: [32, 32])
-    """Hidden layer widths of the policy MLP (paper: 2 x 32)."""
-    critic_hidden_dims: list[int] = field(default_factory=lambda: [64, 64])
-    """Hidden layer widths of the value MLP."""
-    actor_feedback: bool = False
-    """Add a linear map of the observed tracking error to the policy MLP's output, zero at the start
-    (:class:`agents.models.FeedbackMLPModel`: es's feedback gains inside the network; needs the contour
-    features). The ``es`` recipe's: at es's default budget on issue 16's six contours, validation kept a
-    trained policy on 5 of 6 with it and on 2 of 6 without; on the suite +49.4% against +45.5%
-    (docs/learning.md, "es with a feedback path on the tracking error")."""
-    activation: str = "tanh"
-    """Hidden activation of both MLPs (an rsl-rl name: elu, relu, tanh, ...)."""
-    obs_normalization: bool = True
-    """Normalize observations by running mean and std (part of the exported policy)."""
-    obs_groups: dict[str, list[str]] = field(
-        default_factory=lambda: {"actor": ["policy"], "critic": ["policy"]}
-    )
-    """Observation groups of the env that feed the actor and the critic."""
-    init_noise_std: float = 1.0
-    """Initial action standard deviation (continuous only), in the env's action units."""
-    num_steps_per_env: int = 32
-    """Env steps per env per iteration; an iteration collects ``num_envs * num_steps_per_env`` steps."""
-    num_learning_epochs: int = 3
-    """Passes over each rollout. 3 (rsl-rl's usual 5 until session 31): the update's cost is nearly
-    proportional to it (at 256 envs 112 → 66 ms an update, of an iteration of ~330), and the adaptive
-    schedule keeps each update's KL near ``desired_kl`` either way. On the Table I suite at two seeds 3 epochs
-    gave RL +44.1% and +43.6%, trained policies kept on 19 and 18 contours, against 5's +43.0% and +43.3%,
-    17 and 18; PPO's rate rose from 45% to 51.5% of the simulator's in alternating runs (docs/learning.md,
-    "Table I with 3 PPO epochs"; docs/performance.md, section 6)."""
-    num_mini_batches: int = 4
-    """Mini-batches per pass."""
-    learning_rate: float = 1e-3
-    """Adam step size (initial value when ``schedule`` is "adaptive")."""
-    schedule: str = "adaptive"
-    """"adaptive": scale the learning rate to keep the KL per update near ``desired_kl``; "fixed": don't."""
-    desired_kl: float = 0.01
-    """Target KL divergence between successive policies for the adaptive schedule."""
-    entropy_coef: float = 0.03
-    """Entropy bonus weight. warpcut's recipe: 0.03 keeps PPO exploring moves away from the "stay" prior
-    (0.01, rsl-rl's usual value, and 0.1 both kept the still initial policy more often; docs/learning.md,
-    "Recipes that learn motion")."""
-    gamma: float = 0.99
-    """Discount per env step."""
-    lam: float = 0.95
-    """GAE lambda."""
-    clip_param: float = 0.2
-    """PPO ratio clip (also the value clip)."""
-    value_loss_coef: float = 1.0
-    """Value loss weight."""
-    max_grad_norm: float = 1.0
-    """Gradient norm clip."""
-    save_interval: int = 50
-    """Save a checkpoint every this many iterations (and at the end, and on Ctrl-C)."""
-    stay_prior: float = 0.9
-    """Discrete only: initial probability of action 0, the others sharing the rest; the initial
-    deterministic policy then takes action 0. For warpcut's env action 0 is "stay" (hold the grasp still,
-    what fixed tensioning does), so PPO learns moves on top of holding still (warpcut's recipe,
-    docs/learning.md). 0: start uniform over the actions (the paper's setting)."""
+    algo: str = DEFAULT_ALGORITHM
+    """The learner (:data:`agents.algorithms.ALGORITHMS`): ``es`` (the default), ``ppo`` or ``apg``."""
+    num_envs: int | None = None
+    """Parallel envs. None: the learner's (256 for es and PPO, 16 for APG)."""
+    iterations: int | None = None
+    """Learning iterations of the run, counting those before a resume. None: the learner's (PPO 150, APG 30;
+    es as many whole cuts as PPO's 150 x 256 x 32 env steps, at least 10: :func:`agents.es.config.
+    default_iterations`)."""
+    validation_trials: int = VALIDATION_TRIALS
+    """Held-out episodes that score the deterministic policy before training and every
+    ``validation_interval`` iterations; the best is the run's policy (``best.pt``). 0: no validation, the
+    last policy is the run's (the paper's)."""
     validation_interval: int = 10
-    """With a ``validate`` callback (see :func:`train`): score the deterministic policy every this many
-    iterations and keep the best in ``best.pt``."""
+    """Iterations between validations."""
     selection_margin: float = 1.0
     """Model selection: a validated policy's score is its mean validation error plus this many standard
-    errors of its episode-by-episode difference from the initial policy's (the same held-out episodes), and
-    the lowest score is kept. 1: a trained policy must beat the initial one by more than one standard
-    error; 0: the lowest mean, however noisy (docs/learning.md, "Model selection")."""
+    errors of its episode-by-episode difference from the initial policy's (the same episodes); the lowest
+    score is kept. 1: a trained policy must beat the initial one by more than one standard error; 0: the
+    lowest mean, however noisy."""
+    save_interval: int = 50
+    """Save a checkpoint every this many iterations (and at the end, and on Ctrl-C)."""
+    actor_hidden_dims: list[int] = field(default_factory=lambda: [32, 32])
+    """Hidden layer widths of the policy MLP (the paper's 2 x 32)."""
+    activation: str = "tanh"
+    """Hidden activation of the MLPs (an rsl-rl name: elu, relu, tanh, ...)."""
+    obs_normalization: bool = True
+    """Normalise observations by their running mean and std (part of the exported policy)."""
+    torch_device: str = "cpu"
+    """Torch device of the policy and its updates; the simulator's Warp device is the env's own. The CPU by
+    default, wherever the simulator runs: the policy is a small MLP fed NumPy observations every step."""
+    ppo: PpoConfig = field(default_factory=PpoConfig)
+    """PPO's settings (``algo = "ppo"``)."""
+    es: EsConfig = field(default_factory=EsConfig)
+    """es's settings (``algo = "es"``)."""
+    apg: ApgConfig = field(default_factory=ApgConfig)
+    """APG's settings (``algo = "apg"``)."""
 
-    def check_algorithm(self) -> None:
-        """``ValueError`` naming ``algorithm`` unless it is known and fits the actions."""
-        if self.algorithm not in ALGORITHMS:
-            raise ValueError(f"algorithm: choose one of {', '.join(ALGORITHMS)} (got {self.algorithm!r})")
-        if self.algorithm in CONTINUOUS_ALGORITHMS and self.discrete:
+    def check(self, discrete: bool | None = None) -> TrainConfig:
+        """Itself, or ``ValueError`` naming the first field out of range (``discrete``: whether the env's
+        actions are discrete, where known)."""
+        entry = algorithm(self.algo)
+        for name in ("num_envs", "iterations"):
+            value = getattr(self, name)
+            if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
+                raise ValueError(f"{name}: must be an integer >= 1, or null for the learner's (got {value!r})")
+        for name in ("validation_interval", "save_interval"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"{name}: must be an integer >= 1 (got {value!r})")
+        trials = self.validation_trials
+        if isinstance(trials, bool) or not isinstance(trials, int) or trials < 0:
+            raise ValueError(f"validation_trials: must be an integer >= 0, 0 for none (got {trials!r})")
+        margin = self.selection_margin
+        if isinstance(margin, bool) or not isinstance(margin, int | float) or not 0 <= margin < math.inf:
+            raise ValueError(f"selection_margin: must be a finite number >= 0 (got {margin!r})")
+        if discrete and entry.continuous_only:
             raise ValueError(
-                f"algorithm: {self.algorithm} plays continuous moves; set discrete=False "
-                "(--actions continuous)"
+                f"algo: {self.algo} plays continuous moves; set env.action_type=continuous (or train with ppo)"
             )
+        section = getattr(self, self.algo)
+        section.check(self.batch_size) if self.algo == "es" else section.check()
+        return self
+
+    @property
+    def batch_size(self) -> int:
+        """The envs a run trains with: ``num_envs``, or the learner's."""
+        return self.num_envs if self.num_envs is not None else algorithm(self.algo).num_envs
+
+    def total_iterations(self, episode_steps: int) -> int:
+        """The iterations a run trains for on episodes of ``episode_steps``: ``iterations``, or the
+        learner's."""
+        if self.iterations is not None:
+            return self.iterations
+        return default_iterations(self.algo, self.batch_size, episode_steps)
 
     def to_rsl_rl(
-        self, num_action_choices: int | None = None, feedback_inputs: tuple[int, int] | None = None
+        self,
+        num_action_choices: int | None = None,
+        feedback_inputs: tuple[int, int] | None = None,
+        episode_steps: int | None = None,
     ) -> dict:
-        """Return rsl-rl 5.5.1's ``OnPolicyRunner`` config.
+        """rsl-rl 5.5's ``OnPolicyRunner`` config.
 
         Args:
-            num_action_choices: Options per discrete action (the env's ``num_action_choices``); required
-                when ``discrete``.
+            num_action_choices: Options per discrete action (the env's ``num_action_choices``); None for
+                continuous actions.
             feedback_inputs: ``(start, size)`` of the tracking error in the observation
-                (:func:`agents.models.feedback_inputs`); required with ``actor_feedback``.
+                (:func:`agents.models.feedback_inputs`); required where the learner's actor has the feedback
+                path.
+            episode_steps: The env's episode length: es plays one whole cut per env an iteration.
         """
-        if self.discrete:
-            if num_action_choices is None:
-                raise ValueError("discrete training needs the env's num_action_choices")
-            distribution = {
-                "class_name": "agents.distributions:Categorical",
-                "num_choices": num_action_choices,
-            }
-            if self.stay_prior > 0:
-                distribution.update(init_choice=0, init_choice_prob=self.stay_prior)
-        else:
-            distribution = {
-                "class_name": "rsl_rl.modules:GaussianDistribution",
-                "init_std": self.init_noise_std,
-            }
+        discrete = num_action_choices is not None
         model = {"class_name": "rsl_rl.models:MLPModel", "activation": self.activation}
         actor = dict(model)
-        if self.actor_feedback:
+        if self.feedback:
             if feedback_inputs is None:
-                raise ValueError("actor_feedback needs the tracking error's place in the observation")
+                raise ValueError("feedback: the actor's feedback path needs the tracking error in the observation")
             actor.update(class_name="agents.models:FeedbackMLPModel", feedback_inputs=list(feedback_inputs))
-        own = {
-            "apg": {"apg": {"window": self.apg_window, "accept": self.apg_accept}},
-            "es": {
-                "es": {
-                    "population": self.es_population,
-                    "sigma": self.es_sigma,
-                    "feedback_sigma": self.es_feedback_sigma,
-                    "feedback_learning_rate": self.es_feedback_learning_rate,
-                }
-            },
-        }.get(self.algorithm, {})
+        if self.algo == "ppo":
+            ppo = self.ppo.rsl_rl(discrete, num_action_choices)
+            algorithm_cfg, distribution = ppo["algorithm"], ppo["distribution"]
+            critic_dims, steps = ppo["critic_hidden_dims"], self.ppo.num_steps_per_env
+        else:
+            # es and APG play the actor's deterministic output (the Gaussian's mean); the distribution is
+            # kept so that the actor, its checkpoints and its exports are those of a continuous PPO policy.
+            distribution = {"class_name": "rsl_rl.modules:GaussianDistribution", "init_std": 1.0}
+            if self.algo == "es":
+                if episode_steps is None:
+                    raise ValueError("es plays whole cuts: give the env's episode_steps")
+                algorithm_cfg, steps = self.es.rsl_rl(), episode_steps
+            else:  # APG's runner steps whole episodes itself; rsl-rl's PPO only holds its actor
+                algorithm_cfg, steps = {"class_name": "agents.ppo.algorithm:PPO"}, 1
+            critic_dims = PpoConfig().critic_hidden_dims
         return {
-            **own,
-            "num_steps_per_env": self.num_steps_per_env,
+            "num_steps_per_env": steps,
             "save_interval": self.save_interval,
-            "obs_groups": {name: list(groups) for name, groups in self.obs_groups.items()},
+            "obs_groups": {name: list(groups) for name, groups in OBS_GROUPS.items()},
             "logger": "tensorboard",
             "actor": {
                 **actor,
@@ -203,209 +158,34 @@ class TrainConfig:
                 "obs_normalization": self.obs_normalization,
                 "distribution_cfg": distribution,
             },
-            "critic": {
-                **model,
-                "hidden_dims": list(self.critic_hidden_dims),
-                "obs_normalization": self.obs_normalization,
-            },
-            "algorithm": {
-                "class_name": "rsl_rl.algorithms:PPO",
-                "num_learning_epochs": self.num_learning_epochs,
-                "num_mini_batches": self.num_mini_batches,
-                "learning_rate": self.learning_rate,
-                "schedule": self.schedule,
-                "desired_kl": self.desired_kl,
-                "entropy_coef": self.entropy_coef,
-                "gamma": self.gamma,
-                "lam": self.lam,
-                "clip_param": self.clip_param,
-                "value_loss_coef": self.value_loss_coef,
-                "max_grad_norm": self.max_grad_norm,
-            },
+            "critic": {**model, "hidden_dims": list(critic_dims), "obs_normalization": self.obs_normalization},
+            "algorithm": algorithm_cfg,
         }
 
-
-EVALUATION_TRIALS = 10
-"""Seeded trials per method of an evaluation (the paper's Table I: 10)."""
-
-VALIDATION_TRIALS = 16
-"""Held-out episodes scoring a policy during training (model selection, ``best.pt``); 0 turns it off."""
-
-RECIPE = {"dense_reward": True, "contour_features": True, "allow_z": True, "action_type": "discrete"}
-"""warpcut's learning recipe, as :class:`~envs.options.PatternCutOptions` fields: dense cut-deviation
-shaping, contour-aware observations and x-y-z moves; with :class:`~agents.train.TrainConfig`'s defaults
-(the initial policy holds still with probability ``stay_prior``) and validation-based model selection.
-``warpcut train``, ``evaluate`` and ``run`` use it; docs/learning.md has the measurements behind each
-choice. The paper's setting is the env's defaults (sparse reward, fiducials only, x-y moves) with
-``stay_prior=0`` and no validation."""
-
-
-@dataclass(frozen=True)
-class Recipe:
-    """How a pipeline trains a tensioner: the env's observations, actions and reward, PPO's settings beyond
-    the batch and the budget, and model selection."""
-
-    options: dict
-    """:class:`~envs.options.PatternCutOptions` fields (reward, observations, actions)."""
-    train: dict = field(default_factory=dict)
-    """:class:`TrainConfig` fields (not ``num_envs``, ``iterations``, ``seed``: the budget's)."""
-    validation_trials: int = VALIDATION_TRIALS
-    """Held-out episodes per validation; 0: no validation, the last policy is the run's."""
-    base_plan: str | None = None
-    """``"grad"``: each contour's policy acts on top of the open-loop plan the gradient optimiser finds at
-    its pinch point (the ``grad`` column's plan, :func:`agents.gradient.cached_plan`; the env's
-    ``base_plan``), so PPO (``grad-residual``) or APG (``apg-residual``) learns a residual on it and its
-    "stay" plays the plan (both also observe the plan's move, ``observe_plan``). None: the policy's moves
-    alone."""
-
     @property
-    def batch(self) -> dict[str, int]:
-        """The envs and iterations it trains with unless told otherwise: its algorithm's
-        (:func:`batch_defaults`)."""
-        return batch_defaults(self.train.get("algorithm", TrainConfig.algorithm))
+    def feedback(self) -> bool:
+        """Whether the actor has the linear feedback path on the tracking error (the learner's ``feedback``;
+        APG: never)."""
+        return self.algo in ("ppo", "es") and getattr(self, self.algo).feedback
 
 
-APG_FIXED_SHEET = "randomize: APG differentiates one fixed sheet; train with PPO (--algo ppo)"
-"""Why APG refuses domain randomisation and a relative reward (:class:`agents.apg.ApgRunner`, the CLI)."""
-
-SHARED_BASE_PLAN = (
-    "shared-policy: a recipe on a base plan (grad-residual) trains a policy per pinch candidate, each on its "
-    "own candidate's plan; drop --shared-policy or choose another --recipe"
-)
-"""Why a shared policy refuses a recipe with a ``base_plan`` (``agents.pipeline.run_pipeline``, the CLI)."""
-
-APG_BATCH = {"num_envs": 16, "iterations": 30}
-"""APG's envs and iterations where none are given (Table I's APG column, docs/learning.md): PPO's 256 x 150
-would train APG for about an hour and a half a contour (an APG iteration at 256 envs took 35 s here)."""
-
-
-def es_population_error(population: int, num_envs: int) -> str | None:
-    """Why ``es_population`` does not fit ``num_envs`` (it must be even, antithetic pairs, and divide the
-    envs: each perturbed policy plays as many episodes), with a population that would; None if it fits."""
-    if population >= 2 and population % 2 == 0 and num_envs % population == 0:
-        return None
-    fits = max((p for p in range(2, min(num_envs, 64) + 1, 2) if num_envs % p == 0), default=None)
-    fix = f"e.g. --es-population {fits}" if fits else "give an even --num-envs"
-    return (
-        f"es_population: {population} must be even (antithetic pairs) and divide num_envs ({num_envs}); {fix}"
-    )
-
-
-ES_BATCH = {"num_envs": 256, "iterations": None}
-"""es's envs and iterations where none are given: 64 perturbed policies x 4 episodes, one whole cut each, an
-iteration; as many iterations as :func:`es_iterations` gives for the contour (resolved by
-:func:`agents.train.train`, where the episode's length is known)."""
-
-ES_ENV_STEPS = TrainConfig.iterations * TrainConfig.num_envs * TrainConfig.num_steps_per_env
-"""es's env steps per policy where no iterations are given: PPO's default run's (150 x 256 x 32 =
-1,228,800). An es iteration plays whole cuts, 41 to 380 steps on the suite, so a fixed count of them would
-cost eight times more on the longest contour than on the shortest."""
-
-ES_MIN_ITERATIONS = 10
-"""The fewest iterations :func:`es_iterations` gives (one validation after the initial one)."""
-
-
-def default_iterations(algorithm: str, env) -> int:
-    """The iterations a run of ``algorithm`` on ``env`` (warpcut's rsl-rl env) trains for where none are
-    given: :func:`es_iterations` of its episode for es, :func:`batch_defaults`' otherwise."""
-    if algorithm == "es":
-        return es_iterations(env.num_envs, env.env.scene.task.num_steps)
-    return int(batch_defaults(algorithm)["iterations"])
-
-
-def iterations_text(iterations: int | None) -> str:
-    """``iterations`` for the logs: ``"150 iterations"``, or for None es's rule (:func:`es_iterations`)."""
-    return f"{iterations} iterations" if iterations is not None else "iterations for PPO's env steps"
-
-
-def es_iterations(num_envs: int, episode_steps: int) -> int:
-    """es's default iterations: :data:`ES_ENV_STEPS` over ``num_envs`` whole cuts of ``episode_steps``,
-    at least :data:`ES_MIN_ITERATIONS`."""
-    return max(ES_MIN_ITERATIONS, round(ES_ENV_STEPS / (num_envs * episode_steps)))
-
-
-def batch_defaults(algorithm: str) -> dict[str, int]:
-    """``{"num_envs": ..., "iterations": ...}`` a run of ``algorithm`` (:data:`ALGORITHMS`) trains with unless
-    told otherwise: :class:`TrainConfig`'s for PPO, :data:`APG_BATCH` for APG, :data:`ES_BATCH` for es."""
-    if algorithm in ("apg", "es"):
-        return dict({"apg": APG_BATCH, "es": ES_BATCH}[algorithm])
-    return {"num_envs": TrainConfig.num_envs, "iterations": TrainConfig.iterations}
-
-
-APG_LEARNING_RATE = 3e-3
-"""Adam's step of the ``apg`` recipe (APG's gradients are clipped to ``max_grad_norm``; docs/learning.md)."""
-
-APG_RESIDUAL_LEARNING_RATE = 1e-3
-"""Adam's step of the ``apg-residual`` recipe: on fls-circle's plan 3e-3 left the plan within 5 iterations and
-diverged, 3e-4 did not move it, 1e-3 improved wave-1 and wave-2's plans (docs/learning.md)."""
-
-ES_LEARNING_RATE = 0.001
-"""Adam's step of the ``es`` recipe for the MLP's weights, in weight space: small, so the MLP stays near "hold
-still" while the feedback gains learn (``TrainConfig.es_feedback_learning_rate``; docs/learning.md, "es with
-separate steps for the feedback path")."""
-
-ES_PLAIN_NETWORK = {"es_sigma": 0.05, "learning_rate": 0.01}
-"""es on an actor without the feedback path (a policy that observes no tracking error, or a run trained before
-the path): the MLP is all that learns, so it keeps session 22's σ and Adam step (on issue 16's six contours σ
-0.05 gave +46.9% against +44.0% with 0.02; docs/learning.md, "es on the neural policy")."""
-
-RECIPES = {
-    "warpcut": Recipe(
-        RECIPE, {"stay_prior": TrainConfig.stay_prior, "entropy_coef": TrainConfig.entropy_coef}
-    ),
-    "paper": Recipe(
-        {"dense_reward": False, "contour_features": False, "allow_z": False, "action_type": "discrete"},
-        {"stay_prior": 0.0},
-        validation_trials=0,
-    ),
-    "apg": Recipe(
-        {**RECIPE, "action_type": "continuous"}, {"algorithm": "apg", "learning_rate": APG_LEARNING_RATE}
-    ),
-    "es": Recipe(
-        {**RECIPE, "action_type": "continuous"},
-        {"algorithm": "es", "learning_rate": ES_LEARNING_RATE, "actor_feedback": True},
-    ),
-    "grad-residual": Recipe(
-        {**RECIPE, "observe_plan": True},
-        {"stay_prior": TrainConfig.stay_prior, "entropy_coef": TrainConfig.entropy_coef},
-        base_plan="grad",
-    ),
-    "apg-residual": Recipe(
-        {**RECIPE, "action_type": "continuous", "observe_plan": True},
-        {"algorithm": "apg", "learning_rate": APG_RESIDUAL_LEARNING_RATE},
-        base_plan="grad",
-    ),
-}
-"""``--recipe``: warpcut's (:data:`RECIPE`, the default) or the paper's setting (sparse reward, 12
-fiducials observed, x-y moves of 1 mm, a uniform initial policy, the last policy kept)."""
-
-
-def algorithm_settings(algorithm: str, feedback: bool | None = None) -> dict:
-    """The :class:`TrainConfig` fields ``warpcut train --algo ALGORITHM`` trains with beyond its flags: those
-    of the recipe of that name (``apg``, ``es``: their learning rates), warpcut's for PPO. ``feedback``:
-    whether the actor gets the feedback path (None: the recipe's choice); es without it learns with the MLP
-    alone, so it takes :data:`ES_PLAIN_NETWORK`'s σ and step."""
-    settings = dict(RECIPES["warpcut" if algorithm == "ppo" else algorithm].train)
-    if feedback is not None:
-        settings["actor_feedback"] = feedback
-    if algorithm == "es" and not settings.get("actor_feedback", False):
-        settings.update(ES_PLAIN_NETWORK)
-    return settings
-
+APG_FIXED_SHEET = "env.randomize: APG differentiates one fixed sheet; train with es or ppo (--algo)"
+"""Why APG refuses domain randomisation and a relative reward (:class:`agents.apg.runner.ApgRunner`)."""
 
 BUDGETS = {
     # candidates for the pinch search, of which the best rl_candidates (by fixed tension; None: all, as in
-    # the paper) get a PPO policy each; PPO iterations per policy; evaluation trials
-    "fast": {"candidates": 8, "rl_candidates": 2, "iterations": 60, "trials": EVALUATION_TRIALS},
-    "paper": {"candidates": 30, "rl_candidates": None, "iterations": 200, "trials": EVALUATION_TRIALS},
+    # the paper) get a policy each; evaluation trials
+    "fast": {"candidates": 8, "rl_candidates": 1, "trials": EVALUATION_TRIALS},
+    "paper": {"candidates": 30, "rl_candidates": None, "trials": EVALUATION_TRIALS},
 }
-"""``run_pipeline``'s budgets (``warpcut run --budget``)."""
+"""``run_pipeline``'s budgets (``warpcut run --budget``). fast: a policy for the best pinch candidate by
+fixed tension, about a minute on 2 CPU cores; paper: a policy for each of the paper's 30 candidates."""
 
 DEFAULT_CONTOUR = "fls-circle"
 """The contour ``warpcut run`` cuts unless told otherwise: the FLS pattern-cutting circle."""
 
 DEFAULT_BUDGET = "fast"
-"""The budget of ``run_pipeline`` (``warpcut run``): about a minute on 2 CPU cores (README)."""
+"""The budget of ``run_pipeline`` (``warpcut run``)."""
 
 DEFAULT_SELECTOR = "rl"
 """The tensioner that chooses ``run_pipeline``'s pinch candidate."""

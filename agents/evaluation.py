@@ -65,7 +65,7 @@ class MethodResult:
 
     @classmethod
     def from_rollouts(cls, rollouts: Sequence[dict]) -> MethodResult:
-        """From one rollout dict per contour (:func:`agents.rl.rollout_errors`)."""
+        """From one rollout dict per contour (:func:`agents.policies.rollout_errors`)."""
         diverged = None
         if any("diverged" in r for r in rollouts):
             diverged = np.array([np.asarray(r.get("diverged", False), dtype=bool) for r in rollouts])

@@ -1,7 +1,7 @@
 """Trained policies as deployable files: TorchScript (``policy.pt``) and ONNX (``policy.onnx``).
 
 Both map a batch of observations ``(batch, obs_dim)``, the actor's observation groups concatenated in
-``config.json``'s ``obs_groups["actor"]`` order, to deterministic actions ``(batch, num_actions)``: the most
+the checkpoint's ``obs_groups["actor"]`` order, to deterministic actions ``(batch, num_actions)``: the most
 likely choice index (as a float, exactly what the env's ``step()`` receives in training) for discrete
 policies, the Gaussian mean for continuous ones. Observation normalization is part of both. They are built
 from rsl-rl's own export wrappers (``MLPModel.as_jit`` and ``as_onnx``), which its runner uses too; the
@@ -20,91 +20,14 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import torch
-from rsl_rl.models import MLPModel
-from rsl_rl.utils import resolve_class
-from tensordict import TensorDict
 
-from agents.train import layout_mismatch, make_run_dir, policy_checkpoint, read_checkpoint
-from warpcut.io import read_json, write_atomic
+from agents.checkpoints import policy_checkpoint
+from agents.policies import is_run, load_options, load_policy, policy_runs
+from agents.training import make_run_dir
+from warpcut.io import write_atomic
 
 ONNX_OPSET = 18
 """ONNX opset of ``policy.onnx`` (rsl-rl's choice)."""
-
-
-def load_policy(source: str | Path) -> MLPModel:
-    """Rebuild a trained actor on the CPU, in eval mode, from a run directory or checkpoint.
-
-    Args:
-        source: Run directory (its ``best.pt`` if training validated, else ``latest.pt``) or a checkpoint
-            file; ``config.json`` is read from the checkpoint's directory.
-
-    Returns:
-        The actor; ``actor(obs_tensordict)`` returns deterministic actions.
-
-    Raises:
-        FileNotFoundError: No checkpoint, or no ``config.json`` beside it.
-        ValueError: The checkpoint or ``config.json`` cannot be read, or they do not fit together; the
-            message names the file and the fix.
-    """
-    checkpoint = policy_checkpoint(source)
-    state = read_checkpoint(checkpoint)
-    path = checkpoint.parent / "config.json"
-    if not path.is_file():
-        raise FileNotFoundError(
-            f"{path}: missing; a checkpoint is read with the config.json 'warpcut train' wrote beside it "
-            "(give the run directory, or a checkpoint inside it)"
-        )
-    config = read_json(path)
-    try:
-        env, rsl_cfg = config["env"], config["rsl_rl"]
-        obs = TensorDict(
-            {group: torch.zeros(1, *shape) for group, shape in env["obs_shapes"].items()}, batch_size=[1]
-        )
-        actor_class, actor_cfg = resolve_class(rsl_cfg["actor"])
-        actor = actor_class(obs, rsl_cfg["obs_groups"], "actor", env["num_actions"], **actor_cfg)
-    except (KeyError, TypeError, AttributeError, ValueError) as exc:
-        raise ValueError(
-            f"{path}: not a run's config.json ({type(exc).__name__}: {exc}); restore it or retrain"
-        ) from None
-    mismatch = layout_mismatch(state["actor_state_dict"], actor.state_dict(), path.name)
-    if mismatch:
-        raise ValueError(
-            f"{checkpoint}: {mismatch}: {path.name} was written by another training than this checkpoint; "
-            "export or evaluate a checkpoint of the run that wrote it, or retrain"
-        )
-    actor.load_state_dict(state["actor_state_dict"])
-    return actor.eval()
-
-
-def policy_runs(source: str | Path) -> list[tuple[Path, str]]:
-    """The policies a directory holds, as ``(run directory or checkpoint, what it is)``: a checkpoint file;
-    a ``warpcut train`` run; a ``warpcut run`` directory (the policy of the candidate it chose); an
-    ``evaluate`` directory (each contour's policy in ``policies/``).
-
-    Raises:
-        FileNotFoundError: ``source`` does not exist.
-        ValueError: ``source`` holds no policy (the message says what would).
-    """
-    from agents.rl import is_run
-
-    source = Path(source)
-    if not source.exists():
-        raise FileNotFoundError(f"{source}: no such run directory or checkpoint")
-    if source.is_file() or is_run(source) or any(source.glob("*.pt")):  # a checkpoint, or train()'s run
-        return [(source, f"{'checkpoint' if source.is_file() else 'train run'} {source}")]
-    results = source / "results.json"
-    report = read_json(results) if results.is_file() else {}
-    if isinstance(report, dict) and report.get("policy") == "rl" and report.get("candidates"):
-        chosen = report["candidates"][int(report["chosen_candidate"])]
-        run = source / chosen["run"]
-        return [(run, f"run {source}: the chosen pinch candidate's policy ({run.relative_to(source)})")]
-    policies = sorted(d for d in (source / "policies").glob("*") if is_run(d))
-    if policies:
-        return [(d, f"evaluate {source}: {d.name}'s policy") for d in policies]
-    raise ValueError(
-        f"{source}: holds no trained policy; give a run directory of 'warpcut train', 'warpcut run "
-        "--policy rl' or 'warpcut evaluate' with rl, or a .pt checkpoint"
-    )
 
 
 def export_run(source: str | Path, out_dir: str | Path | None = None) -> list[dict]:
@@ -126,11 +49,11 @@ def policy_metadata(source: str | Path) -> dict[str, str]:
     """What an exported policy's inputs and outputs mean, as ONNX metadata (string values, JSON where
     structured): ``warpcut.observations`` (the name of each input entry, :mod:`envs.observations`),
     ``warpcut.actions`` (the meaning of each action: discrete choices, or continuous axes in units of
-    ``max_step_mm``), ``warpcut.scenario`` (the run's options) and ``warpcut.checkpoint``; only the last for
-    a run of another env."""
+    ``max_step_mm``), ``warpcut.options`` (the run's :class:`~envs.options.PatternCutOptions` as JSON: its
+    fields are ``gymnasium.make("warpcut/PatternCut-v0", **options)``'s keyword arguments) and
+    ``warpcut.checkpoint``; only the last for a run of another env."""
     import json
 
-    from agents.rl import is_run, load_options
     from envs.core import DISCRETE_MOVES
     from envs.observations import observation_names
 
@@ -148,14 +71,12 @@ def policy_metadata(source: str | Path) -> dict[str, str]:
         actions = [f"{k}: {name} (grasp move of max_step_mm)" for k, name in enumerate(actions)]
     else:
         actions = [f"grasp d{axis} / max_step_mm, in [-1, 1]" for axis in "xyz"[:axes]]
-    names = observation_names(
-        options.num_fiducials, options.contour_features, options.observe_pinch, options.observe_plan
-    )
+    names = observation_names(options.num_fiducials, options.contour_features)
     scenario = dataclasses.replace(options, device=None).to_dict()
     return {
         "warpcut.observations": json.dumps(names),
         "warpcut.actions": json.dumps(actions),
-        "warpcut.scenario": json.dumps(scenario, default=str),
+        "warpcut.options": json.dumps(scenario),
         "warpcut.checkpoint": str(checkpoint),
     }
 

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from agents.adam import Adam
 from agents.config import (
     EVALUATION_CANDIDATES,
     EVALUATION_TRIALS,
@@ -219,31 +220,6 @@ def _episodes(contour, point, segments, config, count: int, device, seed: int) -
     cut = None if segments is None else [segments] * count
     points = np.tile(point, (count, 1))
     return CuttingTask(config, [contour] * count, pinch_points=points, segments=cut, device=device, seed=seed)
-
-
-class Adam:
-    """Adam on a NumPy array (minimising), with the usual bias correction; ``learning_rate`` is a number or
-    an array of ``shape`` (a step per parameter)."""
-
-    def __init__(self, shape: tuple[int, ...], learning_rate: float, betas=(0.9, 0.999), eps: float = 1e-8):
-        self.m, self.v = np.zeros(shape), np.zeros(shape)
-        self.learning_rate, self.betas, self.eps, self.steps = learning_rate, betas, eps, 0
-
-    def state(self) -> dict:
-        return {"m": self.m.tolist(), "v": self.v.tolist(), "steps": self.steps}
-
-    def load(self, state: dict) -> None:
-        self.m, self.v = np.asarray(state["m"]), np.asarray(state["v"])
-        self.steps = int(state["steps"])
-
-    def step(self, grad: np.ndarray) -> np.ndarray:
-        """The change to add to the parameters for ``grad``."""
-        b1, b2 = self.betas
-        self.steps += 1
-        self.m = b1 * self.m + (1 - b1) * grad
-        self.v = b2 * self.v + (1 - b2) * grad * grad
-        m_hat, v_hat = self.m / (1 - b1**self.steps), self.v / (1 - b2**self.steps)
-        return -self.learning_rate * m_hat / (np.sqrt(v_hat) + self.eps)
 
 
 class TapeGradient:
@@ -599,38 +575,6 @@ def cached_plan(
     return result
 
 
-def base_plan_options(
-    contour: Contour,
-    planned: dict,
-    folder: Path,
-    config: SimConfig,
-    settings: tuple[GradConfig, ArmModel],
-    device: str | None,
-    seed: int,
-    log: Callable[[str], None],
-) -> dict:
-    """The options of a policy on top of ``contour``'s grad plan (:func:`cached_plan`, kept
-    in ``folder``) at the planned pinch point and segments (none planned: the feasible centroid, the whole
-    contour): ``base_plan`` and the plan's ``pinch_point``."""
-    from warpcut.planning.feasibility import default_pinch
-
-    grad, arm = settings
-    if grad.es_feedback_phases:
-        raise ValueError(
-            "es_feedback_phases: a policy on top of a plan adds its moves to an open-loop plan; optimise the "
-            "base plan with es_feedback_phases=0"
-        )
-    pinch = planned.get("pinch_point")
-    pinch = np.asarray(default_pinch(contour, config, arm) if pinch is None else pinch, dtype=np.float64)
-    segments = planned.get("segments")
-    segments = None if segments is None else [np.asarray(s, dtype=np.float64) for s in segments]
-    result = cached_plan(contour, pinch, segments, config, grad, device, seed, folder, log, arm)
-    return {
-        "base_plan": np.asarray(result.plan, dtype=np.float64).tolist(),
-        "pinch_point": list(result.pinch),
-    }
-
-
 def optimize_contour(
     contour: str | Contour,
     out: Path | None = None,
@@ -713,7 +657,7 @@ def grad_column(
     log: Callable[[str], None],
     step_callbacks: StepCallbacks | None = None,
 ) -> tuple[MethodResult, Callable[[dict], None]]:
-    """:func:`agents.pipeline.evaluate_table`'s grad column (:func:`grad_result`, kept in ``out/grad``) at
+    """:func:`agents.pipelines.table.evaluate_table`'s grad column (:func:`grad_result`, kept in ``out/grad``) at
     the planned pinch points and segments (unplanned: the feasible centroid, the contour as one loop);
     ``settings`` is the optimiser's config and the cutting arm. Returns the result and ``note(table)``,
     which adds each row's ``grad_best_iteration``, ``grad_seconds`` and ``grad_env_steps``, and how many

@@ -13,7 +13,7 @@ METHODS = {
     "none": "no tensioning: only the corner clips hold the sheet",
     "fixed": "pinch at the planned (or best searched) point and hold still",
     "analytic": "pinch at the (feasible) centroid and move against the tracking error",
-    "rl": "a PPO policy trained for the contour (agents.rl)",
+    "rl": "a policy trained for the contour by the learner (es by default; agents.training)",
     "grad": "an open-loop plan of grasp moves optimised by Adam through the differentiable simulator, at "
     "fixed's pinch point (agents.gradient)",
 }

@@ -5,8 +5,7 @@ the (normalised) tracking error added, ``mlp(x) + K x[tracking]``, ``K`` (action
 It is the structure of es's feedback gains (``warpcut optimize --feedback-only``: a still grasp that moves
 by a gain matrix times the tracking error, docs/learning.md "Closed loop: es on feedback gains") inside the
 neural policy: the network can still use every observation, and the gains need not be found through two
-tanh layers. ``TrainConfig.actor_feedback`` turns it on (the ``es`` recipe's; docs/learning.md, "es on the
-neural policy"). The path lives inside ``model.mlp`` (:class:`FeedbackMLP`), so rsl-rl's PPO, the TorchScript
+tanh layers. es's policy has it (:attr:`agents.es.config.EsConfig.feedback`). The path lives inside ``model.mlp`` (:class:`FeedbackMLP`), so rsl-rl's PPO, the TorchScript
 and ONNX exports and everything else that calls ``model.mlp`` use it unchanged.
 """
 
@@ -79,13 +78,11 @@ def feedback_inputs(env) -> tuple[int, int]:
     options = getattr(env, "cfg", None)
     options = options if isinstance(options, PatternCutOptions) else getattr(env, "options", None)
     if not isinstance(options, PatternCutOptions):
-        raise ValueError("actor_feedback: needs warpcut's env (its observation's tracking error)")
+        raise ValueError("feedback: the actor's feedback path needs warpcut's env (its tracking error)")
     if not options.contour_features:
         raise ValueError(
-            "actor_feedback: the policy observes no tracking error (contour_features=False, e.g. --observe "
-            "fiducials); observe the contour, or train without the feedback path"
+            "feedback: the policy observes no tracking error (env.contour_features=false); observe the "
+            "contour, or train without the feedback path (train.es.feedback=false)"
         )
-    names = observation_names(
-        options.num_fiducials, options.contour_features, options.observe_pinch, options.observe_plan
-    )
+    names = observation_names(options.num_fiducials, options.contour_features)
     return names.index(TRACKING_ERROR[0]), len(TRACKING_ERROR)

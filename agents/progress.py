@@ -62,7 +62,7 @@ def training_progress(
 
 @contextlib.contextmanager
 def stage_bars(enabled: bool = True):
-    """A pipeline's ``stages(stage, done, total)`` callback (:data:`agents.pipeline.Stages`) drawing one
+    """A pipeline's ``stages(stage, done, total)`` callback (:data:`agents.pipelines.table.Stages`) drawing one
     progress bar per stage (planning, training, evaluating) with elapsed time and ETA, on stderr; a no-op
     when not ``enabled``."""
     if not enabled:

@@ -59,9 +59,8 @@ from warpcut.sim.config import sample_parameters
 from warpcut.task import CuttingTask, NoTensionReference
 
 from .observations import Fiducials, normalise_positions, observation_bounds, sample_fiducials
-from .options import PatternCutOptions
+from .options import ACTION_TYPES, PatternCutOptions
 
-ACTION_TYPES = ("discrete", "continuous")
 DISCRETE_MOVES = np.array(
     [[0, 0, 0], [1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.float32
 )
@@ -82,7 +81,7 @@ class PatternCut:
         action_space: One env's action space.
         area_mm2: (B,) intended area of each env's contour (mm^2).
         episode_steps: Steps per episode: the cut's ``num_steps``, or ``max_episode_steps`` if smaller.
-        last_moves: (B, 3) the grasp moves (mm) of the last step, the residual controller's included.
+        last_moves: (B, 3) the grasp moves (mm) of the last step.
     """
 
     def __init__(self, options: PatternCutOptions, num_envs: int):
@@ -91,8 +90,6 @@ class PatternCut:
         if not isinstance(options.num_fiducials, int) or options.num_fiducials < 0:
             raise ValueError(f"num_fiducials: must be a non-negative integer (got {options.num_fiducials!r})")
         _check_pinch_option(options)
-        if not (np.isfinite(options.residual_gain) and options.residual_gain >= 0):
-            raise ValueError(f"residual_gain: must be a finite number >= 0 (got {options.residual_gain!r})")
         if not options.shaft_radius_mm >= 0:
             raise ValueError(f"shaft_radius_mm: must be >= 0 mm (got {options.shaft_radius_mm!r})")
         if options.max_episode_steps is not None and options.max_episode_steps < 1:
@@ -106,19 +103,11 @@ class PatternCut:
             config, contours, num_envs, pinch_points=pinch_points, segments=segments, device=options.device
         )
         self.config = self.task.config
-        self.base_plan = _base_plan(options.base_plan, self.config.max_step_mm)
-        """(T, 3) float32 grasp moves (mm) added to the policy's (``options.base_plan``), or None."""
         self.area_mm2 = np.array([c.area_mm2 for c in contours])
         self.episode_steps = min(self.task.num_steps, options.max_episode_steps or self.task.num_steps)
         self.fiducials = Fiducials(self.task.grid, options.shaft_radius_mm)
         self.task.fiducials = self.fiducials  # what a recording of the task shows
-        if options.observe_plan and self.base_plan is None:
-            raise ValueError(
-                "observe_plan: there is no base_plan to observe; give one, or set observe_plan=False"
-            )
-        low, high = observation_bounds(
-            options.num_fiducials, options.contour_features, options.observe_pinch, options.observe_plan
-        )
+        low, high = observation_bounds(options.num_fiducials, options.contour_features)
         self.observation_space = gym.spaces.Box(low, high, dtype=np.float32)
         num_axes = 3 if options.allow_z else 2
         if options.action_type == "discrete":
@@ -199,11 +188,6 @@ class PatternCut:
             raise RuntimeError("step: the episode is over; call reset() first")
         first_update = self.task.update_index
         moves = self.moves(actions)
-        if self.options.residual_gain:
-            moves[:, :2] -= self.options.residual_gain * np.nan_to_num(self.tracking_error()[:, :2], nan=0.0)
-        if self.base_plan is not None and self.task.step_index < len(self.base_plan):
-            step = self.config.max_step_mm
-            moves = np.clip(moves + self.plan_move(), -step, step)
         self.last_moves = moves
         self.task.step(moves)
         diverged = self.task.diverged()
@@ -231,14 +215,6 @@ class PatternCut:
         if self._reward_scale is not None:
             rewards *= self._reward_scale
         return self.observe(), rewards, terminated, truncated, info
-
-    def plan_move(self) -> np.ndarray:
-        """(3,) the base plan's grasp move (mm) at this step: added to the policy's; zero without a plan or
-        once it has run out."""
-        step = self.task.step_index
-        if self.base_plan is None or step >= len(self.base_plan):
-            return np.zeros(3, dtype=np.float32)
-        return self.base_plan[step]
 
     @property
     def reward_scale(self) -> np.ndarray:
@@ -294,11 +270,6 @@ class PatternCut:
         if self.options.contour_features:
             tracking = np.nan_to_num(self.tracking_error(), nan=0.0) / self.config.max_displacement_mm
             parts += [normalise_positions(tip[:, :3], self.config), tip[:, 3:4], tracking]
-        if self.options.observe_pinch:
-            pinch = np.nan_to_num(self.task.pinch_points, nan=0.0)
-            parts.append(normalise_positions(np.pad(pinch, ((0, 0), (0, 1))), self.config)[:, :2])
-        if self.options.observe_plan:
-            parts.append(np.broadcast_to(self.plan_move() / self.config.max_step_mm, (self.num_envs, 3)))
         obs = np.concatenate(parts, axis=1).astype(np.float32)
         obs[self.diverged] = 0.0  # a diverged env's state means nothing (and may be NaN)
         # NaN to 0 and the rest clipped to the bounds (infinities to them): np.nan_to_num then np.clip, the
@@ -316,11 +287,9 @@ def _score_info(score) -> dict[str, np.ndarray]:
 
 
 def _check_pinch_option(options: PatternCutOptions) -> None:
-    """Raise ``ValueError`` naming ``pinch_point`` (or the candidate) unless every pinch point given is
+    """Raise ``ValueError`` naming ``pinch_point`` unless every pinch point given is
     finite: a NaN or infinite pinch point would silently mean "no grasp"."""
     given = [("pinch_point", options.pinch_point)]
-    candidates = [c if isinstance(c, dict) else {} for c in options.candidates or []]
-    given += [(f"candidates[{k}].pinch", c.get("pinch")) for k, c in enumerate(candidates)]
     for name, point in given:
         if point is None:
             continue
@@ -350,25 +319,3 @@ def check_reset_options(options: dict[str, Any] | None, allowed: tuple[str, ...]
 def reject_reset_options(options: dict[str, Any] | None) -> None:
     """Raise ``ValueError`` for non-empty reset ``options``: these envs take none."""
     check_reset_options(options)
-
-
-def _base_plan(plan, max_step_mm: float) -> np.ndarray | None:
-    """``options.base_plan`` as a (T, 3) float32 array, checked (``ValueError`` naming the field and fix)."""
-    if plan is None:
-        return None
-    try:
-        moves = np.asarray(plan, dtype=np.float32)
-    except (TypeError, ValueError):
-        moves = None
-    if moves is None or moves.ndim != 2 or moves.shape[1] != 3 or not len(moves):
-        raise ValueError("base_plan: give (T, 3) grasp moves (mm), one [dx, dy, dz] per env step, or None")
-    if not np.isfinite(moves).all():
-        raise ValueError("base_plan: every move must be finite (mm)")
-    beyond = np.abs(moves) > max_step_mm * (1 + 1e-5)
-    if beyond.any():
-        step = int(np.argwhere(beyond)[0][0])
-        raise ValueError(
-            f"base_plan: step {step} moves {moves[step].tolist()} mm, beyond max_step_mm = {max_step_mm} per "
-            "axis; give a plan of moves within it (warpcut optimize's are)"
-        )
-    return moves

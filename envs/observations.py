@@ -1,7 +1,7 @@
-"""What a pattern-cutting policy observes: time, grasp displacement, fiducials, optional contour features,
-pinch point and base plan's move.
+"""What a pattern-cutting policy observes: time, grasp displacement, fiducials and (by default) the contour
+features.
 
-The layout of one env's observation (float32, ``D = 4 + 3 * num_fiducials [+ 7] [+ 2] [+ 3]``):
+The layout of one env's observation (float32, ``D = 4 + 3 * num_fiducials [+ 7]``; 47 with the defaults):
 
 =================  =====  =====================================================================  ==========
 slice              size   quantity                                                               bounds
@@ -12,17 +12,12 @@ slice              size   quantity                                              
 ``[4+3K:7+3K]``    3      (``contour_features``) scissor tip position, normalised               [-2, 2]
 ``[7+3K]``         1      (``contour_features``) 1 while the tip cuts, 0 while it travels       [0, 1]
 ``[8+3K:11+3K]``   3      (``contour_features``) tracking error / ``max_displacement_mm``       [-5, 5]
-next 2             2      (``observe_pinch``) the pinch point (material x, y), normalised       [-1, 1]
-last 3             3      (``observe_plan``) the base plan's move this step / ``max_step_mm``   [-1, 1]
 =================  =====  =====================================================================  ==========
 
 *Normalised* positions are ``(p - (W/2, H/2, 0)) / (max(W, H) / 2)``: the sheet at rest spans [-1, 1] in
 x and y, and its ~15 mm sag is about -0.3 in z. The tracking error is ``target_world() - tip``, the vector
 from the next scissor position to where the sheet has carried the contour point it is about to cut (what
 :class:`agents.baselines.AnalyticTension` opposes); zero while the tip travels or once the cut is done.
-The base plan's move is the one the env adds to the policy's at this step (``base_plan``; zero once the
-plan has run out): a residual policy sees what it corrects, e.g. that a move further along an axis the plan
-already moves at ``max_step_mm`` is clipped to nothing.
 
 Every entry is clipped to its bounds, so observations always lie in the observation space (only a
 piece that has been cut free and falls ever reaches the position bounds, 100 mm from the sheet centre).
@@ -59,21 +54,13 @@ TRACKING_LIMIT = 5.0
 """Bound on the normalised tracking error: 50 mm at the default ``max_displacement_mm`` of 10 mm."""
 
 
-def observation_bounds(
-    num_fiducials: int, contour_features: bool, observe_pinch: bool = False, observe_plan: bool = False
-) -> tuple[np.ndarray, np.ndarray]:
+def observation_bounds(num_fiducials: int, contour_features: bool) -> tuple[np.ndarray, np.ndarray]:
     """``(low, high)`` float32 bounds of one env's observation, in the layout of the module docstring."""
     low = [0.0, -1.0, -1.0, -1.0] + [-POSITION_LIMIT] * (3 * num_fiducials)
     high = [1.0, 1.0, 1.0, 1.0] + [POSITION_LIMIT] * (3 * num_fiducials)
     if contour_features:
         low += [-POSITION_LIMIT] * 3 + [0.0] + [-TRACKING_LIMIT] * 3
         high += [POSITION_LIMIT] * 3 + [1.0] + [TRACKING_LIMIT] * 3
-    if observe_pinch:
-        low += [-1.0, -1.0]
-        high += [1.0, 1.0]
-    if observe_plan:
-        low += [-1.0] * 3
-        high += [1.0] * 3
     return np.array(low, dtype=np.float32), np.array(high, dtype=np.float32)
 
 
@@ -83,17 +70,11 @@ def normalise_positions(points: np.ndarray, config: SimConfig) -> np.ndarray:
     return (points - centre) / (max(config.width_mm, config.height_mm) / 2)
 
 
-def observation_names(
-    num_fiducials: int, contour_features: bool, observe_pinch: bool = False, observe_plan: bool = False
-) -> list[str]:
+def observation_names(num_fiducials: int, contour_features: bool) -> list[str]:
     """The name of each entry of one env's observation, in the layout of the module docstring (e.g. for an
     exported policy's metadata)."""
     names = ["time", "grasp_dx", "grasp_dy", "grasp_dz"]
     names += [f"fiducial_{k}_{axis}" for k in range(num_fiducials) for axis in "xyz"]
     if contour_features:
         names += ["tip_x", "tip_y", "tip_z", "tip_cutting", *TRACKING_ERROR]
-    if observe_pinch:
-        names += ["pinch_x", "pinch_y"]
-    if observe_plan:
-        names += ["plan_dx", "plan_dy", "plan_dz"]
     return names

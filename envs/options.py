@@ -1,6 +1,7 @@
 """What a pattern-cutting env cuts and how its policy sees and acts: :class:`PatternCutOptions`, the one
 spec of a scenario that the envs, training (saved as a run directory's ``options.json``) and evaluation
-share."""
+share, and its policy-facing part :class:`EnvConfig` (observations, actions, reward, domain
+randomisation), whose defaults are the default learner's."""
 
 from __future__ import annotations
 
@@ -16,16 +17,77 @@ from warpcut.contours import Contour, builtin_names, contour_from_json, load_con
 from warpcut.fiducials import NUM_FIDUCIALS, SHAFT_RADIUS_MM
 from warpcut.planning import default_pinch
 from warpcut.sim.config import PHYSICAL_PARAMETERS, PerEnv, SimConfig, randomize_ranges
-from warpcut.task import default_segments
 
 ContourSpec = str | os.PathLike | Contour
 SIM_OVERRIDES = ("fixture", "resolution", "damping", "dt", "gravity", "elasticity", "noise_std")
 """The :class:`PatternCutOptions` fields that override ``sim_config``'s."""
 
+ACTION_TYPES = ("discrete", "continuous")
+"""How a policy acts: ``discrete`` (stay or a 1 mm move along one axis) or ``continuous`` (a move of up to 1 mm
+per axis)."""
+
 
 @dataclass
-class PatternCutOptions:
-    """A pattern-cutting scenario and how the policy sees and acts on it.
+class EnvConfig:
+    """How a policy sees the sheet, acts on it and is rewarded: the env's side of a learner's recipe.
+
+    The defaults are those of warpcut's default learner (es, ``agents.algorithms``), so a policy it trains
+    runs on ``gymnasium.make("warpcut/PatternCut-v0", contour=...)`` as is: contour features observed,
+    continuous x-y-z moves, a dense reward. The paper's setting is ``contour_features=False,
+    action_type="discrete", allow_z=False, dense_reward=False``.
+    """
+
+    num_fiducials: int = NUM_FIDUCIALS
+    """Fiducial points observed on the sheet (paper: 12)."""
+    resample_fiducials: bool = False
+    """Draw new fiducials at every reset. Otherwise they are drawn at a seeded reset (and the first one)
+    and kept, so a given seed always gives the same fiducials."""
+    shaft_radius_mm: float = SHAFT_RADIUS_MM
+    """Radius of the cutting arm's shaft, which hides the fiducials under it (mm)."""
+    contour_features: bool = True
+    """Add the scissor tip, its cutting flag and the tracking error (the vector from the tip to the contour
+    point it is about to cut, as it lies on the moved sheet) to the observation (the paper: fiducials only)."""
+    action_type: str = "continuous"
+    """``"continuous"`` (moves of up to ``max_step_mm`` per axis) or ``"discrete"`` (the paper's: stay, or
+    a 1 mm move along one axis)."""
+    allow_z: bool = True
+    """Let the grasp move along z too (lift or lower the sheet): a 3-D continuous action, or ``Discrete(7)``
+    (the paper: x-y only)."""
+    dense_reward: bool = True
+    """Add the per-step cut-deviation penalty (the path score's increment) to the sparse final reward (the
+    paper: the final reward alone)."""
+    relative_reward: bool = False
+    """Scale every env's reward by the nominal sheet's no-tension error over its own sheet's (module
+    :mod:`envs.core`): with domain randomisation, each sheet counts by its relative improvement, as the
+    evaluation counts it; validation scales each episode's error alike. Without randomisation every scale
+    is 1."""
+    max_episode_steps: int | None = None
+    """Truncate episodes after this many steps; default: the whole cut."""
+    randomize: Sequence[str] = ()
+    """Domain randomisation: the physical parameters (``gravity``, ``elasticity``, ``noise_std`` or
+    ``noise``, ``damping``) drawn anew for every env at every reset, uniformly over
+    :data:`~warpcut.sim.config.RANDOMIZE_LEVELS` levels of their range (``randomize_ranges``). Empty:
+    the nominal parameters throughout. Evaluation runs a trained policy on the nominal parameters
+    (:meth:`PatternCutOptions.nominal`)."""
+    randomize_ranges: dict[str, Sequence[float]] | None = None
+    """``{parameter: [low, high]}`` for the randomised parameters, in their units; a parameter not given
+    takes its :data:`~warpcut.sim.config.RANDOMIZE_RANGES` default."""
+
+    def __post_init__(self):
+        for f in dataclasses.fields(self):  # wrong types named here, not deep inside the env
+            problem = _field_problem(f.name, getattr(self, f.name))
+            if problem:
+                raise ValueError(f"{f.name}: {problem} (got {getattr(self, f.name)!r:.80})")
+
+
+ENV_FIELDS = tuple(f.name for f in dataclasses.fields(EnvConfig))
+"""The :class:`EnvConfig` fields, which :class:`PatternCutOptions` holds too."""
+
+
+@dataclass
+class PatternCutOptions(EnvConfig):
+    """A pattern-cutting scenario (what is cut, where the grasp pinches, the physics) and how the policy sees
+    and acts on it (the :class:`EnvConfig` fields).
 
     Physical parameters take one value for all envs or a list with one value per env (see
     :class:`~warpcut.sim.config.SimConfig`); ``None`` keeps ``sim_config``'s value.
@@ -43,7 +105,8 @@ class PatternCutOptions:
     list for every env, or a list of them, one per env; default: the whole contour as one segment
     (``warpcut.task.default_segments``)."""
     sim_config: SimConfig = field(default_factory=SimConfig)
-    """Base simulation parameters; the fields below override it when given."""
+    """Base simulation parameters (a ``SimConfig``, or a dict of its fields); the fields below override it
+    when given."""
     fixture: str | None = None
     """How the sheet is held: ``"corners"`` (FLS, the default) or ``"rows"``."""
     resolution: int | tuple[int, int] | None = None
@@ -57,79 +120,26 @@ class PatternCutOptions:
     elasticity: PerEnv | None = None
     """Spring correction per sweep (paper tau = 1)."""
     noise_std: PerEnv | None = None
-    """Process noise per free vertex per update (mm), paper sigma; default 0."""
+    """Process noise per free vertex per update (mm), paper sigma."""
     device: str | None = None
     """Warp device of the simulator (``"cpu"``, ``"cuda"``); default: CUDA when available."""
-    num_fiducials: int = NUM_FIDUCIALS
-    """Fiducial points observed on the sheet (paper: 12)."""
-    resample_fiducials: bool = False
-    """Draw new fiducials at every reset. Otherwise they are drawn at a seeded reset (and the first one)
-    and kept, so a given seed always gives the same fiducials."""
-    shaft_radius_mm: float = SHAFT_RADIUS_MM
-    """Radius of the cutting arm's shaft, which hides the fiducials under it (mm)."""
-    contour_features: bool = False
-    """Add the scissor tip, its cutting flag and the tracking error to the observation, for policies
-    meant to generalise across contours."""
-    observe_pinch: bool = False
-    """Add the pinch point (material x, y, normalised) to the observation, for one policy shared across
-    pinch points (``warpcut run`` trains one over all pinch candidates)."""
-    action_type: str = "discrete"
-    """``"discrete"`` (paper: stay, +-x, +-y at 1 mm) or ``"continuous"`` (moves in units of 1 mm)."""
-    allow_z: bool = False
-    """Let the grasp move along z too: ``Discrete(7)``, or a 3-D continuous action (paper: x-y only)."""
-    residual_gain: float = 0.0
-    """Add the analytic controller's move to every action: ``-residual_gain`` times the tracking error in
-    x-y (mm per mm, per step; the paper's analytic gain is 0.048), so the policy learns a residual on it
-    and its "stay" action is analytic control. 0: off (the policy's moves alone)."""
-    observe_plan: bool = False
-    """Add the base plan's move at this step (``base_plan``; zero once it has run out), in units of
-    ``max_step_mm``, to the observation: a residual policy sees what it corrects. Needs a ``base_plan``."""
-    base_plan: Sequence[Sequence[float]] | np.ndarray | None = None
-    """An open-loop plan the policy acts on: (T, 3) grasp moves (mm), one per env step (e.g. the ``plan`` of
-    the ``NAME.json`` that ``warpcut optimize`` writes), added to the policy's move at every step, the sum
-    clipped to ``max_step_mm`` per axis; after step T the policy's moves alone. The policy learns a residual
-    on the plan, and its "stay" action plays the plan. None: off."""
-    dense_reward: bool = False
-    """Add the per-step cut-deviation penalty (the path score's increment) to the sparse final reward."""
-    relative_reward: bool = False
-    """Scale every env's reward by the nominal sheet's no-tension error over its own sheet's (module
-    :mod:`envs.core`): with domain randomisation, each sheet counts by its relative improvement, as the
-    evaluation counts it; validation scales each episode's error alike. Without randomisation every scale
-    is 1."""
-    max_episode_steps: int | None = None
-    """Truncate episodes after this many steps; default: the whole cut."""
-    randomize: Sequence[str] = ()
-    """Domain randomisation: the physical parameters (``gravity``, ``elasticity``, ``noise_std`` or
-    ``noise``, ``damping``) drawn anew for every env at every reset, uniformly over
-    :data:`~warpcut.sim.config.RANDOMIZE_LEVELS` levels of their range (``randomize_ranges``). Empty:
-    the nominal parameters (the fields above) throughout. Evaluation runs a trained policy on the nominal
-    parameters (:meth:`nominal`)."""
-    randomize_ranges: dict[str, Sequence[float]] | None = None
-    """``{parameter: [low, high]}`` for the randomised parameters, in their units; a parameter not given
-    takes its :data:`~warpcut.sim.config.RANDOMIZE_RANGES` default."""
-    candidates: Sequence[dict] | None = None
-    """Several pinch candidates for one policy shared across them, each ``{"pinch": [x, y], "segments":
-    polylines or None}`` (a plan's candidate with its best order): env ``i`` pinches candidate ``i % K`` and
-    cuts its segments (None: the whole contour). ``pinch_point`` and ``segments`` must then be None, and the
-    pinch point is observed (``observe_pinch``). :meth:`at_candidate` is the options of one candidate."""
 
     def __post_init__(self):
-        for f in dataclasses.fields(self):  # wrong types named here, not deep inside the env
-            value = getattr(self, f.name)
-            problem = _field_problem(f.name, value)
-            if problem is None and f.name == "sim_config" and not isinstance(value, SimConfig):
-                problem = "give a SimConfig (PatternCutOptions.from_dict reads one from a dict)"
-            if problem:
-                raise ValueError(f"{f.name}: {problem} (got {value!r:.80})")
-        if self.candidates is None:
-            return
-        if not self.candidates or any(not isinstance(c, dict) or "pinch" not in c for c in self.candidates):
-            raise ValueError('candidates: give a non-empty list of {"pinch": [x, y], "segments": ...}')
-        if self.pinch_point is not None or self.segments is not None:
-            raise ValueError(
-                "candidates: leave pinch_point and segments None; each candidate carries its own"
-            )
-        self.observe_pinch = True
+        # to_dict()'s output given back as keyword arguments (e.g. to gymnasium.make): its dicts read here
+        if isinstance(self.sim_config, dict):
+            self.sim_config = sim_config_from_dict(self.sim_config, "sim_config")
+        if isinstance(self.contour, dict) or isinstance(self.contour, list) and any(
+            isinstance(c, dict) for c in self.contour
+        ):
+            self.contour = _read_contours(self.contour, self.sim_config)
+        super().__post_init__()
+        if not isinstance(self.sim_config, SimConfig):
+            raise ValueError(f"sim_config: give a SimConfig or a dict of its fields (got {self.sim_config!r:.80})")
+
+    @classmethod
+    def env_settings(cls, options: PatternCutOptions) -> EnvConfig:
+        """The :class:`EnvConfig` part of ``options``."""
+        return EnvConfig(**{name: getattr(options, name) for name in ENV_FIELDS})
 
     @classmethod
     def build(cls, options: PatternCutOptions | None = None, **kwargs: Any) -> PatternCutOptions:
@@ -173,28 +183,10 @@ class PatternCutOptions:
         loaded = [c if isinstance(c, Contour) else load_contour(c) for c in specs]
         return loaded * num_envs if len(loaded) == 1 else loaded
 
-    def at_candidate(self, k: int) -> PatternCutOptions:
-        """The single-pinch options of candidate ``k`` (its pinch observed, as the shared policy expects)."""
-        if self.candidates is None:
-            raise ValueError("at_candidate: these options have no candidates")
-        if not 0 <= k < len(self.candidates):
-            raise ValueError(f"candidate: {k} is not in 0..{len(self.candidates) - 1}")
-        c = self.candidates[k]
-        pinch = [float(v) for v in c["pinch"]]
-        return dataclasses.replace(self, candidates=None, pinch_point=pinch, segments=c.get("segments"))
-
     def per_env(self, num_envs: int) -> tuple[list[Contour], np.ndarray, list[list[np.ndarray]] | None]:
         """Per env: the contour, the pinch point (B, 2) and the segments (None: each contour whole)."""
         contours = self.contours(num_envs)
         config = self.config()
-        if self.candidates is not None:  # env i: candidate i % K
-            picks = [self.candidates[i % len(self.candidates)] for i in range(num_envs)]
-            pinch = np.array([c["pinch"] for c in picks], dtype=np.float64)
-            segments = [
-                segments_per_env(c["segments"], 1)[0] if c.get("segments") else default_segments(contour)
-                for c, contour in zip(picks, contours, strict=True)
-            ]
-            return contours, pinch, segments
         if self.pinch_point is None:
             # Once per distinct contour (envs of one contour share its object): the grid search is slow.
             by_contour = {id(c): c for c in contours}
@@ -246,38 +238,10 @@ class PatternCutOptions:
             problem = _field_problem(name, value)
             if problem:
                 raise ValueError(f"options: {name}: {problem} (got {value!r:.80})")
-        if "sim_config" in fields:
-            sim = fields["sim_config"]
-            if isinstance(sim, dict):  # JSON lists back to the tuples SimConfig holds
-                known = {f.name for f in dataclasses.fields(SimConfig)}
-                unknown = sorted(set(sim) - known)
-                if unknown:
-                    raise ValueError(
-                        f"options: sim_config: unknown field(s) {', '.join(unknown)}; known: "
-                        f"{', '.join(sorted(known))}"
-                    )
-                if "sweeps" in sim and "chebyshev_rho" not in sim:
-                    # Written before issue 21 (a run directory's options.json holds every field): its
-                    # sweeps were plain Gauss-Seidel sweeps; keep the physics its policy was trained in.
-                    sim = {**sim, "chebyshev_rho": 0.0}
-                sim = SimConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in sim.items()})
-            fields["sim_config"] = sim
-        sim = fields.get("sim_config", SimConfig())
-        default_sheet = (sim.width_mm, sim.height_mm)
-
-        def contour(spec):
-            if not isinstance(spec, dict):
-                return spec
-            sheet = spec.get("sheet_size", default_sheet)
-            if not (
-                isinstance(sheet, list | tuple) and len(sheet) == 2 and all(_is_number(v) for v in sheet)
-            ):
-                raise ValueError(f"options: contour: sheet_size: give [width_mm, height_mm] (got {sheet!r})")
-            return contour_from_json(spec, "options: contour", tuple(float(v) for v in sheet))
-
+        if isinstance(fields.get("sim_config"), dict):
+            fields["sim_config"] = sim_config_from_dict(fields["sim_config"], "options: sim_config")
         if "contour" in fields:
-            c = fields["contour"]
-            fields["contour"] = [contour(s) for s in c] if isinstance(c, list) else contour(c)
+            fields["contour"] = _read_contours(fields["contour"], fields.get("sim_config", SimConfig()), "options: ")
         try:
             options = cls(**fields)
             options.config()  # the simulation settings, checked now
@@ -288,6 +252,31 @@ class PatternCutOptions:
         return options
 
 
+def _read_contours(spec: Any, sim: SimConfig, prefix: str = "") -> Any:
+    """The contours ``{name, closed, points[, sheet_size]}`` in ``spec`` (one, or a list) as ``Contour``s;
+    names and files as they are."""
+
+    def read(item: Any) -> Any:
+        if not isinstance(item, dict):
+            return item
+        sheet = item.get("sheet_size", (sim.width_mm, sim.height_mm))
+        if not (isinstance(sheet, list | tuple) and len(sheet) == 2 and all(_is_number(v) for v in sheet)):
+            raise ValueError(f"{prefix}contour: sheet_size: give [width_mm, height_mm] (got {sheet!r})")
+        return contour_from_json(item, f"{prefix}contour", tuple(float(v) for v in sheet))
+
+    return [read(s) for s in spec] if isinstance(spec, list) else read(spec)
+
+
+def sim_config_from_dict(data: dict[str, Any], where: str) -> SimConfig:
+    """A :class:`SimConfig` from a dict of its fields (JSON lists back to the tuples it holds); ``ValueError``
+    naming ``where`` and an unknown field."""
+    known = {f.name for f in dataclasses.fields(SimConfig)}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise ValueError(f"{where}: unknown field(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
+    return SimConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
+
+
 def _is_number(value: Any) -> bool:
     return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
 
@@ -296,15 +285,7 @@ def _is_count(value: Any, least: int) -> bool:
     return isinstance(value, int | np.integer) and not isinstance(value, bool) and value >= least
 
 
-_FLAGS = (
-    "resample_fiducials",
-    "contour_features",
-    "observe_pinch",
-    "observe_plan",
-    "allow_z",
-    "dense_reward",
-    "relative_reward",
-)
+_FLAGS = ("resample_fiducials", "contour_features", "allow_z", "dense_reward", "relative_reward")
 
 
 def _field_problem(name: str, value: Any) -> str | None:
@@ -319,24 +300,15 @@ def _field_problem(name: str, value: Any) -> str | None:
     if name == "sim_config" and not isinstance(value, dict | SimConfig):
         return "give an object of SimConfig fields"
     if name == "action_type":
-        from .core import ACTION_TYPES  # envs.core imports this module
-
         if value not in ACTION_TYPES:
             return f"choose one of {', '.join(ACTION_TYPES)}"
     if name == "num_fiducials" and not _is_count(value, 0):
         return "must be a non-negative integer"
     if name == "max_episode_steps" and value is not None and not _is_count(value, 1):
         return "must be an integer >= 1, or null"
-    if name in ("residual_gain", "shaft_radius_mm") and not (_is_number(value) and 0 <= value < np.inf):
+    if name == "shaft_radius_mm" and not (_is_number(value) and 0 <= value < np.inf):
         return "must be a finite number >= 0"
-    if name == "base_plan" and value is not None:
-        try:
-            plan = np.asarray(value, dtype=np.float64)
-        except (TypeError, ValueError):
-            plan = None
-        if plan is None or plan.ndim != 2 or plan.shape[1] != 3 or not len(plan):
-            return "give (T, 3) grasp moves (mm): a list of [dx, dy, dz], one per env step, or null"
-    lists = ("pinch_point", "segments", "candidates")
+    lists = ("pinch_point", "segments")
     if name in lists and value is not None and not isinstance(value, list | tuple | np.ndarray):
         return "must be a list, or null"
     if name == "pinch_point" and value is not None:

@@ -5,7 +5,7 @@ Observations are a ``TensorDict`` with one group, ``"policy"`` (B, D) float32; c
 
 Actions, a tensor on any device:
     * discrete: choice indices, shape (B,) or (B, 1), of any dtype holding integers in
-      ``[0, num_choices)`` -- what ``agents.distributions.Categorical`` samples (floats of shape
+      ``[0, num_choices)`` -- what ``agents.ppo.distributions.Categorical`` samples (floats of shape
       ``(B, num_actions)`` with ``num_actions == 1``). Set its ``num_choices`` to :attr:`num_action_choices`.
     * continuous: (B, num_actions) moves in units of ``max_step_mm``, clipped to [-1, 1].
 
@@ -16,7 +16,14 @@ not bootstrap past it, nor past an env that diverged (it ended when it diverged,
 step where cuts complete, ``extras["log"]`` holds one value per env of ``Episode/final_error``
 (:data:`FINAL_ERROR_KEY`: ``error_mm2 / area_mm2``, minus the final reward), ``Cut/error_mm2`` and
 ``Cut/error_vertices``; rsl-rl's logger records their means under those names. The
-key is absent on other steps (and after truncated episodes, which have no score).
+key is absent on other steps (and after truncated episodes, which have no score). On the step where the batch's
+episode ends, ``extras["episode_cost"]`` (:data:`EPISODE_COST_KEY`) holds every env's cost of the cut that
+ended, (B,) float: its path error over the intended area, weighed as its reward is weighed
+(``relative_reward``), NaN where the env diverged or the episode was cut short (es ranks its policies by
+it).
+
+Training can restart the current episode exactly as it began (:meth:`PatternCutRslEnv.episode_start`,
+:meth:`PatternCutRslEnv.restart_episode`): a resumed run continues the episodes' stream where it stopped.
 """
 
 from __future__ import annotations
@@ -31,7 +38,10 @@ from .options import PatternCutOptions
 from .vector import PatternCutVecEnv
 
 FINAL_ERROR_KEY = "Episode/final_error"
-"""``extras["log"]`` key of each completed cut's relative error (the name ``agents.train`` reads)."""
+"""``extras["log"]`` key of each completed cut's relative error (the name ``agents.training`` reads)."""
+
+EPISODE_COST_KEY = "episode_cost"
+"""``extras`` key of every env's cost of the cut that ended this step (module docstring)."""
 
 
 class PatternCutRslEnv(VecEnv):
@@ -91,6 +101,27 @@ class PatternCutRslEnv(VecEnv):
             "episode lengths; train with init_at_random_ep_len=False"
         )
 
+    @property
+    def common_sheets(self) -> int:
+        """With randomised parameters, the batch is this many copies of ``num_envs / common_sheets`` sheets
+        (env ``e`` cuts sheet ``e % (num_envs / common_sheets)``: es's perturbed policies cut the same
+        sheets); 1: every env its own sheet. Takes effect at the next reset."""
+        return self.env.common_sheets
+
+    @common_sheets.setter
+    def common_sheets(self, copies: int) -> None:
+        self.env.common_sheets = copies
+
+    def episode_start(self) -> dict:
+        """What :meth:`restart_episode` needs to start the current episode again as it began (the random
+        stream's state before its reset)."""
+        return self.env.episode_start()
+
+    def restart_episode(self, start: dict) -> None:
+        """Start the episode that :meth:`episode_start` described again, in every env, as it began: the same
+        process noise, fiducials and randomised sheets (for the same options and seed of the first reset)."""
+        self._obs = self._tensordict(self.env.restart_episode(start))
+
     def get_observations(self) -> TensorDict:
         """The current observations, ``{"policy": (B, D) float32}``."""
         return self._obs
@@ -104,10 +135,14 @@ class PatternCutRslEnv(VecEnv):
         actions = actions.detach().cpu().numpy()
         if self.num_action_choices is not None and actions.ndim == 2 and actions.shape[1] == 1:
             actions = actions[:, 0]
+        scale = self.env.scene.reward_scale  # this episode's (the env resets inside the step that ends it)
         obs, rewards, terminated, truncated, info = self.env.step(actions)
         self._obs = self._tensordict(obs)
         extras: dict = {"time_outs": torch.as_tensor(truncated, device=self.device)}
         score = info.get("final_info", {})
+        if np.all(terminated | truncated):  # the batch's episode ended (all envs share one clock)
+            costs = score.get("relative_error", np.full(self.num_envs, np.nan)) * scale
+            extras[EPISODE_COST_KEY] = torch.as_tensor(costs, dtype=torch.float64, device=self.device)
         scored = np.isfinite(score["relative_error"]) if "relative_error" in score else None
         if scored is not None and scored.any():  # a diverged env's NaN score is never averaged in
             extras["log"] = {

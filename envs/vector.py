@@ -142,6 +142,10 @@ class PatternCutVecEnv(VectorEnv):
         """The batch's episode ended (NEXT_STEP: the next step resets; DISABLED: reset() must)."""
         self._ended = np.zeros(num_envs, dtype=bool)
         self._obs: np.ndarray | None = None
+        self.common_sheets = 1
+        """With randomised parameters, the batch is this many copies of ``num_envs / common_sheets`` sheets
+        (:meth:`envs.core.PatternCut.reset`'s ``repeat``); takes effect at the next reset."""
+        self._start: dict | None = None
 
     @property
     def task(self) -> CuttingTask:
@@ -165,7 +169,7 @@ class PatternCutVecEnv(VectorEnv):
         super().reset(seed=seed)
         self._started, self._over = True, False
         self._ended[:] = False
-        self._obs = self.scene.reset(self.np_random, seed is not None or self.options.resample_fiducials)
+        self._obs = self._reset_scene(seed is not None or self.options.resample_fiducials)
         return self._obs, {}
 
     def step(
@@ -194,7 +198,7 @@ class PatternCutVecEnv(VectorEnv):
             if same_step:
                 final_info = {**info, **{f"_{k}": ending.copy() for k in info}}
                 infos |= self._final(obs, ending, final_info)
-                obs = self.scene.reset(self.np_random, self.options.resample_fiducials)
+                obs = self._reset_scene(self.options.resample_fiducials)
                 self._ended[:] = False
             else:  # the score in this step's info; the next step (NEXT_STEP) or reset() restarts
                 score_keys = [k for k in info if k not in step_keys]
@@ -227,11 +231,44 @@ class PatternCutVecEnv(VectorEnv):
     def _reset_step(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """NEXT_STEP's step after the episode's end: every env restarts, its action ignored."""
         b = self.num_envs
-        self._obs = self.scene.reset(self.np_random, self.options.resample_fiducials)
+        self._obs = self._reset_scene(self.options.resample_fiducials)
         self._ended[:] = False
         self._over = False
         none = np.zeros(b, dtype=bool)
         return self._obs, np.zeros(b), none, none.copy(), {}
+
+    def _reset_scene(self, resample_fiducials: bool) -> np.ndarray:
+        """Start a new episode in every env, remembering how (:meth:`episode_start`)."""
+        self._start = {
+            "rng": self.np_random.bit_generator.state,
+            "resample_fiducials": bool(resample_fiducials),
+            "common_sheets": int(self.common_sheets),
+        }
+        return self.scene.reset(self.np_random, resample_fiducials, repeat=self.common_sheets)
+
+    def episode_start(self) -> dict:
+        """How the current episode began: the random stream's state before its reset, whether it drew new
+        fiducials, and ``common_sheets`` (JSON-able; :meth:`restart_episode` takes it)."""
+        if self._start is None:
+            raise RuntimeError("episode_start: call reset() first")
+        return dict(self._start)
+
+    def restart_episode(self, start: dict) -> np.ndarray:
+        """Start again, in every env, the episode that :meth:`episode_start` described: the same process
+        noise, randomised sheets and (where it drew them) fiducials, for an env with the same options whose
+        first reset had the same seed. Returns the first observations."""
+        if not self._started:
+            raise RuntimeError("restart_episode: call reset() first")
+        try:
+            self.np_random.bit_generator.state = start["rng"]
+            self.common_sheets = int(start["common_sheets"])
+            resample = bool(start["resample_fiducials"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"restart_episode: not an episode_start() record ({exc})") from None
+        self._over = False
+        self._ended[:] = False
+        self._obs = self._reset_scene(resample)
+        return self._obs
 
     def _resets_all(self, mask: Any) -> bool:
         """Whether ``options["reset_mask"]`` resets every env (True) or none (False); ``ValueError`` for a

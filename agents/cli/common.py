@@ -15,7 +15,7 @@ from pathlib import Path
 
 import click
 
-from agents.config import ANALYTIC_PINCHES, GRAD_CONFIG, GRAD_ESTIMATORS, RECIPES, batch_defaults
+from agents.config import ANALYTIC_PINCHES, GRAD_CONFIG, GRAD_ESTIMATORS
 from warpcut.sim.config import ARM_LENGTH_MM, RESOLUTION_RANGE, SCORES, SimConfig
 from warpcut.viz import COLOUR_FIELDS
 from warpcut.viz.process import RecordingError
@@ -225,14 +225,6 @@ seed_option = click.option(
 DEFAULTS = SimConfig()
 """The library's defaults, which the options below show and pass on (one set for library and CLI)."""
 
-_PPO, _APG, _ES = batch_defaults("ppo"), batch_defaults("apg"), batch_defaults("es")
-BATCH_DEFAULTS_HELP = (
-    f"Default: the algorithm's, {_PPO['num_envs']} envs x {_PPO['iterations']} iterations for PPO, "
-    f"{_APG['num_envs']} x {_APG['iterations']} for APG, {_ES['num_envs']} envs for es, its iterations "
-    "as many whole cuts as PPO's env steps (agents.config.batch_defaults, es_iterations)."
-)
-"""What ``--num-envs`` and ``--iterations`` default to where the algorithm decides (train, evaluate)."""
-
 noise_option = click.option(
     "--noise",
     default=DEFAULTS.noise_std,
@@ -292,22 +284,6 @@ def feedback_options(prefix: str, what: str):
         )(f)
 
     return decorate
-
-
-recipe_option = click.option(
-    "--recipe",
-    default=next(iter(RECIPES)),
-    show_default=True,
-    type=click.Choice(list(RECIPES)),
-    help="How RL policies are trained: warpcut (dense path-deviation reward, contour-aware observations, "
-    "x-y-z moves, a 'hold still' prior, validation-based model selection; docs/learning.md), paper "
-    "(sparse reward, 12 fiducials, x-y moves, a uniform start, the last policy kept) or apg (warpcut's "
-    "observations, continuous moves learnt by analytic policy gradients through the simulator, starting "
-    "from holding still) or grad-residual (warpcut's, PPO learning a residual on the open-loop plan the "
-    "gradient optimiser finds first, as for the grad method, and observing that plan's moves; its 'stay' "
-    "plays the plan) or apg-residual (the same with APG: the plan's moves plus continuous moves learnt by "
-    "analytic policy gradients, starting from the plan).",
-)
 
 
 arm_length_option = click.option(
@@ -512,17 +488,6 @@ def parse_randomization(names: str | None, ranges: tuple[str, ...]) -> tuple[lis
     return list(chosen), {k: v for k, v in chosen.items() if k in given}
 
 
-def refuse_apg(randomized: bool, algorithm: str | None, fix: str | None = None) -> None:
-    """A usage error for domain randomisation (or a relative reward) with APG, before anything is written
-    (:data:`agents.config.APG_FIXED_SHEET`; ``fix``: what to do instead in this command, if not its
-    ``--algo ppo``)."""
-    if randomized and algorithm == "apg":
-        from agents.config import APG_FIXED_SHEET
-
-        message = APG_FIXED_SHEET if fix is None else f"{APG_FIXED_SHEET.split(';')[0]}; {fix}"
-        raise click.UsageError(f"--{message}")
-
-
 def flag_error(error: ValueError, flags: dict[str, str]) -> click.UsageError:
     """``error`` (a library ``ValueError`` naming settings by their field names) as a usage error naming this
     command's flags instead (``flags``: field name -> flag). Plain words (no underscore, e.g. ``trials``)
@@ -534,37 +499,6 @@ def flag_error(error: ValueError, flags: dict[str, str]) -> click.UsageError:
         elif text.startswith(f"{field}: "):
             text = flags[field] + text[len(field) :]
     return click.UsageError(text)
-
-
-def check_es_batch(recipe, num_envs: int | None) -> None:
-    """A usage error for a ``--num-envs`` the es recipe's population does not divide (each perturbed policy
-    plays as many episodes), before anything is planned or written."""
-    from agents.config import TrainConfig, es_population_error
-
-    population = recipe.train.get("es_population", TrainConfig.es_population)
-    if recipe.train.get("algorithm") == "es" and num_envs is not None:
-        if es_population_error(population, num_envs):
-            raise click.BadParameter(
-                f"es plays {population} perturbed policies, each the same number of episodes: give a "
-                f"multiple of {population} (got {num_envs})",
-                param_hint="--num-envs",
-            )
-
-
-def randomized_recipe(recipe, names: str | None, ranges: tuple[str, ...], relative_reward: bool = False):
-    """``recipe`` (:class:`agents.config.Recipe`) training with the domain randomisation of ``--randomize``
-    and ``--randomize-range`` (:func:`parse_randomization`) and ``--relative-reward``; ``recipe`` itself
-    without any."""
-    import dataclasses
-
-    randomized, given = parse_randomization(names, ranges)
-    if not randomized and not relative_reward:
-        return recipe
-    refuse_apg(randomized or relative_reward, recipe.train.get("algorithm"), "choose a PPO or es --recipe")
-    options = {**recipe.options, "randomize": randomized, "randomize_ranges": given or None}
-    if relative_reward:
-        options["relative_reward"] = True
-    return dataclasses.replace(recipe, options=options)
 
 
 def parse_point(value: str | None, name: str) -> tuple[float, float] | None:
@@ -679,3 +613,132 @@ def plot_learning_curves(runs: dict[Path, str]) -> list[Path]:
         summary = read_json(run / "summary.json")
         written += plot_learning_curve(summary["history"], summary["validation"], run, title=title)
     return written
+
+
+class Command(click.Command):
+    """click's command that refuses an option given twice: click would keep the last value without a word."""
+
+    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        if args:
+            _, _, order = self.make_parser(ctx).parse_args(args=list(args))
+            seen: set[str] = set()
+            for param in order:
+                if not isinstance(param, click.Option) or param.multiple or param.count:
+                    continue
+                if param.name in seen:
+                    raise click.UsageError(f"{param.opts[0]}: given twice; give it once", ctx=ctx)
+                seen.add(param.name)
+        return super().parse_args(ctx, args)
+
+
+def config_options(command):
+    """``--config FILE|PRESET``, ``--set KEY=VALUE`` (repeatable) and ``--print-config``: the settings a
+    command's flags do not reach (:func:`resolve`)."""
+    from agents.config_io import presets
+
+    command = click.option(
+        "--print-config", is_flag=True, help="Print the full resolved config (YAML) and exit."
+    )(command)
+    command = click.option(
+        "--set",
+        "overrides",
+        multiple=True,
+        metavar="KEY=VALUE",
+        help="Set one setting by its dotted key (repeatable), e.g. --set sim.noise_std=0 --set "
+        "train.es.sigma=0.01; --print-config shows every key.",
+    )(command)
+    return click.option(
+        "--config",
+        "config_file",
+        metavar="FILE|PRESET",
+        help="Settings from a TOML, YAML or JSON file (a run directory's config.json runs it again), or a "
+        f"preset: {', '.join(presets())}. Flags and --set override it.",
+    )(command)
+
+
+def resolve(job_class, config_file: str | None, overrides: tuple[str, ...], flags: dict[str, str], base=None):
+    """The job a command runs: the defaults (or ``base``), then the ``--config`` file, then ``--set``, then
+    the flags given on the command line (``flags``: parameter name -> key), each checked by its key.
+
+    Defaults that follow from other settings follow them unless given (:func:`agents.jobs.
+    with_dependent_defaults`): ``--algo ppo`` trains PPO's discrete moves.
+
+    Raises:
+        click.UsageError: A key given twice (``--set`` twice, or a flag and ``--set``).
+        ValueError: An unknown key or a value of the wrong type (naming it and where it came from).
+    """
+    from agents.config_io import apply, flatten, parse_override, read_file, to_plain
+    from agents.jobs import with_dependent_defaults
+
+    ctx = click.get_current_context()
+    job = base if base is not None else job_class()
+    explicit: set[str] = set()
+    if config_file:
+        data = read_file(config_file)
+        job = apply(job, data, str(config_file))
+        explicit |= set(flatten(data))
+    sets: dict = {}
+    for text in overrides:
+        key, value = parse_override(text)
+        if key in sets:
+            raise click.UsageError(f"--set {key}: given twice; give it once")
+        sets[key] = value
+    given = {}
+    for name, key in flags.items():
+        if ctx.get_parameter_source(name) != click.core.ParameterSource.COMMANDLINE:
+            continue
+        flag = next(p.opts[0] for p in ctx.command.params if p.name == name)
+        if key in sets:
+            raise click.UsageError(f"{flag} and --set {key}: both set {key}; give one")
+        given[key] = (flag, ctx.params[name])
+    job = apply(job, sets, "--set")
+    for key, (flag, value) in given.items():
+        job = apply(job, {key: value}, flag)
+    explicit |= set(sets) | set(given)
+    if base is not None:  # a resumed run's own settings count as given
+        explicit |= set(flatten(to_plain(base)))
+    return with_dependent_defaults(job, explicit)
+
+
+def print_config(job) -> None:
+    """``--print-config``: the resolved job as YAML on stdout."""
+    from agents.config_io import to_yaml
+
+    click.echo(to_yaml(job), nl=False)
+
+
+def point_callback(ctx: click.Context, param: click.Parameter, value: str | None) -> list[float] | None:
+    """A ``X,Y`` option (mm) as ``[x, y]``."""
+    point = parse_point(value, param.opts[0])
+    return None if point is None else [float(v) for v in point]
+
+
+def record_flag(what: str):
+    """``--record [N]``: a rerun recording (``what``) of the first N envs (default 1) of each method."""
+    return click.option(
+        "--record",
+        "record_envs",
+        type=click.IntRange(min=1),
+        is_flag=False,
+        flag_value=1,
+        default=None,
+        metavar="[N]",
+        help=f"Write recording.rrd ({what}) of the first N envs (default 1) of each method; view it with "
+        "'warpcut replay' (colours: --set colour_by=strain|height).",
+    )
+
+
+def saved_job(job_class, path: Path):
+    """The job a run directory's ``config.json`` (``path``) holds, to resume it."""
+    from agents.config_io import apply
+    from warpcut.io import read_json
+
+    if not path.is_file():
+        raise click.BadParameter(
+            f"{path.parent}: no {path.name}: not a run this command wrote; give its run directory",
+            param_hint="--resume",
+        )
+    data = read_json(path)
+    if not isinstance(data, dict):
+        raise click.BadParameter(f"{path}: not a run's settings; restore it, or start a new run", param_hint="--resume")
+    return apply(job_class(), data, str(path))

@@ -3,7 +3,7 @@
 rsl-rl 5.5.1 builds an actor's output distribution from ``{"class_name": ..., **kwargs}`` as
 ``cls(output_dim, **kwargs)``, where ``output_dim`` is the env's ``num_actions``. Select the one here with::
 
-    "distribution_cfg": {"class_name": "agents.distributions:Categorical", "num_choices": K}
+    "distribution_cfg": {"class_name": "agents.ppo.distributions:Categorical", "num_choices": K}
 """
 
 from __future__ import annotations

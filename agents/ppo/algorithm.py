@@ -1,13 +1,15 @@
-"""warpcut's changes to rsl-rl's PPO for speed on a CPU, applied by :func:`speed_up` to a runner's algorithm.
+"""PPO: rsl-rl's PPO with warpcut's changes for speed on a CPU (its ``class_name`` in the runner's config is
+``agents.ppo.algorithm:PPO``).
 
-Each one computes what rsl-rl computes (docs/performance.md, section 6, where each was measured):
+Each change computes what rsl-rl computes:
 
-- **Adam, fused** (``torch.optim.Adam(fused=True)``): one kernel per step instead of ~12 ops per tensor. Not
-  bit-identical to the unfused step (last-bit differences), adopted in session 13 with Table I run again.
+- **Adam, fused** (``torch.optim.Adam(fused=True)``): one kernel per step instead of ~12 ops per tensor (not
+  bit-identical to the unfused step: last-bit differences).
 - **Minibatches gathered with ``index_select``**: rsl-rl's generator indexes every stored field with a
-  tensor of indices (``x[idx]``, advanced indexing: ~55 µs for 2,048 x 47 floats here); ``index_select`` on
-  the first dimension gathers the same rows bit for bit in a quarter of the time. The permutation is drawn
-  as rsl-rl draws it (one ``torch.randperm`` per update), so training's random stream is unchanged.
+  tensor of indices (``x[idx]``, advanced indexing: ~55 µs for 2,048 x 47 floats on the development
+  machine); ``index_select`` on the first dimension gathers the same rows bit for bit in a quarter of the
+  time. The permutation is drawn as rsl-rl draws it (one ``torch.randperm`` per update), so training's
+  random stream is unchanged.
 """
 
 from __future__ import annotations
@@ -16,13 +18,24 @@ import types
 from collections.abc import Generator
 
 import torch
-from rsl_rl.algorithms import PPO
+from rsl_rl.algorithms import PPO as RslPPO
+from rsl_rl.env import VecEnv
 from rsl_rl.storage import RolloutStorage
 from tensordict import TensorDict
 
 
-def speed_up(alg: PPO) -> None:
-    """Apply this module's changes to ``alg``, an rsl-rl PPO built by its runner (before any update)."""
+class PPO(RslPPO):
+    """rsl-rl's PPO, built as rsl-rl builds it, with :func:`speed_up` applied."""
+
+    @staticmethod
+    def construct_algorithm(obs: TensorDict, env: VecEnv, cfg: dict, device: str) -> PPO:
+        alg = RslPPO.construct_algorithm(obs, env, cfg, device)
+        speed_up(alg)
+        return alg
+
+
+def speed_up(alg: RslPPO) -> None:
+    """Apply this module's changes to ``alg``, an rsl-rl PPO (before any update)."""
     if type(alg.optimizer) is torch.optim.Adam:
         (group,) = alg.optimizer.param_groups  # rsl-rl's one group: the actor's and critic's
         alg.optimizer = torch.optim.Adam(group["params"], lr=group["lr"], fused=True)

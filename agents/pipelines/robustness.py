@@ -27,6 +27,8 @@ policy diverged in more trials than no tension against the policy.
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -38,6 +40,7 @@ from agents.evaluation import run_method
 from agents.gradient import PlanResult
 from agents.methods import BASELINES, check_methods, tensioner
 from warpcut.contours import Contour, ContourError
+from warpcut.io import finite_json, read_json, write_json
 from warpcut.scoring import bootstrap_ci, bootstrap_difference_ci, paired_improvement
 from warpcut.sim.config import GRAVITY_MM_S2, SimConfig
 from warpcut.task import segments_key
@@ -292,8 +295,7 @@ def _check_label(field: str, label, taken: Mapping = ()) -> None:
 def check_runs(runs: Mapping[str, str | Path] | str | Path | None) -> dict[str, Path]:
     """``runs`` as ``{label: run directory}`` (one run: ``{"rl": run}``), each a trained run; ``ValueError``
     naming ``runs`` for a label that is a baseline's, or not a plain name."""
-    from agents.export import policy_runs
-    from agents.rl import is_run
+    from agents.policies import is_run, policy_runs
 
     if runs is None:
         return {}
@@ -344,7 +346,7 @@ def _scenario(contour, runs: dict[str, Path], config, device, seed, log) -> dict
     from warpcut.contours import load_contour
 
     if runs:
-        from agents.rl import policy_options, same_contour
+        from agents.policies import policy_options, same_contour
 
         given = None
         if contour is not None:
@@ -401,7 +403,7 @@ def _method_errors(
     """(settings, trials) errors (mm^2) of ``method``: one batch, env ``s * trials + k`` = setting ``s``,
     trial ``k``, with the same noise streams in every method's batch; NaN where the trial diverged."""
     if method in runs:
-        from agents.rl import rollout_errors
+        from agents.policies import rollout_errors
 
         rollouts = rollout_errors(
             runs[method], settings * trials, seed=seed, device=device, paired_noise=(seed, 0),
@@ -645,7 +647,6 @@ def robustness(
     """``warpcut robustness``: :func:`robustness_study` for each of ``studies`` (``values`` only with one),
     each report written to ``out/robustness-STUDY.json`` as it finishes. With ``resume``, the settings must
     be those ``out`` was started with (``request.json``), and a study already written is read back."""
-    from agents.pipeline import _record_request
     from warpcut.io import read_json
 
     studies = parse_studies(studies)
@@ -677,3 +678,36 @@ def robustness(
         )  # fmt: skip
         reports.append(report)
     return reports
+
+
+REQUEST_FILE = "request.json"
+
+
+def _record_request(out: Path, command: str, resume: bool, **arguments) -> None:
+    """Write ``out/request.json``; with ``resume``, first check that ``arguments`` are those the run was
+    started with (a ValueError names each difference)."""
+    request = {"command": command, "arguments": _jsonable(arguments)}
+    path = out / REQUEST_FILE
+    if resume and path.is_file():
+        before = read_json(path)
+        if before.get("command") != command:
+            raise ValueError(f"--resume: {out} holds a '{before.get('command')}' run, not '{command}'")
+        old, new = before.get("arguments", {}), request["arguments"]
+        changed = [k for k in sorted(set(old) | set(new)) if old.get(k) != new.get(k)]
+        if changed:
+            shown = "; ".join(f"{k}: {old.get(k)!r} then, {new.get(k)!r} now" for k in changed)
+            raise ValueError(
+                f"--resume: {out} was started with other settings ({shown}); repeat the run's settings, "
+                "or start a new run (another --out, or --overwrite)"
+            )
+    write_json(path, request)
+
+
+def _jsonable(obj):
+    """``obj`` as :func:`~warpcut.io.write_json` would write and read it back (tuples as lists, dataclasses
+    as dicts, paths as strings)."""
+
+    def plain(value):
+        return finite_json(dataclasses.asdict(value)) if dataclasses.is_dataclass(value) else str(value)
+
+    return json.loads(json.dumps(finite_json(obj), default=plain))

@@ -1,0 +1,83 @@
+"""Evolution strategies' settings (torch-free, so the command line reads them without loading torch)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+ENV_STEPS = 150 * 256 * 32
+"""es's env steps per run where no iterations are given: as many as PPO's default run simulates (150
+iterations x 256 envs x 32 steps = 1,228,800). An es iteration plays whole cuts, 41 to 380 steps on the
+suite, so a fixed count of iterations would cost eight times more on the longest contour than on the
+shortest."""
+
+MIN_ITERATIONS = 10
+"""The fewest iterations :func:`default_iterations` gives (one validation after the initial one)."""
+
+
+def default_iterations(num_envs: int, episode_steps: int) -> int:
+    """es's iterations where none are given: :data:`ENV_STEPS` over ``num_envs`` whole cuts of
+    ``episode_steps``, at least :data:`MIN_ITERATIONS`."""
+    return max(MIN_ITERATIONS, round(ENV_STEPS / (num_envs * episode_steps)))
+
+
+@dataclass
+class EsConfig:
+    """Evolution strategies on the policy's weights (:mod:`agents.es.algorithm`): every iteration plays
+    ``population`` perturbed copies of the policy, in antithetic pairs, each on ``num_envs / population``
+    whole cuts in one batch, ranks them by the path score and takes a step of Adam along the ranked
+    perturbations.
+
+    The policy is the MLP plus a linear feedback path on the tracking error (``feedback``). The two parts
+    get their own perturbation scales and steps: a perturbed MLP moves the grasp by a near-constant bias that
+    adds up over a long cut, so its σ and step are small; the gains act on the normalised tracking error,
+    where useful values are ~0.5-1, so theirs are large.
+    """
+
+    population: int = 64
+    """Perturbed policies per iteration, in antithetic pairs: even, and dividing ``num_envs`` (256 envs: 4
+    episodes each)."""
+    sigma: float = 0.005
+    """Standard deviation of the perturbations of the MLP's weights (its output is in units of
+    ``max_step_mm``). With 0.05 the perturbed population cut long contours far worse than its centre and es
+    learned nothing there."""
+    feedback_sigma: float = 0.1
+    """Standard deviation of the perturbations of the feedback gains (on the normalised tracking error)."""
+    learning_rate: float = 0.001
+    """Adam's step for the MLP's weights, in weight space: small, so the MLP stays near "hold still" while
+    the gains learn."""
+    feedback_learning_rate: float = 0.1
+    """Adam's step for the feedback gains."""
+    feedback: bool = True
+    """Give the actor the linear feedback path on the tracking error (:class:`agents.models.FeedbackMLP`;
+    it needs the contour features in the observation). Without it es learns the MLP alone: give it a larger
+    ``sigma`` and ``learning_rate`` then (0.05 and 0.01 worked)."""
+
+    def check(self, num_envs: int | None = None) -> None:
+        """``ValueError`` naming the first field out of range (``num_envs``: the batch the population must
+        divide)."""
+        population = self.population
+        if isinstance(population, bool) or not isinstance(population, int) or population < 2 or population % 2:
+            raise ValueError(f"es.population: must be an even integer >= 2, antithetic pairs (got {population!r})")
+        if num_envs is not None and num_envs % population:
+            fits = max((p for p in range(2, min(num_envs, 64) + 1, 2) if num_envs % p == 0), default=None)
+            fix = f"e.g. es.population={fits}" if fits else "give an even num_envs"
+            raise ValueError(
+                f"es.population: {population} must divide num_envs ({num_envs}), each perturbed policy playing "
+                f"as many episodes; {fix}"
+            )
+        for name in ("sigma", "feedback_sigma", "learning_rate", "feedback_learning_rate"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float) or not (0 < value < math.inf):
+                raise ValueError(f"es.{name}: must be a finite number > 0 (got {value!r})")
+
+    def rsl_rl(self) -> dict:
+        """rsl-rl's ``algorithm`` section (``class_name`` and the arguments of :class:`agents.es.algorithm.ES`)."""
+        return {
+            "class_name": "agents.es.algorithm:ES",
+            "population": self.population,
+            "sigma": self.sigma,
+            "feedback_sigma": self.feedback_sigma,
+            "learning_rate": self.learning_rate,
+            "feedback_learning_rate": self.feedback_learning_rate,
+        }

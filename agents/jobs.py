@@ -1,0 +1,251 @@
+"""What each command runs, as a dataclass: the layout of its config file (``--config``), the keys of its
+``--set`` overrides, what ``--print-config`` prints and what a run directory's ``config.json`` holds.
+
+Every job has the same sections where it has them: ``sim`` (:class:`~warpcut.sim.config.SimConfig`: the
+physics and the protocol, e.g. ``sim.noise_std``, ``sim.score``), ``env`` (:class:`~envs.options.EnvConfig`:
+what a policy observes, how it acts and is rewarded, domain randomisation) and ``train``
+(:class:`~agents.config.TrainConfig`: the learner, its batch and its own section, e.g. ``train.es.sigma``).
+The flags of a command set a few of these keys; the rest keep their defaults unless a file or ``--set``
+changes them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+from agents.config import (
+    ANALYTIC_PINCHES,
+    BUDGETS,
+    DEFAULT_BUDGET,
+    DEFAULT_CONTOUR,
+    DEFAULT_SELECTOR,
+    EVALUATION_CANDIDATES,
+    EVALUATION_TRIALS,
+    GRAD_CONFIG,
+    GRAD_CONFIGS,
+    GradConfig,
+    TrainConfig,
+)
+from agents.methods import SELECTORS, TABLE_METHODS, check_methods
+from envs.options import ENV_FIELDS, EnvConfig, PatternCutOptions
+from warpcut.planning.feasibility import ArmModel
+from warpcut.sim.config import SimConfig
+
+COLOUR_FIELDS = ("strain", "height")
+"""What a recording's vertex colours show (``colour_by``)."""
+
+
+@dataclass
+class TrainJob:
+    """``warpcut train``: a policy for one contour, trained into a run directory and evaluated against no
+    tension. A run directory's ``config.json`` is this job; ``warpcut train --config DIR/config.json`` runs it
+    again."""
+
+    contour: str | dict | None = None
+    """The contour: a built-in name (``warpcut contours``), a ``.json``/``.svg`` file, or the contour itself
+    (``{name, closed, points}``, as a run directory stores a contour that is not built in)."""
+    pinch: list[float] | None = None
+    """Pinch point ``[x, y]`` (mm, material coordinates). None: the centroid, or the feasible point nearest
+    it."""
+    segments: list | None = None
+    """The polylines (mm) the scissors cut, in order (a plan's); None: the whole contour as one segment."""
+    seed: int = 0
+    """Seed of everything random: the episodes' noise and fiducials, the policy's initialisation and its
+    learner's streams; validation derives its own episodes from it."""
+    eval_trials: int = EVALUATION_TRIALS
+    """Trials of the final evaluation against no tension (seed ``seed + 1``)."""
+    sim: SimConfig = field(default_factory=SimConfig)
+    """The physics and the protocol (noise, score)."""
+    env: EnvConfig = field(default_factory=EnvConfig)
+    """What the policy observes, how it acts and is rewarded."""
+    train: TrainConfig = field(default_factory=TrainConfig)
+    """The learner and its settings."""
+    record: int | None = None
+    """Write ``recording.rrd`` of the final evaluation's first N envs (rerun); None: no recording."""
+    colour_by: str = "strain"
+    """What the recorded sheet's vertex colours show: ``strain`` or ``height``."""
+    video: int | None = None
+    """Write an MP4 of the final evaluation's first N envs; None: no video."""
+    plots: bool = True
+    """Write ``learning_curve.png/svg``."""
+
+    def options(self, device: str | None = None) -> PatternCutOptions:
+        """The env's options for this job (the contour loaded where it is given inline)."""
+        if self.contour is None:
+            raise ValueError("contour: give the contour to train on (--contour), or --resume a run")
+        return PatternCutOptions(
+            contour=contour_spec(self.contour),
+            pinch_point=self.pinch,
+            segments=self.segments,
+            sim_config=self.sim,
+            device=device,
+            **{name: getattr(self.env, name) for name in ENV_FIELDS},
+        )
+
+    @classmethod
+    def for_options(cls, options: PatternCutOptions, train: TrainConfig, seed: int, eval_trials: int) -> TrainJob:
+        """The job that trains ``train``'s learner in ``options`` (e.g. a pipeline's policy for one contour at
+        one pinch candidate); its contour stored by name or inline, so the job runs from any directory."""
+        data = options.to_dict()
+        return cls(
+            contour=data["contour"],
+            pinch=data["pinch_point"],
+            segments=data["segments"],
+            seed=seed,
+            eval_trials=eval_trials,
+            sim=options.config(),
+            env=PatternCutOptions.env_settings(options),
+            train=train,
+        )
+
+
+def contour_spec(spec: Any) -> Any:
+    """A job's ``contour`` as :class:`~envs.options.PatternCutOptions` takes it: a name or file as is, an
+    inline contour ``{name, closed, points}`` loaded."""
+    if isinstance(spec, dict):
+        from warpcut.contours import contour_from_json
+
+        sheet = spec.get("sheet_size")
+        return contour_from_json(spec, "contour", tuple(float(v) for v in sheet) if sheet else (100.0, 100.0))
+    return spec
+
+
+@dataclass
+class RunJob:
+    """``warpcut run``, the main job: plan one contour (segments, order, pinch candidates scored with fixed
+    tension), let a tensioner choose the candidate (``rl``: a policy trained for each of the best
+    ``rl_candidates``, the one that validates best wins), then compare none, fixed, analytic and rl over
+    seeded trials."""
+
+    contour: str | dict = DEFAULT_CONTOUR
+    """The contour: a built-in name, a ``.json``/``.svg`` file, or the contour itself."""
+    budget: str = DEFAULT_BUDGET
+    """``fast`` (8 candidates, a policy for the best one, 10 trials: about a minute on 2 CPU cores) or
+    ``paper`` (the paper's 30 candidates, a policy for each)."""
+    policy: str = DEFAULT_SELECTOR
+    """The tensioner that chooses the pinch candidate: ``rl``, or ``fixed`` / ``analytic`` for a quick plan
+    without training."""
+    candidates: int | None = None
+    """Pinch candidates sampled for the plan (None: the budget's)."""
+    rl_candidates: int | None = None
+    """How many of the best candidates (by fixed tension) get a policy (None: the budget's)."""
+    trials: int | None = None
+    """Seeded trials of the evaluation (None: the budget's)."""
+    analytic_pinch: str = ANALYTIC_PINCHES[0]
+    """Where the analytic controller pinches: ``feasible`` (the centroid, or the feasible point nearest it)
+    or ``centroid`` (the paper's literal choice, even where the robot could not grasp)."""
+    arm: ArmModel = field(default_factory=ArmModel)
+    """The cutting arm's footprint, for pinch feasibility (``arm.length_mm``: inf, the paper's cylinder)."""
+    seed: int = 0
+    """Seed of everything random."""
+    sim: SimConfig = field(default_factory=SimConfig)
+    """The physics and the protocol (noise, score)."""
+    env: EnvConfig = field(default_factory=EnvConfig)
+    """What the policies observe, how they act and are rewarded."""
+    train: TrainConfig = field(default_factory=TrainConfig)
+    """The learner and its settings (``train.iterations``: per policy)."""
+    record: int | None = None
+    """Write ``recording.rrd`` of the evaluation's first N envs of each method; None: none."""
+    colour_by: str = "strain"
+    """What the recorded sheet's vertex colours show: ``strain`` or ``height``."""
+    plots: bool = True
+    """Write the plots (regions, improvements, the pinch-candidate map, learning curves)."""
+
+    def settings(self) -> dict:
+        """The budget's ``candidates``, ``rl_candidates`` and ``trials``, with this job's where given."""
+        if self.budget not in BUDGETS:
+            raise ValueError(f"budget: choose one of {', '.join(BUDGETS)} (got {self.budget!r})")
+        if self.policy not in SELECTORS:
+            raise ValueError(f"policy: choose one of {', '.join(SELECTORS)} (got {self.policy!r})")
+        given = {"candidates": self.candidates, "rl_candidates": self.rl_candidates, "trials": self.trials}
+        for name, value in given.items():
+            if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
+                raise ValueError(f"{name}: must be an integer >= 1, or null for the budget's (got {value!r})")
+        return {**BUDGETS[self.budget], **{k: v for k, v in given.items() if v is not None}}
+
+
+@dataclass
+class EvaluateJob:
+    """``warpcut evaluate``: the paper's Table I protocol over a suite of contours: per contour the
+    no-tension error and each method's paired improvement with its 95% CI, and the mean row."""
+
+    contours: list[str] = field(default_factory=lambda: ["all"])
+    """Built-in names or contour files; ``all``: the built-in suite."""
+    methods: list[str] = field(default_factory=lambda: list(TABLE_METHODS))
+    """The methods (``none``, ``fixed``, ``analytic``, ``rl``, ``grad``)."""
+    trials: int = EVALUATION_TRIALS
+    """Seeded trials per contour and method (the paper's 10)."""
+    candidates: int = EVALUATION_CANDIDATES
+    """Pinch candidates per plan (the paper's 30)."""
+    plan: bool = True
+    """Plan every cut (segments, order, pinch); false: one loop, fixed by random search, rl and analytic
+    at the feasible centroid."""
+    checkpoints: str | None = None
+    """A directory of trained runs, one per contour (``CHECKPOINTS/NAME``, as ``warpcut train`` writes):
+    the rl column plays them instead of training a policy per contour."""
+    allow_partial: bool = False
+    """Accept checkpoint runs whose training was interrupted (their last saved policy)."""
+    analytic_pinch: str = ANALYTIC_PINCHES[0]
+    """Where the analytic controller pinches: ``feasible`` or ``centroid``."""
+    arm: ArmModel = field(default_factory=ArmModel)
+    """The cutting arm's footprint, for pinch feasibility."""
+    seed: int = 0
+    """Seed of everything random."""
+    sim: SimConfig = field(default_factory=SimConfig)
+    """The physics and the protocol (noise, score)."""
+    env: EnvConfig = field(default_factory=EnvConfig)
+    """What the rl column's policies observe, how they act and are rewarded."""
+    train: TrainConfig = field(default_factory=TrainConfig)
+    """The rl column's learner (a policy per contour)."""
+    grad: GradConfig = GRAD_CONFIG
+    """The grad column's optimiser (an open-loop plan per contour)."""
+    record: int | None = None
+    """Write ``recording.rrd`` of the first contour's first N envs of each method; None: none."""
+    colour_by: str = "strain"
+    """What the recorded sheet's vertex colours show: ``strain`` or ``height``."""
+    video: int | None = None
+    """Write MP4 videos of the first contour's first N envs of each method; None: none."""
+    plots: bool = True
+    """Write the plots (regions, improvements, learning curves)."""
+
+    def check(self) -> EvaluateJob:
+        """Itself, or ``ValueError`` naming a field out of range."""
+        check_methods(self.methods, "methods")
+        for name in ("trials", "candidates"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"{name}: must be an integer >= 1 (got {value!r})")
+        if self.analytic_pinch not in ANALYTIC_PINCHES:
+            raise ValueError(f"analytic_pinch: choose one of {', '.join(ANALYTIC_PINCHES)} (got {self.analytic_pinch!r})")
+        self.sim.validated()
+        self.grad.validated()
+        return self
+
+
+OUTPUT_KEYS = ("record", "colour_by", "video", "plots", "export_mesh")
+"""The keys of a job that say only what a run writes besides its results: a resumed run may change them."""
+
+
+def with_dependent_defaults(job: Any, explicit: set[str]) -> Any:
+    """``job`` with the defaults that follow from its other settings, where not set ``explicit``ly (dotted
+    keys given by a file, ``--set`` or a flag):
+
+    - the env's action type is the learner's (``agents.algorithms``): PPO trains discrete moves;
+    - the gradient optimiser's steps and step size are its estimator's (:data:`agents.config.GRAD_CONFIGS`).
+    """
+    from agents.algorithms import algorithm
+
+    if hasattr(job, "train") and hasattr(job, "env") and "env.action_type" not in explicit:
+        actions = algorithm(job.train.algo).action_type
+        job = dataclasses.replace(job, env=dataclasses.replace(job.env, action_type=actions))
+    if hasattr(job, "grad") and job.grad.estimator in GRAD_CONFIGS:
+        own = GRAD_CONFIGS[job.grad.estimator]
+        keep = {
+            f.name: getattr(job.grad, f.name)
+            for f in dataclasses.fields(GradConfig)
+            if f"grad.{f.name}" in explicit or f.name == "estimator"
+        }
+        job = dataclasses.replace(job, grad=dataclasses.replace(own, **keep))
+    return job

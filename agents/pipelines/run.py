@@ -1,0 +1,247 @@
+"""The main job, :func:`run_pipeline` (``warpcut run``): plan one contour (segments, order, pinch candidates
+scored with fixed tension), let a tensioner choose the candidate (rl: a policy per candidate, the one that
+validates best wins), then compare none / fixed / analytic / rl over seeded trials."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from agents.baselines import AnalyticTension
+from agents.config import VALIDATION_TRIALS
+from agents.evaluation import Method, MethodResult, evaluate_suite, run_method
+from agents.jobs import RunJob, contour_spec
+from agents.methods import StepCallbacks, point_text
+from agents.pipelines.common import analytic_pinches, claims_out, policy_job, record_job, train_policy
+from agents.policies import nominal_validation_error, rollout_errors
+from envs.options import ENV_FIELDS, PatternCutOptions
+from warpcut.contours import Contour, load_contour
+from warpcut.io import write_json
+from warpcut.planning import Plan, plan_cut
+from warpcut.sim.config import SimConfig
+
+
+@dataclass
+class RunReport:
+    """What :func:`run_pipeline` found; :meth:`to_json` is the run directory's ``results.json``."""
+
+    contour: Contour
+    config: SimConfig
+    plan: Plan
+    selector: str
+    """The tensioner that chose the pinch candidate."""
+    methods: list[str]
+    table: dict
+    """:func:`agents.evaluation.evaluate_suite`'s report for the contour (one row)."""
+    candidates: list[dict]
+    """The candidates the selector scored, best fixed-tension rank first, with each one's scores."""
+    chosen_candidate: int
+    budget: str
+    analytic_pinch: str
+    seconds: float
+    policy_runs: list[Path] = field(default_factory=list)
+    """The run directories of the policies trained (empty unless the selector is rl)."""
+
+    @property
+    def row(self) -> dict:
+        return self.table["rows"][0]
+
+    def to_json(self) -> dict:
+        return {
+            **self.table,
+            "plan": self.plan.to_json()["chosen"],
+            "policy": self.selector,
+            "candidates": self.candidates,
+            "chosen_candidate": self.chosen_candidate,
+            "budget": self.budget,
+            "analytic_pinch": self.analytic_pinch,
+            "seconds": self.seconds,
+        }
+
+
+@claims_out
+def run_pipeline(
+    job: RunJob,
+    out: str | Path,
+    *,
+    resume: bool = False,
+    overwrite: bool = False,
+    device: str | None = None,
+    log: Callable[[str], None] = lambda _: None,
+    progress: bool = True,
+    step_callbacks: StepCallbacks | None = None,
+) -> RunReport:
+    """Plan ``job.contour``, choose the pinch candidate with ``job.policy``, evaluate every method.
+
+    Args:
+        job: The contour, budget, selector, physics, env and learner (:class:`agents.jobs.RunJob`).
+        out: Run directory: ``config.json`` (the job), ``plan.json``, ``results.json`` and the policies
+            (``rl/candidate-K/``). Locked while the pipeline runs; refused if it holds another run (see
+            :func:`warpcut.io.claim_run_dir`).
+        resume: Continue the run in ``out`` (started with the same job): policies trained to the end are
+            kept, interrupted ones continue from their checkpoints.
+        overwrite: Delete what ``out`` holds first.
+        device: Warp device.
+        log: Called with each progress line.
+        progress: Show the training progress bars.
+        step_callbacks: Step callbacks of the evaluation's batches (:data:`agents.methods.StepCallbacks`).
+    """
+    settings = job.settings()
+    config = job.sim.validated()
+    out = Path(out)
+    loaded = load_contour(contour_spec(job.contour))
+    record_job(out, job, resume)
+    start = time.perf_counter()
+
+    sampled = f"{settings['candidates']} sampled pinch candidates (+ the centroid if feasible)"
+    log(f"[1/3] planning {loaded.name}: {sampled}")
+    plan = plan_cut(loaded, config, num_candidates=settings["candidates"], seed=job.seed, device=device, arm=job.arm)
+    write_json(out / "plan.json", plan.to_json())
+    pinch = plan.chosen["pinch"]
+    log(
+        f"      {len(plan.segments)} segment(s), order {list(plan.order)}, pinch "
+        f"{point_text(pinch)} with fixed tension: {plan.chosen['error_vertices']:.1f} vertices"
+    )
+    listed = _ranked_candidates(plan, settings["rl_candidates"] if job.policy == "rl" else None)
+    analytic = Method("analytic", pinches=analytic_pinches(job.analytic_pinch, [loaded], [plan]))
+    runs: list[Path] = []
+    rl_dir = None
+    if job.policy == "fixed":
+        chosen = 0  # the plan's choice: the best candidate by fixed tension
+        log("[2/3] --policy fixed: the plan's pinch and order")
+    elif job.policy == "analytic":
+        log(f"[2/3] scoring the analytic policy at {len(listed)} pinch candidate(s)")
+        chosen = _choose_by_analytic(loaded, plan, listed, config, device, job.seed)
+        best = listed[chosen]
+        analytic = Method(
+            "analytic", pinches=[np.asarray(best["pinch"])], segments=[plan.ordered_segments(best["order"])]
+        )
+    else:
+        rl_dir, chosen, runs = _train_candidates(
+            job, loaded, plan, listed, settings["trials"], out, device, resume, log, progress
+        )
+    log(f"      chosen by {job.policy}: {_candidate_text(listed[chosen])}")
+
+    methods = ["none", "fixed", "analytic"] + (["rl"] if job.policy == "rl" else [])
+    log(f"[3/3] evaluating {', '.join(methods)}: {settings['trials']} trials each")
+    specs = [Method("none"), Method("fixed", pinches=[pinch]), analytic]
+    if rl_dir is not None:
+        on_step = None if step_callbacks is None else step_callbacks("rl", 0)
+        # Paired: the noise of the baselines' trials (evaluate_suite below, same seed).
+        rl = rollout_errors(
+            rl_dir, settings["trials"], job.seed + 1, device, on_step, paired_noise=(job.seed, 0)
+        )
+        specs.append(Method("rl", result=MethodResult.from_rollouts([rl])))
+    table = evaluate_suite(
+        [loaded],
+        specs,
+        trials=settings["trials"],
+        config=config,
+        device=device,
+        seed=job.seed,
+        segments=[plan.ordered_segments()],
+        step_callbacks=step_callbacks,
+    )
+    report = RunReport(
+        loaded, config, plan, job.policy, methods, table, listed, chosen, job.budget, job.analytic_pinch,
+        time.perf_counter() - start, runs,
+    )  # fmt: skip
+    write_json(out / "results.json", report.to_json())
+    return report
+
+
+def _ranked_candidates(plan: Plan, keep: int | None) -> list[dict]:
+    """The plan's candidates, best by fixed tension first (the first ``keep``; None: all)."""
+    ranked = sorted(range(len(plan.candidates)), key=lambda c: plan.candidates[c]["error_vertices"])
+    return [
+        {
+            "pinch": [float(v) for v in c["point"]],
+            "order": [int(k) for k in c["best_order"]],
+            "fixed_error_vertices": float(c["error_vertices"]),
+        }
+        for c in (plan.candidates[k] for k in ranked[:keep])
+    ]
+
+
+def _candidate_text(candidate: dict) -> str:
+    """A candidate's pinch, order and scores, as the progress lines show them."""
+    scores = ("fixed_error_vertices", "analytic_error_vertices", "rl_validation_error_vertices")
+    return (
+        f"pinch {point_text(candidate['pinch'])}, order {candidate['order']}"
+        + "".join(f", {k.split('_')[0]} {candidate[k]:.1f}" for k in scores if k in candidate)
+        + " vertices"
+    )
+
+
+def _choose_by_analytic(
+    contour: Contour, plan: Plan, listed: list[dict], config: SimConfig, device: str | None, seed: int
+) -> int:
+    """Score the analytic policy at every candidate (noise-free, one batch); the index of the best."""
+    scores = run_method(
+        [contour] * len(listed),
+        [np.asarray(c["pinch"]) for c in listed],
+        AnalyticTension(),
+        1,
+        config.replace(noise_std=0.0),
+        device,
+        seed,
+        segments=[plan.ordered_segments(c["order"]) for c in listed],
+    ).error_vertices[:, 0]
+    for c, e in zip(listed, scores, strict=True):
+        c["analytic_error_vertices"] = float(e)
+    return int(np.argmin(scores))
+
+
+def _train_candidates(
+    job: RunJob,
+    contour: Contour,
+    plan: Plan,
+    listed: list[dict],
+    trials: int,
+    out: Path,
+    device: str | None,
+    resume: bool,
+    log: Callable[[str], None],
+    progress: bool,
+) -> tuple[Path, int, list[Path]]:
+    """The rl selector: a policy per candidate in ``listed``, each candidate cut in its best order; records
+    each candidate's validation error in ``listed``. Returns the winner's run directory, its index (the
+    first, i.e. the better fixed rank, among ties) and every run directory."""
+    options = PatternCutOptions(
+        contour=contour, sim_config=job.sim, **{name: getattr(job.env, name) for name in ENV_FIELDS}
+    )
+    runs = []
+    what = f"{job.train.algo} policy for each of the best {len(listed)} pinch candidate(s)"
+    log(f"[2/3] training a{'n' if job.train.algo[0] in 'aeiou' else ''} {what} ({job.train.batch_size} envs each)")
+    for k, candidate in enumerate(listed):
+        run_dir = out / "rl" / f"candidate-{k}"
+        segments = [s.tolist() for s in plan.ordered_segments(candidate["order"])]
+        train_job = policy_job(
+            options, job, job.seed, trials, pinch_point=candidate["pinch"], segments=segments
+        )
+        label = f"{job.train.algo.upper()} {contour.name}, candidate {k + 1}/{len(listed)} {point_text(candidate['pinch'])}"
+        summary = train_policy(train_job, run_dir, device=device, progress=progress, resume=resume, label=label)
+        best = summary["best"]
+        candidate["rl_best_iteration"] = best["iterations"] if best else summary["iterations"]
+        if best is not None:
+            candidate["rl_validation_error_vertices"] = best["validation_error"]
+        if best is None or options.randomize or options.relative_reward:
+            # no validation, or one off the nominal sheet: compare the candidates on the nominal sheet
+            if best is not None:
+                candidate["rl_training_validation_error"] = best["validation_error"]
+            candidate["rl_validation_error_vertices"] = nominal_validation_error(
+                run_dir, job.train.validation_trials or VALIDATION_TRIALS, job.seed, device
+            )
+        candidate["run"] = str(run_dir.relative_to(out))
+        runs.append(run_dir)
+        nominal = ", nominal sheet" if "rl_training_validation_error" in candidate else ""
+        log(
+            f"      candidate {point_text(candidate['pinch'])}: fixed {candidate['fixed_error_vertices']:.1f}, "
+            f"rl {candidate['rl_validation_error_vertices']:.1f} vertices (validation{nominal})"
+        )
+    chosen = min(range(len(listed)), key=lambda k: (listed[k]["rl_validation_error_vertices"], k))
+    return out / listed[chosen]["run"], chosen, runs

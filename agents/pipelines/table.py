@@ -1,0 +1,287 @@
+"""The paper's Table I protocol over a suite of contours, :func:`evaluate_table` (``warpcut evaluate``): per
+contour the no-tension error and each method's paired improvement with its 95% CI, and the mean row."""
+
+from __future__ import annotations
+
+import functools
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from agents.evaluation import Method, MethodResult, evaluate_suite
+from agents.gradient import grad_column
+from agents.jobs import EvaluateJob
+from agents.methods import StepCallbacks
+from agents.pipelines.common import (
+    analytic_pinches,
+    claims_out,
+    finished_run,
+    policy_iteration,
+    policy_job,
+    record_job,
+    train_policy,
+)
+from agents.policies import check_policy_run, is_run, rollout_errors
+from envs.options import ENV_FIELDS, PatternCutOptions
+from warpcut.contours import Contour, resolve_contours
+from warpcut.io import read_json, safe_name, write_json
+from warpcut.planning import Plan, plan_cut
+from warpcut.sim.config import SimConfig
+
+
+@dataclass
+class TableReport:
+    """What :func:`evaluate_table` measured; :meth:`to_json` is the run directory's ``results.json``."""
+
+    contours: list[Contour]
+    methods: list[str]
+    config: SimConfig
+    table: dict
+    """:func:`agents.evaluation.evaluate_suite`'s report: ``rows``, ``mean``, ``score``, ``trials``."""
+    plans: list[Plan] | None
+    analytic_pinch: str
+    seconds: float
+    policy_runs: list[Path] = field(default_factory=list)
+    """The run directories of the policies trained here (empty with checkpoints, or without rl)."""
+
+    def to_json(self) -> dict:
+        return {
+            **self.table,
+            "planned": self.plans is not None,
+            "analytic_pinch": self.analytic_pinch,
+            "seconds": self.seconds,
+        }
+
+    def markdown(self) -> str:
+        """The table as Markdown: per contour the no-tension error and each method's improvement ± CI."""
+        shown = [m for m in self.methods if m != "none"]
+        head = "| contour | no tension (vertices) | " + " | ".join(f"{m} (%)" for m in shown) + " |"
+        lines = [head, "|---|---|" + "---|" * len(shown)]
+        for row in self.table["rows"]:
+            cells = [f"{row[f'{m}_improvement_pct']:+.1f} ± {row[f'{m}_ci95']:.1f}" for m in shown]
+            lines.append(
+                f"| {row['contour']} | {row['none_error_vertices']:.1f} | " + " | ".join(cells) + " |"
+            )
+        mean = self.table["mean"]
+        cells = [f"{mean[f'{m}_improvement_pct']:+.1f} ± {mean[f'{m}_ci95']:.1f}" for m in shown]
+        lines.append("| **mean** | | " + " | ".join(cells) + " |")
+        return "\n".join(lines)
+
+
+@claims_out
+def evaluate_table(
+    job: EvaluateJob,
+    out: str | Path,
+    *,
+    resume: bool = False,
+    overwrite: bool = False,
+    plans: Sequence[Plan] | None = None,
+    device: str | None = None,
+    log: Callable[[str], None] = lambda _: None,
+    stages: Stages = lambda stage, done, total: None,
+    step_callbacks: StepCallbacks | None = None,
+) -> TableReport:
+    """The paper's Table I protocol on ``job.contours``.
+
+    Every contour is cut as planned (``job.plan``: segments and order; fixed and rl pinch at the planned
+    point, analytic per ``job.analytic_pinch``), or without a plan as one loop (fixed by random search, rl and
+    analytic at the feasible centroid). The rl column is a policy per contour: ``job.checkpoints/NAME`` when
+    given (runs ``warpcut train`` wrote), else trained now with ``job.train`` into ``out/policies/NAME``. Its
+    trials draw the baselines' noise (paired).
+
+    Args:
+        job: The contours, methods, trials, physics, env and learners (:class:`agents.jobs.EvaluateJob`).
+        out: Run directory: ``config.json`` (the job), ``plans.json``, ``results.json``, ``results.md``,
+            ``policies/`` (a run per contour, named by ``safe_name``). Locked while it runs; refused if it
+            holds another run (``claim_run_dir``).
+        resume: Continue the run in ``out`` (started with the same job): its plans and the policies trained
+            to the end are kept, interrupted ones continue from their checkpoints.
+        overwrite: Delete what ``out`` holds first.
+        plans: The plans themselves, one per contour (e.g. to compare learners on the same plans), instead
+            of planning now.
+        device: Warp device.
+        log: Called with each progress line.
+        stages: Called as each stage advances (:data:`Stages`: planning, training rl, evaluating).
+        step_callbacks: Step callbacks of the batches (``("rl", k)``: contour k's rollout).
+    """
+    job = job.check()
+    methods, config, trials, seed = list(job.methods), job.sim.validated(), job.trials, job.seed
+    out = Path(out)
+    named = resolve_contours(job.contours)
+    loaded = [c for _, c in named]
+    if job.checkpoints is not None and "rl" in methods:
+        _check_checkpoints(Path(job.checkpoints), loaded, job)
+    record_job(out, job, resume)
+    start = time.perf_counter()
+    settings = dict(num_candidates=job.candidates, seed=seed, device=device, arm=job.arm)
+    plans = _table_plans(plans if plans is not None else job.plan, loaded, config, settings, out, log, stages, resume)
+    specs, runs, notes = [Method(m) for m in methods], [], []  # notes: add a column's own fields to the table
+    for spec in specs:
+        if spec.name == "fixed" and plans is not None:
+            spec.pinches = [p.chosen["pinch"] for p in plans]
+        elif spec.name == "analytic":
+            spec.pinches = analytic_pinches(job.analytic_pinch, loaded, plans)
+        elif spec.name == "rl":
+            spec.result, runs, kept = _rl_result(job, named, plans, out, device, resume, log, step_callbacks, stages)
+            notes.append(functools.partial(_note_rl_iterations, kept))
+        elif spec.name == "grad":
+            spec.result, note = grad_column(
+                loaded, plans, out, trials, config, (job.grad, job.arm), device, seed, log, step_callbacks
+            )
+            notes.append(note)
+    batches = len({spec.name for spec in specs} | {"none"})  # evaluate_suite also runs none, the baseline
+    running = iter(range(batches))
+    table = evaluate_suite(
+        loaded,
+        specs,
+        trials=trials,
+        config=config,
+        device=device,
+        seed=seed,
+        segments=None if plans is None else [p.ordered_segments() for p in plans],
+        progress=lambda what: (log(f"  running {what}"), stages("evaluating", next(running, 0), batches)),
+        step_callbacks=step_callbacks,
+    )
+    stages("evaluating", batches, batches)
+    log(f"  evaluated {len(methods)} method(s) x {len(loaded)} contour(s) x {trials} trials")
+    for note in notes:
+        note(table)
+    report = TableReport(
+        loaded, methods, config, table, plans, job.analytic_pinch, time.perf_counter() - start, runs
+    )
+    write_json(out / "results.json", report.to_json())
+    from warpcut.io import write_atomic
+
+    write_atomic(out / "results.md", (report.markdown() + "\n").encode())
+    return report
+
+
+Stages = Callable[[str, int, int], None]
+"""``stages(stage, done, total)``: a pipeline's stage (e.g. "planning") has ``done`` of ``total`` steps
+done (a progress bar per stage; ``warpcut evaluate`` draws them)."""
+
+
+def _note_rl_iterations(kept: list[int | None], table: dict) -> None:
+    """Which iteration each contour's policy kept (``rl_policy_iteration``), and on how many contours model
+    selection kept the initial policy (it holds still)."""
+    for row, iteration in zip(table["rows"], kept, strict=False):
+        row["rl_policy_iteration"] = iteration
+    if kept:
+        table["rl_initial_policy_contours"] = sum(1 for it in kept if it == 0)
+
+
+def _table_plans(
+    plan: bool | Sequence[Plan],
+    contours: list[Contour],
+    config: SimConfig,
+    settings: dict,
+    out: Path,
+    log: Callable[[str], None],
+    stages: Stages,
+    resume: bool = False,
+) -> list[Plan] | None:
+    """:func:`evaluate_table`'s plans: the ones given (checked against the contours), or made now with the
+    plan search's ``settings`` (noise-free; written to ``out/plans.json``), or None (``plan`` False). With
+    ``resume``, the plans ``out/plans.json`` holds are read back instead of searched again: the request
+    (checked already) names the same contours, points and settings, and the search is deterministic."""
+    if isinstance(plan, list | tuple):  # plans made already, one per contour
+        plans = list(plan)
+        if [p.contour.name for p in plans] != [c.name for c in contours]:
+            raise ValueError("plan: give one Plan per contour, in the contours' order (or True / False)")
+        return plans
+    if not plan:
+        return None
+    config, path = config.replace(noise_std=0.0), out / "plans.json"
+    if resume and path.is_file():
+        try:
+            saved = read_json(path)
+            plans = [Plan.from_json(saved[c.name], c, config) for c in contours]
+        except (OSError, KeyError, TypeError, ValueError) as exc:
+            why = f"no plan for {exc.args[0]!r}" if isinstance(exc, KeyError) else " ".join(str(exc).split())
+            log(f"  planning again: {path} cannot be kept ({why})")
+        else:
+            stages("planning", len(contours), len(contours))
+            log(f"  kept the {len(plans)} plan(s) in {path}")
+            return plans
+    plans = _plan_all(contours, config, settings, log, stages)
+    write_json(path, {p.contour.name: p.to_json() for p in plans})
+    return plans
+
+
+def _plan_all(
+    contours: list[Contour], config: SimConfig, settings: dict, log: Callable[[str], None], stages: Stages
+) -> list[Plan]:
+    """Plan every contour (:func:`~warpcut.planning.plan_cut` with ``settings``), saying how far it got."""
+    plans, started = [], time.perf_counter()
+    for k, contour in enumerate(contours):
+        log(f"  [{k + 1}/{len(contours)}] planning {contour.name} ({settings['num_candidates']} candidates)")
+        stages("planning", k, len(contours))
+        plans.append(plan_cut(contour, config, **settings))
+    stages("planning", len(contours), len(contours))
+    log(f"  planned {len(plans)} contour(s) in {time.perf_counter() - started:.0f} s")
+    return plans
+
+
+def _rl_result(
+    job: EvaluateJob,
+    named: list[tuple[str, Contour]],
+    plans: list[Plan] | None,
+    out: Path,
+    device: str | None,
+    resume: bool,
+    log: Callable[[str], None],
+    step_callbacks: StepCallbacks | None,
+    stages: Stages,
+) -> tuple[MethodResult, list[Path], list[int | None]]:
+    """The rl column: per contour a run (from ``job.checkpoints``, or trained now with ``job.train``, at the
+    planned pinch and segments when planned) rolled out for ``job.trials``, paired with the baselines'
+    noise."""
+    trials, seed, checkpoints = job.trials, job.seed, job.checkpoints
+    options = PatternCutOptions(sim_config=job.sim, **{name: getattr(job.env, name) for name in ENV_FIELDS})
+    rollouts, runs, iterations, started = [], [], [], time.perf_counter()
+    for k, (spec, contour) in enumerate(named):
+        if checkpoints is not None:
+            run = Path(checkpoints) / safe_name(contour.name)
+        else:
+            run = out / "policies" / safe_name(contour.name)
+            verb = "kept" if resume and finished_run(run) else "training"
+            log(f"  [{k + 1}/{len(named)}] {verb} {job.train.algo} for {contour.name}")
+            planned = {}
+            if plans is not None:
+                planned = {
+                    "pinch_point": [float(v) for v in plans[k].chosen["pinch"]],
+                    "segments": [s.tolist() for s in plans[k].ordered_segments()],
+                }
+            train_job = policy_job(options, job, seed, trials, contour=spec, **planned)
+            train_policy(train_job, run, device=device, progress=False, resume=resume)
+            runs.append(run)
+        iterations.append(policy_iteration(run))
+        callback = None if step_callbacks is None else step_callbacks("rl", k)
+        # Trial t sees the noise of the baselines' trial t of this contour (env k * trials + t there).
+        rollouts.append(
+            rollout_errors(
+                run, trials, seed=seed + 1, device=device, on_step=callback, paired_noise=(seed, k * trials)
+            )
+        )
+        stages("training rl" if checkpoints is None else "rolling out rl", k + 1, len(named))
+    what = "trained" if checkpoints is None else "rolled out"
+    log(f"  rl: {what} {len(named)} policy(ies) in {time.perf_counter() - started:.0f} s")
+    return MethodResult.from_rollouts(rollouts), runs, iterations
+
+
+
+def _check_checkpoints(checkpoints: Path, contours: list[Contour], job: EvaluateJob) -> None:
+    """Refuse ``checkpoints`` unless it holds, for every contour, a finished run (or any, with
+    ``job.allow_partial``) trained on that contour, with the job's observations and actions and the same
+    simulation settings (:func:`agents.policies.check_policy_run`)."""
+    env = {name: getattr(job.env, name) for name in ENV_FIELDS}
+    for contour in contours:
+        run = checkpoints / safe_name(contour.name)
+        if not is_run(run):
+            raise ValueError(
+                f"checkpoints: no trained run for {contour.name!r} at {run} "
+                "(expected CHECKPOINTS/NAME/options.json from 'warpcut train --out')"
+            )
+        requested = PatternCutOptions(contour=contour, sim_config=job.sim, **env)
+        check_policy_run(run, requested, allow_partial=job.allow_partial)
