@@ -180,7 +180,7 @@ class Simulator(StateReads):
     def first_noise_stream(self) -> int:
         """The noise stream env 0 draws; env ``e`` draws stream ``first_noise_stream + e`` (default 0). A
         batch that sets it to ``k`` sees the same noise as envs ``k, k + 1, ...`` of another batch with the
-        same seed: paired trials across batches laid out differently (``agents.rl.policy_errors``)."""
+        same seed: paired trials across batches laid out differently (``agents.policies.policy_errors``)."""
         return self._first_noise_stream
 
     @first_noise_stream.setter
