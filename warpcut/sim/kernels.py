@@ -31,7 +31,7 @@ def hash32(x: wp.uint32) -> wp.uint32:
     x = x ^ (x >> wp.uint32(16))
     x = x * wp.uint32(0x7FEB352D)
     x = x ^ (x >> wp.uint32(15))
-    x = x * wp.uint32(0x846CA68B)
+    x = x * wp.uint32(-2073254261)  # 0x846CA68B: Warp writes integer literals as int32 first
     x = x ^ (x >> wp.uint32(16))
     return x
 
