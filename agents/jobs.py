@@ -12,6 +12,7 @@ changes them.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -28,7 +29,7 @@ from agents.config import (
     GradConfig,
     TrainConfig,
 )
-from agents.methods import SELECTORS, TABLE_METHODS, check_methods
+from agents.methods import BASELINES, SELECTORS, TABLE_METHODS, check_methods
 from envs.options import ENV_FIELDS, EnvConfig, PatternCutOptions
 from warpcut.planning.feasibility import ArmModel
 from warpcut.sim.config import SimConfig
@@ -249,3 +250,198 @@ def with_dependent_defaults(job: Any, explicit: set[str]) -> Any:
         }
         job = dataclasses.replace(job, grad=dataclasses.replace(own, **keep))
     return job
+
+
+def _count(name: str, value: Any) -> None:
+    """``ValueError`` naming ``name`` unless ``value`` is an integer >= 1."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ValueError(f"{name}: must be an integer >= 1 (got {value!r})")
+
+
+def _grad_validated(grad: GradConfig) -> GradConfig:
+    """``grad`` validated (its one spelling of ranges), or ``ValueError`` naming the ``grad.`` key."""
+    try:
+        return grad.validated()
+    except ValueError as error:
+        raise ValueError(f"grad.{error}") from None
+
+
+@dataclass
+class OptimizeJob:
+    """``warpcut optimize``: plan one contour's cut (segments, order and, unless ``pinch`` is given, the pinch
+    point: fixed tension's best candidate), optimise a plan of grasp moves there through the simulator
+    (``grad``: tape or es gradients; with es, feedback gains too), and evaluate it against no tension and
+    fixed tension at the same pinch point over seeded trials (paired)."""
+
+    contour: str | dict | None = None
+    """The contour: a built-in name, a ``.json``/``.svg`` file, or the contour itself."""
+    pinch: list[float] | None = None
+    """Pinch point ``[x, y]`` (mm, material coordinates). None: the plan's (fixed tension's best
+    candidate)."""
+    candidates: int = EVALUATION_CANDIDATES
+    """Pinch candidates sampled for the plan."""
+    trials: int = EVALUATION_TRIALS
+    """Seeded trials of the evaluation (none, fixed and grad, paired); the optimiser's episodes are others
+    (``grad.trials``, ``grad.es_trials``)."""
+    seed: int = 0
+    """Seed of everything random: the plan, the optimiser's episodes and perturbations, the evaluation."""
+    arm: ArmModel = field(default_factory=ArmModel)
+    """The cutting arm's footprint, for pinch feasibility (a pinch point moved by ``grad.optimize_pinch``
+    stays out of it)."""
+    sim: SimConfig = field(default_factory=SimConfig)
+    """The physics and the protocol (noise, score)."""
+    grad: GradConfig = GRAD_CONFIG
+    """The optimiser: its estimator, steps, episodes (``grad.iterations`` and ``grad.learning_rate``: the
+    estimator's own unless given)."""
+
+    def check(self) -> OptimizeJob:
+        """Itself (its ``grad`` ranges in their one spelling), or ``ValueError`` naming a field out of
+        range."""
+        if self.contour is None:
+            raise ValueError("contour: give the contour to optimise for (--contour)")
+        for name in ("candidates", "trials"):
+            _count(name, getattr(self, name))
+        if self.pinch is not None and (len(self.pinch) != 2 or not all(math.isfinite(v) for v in self.pinch)):
+            raise ValueError(f"pinch: give [x, y], finite numbers in mm (got {self.pinch!r})")
+        self.sim.validated()
+        return dataclasses.replace(self, grad=_grad_validated(self.grad))
+
+    def unused_keys(self) -> dict[str, str]:
+        """The keys this job would not use, ``{key: when it applies}``: the optimiser's settings of the other
+        estimator (:func:`agents.cli.common.refuse_unused_settings`)."""
+        es = [f.name for f in dataclasses.fields(GradConfig) if f.name.startswith("es_")]
+        if self.grad.estimator == "es":
+            return {f"grad.{k}": "read by estimator tape only (--estimator tape)" for k in TAPE_ONLY}
+        return {f"grad.{k}": "read by estimator es only (--estimator es)" for k in es}
+
+
+TAPE_ONLY = ("trials", "window", "pinch_learning_rate")
+"""The :class:`~agents.config.GradConfig` fields only the tape estimator reads (``optimize_pinch`` refuses es
+itself, as the closed-loop ``es_*`` fields refuse tape)."""
+
+
+@dataclass
+class RobustnessJob:
+    """``warpcut robustness``: the paper's sensitivity studies (Fig. 5). Each study sweeps one setting of the
+    simulation around the nominal sheet (``resolution``, ``noise``, ``force``: gravity) and scores every
+    method at every value over the same seeded trials: the baselines, trained policies (``runs``),
+    optimised plans (``plans``) and ``grad``, a plan optimised on the nominal sheet
+    (:mod:`agents.pipelines.robustness`)."""
+
+    contour: str | dict | None = None
+    """The contour: a built-in name, a ``.json``/``.svg`` file, or the contour itself; None with ``runs``:
+    the runs' contour."""
+    study: list[str] = field(default_factory=list)
+    """The studies to run, in order: ``resolution`` (vertices per side), ``noise`` (process noise, mm),
+    ``force`` (gravity, mm/s^2), or ``all``."""
+    methods: list[str] = field(default_factory=lambda: list(BASELINES))
+    """The methods besides the runs' and plans': the baselines and ``grad``; ``none`` always runs, the
+    others are measured against it."""
+    runs: dict[str, str] = field(default_factory=dict)
+    """Trained policies' runs of the contour (``warpcut train`` or ``run``), ``{label: run directory}``:
+    each a method. The first sets the pinch point, the cut order and the nominal sheet (then ``sim`` is
+    the run's own); none: fixed tension at the plan's pinch point on ``sim``'s sheet."""
+    plans: dict[str, str] = field(default_factory=dict)
+    """Optimised plans of the contour (``warpcut optimize``'s ``NAME.json``, or ``warpcut evaluate``'s
+    ``grad/NAME.json``), ``{label: file}``: each a method, played as it was optimised (open or closed loop)
+    at its own pinch point at every value."""
+    values: list[float] | None = None
+    """The sweep of the one study given (vertices per side, mm or mm/s^2); None: each study's own
+    (:data:`agents.pipelines.robustness.STUDY_VALUES`)."""
+    trials: int = EVALUATION_TRIALS
+    """Seeded noisy trials per value and method (paired: trial k has the same noise in every method)."""
+    seed: int = 0
+    """Seed of everything random: the noise, the plan, ``grad``'s optimisation."""
+    sim: SimConfig = field(default_factory=SimConfig)
+    """The nominal sheet and the protocol (noise, score) without ``runs``."""
+    grad: GradConfig = GRAD_CONFIG
+    """The ``grad`` method's optimiser (only with ``grad`` in ``methods``)."""
+    plots: bool = True
+    """Write ``robustness.png/svg`` (the paper's Fig. 5, a panel per study)."""
+
+    def check(self) -> RobustnessJob:
+        """Itself (its ``grad`` ranges in their one spelling), or ``ValueError`` naming a field out of range;
+        the studies, their values, runs and plans are the pipeline's to check
+        (:func:`agents.pipelines.robustness.check_job`)."""
+        _count("trials", self.trials)
+        for name in ("runs", "plans"):
+            if not all(isinstance(v, str) and v for v in getattr(self, name).values()):
+                raise ValueError(f"{name}: give {{label: path}}, each path a directory or file")
+        self.sim.validated()
+        return dataclasses.replace(self, grad=_grad_validated(self.grad))
+
+    def unused_keys(self) -> dict[str, str]:
+        """The keys this job would not use, ``{key: when it applies}``: ``grad`` without the grad method,
+        ``sim`` with runs (:func:`agents.cli.common.refuse_unused_settings`)."""
+        unused = {}
+        if "grad" not in self.methods:
+            unused["grad"] = "read by the grad method only (--methods ...,grad)"
+        if self.runs:
+            unused["sim"] = "with --run the nominal sheet is the run's"
+        return unused
+
+
+@dataclass
+class SimulateJob:
+    """``warpcut simulate``: cut one contour with each baseline tensioner (no training) over seeded trials
+    and compare their errors with no tension's."""
+
+    contour: str | dict | None = None
+    """The contour: a built-in name (``warpcut contours``), a ``.json``/``.svg`` file, or the contour
+    itself."""
+    policy: list[str] = field(default_factory=lambda: list(BASELINES))
+    """The tensioners to compare: ``none``, ``fixed``, ``analytic``."""
+    pinch: list[float] | None = None
+    """Pinch point ``[x, y]`` (mm, material coordinates) of fixed and analytic. None: fixed's best point by
+    random search, analytic's feasible centroid."""
+    trials: int = 1
+    """Seeded trials per tensioner; they differ by their process noise (``sim.noise_std``)."""
+    seed: int = 0
+    """Seed of the trials' noise (and of fixed's pinch search)."""
+    sim: SimConfig = field(default_factory=SimConfig)
+    """The physics and the protocol: ``sim.noise_std``, ``sim.score``, ``sim.resolution``, ``sim.fixture``
+    ..."""
+    record: int | None = None
+    """Write ``recording.rrd`` (next to ``--json``, or in ``logs/simulate-TIMESTAMP``) of each tensioner's
+    first N envs; None: no recording."""
+    colour_by: str = "strain"
+    """What the recorded sheet's vertex colours show: ``strain`` or ``height`` (with ``record``)."""
+    video: int | None = None
+    """Write MP4 videos of each tensioner's first N envs where the recording goes; None: no video."""
+    export_mesh: str | None = None
+    """A directory: each tensioner's final sheet (its first trial) as ``POLICY_env0_stepN.glb`` (mm, z up,
+    strain colours); None: no meshes."""
+    plots: bool = True
+    """Write ``regions.png/svg`` (each tensioner's cut region) where the recording goes."""
+
+    def check(self) -> SimulateJob:
+        """Itself, or ``ValueError`` naming a field out of range."""
+        if self.contour is None:
+            raise ValueError("contour: give the contour to cut (--contour)")
+        check_methods(self.policy, "policy", BASELINES)
+        _count("trials", self.trials)
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+            raise ValueError(f"seed: must be an integer >= 0 (got {self.seed!r})")
+        if self.pinch is not None and (len(self.pinch) != 2 or not all(math.isfinite(v) for v in self.pinch)):
+            raise ValueError(f"pinch: give [x, y], finite numbers in mm (got {self.pinch!r})")
+        for name in ("record", "video"):
+            if getattr(self, name) is not None:
+                _count(name, getattr(self, name))
+        if self.colour_by not in COLOUR_FIELDS:
+            raise ValueError(f"colour_by: choose one of {', '.join(COLOUR_FIELDS)} (got {self.colour_by!r})")
+        try:
+            self.sim.validated()
+        except ValueError as error:
+            raise ValueError(f"sim.{error}") from None
+        return self
+
+    def unused_keys(self) -> dict[str, str]:
+        """The keys this job would not use, ``{key: when it applies}``: a setting given for nothing is
+        refused, not ignored (:func:`agents.cli.common.refuse_unused_settings`)."""
+        unused = {}
+        if not {"fixed", "analytic"} & set(self.policy):
+            runs = ",".join(self.policy)
+            unused["pinch"] = f"only fixed and analytic pinch, and policy is {runs} (add either to policy)"
+        if self.record is None:
+            unused["colour_by"] = "colours a recording, and record is off (add --record [N])"
+        return unused

@@ -3,10 +3,8 @@
 import json
 import os
 import re
-import shutil
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,99 +24,9 @@ def invoke(args):
     return result.exit_code, result.stdout, result.stderr
 
 
-def test_contours_lists_the_suite_and_writes_json(tmp_path):
-    out = tmp_path / "contours.json"
-    code, stdout, _ = invoke(["contours", "--json", str(out)])
-    assert code == 0
-    assert "fls-circle" in stdout and "closed" in stdout and "open" in stdout
-    rows = json.loads(out.read_text())["contours"]
-    assert len(rows) >= 18
-    circle = next(r for r in rows if r["name"] == "fls-circle")
-    assert circle["closed"] is True and circle["length_mm"] == pytest.approx(157.08, abs=0.1)
-
-
-def test_simulate_writes_results_json(tmp_path):
-    out = tmp_path / "results.json"
-    code, stdout, _ = invoke(
-        [
-            "simulate",
-            "--contour",
-            "fls-circle",
-            "--policy",
-            "none,fixed,analytic",
-            "--pinch",
-            "50,42",
-            "--resolution",
-            "13",
-            "--trials",
-            "2",
-            "--noise",
-            "0.01",
-            "--device",
-            "cpu",
-            "--json",
-            str(out),
-        ]
-    )
-    assert code == 0, stdout
-    report = json.loads(out.read_text())
-    assert report["contour"] == "fls-circle"
-    assert set(report["results"]) == {"none", "fixed", "analytic"}
-    for r in report["results"].values():
-        assert {"error_vertices", "error_mm2", "improvement_pct"} <= set(r)
-    assert report["results"]["none"]["improvement_pct"] == 0.0
-    assert report["results"]["none"]["error_vertices"] > 0
-    assert "improvement" in stdout and "analytic" in stdout
-
-
-def test_simulate_accepts_a_contour_file(tmp_path):
-    path = tmp_path / "mine.json"
-    path.write_text(
-        json.dumps({"name": "mine", "closed": True, "points": [[70, 50], [50, 70], [30, 50], [50, 30]]})
-    )
-    code, stdout, _ = invoke(
-        ["simulate", "--contour", str(path), "--policy", "none", "--resolution", "9", "--no-plots"]
-    )
-    assert code == 0 and "contour mine" in stdout
-
-
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["simulate", "--contour", "no-such-shape"], "unknown contour 'no-such-shape'.*fls-circle"),
-        (["simulate", "--contour", "fls-circle", "--policy", "none,magic"], "--policy.*unknown magic"),
-        (["simulate", "--contour", "fls-circle", "--pinch", "50"], "--pinch.*expected X,Y"),
-        (
-            ["simulate", "--contour", "fls-circle", "--pinch", "150,40", "--policy", "fixed"],
-            "pinch_points.*off the",
-        ),
-        (["simulate", "--contour", "fls-circle", "--trials", "0"], "--trials"),
-        (["simulate", "--contour", "fls-circle", "--device", "tpu"], "device: unknown device 'tpu'"),
-        (["simulate"], "Missing option '--contour'"),
-        (["simulate", "--contour", "fls-circle", "--record", "-1"], "--record: N must be a positive integer"),
-        (
-            ["simulate", "--contour", "fls-circle", "--record=-2"],
-            r"--record: N must be a positive integer \(got -2",
-        ),
-        (["simulate", "--contour", "fls-circle", "-5"], "No such option '-5'"),
-        (["simulate", "--contour", "fls-circle", "--record", "-12"], r"--record: .*\(got -12\)"),
-        (["simulate", "--contour", "fls-circle", "--record", "2", "-7"], "No such option '-7'"),
-        (["simulate", "--contour", "fls-circle", "--seed", "-1"], "--seed.*-1 is not in the range 0<=x<="),
-        (
-            [
-                "simulate",
-                "--contour",
-                "circle-small",
-                "--policy",
-                "none",
-                "--trials",
-                "1",
-                "--resolution",
-                "9",
-            ]
-            + ["--no-plots", "--json", "/dev/null/sub/results.json"],
-            r"--json: cannot write /dev/null/sub/results.json \(/dev/null is not a directory\)",
-        ),
         (["nonsense"], "No such command"),
     ],
 )
@@ -153,79 +61,6 @@ def test_warp_starts_quietly_unless_asked():
         ["bash", "-c", f'"{sys.executable}" -c "{code}" 2>&-'], capture_output=True, text=True, env=env
     )
     assert closed.returncode == 0 and closed.stdout.strip() == done.stdout.strip()
-
-
-def test_console_script_runs():
-    script = shutil.which("warpcut", path=str(Path(sys.executable).parent)) or shutil.which("warpcut")
-    assert script, "the warpcut console script is not installed (pip install -e .)"
-    proc = subprocess.run(
-        [
-            script,
-            "simulate",
-            "--contour",
-            "circle-small",
-            "--policy",
-            "none",
-            "--resolution",
-            "9",
-            "--no-plots",
-        ],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert proc.returncode == 0, proc.stderr
-    assert "circle-small" in proc.stdout and "Traceback" not in proc.stderr
-
-
-def test_bench_writes_the_documented_json(tmp_path):
-    out = tmp_path / "bench.json"
-    code, stdout, _ = invoke(
-        [
-            "bench",
-            "--device",
-            "cpu",
-            "--batch-sizes",
-            "1,4",
-            "--rollout-envs",
-            "2",
-            "--train-envs",
-            "4,8",
-            "--repeats",
-            "1",
-            "--json",
-            str(out),
-        ]
-    )
-    assert code == 0, stdout
-    result = json.loads(out.read_text())
-    assert result["device"] == "cpu"
-    assert set(result["updates_per_s"]) == {"1", "4"}
-    for key in (
-        "rollouts_per_s",
-        "rollouts_per_s_paper_sweeps",
-        "numpy_updates_per_s",
-        "speedup_vs_numpy",
-        "cold_start_s",
-        "warm_start_s",
-    ):
-        assert result[key] > 0, key
-    for key in (
-        "sim_env_steps_per_s",
-        "train_steps_per_s",
-        "train_collection_steps_per_s",
-        "train_overall_steps_per_s",
-    ):
-        assert set(result[key]) == {"4", "8"} and min(result[key].values()) > 0, key
-    for b in ("4", "8"):
-        (ratio,) = result["train_vs_sim_pct_runs"][b]  # --repeats 1: one PPO run between two simulator runs
-        assert result["train_vs_sim_pct"][b] == ratio > 0
-        assert result["train_collection_steps_per_s"][b] > result["train_steps_per_s"][b]  # + the update
-    assert result["speedup_vs_numpy"] == pytest.approx(
-        max(result["updates_per_s"].values()) / result["numpy_updates_per_s"]
-    )
-    assert isinstance(result["scoring_overhead_pct"], float)  # may be negative at B = 2 (noise)
-    assert set(result["updates_per_s_noise_free"]) == {"4"} and result["updates_per_s_noise_free"]["4"] > 0
 
 
 def test_train_resume_export_and_evaluate_with_checkpoints(tmp_path):
@@ -438,33 +273,6 @@ def test_train_continuous_actions(tmp_path):
     assert "rl_error_vertices" in json.loads((run / "evaluation.json").read_text())
 
 
-def test_plan_prints_and_writes_the_plan_json(tmp_path):
-    out = tmp_path / "plan.json"
-    code, stdout, _ = invoke(
-        [
-            "plan",
-            "--contour",
-            "fls-circle",
-            "--candidates",
-            "4",
-            "--arm-length",
-            "15",
-            "--resolution",
-            "17",
-            "--json",
-            str(out),
-        ]
-    )
-    assert code == 0, stdout
-    assert "segment 0: notch (75.0, 50.0)" in stdout and "chosen: pinch" in stdout
-    plan = json.loads(out.read_text())
-    assert len(plan["segments"]) == 2 and sorted(plan["order"]) == [0, 1]
-    assert {"points", "notch", "termination"} <= set(plan["segments"][0])
-    assert all({"point", "feasible", "error_vertices"} <= set(c) for c in plan["pinch_candidates"])
-    feasible = [c for c in plan["pinch_candidates"] if c["feasible"]]
-    assert plan["chosen"]["error_vertices"] == min(c["error_vertices"] for c in feasible)
-
-
 @pytest.mark.parametrize("shared", [False, True], ids=["policy-per-candidate", "shared-policy"])
 def test_run_end_to_end_on_a_tiny_budget(tmp_path, shared):
     out = tmp_path / "run"
@@ -555,59 +363,6 @@ def test_run_with_a_quick_analytic_plan(tmp_path):
     assert chosen["analytic_error_vertices"] == min(scores)
     assert report["rows"][0]["analytic_pinch"] == pytest.approx(chosen["pinch"])
     assert not (tmp_path / "run" / "rl").exists()
-
-
-@pytest.mark.parametrize("option", ["--batch-sizes", "--train-envs"])
-@pytest.mark.parametrize("value", ["64,x", "0,64"])
-def test_bench_names_a_bad_batch_list(option, value):
-    code, stdout, stderr = invoke(["bench", option, value])
-    assert code == 2 and option in stderr and "Traceback" not in stdout + stderr
-
-
-def test_bench_measures_training_at_the_default_batch():
-    """The env-step and PPO measurements include the batch ``warpcut train`` steps by default."""
-    from agents.config import TrainConfig
-    from warpcut.bench import ENV_STEP_ENVS
-
-    assert TrainConfig.num_envs in ENV_STEP_ENVS
-
-
-def test_bench_compares_each_ppo_run_with_the_simulator_around_it(monkeypatch):
-    """PPO's rate is a percentage of the simulator's measured just before and after each run (a shared
-    machine drifts), and the median over runs is reported."""
-    import warpcut.bench as bench
-
-    sims = iter([30.0, 50.0, 20.0])  # measured after each run; 40.0 is the one before the first
-    monkeypatch.setattr(bench, "env_steps_per_second", lambda num_envs, device, repeats: next(sims))
-    rates = iter([9.0, 14.0, 8.0])
-    result = {"sim_env_steps_per_s": {"4": 40.0}, "train_steps_per_s": {"2": 1.0}}
-    out = bench._training_against_simulator(
-        result, 4, "cpu", 3, lambda num_envs: {"train_steps_per_s": next(rates), "other": 1.0}
-    )
-    ratios = [100 * 9 / 35, 100 * 14 / 40, 100 * 8 / 35]
-    assert out["train_vs_sim_pct_runs"]["4"] == pytest.approx(ratios)
-    assert out["train_vs_sim_pct"]["4"] == pytest.approx(np.median(ratios))
-    assert out["sim_env_steps_per_s"] == {"4": 35.0}  # the median of 40, 30, 50, 20
-    assert out["train_steps_per_s"] == {"2": 1.0, "4": 9.0} and out["other"] == {"4": 1.0}
-
-
-@pytest.mark.parametrize("episodes", [0, 1.5, True])
-def test_bench_training_names_a_bad_window(episodes):
-    from agents.rl import benchmark_training
-
-    with pytest.raises(ValueError, match="episodes: the steady state needs at least 1 whole episode"):
-        benchmark_training(num_envs=2, episodes=episodes)
-
-
-def test_bench_times_the_captured_colours_update_on_cpu():
-    """The path ``warpcut bench --device cuda`` takes (colours backend replayed from graphs) also runs on
-    the CPU, so it is exercised without a GPU."""
-    from warpcut.bench import updates_per_second
-
-    rate = updates_per_second(
-        SimConfig(resolution=7, settle_updates=2), 3, "cpu", 1, backend="colours", capture=True
-    )
-    assert np.isfinite(rate) and rate > 0
 
 
 def test_cli_defaults_are_the_library_defaults():
@@ -718,67 +473,6 @@ def test_cli_defaults_are_the_library_defaults():
 def test_no_command_prints_the_help():
     code, stdout, _ = invoke([])
     assert code == 0 and stdout.startswith("Usage: ") and "evaluate" in stdout
-
-
-def test_optimize_writes_the_plan_and_its_evaluation(tmp_path):
-    out, report_path = tmp_path / "run", tmp_path / "optimize.json"
-    args = ["optimize", "--contour", "circle-small", "--iterations", "2", "--episodes", "2", "--trials", "2"]
-    args += ["--candidates", "2", "--out", str(out), "--json", str(report_path)]
-    code, stdout, _ = invoke(args)
-    assert code == 0, stdout
-    report = json.loads(report_path.read_text())
-    assert set(report["evaluation"]) == {"none", "fixed", "grad"}
-    assert report["optimized"]["best_iteration"] in (0, 1, 2)
-    assert len(report["optimized"]["plan"]) > 0 and (out / "circle-small.json").is_file()
-    assert not (out / "circle-small.state.json").exists()  # finished: the state is gone, the plan kept
-    assert json.loads((out / "results.json").read_text())["contour"] == "circle-small"
-    assert "grad" in stdout and "kept iteration" in stdout
-    code, _, stderr = invoke(args[:-4] + ["--out", str(out)])  # a finished run directory is not overwritten
-    assert code != 0 and "--overwrite" in stderr
-
-
-def test_optimize_by_evolution_strategies_takes_the_es_defaults(tmp_path):
-    import dataclasses
-
-    from agents.config import GRAD_CONFIGS
-
-    out = tmp_path / "run"
-    args = ["optimize", "--contour", "circle-small", "--estimator", "es", "--iterations", "2"]
-    args += ["--population", "4", "--trials", "2", "--candidates", "2", "--out", str(out)]
-    code, stdout, _ = invoke(args + ["--json", str(tmp_path / "es.json")])
-    assert code == 0, stdout
-    report = json.loads((tmp_path / "es.json").read_text())
-    es = dataclasses.asdict(GRAD_CONFIGS["es"])
-    assert report["settings"] == {**es, "iterations": 2, "es_population": 4}  # the step is es's, not tape's
-    assert report["optimized"]["env_steps"] == 2 * 4 * es["es_trials"] * len(report["optimized"]["plan"])
-    assert json.loads((out / "circle-small.json").read_text())["settings"] == report["settings"]
-    code, _, stderr = invoke(args[:-4] + ["--population", "3", "--out", str(tmp_path / "odd")])
-    assert code != 0 and "--population: must be even" in stderr
-    code, _, stderr = invoke(args[:-4] + ["--optimize-pinch", "--out", str(tmp_path / "pinch")])
-    assert code != 0 and "--optimize-pinch: the pinch point moves only with --estimator 'tape'" in stderr
-
-
-def test_optimize_a_closed_loop_policy_under_randomisation(tmp_path):
-    out = tmp_path / "run"
-    args = ["optimize", "--contour", "circle-small", "--estimator", "es", "--iterations", "1"]
-    args += ["--population", "2", "--trials", "2", "--candidates", "2", "--feedback-phases", "2"]
-    ranged = ["--randomize", "gravity,noise", "--randomize-range", "noise=0,0.27"]
-    code, stdout, _ = invoke(args + ranged + ["--feedback-sag", "--out", str(out)])
-    assert code == 0, stdout
-    plan = json.loads((out / "circle-small.json").read_text())
-    assert np.asarray(plan["gains"]).shape == (2, 3, 4)  # scheduled on the sag: [e, s e]
-    assert plan["settings"]["es_feedback_phases"] == 2 and plan["settings"]["es_randomize"] == "gravity,noise"
-    assert plan["settings"]["es_feedback_sag"] is True
-    assert plan["settings"]["es_randomize_ranges"] == {"noise_std": [0.0, 0.27]}
-    code, stdout, _ = invoke(args + ranged + ["--feedback-sag", "--out", str(out), "--resume"])
-    assert code == 0, stdout  # the saved settings read back equal
-    bad = ["--randomize", "gravity", "--randomize-range", "noise=0,0.27", "--out", str(tmp_path / "bad")]
-    code, _, stderr = invoke(args + bad)
-    assert code != 0 and "--randomize-range" in stderr and "noise_std not randomised" in stderr
-    code, _, stderr = invoke(["optimize", "--contour", "circle-small", "--feedback-phases", "1"])
-    assert code != 0 and "--feedback-phases: only --estimator 'es'" in stderr
-    code, _, stderr = invoke(["optimize", "--contour", "circle-small", "--estimator", "es", "--feedback-sag"])
-    assert code != 0 and "--feedback-sag: there are no gains" in stderr
 
 
 def test_batch_defaults_are_ppos_and_apgs_own():

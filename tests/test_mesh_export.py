@@ -99,8 +99,8 @@ def test_simulate_export_mesh_writes_each_policys_final_sheet(tmp_path):
 
     result = CliRunner().invoke(
         main,
-        ["simulate", "--contour", "circle-small", "--policy", "none,fixed", "--resolution", "9",
-         "--trials", "1", "--no-plots", "--export-mesh", str(tmp_path / "meshes"),
+        ["simulate", "--contour", "circle-small", "--policy", "none,fixed", "--set", "sim.resolution=9",
+         "--trials", "1", "--set", "plots=false", "--set", f"export_mesh={tmp_path / 'meshes'}",
          "--json", str(tmp_path / "r.json")],
         catch_exceptions=False,
     )  # fmt: skip

@@ -3,6 +3,7 @@ written, PNGs decode, feasibility agrees, the regions show the first trial of ea
 intervals stay at or below 100%, legends sit outside the axes and match what is drawn)."""
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -272,11 +273,15 @@ def test_learning_curve_has_one_unit_per_panel_and_whole_iterations(iterations):
     validation = [{"iterations": k, "error": 20.0 - k / 3} for k in range(0, iterations + 1, 10)]
     fig = drawn(learning_curve_figure(metrics(iterations), validation))
     assert len(fig.axes) == 3  # three panels, no second y axis
+    # Each label names its series and its unit: every learner's final_error is the error area over the
+    # intended area, validation errors are in vertices.
     assert [ax.get_ylabel() for ax in fig.axes] == [
-        "error mm² / intended area",
-        "error (vertices)",
-        "env steps/s",
+        "final error: error / intended area (mm²/mm²)",
+        "validation error (vertices)",
+        "throughput (env steps/s)",
     ]
+    (best,) = [t.get_text() for t in fig.axes[1].get_legend().get_texts() if t.get_text().startswith("best")]
+    assert re.fullmatch(r"best: [\d.]+ vertices at iteration \d+ \(best\.pt\)", best), best
     ticks = fig.axes[-1].get_xticks()
     low, high = fig.axes[-1].get_xlim()
     shown = ticks[(ticks >= low) & (ticks <= high)]

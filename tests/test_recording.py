@@ -70,8 +70,8 @@ def simulated(tmp_path_factory):
             "none,analytic",
             "--pinch",
             "50,45",
-            "--resolution",
-            str(RESOLUTION),
+            "--set",
+            f"sim.resolution={RESOLUTION}",
             "--trials",
             "2",
             "--device",
@@ -120,11 +120,12 @@ def test_no_plots_writes_none(tmp_path):
             "circle-small",
             "--policy",
             "none",
-            "--resolution",
-            str(RESOLUTION),
+            "--set",
+            f"sim.resolution={RESOLUTION}",
             "--device",
             "cpu",
-            "--no-plots",
+            "--set",
+            "plots=false",
             "--json",
             str(tmp_path / "results.json"),
         ]
@@ -142,10 +143,12 @@ def test_evaluate_writes_the_comparison_plot_and_recording(tmp_path):
         "none,analytic",
         "--trials",
         "1",
-        "--candidates",
-        "3",
+        "--set",
+        "candidates=3",
     ]
-    code, stdout = invoke([*args, "--out", str(tmp_path / "run"), "--record", "--colour-by", "height"])
+    code, stdout = invoke(
+        [*args, "--out", str(tmp_path / "run"), "--set", "record=1", "--set", "colour_by=height"]
+    )
     assert code == 0, stdout
     for name in ("improvement.png", "improvement.svg", "recording.rrd", "results.json"):
         assert (tmp_path / "run" / name).stat().st_size > 0, name
@@ -156,10 +159,10 @@ def test_evaluate_writes_the_comparison_plot_and_recording(tmp_path):
     ]
     assert "vertex colours: height" in info
 
-    code, stdout = invoke([*args, "--out", str(tmp_path / "bare"), "--no-plots"])
+    code, stdout = invoke([*args, "--out", str(tmp_path / "bare"), "--set", "plots=false"])
     assert code == 0, stdout
     written = sorted(p.name for p in (tmp_path / "bare").iterdir())
-    assert written == [".warpcut.lock", "plans.json", "request.json", "results.json"]
+    assert written == [".warpcut.lock", "config.json", "plans.json", "results.json", "results.md"]
 
 
 def test_recording_does_not_change_the_results(tmp_path):
@@ -817,8 +820,18 @@ def test_columns_are_the_rerun_archetypes_columns():
 
 
 def test_simulate_says_when_fewer_envs_ran_than_record_asks(tmp_path):
-    args = ["simulate", "--contour", "circle-small", "--policy", "none", "--trials", "1", "--no-plots"]
-    args += ["--resolution", str(RESOLUTION), "--device", "cpu", "--json", str(tmp_path / "r.json")]
+    args = [
+        "simulate",
+        "--contour",
+        "circle-small",
+        "--policy",
+        "none",
+        "--trials",
+        "1",
+        "--set",
+        "plots=false",
+    ]
+    args += ["--set", f"sim.resolution={RESOLUTION}", "--device", "cpu", "--json", str(tmp_path / "r.json")]
     result = CliRunner().invoke(main, [*args, "--record", "2"], catch_exceptions=False)
     assert result.exit_code == 0, result.output
     assert "warning: --record 2: fewer envs ran, all of them recorded (none: 1)" in result.stderr
@@ -828,11 +841,12 @@ def test_simulate_says_when_fewer_envs_ran_than_record_asks(tmp_path):
 
 
 def test_cli_colour_choices_are_the_recorders():
-    result = CliRunner().invoke(main, ["simulate", "--record", "--colour-by", "rainbow"])
-    choices = ", ".join(repr(field) for field in COLOUR_FIELDS)
-    assert result.exit_code == 2 and f"'rainbow' is not one of {choices}" in result.output
-    result = CliRunner().invoke(main, ["simulate", "--contour", "circle-small", "--colour-by", "height"])
-    assert result.exit_code == 2 and "--colour-by: colours a recording; add --record" in result.output
+    args = ["simulate", "--contour", "circle-small"]
+    result = CliRunner().invoke(main, [*args, "--record", "--set", "colour_by=rainbow"])
+    choices = ", ".join(COLOUR_FIELDS)
+    assert result.exit_code == 2 and f"colour_by: choose one of {choices} (got 'rainbow')" in result.output
+    result = CliRunner().invoke(main, [*args, "--set", "colour_by=height"])
+    assert result.exit_code == 2 and "colour_by: colours a recording, and record is off" in result.output
 
 
 def test_recorded_fiducials_are_where_the_env_tracks_them_and_hidden_when_it_cannot_see_them(tmp_path):
@@ -849,7 +863,7 @@ def test_recorded_fiducials_are_where_the_env_tracks_them_and_hidden_when_it_can
         scene.reset(np.random.default_rng(3), resample_fiducials=True)
         for step in range(scene.task.num_steps + 1):
             if step:
-                scene.step(np.zeros(2, dtype=np.int64))  # hold still
+                scene.step(np.zeros((2, 3)))  # hold still
             callback(scene.task, None)
             world.append(scene.fiducials.world(scene.task.sim.positions()))
             seen.append(scene.fiducials.visible.copy())

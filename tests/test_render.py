@@ -26,6 +26,8 @@ from warpcut.viz.video import VideoRecorder
 SMALL = {"contour": "circle-small", "resolution": 9, "device": "cpu"}
 """A 9 x 9 sheet and a 94 mm contour: 48 steps per episode."""
 STEPS = 48
+HOLD = np.zeros(3, dtype=np.float32)
+"""The env's default action (continuous x-y-z moves): hold still."""
 
 
 def pixels_of(image: np.ndarray, rgb) -> int:
@@ -51,7 +53,7 @@ def test_rgb_array_shows_the_sheet_contour_grasp_and_the_cut_so_far():
     assert pixels_of(first, CONTOUR_RGB) > 50 and pixels_of(first, GRASP_RGB) > 50
     assert pixels_of(first, CUTTING_RGB) < 60  # only the tip's dot
     for _ in range(STEPS // 2):
-        env.step(1)
+        env.step(np.array([1.0, 0.0, 0.0], dtype=np.float32))  # +x, a step's longest move
     half = env.render()
     assert pixels_of(half, CUTTING_RGB) > pixels_of(first, CUTTING_RGB) + 30  # the path cut so far
     assert pixels_of(half, BACKGROUND_RGB) > pixels_of(first, BACKGROUND_RGB)  # the cut opens the mesh
@@ -89,7 +91,7 @@ def test_no_render_mode_costs_nothing_and_render_warns(monkeypatch):
     monkeypatch.setattr(render, "TaskRenderer", refuse)
     env = PatternCutEnv(**SMALL)
     env.reset(seed=0)
-    env.step(0)
+    env.step(HOLD)
     with pytest.warns(UserWarning, match="without a render_mode"):
         assert env.render() is None
 
@@ -122,7 +124,7 @@ def test_human_mode_needs_a_display(monkeypatch):
     monkeypatch.setattr(render, "Window", Window)
     env = PatternCutEnv(render_mode="human", **SMALL)
     env.reset(seed=0)
-    env.step(0)
+    env.step(HOLD)
     assert env.render() is None
     env.close()
     assert shown == [((256, 256, 3), 31)] * 3 + ["closed"]
@@ -138,7 +140,7 @@ def test_record_video_writes_an_mp4_of_each_episode(tmp_path):
     env.reset(seed=0)
     terminated = False
     while not terminated:
-        _, _, terminated, _, _ = env.step(0)
+        _, _, terminated, _, _ = env.step(HOLD)
     env.close()
     (video,) = (tmp_path / "videos").glob("*.mp4")
     assert video.name == "rl-video-episode-0.mp4" and frames_in(video) >= STEPS
@@ -160,7 +162,7 @@ def test_the_vector_env_renders_its_first_envs(tmp_path):
     )
     filmed.reset(seed=0)
     for _ in range(STEPS + 1):
-        filmed.step(np.zeros(2, dtype=int))
+        filmed.step(np.zeros((2, 3), dtype=np.float32))
     filmed.close()
     assert frames_in(tmp_path / "videos" / "rl-video-episode-0.mp4", (128, 64)) >= STEPS  # two envs tiled
     with pytest.raises(ValueError, match="render_mode: choose one of \\['rgb_array'\\]"):
@@ -216,8 +218,8 @@ def test_with_videos_adds_the_first_contours_films_to_the_other_callbacks():
 
 
 def test_simulate_video_writes_mp4s_beside_the_recording(tmp_path):
-    args = ["simulate", "--contour", "circle-small", "--policy", "none,fixed", "--resolution", "9"]
-    args += ["--trials", "2", "--device", "cpu", "--no-plots", "--json", str(tmp_path / "r.json")]
+    args = ["simulate", "--contour", "circle-small", "--policy", "none,fixed", "--set", "sim.resolution=9"]
+    args += ["--trials", "2", "--device", "cpu", "--set", "plots=false", "--json", str(tmp_path / "r.json")]
     result = CliRunner().invoke(main, [*args, "--video", "2"], catch_exceptions=False)
     assert result.exit_code == 0, result.output
     videos = sorted(p.name for p in tmp_path.glob("*.mp4"))
@@ -226,6 +228,7 @@ def test_simulate_video_writes_mp4s_beside_the_recording(tmp_path):
     assert frames_in(tmp_path / "fixed-env_1.mp4") == STEPS + 1
     bad = CliRunner().invoke(main, [*args, "--video", "0"])
     assert bad.exit_code == 2 and "--video" in bad.output
-    for command in ("evaluate", "train"):
-        help_text = CliRunner().invoke(main, [command, "--help"]).output
-        assert "--video N" in help_text
+    assert "--video N" in CliRunner().invoke(main, ["simulate", "--help"]).output
+    for command in (["evaluate"], ["train", "--contour", "circle-small"]):  # a key of their jobs
+        printed = CliRunner().invoke(main, [*command, "--set", "video=2", "--print-config"])
+        assert printed.exit_code == 0 and "\nvideo: 2\n" in printed.output, printed.output

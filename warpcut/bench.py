@@ -2,7 +2,8 @@
 
 Every figure is the median over ``repeats`` timed repetitions, after a warm-up. The machines this runs
 on are shared and noisy: compare ratios measured in one run, not absolute figures across runs. What lies
-above the simulator (e.g. training) is measured by the caller's ``extra`` functions (:func:`run_bench`).
+above the simulator (the learners' training) is measured by the caller's ``training`` functions
+(:func:`run_bench`).
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 import numpy as np
 
@@ -26,9 +27,9 @@ REPEATS = 3
 ROLLOUT_ENVS = 256
 """Batch of the fls-circle rollout measurements."""
 ENV_STEP_ENVS = (64, 256)
-"""Batches of the tensioned env-step measurement (``sim_env_steps_per_s``) and of PPO's beside it: 64, a
-small training batch, and 256, the envs a training run steps by default
-(``agents.config.TrainConfig.num_envs``; docs/performance.md, section 6)."""
+"""Batches of the tensioned env-step measurement (``sim_env_steps_per_s``) and of the learners' training
+beside it: 64, a small training batch, and 256, the envs es and PPO train with by default
+(``agents.algorithms``; docs/performance.md, section 6)."""
 PAPER_SWEEPS = SimConfig(springs=("structural",), sweeps=5, chebyshev_rho=0.0, noise_std=0.0)
 """The paper's unit of work: one update = integrate + 5 structural relaxation sweeps,
 without process noise (the authors' code had none)."""
@@ -182,13 +183,14 @@ def run_bench(
     rollout_envs: int = ROLLOUT_ENVS,
     env_step_envs: tuple[int, ...] = ENV_STEP_ENVS,
     progress: Callable[[str], None] = lambda _: None,
-    training: Callable[[int], dict[str, float]] | None = None,
+    training: Mapping[str, Callable[[int], dict[str, float]]] | None = None,
 ) -> dict:
-    """Measure the simulator as ``warpcut bench`` reports it; then, if given, ``training(num_envs)`` (what
-    lies above the simulator: PPO's steady-state figures, ``train_steps_per_s`` among them) at each batch of
-    ``sim_env_steps_per_s`` (``env_step_envs``), with ``train_vs_sim_pct``, the one as a percentage of the
-    other. Per-batch figures are dicts keyed by the batch, as ``updates_per_s``. Returns the JSON-ready
-    dict."""
+    """Measure the simulator as ``warpcut bench`` reports it; then, if given, each learner of ``training``
+    (``{name: training(num_envs)}``: what lies above the simulator, its steady-state figures,
+    ``train_steps_per_s`` among them) at each batch of ``sim_env_steps_per_s`` (``env_step_envs``), into
+    ``training[name]``, with ``train_vs_sim_pct``, its rate as a percentage of the simulator's at the same
+    batch (:func:`_training_against_simulator`). Per-batch figures are dicts keyed by the batch, as
+    ``updates_per_s``. Returns the JSON-ready dict."""
     from warpcut.sim._warp import wp
     from warpcut.sim.simulator import Simulator
 
@@ -234,34 +236,50 @@ def run_bench(
     result["numpy_updates_per_s"] = numpy_updates_per_second(repeats)
     best = max(ups.values())
     result["speedup_vs_numpy"] = best / result["numpy_updates_per_s"]
-    if training is None:
+    if not training:
         return result
+    result["training"] = {name: {} for name in training}
     for b in map(str, env_step_envs):
-        progress(f"PPO training at B={b}, alternating with the simulator ({repeats} x)")
+        names = " and ".join(training)
+        progress(f"{names} training at B={b}, alternating with the simulator ({repeats} x)")
         result.update(_training_against_simulator(result, int(b), device, repeats, training))
     return result
 
 
 def _training_against_simulator(
-    result: dict, num_envs: int, device: str, repeats: int, training: Callable[[int], dict[str, float]]
+    result: dict,
+    num_envs: int,
+    device: str,
+    repeats: int,
+    training: Mapping[str, Callable[[int], dict[str, float]]],
 ) -> dict:
-    """``repeats`` runs of ``training(num_envs)``, each between two measurements of the simulator's env-step
-    rate at that batch (the first is the one already in ``result``). On a shared machine the rate drifts
-    by tens of percent within minutes, so each run is compared with the simulator just before and after it:
-    ``train_vs_sim_pct`` is the median over runs of its rate as a percentage of that pair's mean
+    """``repeats`` rounds of every learner's ``training[name](num_envs)``, each run between two measurements
+    of the simulator's env-step rate at that batch (the first is the one already in ``result``); the learners
+    take turns within a round, so a drift hits them alike. On a shared machine the rate drifts by tens of
+    percent within minutes, so each run is compared with the simulator just before and after it:
+    ``train_vs_sim_pct`` is the median over a learner's runs of its rate as a percentage of that pair's mean
     (``train_vs_sim_pct_runs``: each run's). ``sim_env_steps_per_s`` becomes the median of every simulator
-    measurement at the batch, the training figures medians over runs."""
+    measurement at the batch; ``training[name]`` holds the learner's figures, medians over its runs, each a
+    dict keyed by the batch."""
     b = str(num_envs)
     sims = [result["sim_env_steps_per_s"][b]]
-    runs, ratios = [], []
+    runs: dict[str, list[dict]] = {name: [] for name in training}
+    ratios: dict[str, list[float]] = {name: [] for name in training}
     for _ in range(repeats):
-        runs.append(training(num_envs))
-        sims.append(env_steps_per_second(num_envs, device, repeats))
-        ratios.append(100 * runs[-1]["train_steps_per_s"] / ((sims[-2] + sims[-1]) / 2))
-    out = {key: dict(result.get(key, {})) for key in (*runs[0], "sim_env_steps_per_s")}
-    for key in runs[0]:
-        out[key][b] = statistics.median(run[key] for run in runs)
-    out["sim_env_steps_per_s"][b] = statistics.median(sims)
-    out["train_vs_sim_pct"] = {**result.get("train_vs_sim_pct", {}), b: statistics.median(ratios)}
-    out["train_vs_sim_pct_runs"] = {**result.get("train_vs_sim_pct_runs", {}), b: ratios}
-    return out
+        for name, learner in training.items():
+            runs[name].append(learner(num_envs))
+            sims.append(env_steps_per_second(num_envs, device, repeats))
+            ratios[name].append(100 * runs[name][-1]["train_steps_per_s"] / ((sims[-2] + sims[-1]) / 2))
+    trained = {
+        name: {k: dict(v) for k, v in figures.items()} for name, figures in result.get("training", {}).items()
+    }
+    for name in training:
+        figures = trained.setdefault(name, {})
+        for key in runs[name][0]:
+            figures.setdefault(key, {})[b] = statistics.median(run[key] for run in runs[name])
+        figures.setdefault("train_vs_sim_pct", {})[b] = statistics.median(ratios[name])
+        figures.setdefault("train_vs_sim_pct_runs", {})[b] = ratios[name]
+    return {
+        "sim_env_steps_per_s": {**result["sim_env_steps_per_s"], b: statistics.median(sims)},
+        "training": trained,
+    }

@@ -6,11 +6,12 @@ from pathlib import Path
 
 import click
 
+from agents.algorithms import DEFAULT_ALGORITHM
 from agents.cli import common
 from warpcut import bench
 
 
-@click.command("bench")
+@click.command("bench", cls=common.Command)
 @common.device_option
 @common.count_option("repeats", bench.REPEATS, "Timed repeats (median).")
 @click.option(
@@ -24,7 +25,8 @@ from warpcut import bench
     "--train-envs",
     default=",".join(map(str, bench.ENV_STEP_ENVS)),
     show_default=True,
-    help="Comma-separated batch sizes of the tensioned env-step and PPO measurements.",
+    help="Comma-separated batch sizes of the tensioned env-step measurement and of training beside it (the "
+    "default learner and PPO; es needs multiples of its population, es.population).",
 )
 @common.json_option
 def command(
@@ -35,19 +37,27 @@ def command(
     train_envs: str,
     json_path: Path | None,
 ) -> None:
-    """Measure simulator and PPO throughput (medians over repeats, all in one run)."""
-    from agents.rl import benchmark_training
+    """Measure simulator and training throughput (medians over repeats, all in one run): the simulator's
+    updates and env steps, and the env steps of the default learner's training and of PPO's at the same
+    batches, each also as a share of the simulator's own rate."""
+    import functools
+
+    from agents.training import benchmark_training
 
     common.check_outputs({"--json": json_path})
+    train_envs_sizes = _sizes(train_envs, "--train-envs")
+    learners = list(dict.fromkeys([DEFAULT_ALGORITHM, "ppo"]))
+    _check_batches(learners, train_envs_sizes)
     result = bench.run_bench(
         device,
         repeats=repeats,
         batch_sizes=_sizes(batch_sizes, "--batch-sizes"),
         rollout_envs=rollout_envs,
-        env_step_envs=_sizes(train_envs, "--train-envs"),
+        env_step_envs=train_envs_sizes,
         progress=lambda what: click.echo(f"  measuring {what} ...", err=True),
-        training=lambda num_envs: benchmark_training(device, num_envs),
+        training={algo: functools.partial(benchmark_training, device, algo=algo) for algo in learners},
     )
+    result["default_learner"] = DEFAULT_ALGORITHM
     click.echo(f"device {result['device']} ({result['device_name']}), 25x25 sheet, median of {repeats}")
     click.echo(
         f"cold start (compile) {result['cold_start_s']:.2f} s, warm start {result['warm_start_s']:.2f} s"
@@ -69,14 +79,16 @@ def command(
         f"(Warp best / NumPy = {result['speedup_vs_numpy']:,.0f}x)"
     )
     for b, sim in result["sim_env_steps_per_s"].items():
-        runs = ", ".join(f"{r:.0f}%" for r in result["train_vs_sim_pct_runs"][b])
-        click.echo(
-            f"env steps/s at {b} envs (tensioned fls-circle): simulator {sim:,.0f}; PPO in steady state "
-            f"{result['train_steps_per_s'][b]:,.0f} ({result['train_vs_sim_pct'][b]:.0f}% of the simulator "
-            f"around each run, median of {runs}; "
-            f"collection alone {result['train_collection_steps_per_s'][b]:,.0f}; a whole short run "
-            f"{result['train_overall_steps_per_s'][b]:,.0f})"
-        )
+        click.echo(f"env steps/s at {b} envs (tensioned fls-circle): simulator {sim:,.0f}")
+        for algo, figures in result["training"].items():
+            runs = ", ".join(f"{r:.0f}%" for r in figures["train_vs_sim_pct_runs"][b])
+            name = f"{algo} (the default learner)" if algo == DEFAULT_ALGORITHM else algo
+            click.echo(
+                f"  {name} training in steady state {figures['train_steps_per_s'][b]:,.0f} "
+                f"({figures['train_vs_sim_pct'][b]:.0f}% of the simulator around each run, median of {runs}; "
+                f"collection alone {figures['train_collection_steps_per_s'][b]:,.0f}; a whole short run "
+                f"{figures['train_overall_steps_per_s'][b]:,.0f})"
+            )
     if json_path:
         from warpcut.io import write_json
 
@@ -95,3 +107,21 @@ def _sizes(text: str, hint: str) -> tuple[int, ...]:
     if not sizes or min(sizes) < 1:
         raise click.BadParameter("batch sizes must be positive", param_hint=hint)
     return sizes
+
+
+def _check_batches(learners: list[str], sizes: tuple[int, ...]) -> None:
+    """Refuse, before any work, a batch of ``--train-envs`` that a learner cannot train on (es: its population
+    must divide it)."""
+    from agents.algorithms import algorithm
+    from agents.config import TrainConfig
+
+    for algo in learners:
+        for size in sizes:
+            try:
+                TrainConfig(algo=algo, num_envs=size).check()
+            except ValueError as error:
+                raise click.BadParameter(
+                    f"{size}: {algo} cannot train on {size} envs ({str(error).split('; ')[0]}); give batches "
+                    f"it trains on, e.g. its default {algorithm(algo).num_envs}",
+                    param_hint="--train-envs",
+                ) from None

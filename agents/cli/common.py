@@ -742,3 +742,50 @@ def saved_job(job_class, path: Path):
     if not isinstance(data, dict):
         raise click.BadParameter(f"{path}: not a run's settings; restore it, or start a new run", param_hint="--resume")
     return apply(job_class(), data, str(path))
+
+
+def refuse_unused_keys(
+    job, keys: list[str], overrides: tuple[str, ...], flags: dict[str, str], why: str
+) -> None:
+    """A UsageError naming the settings under ``keys`` (dotted keys or sections, e.g. ``grad``) that this
+    invocation gives but would ignore (``why``: when they apply), instead of ignoring them without a word:
+    those that ``--set`` or a flag (``flags``: parameter name -> key) gives, and those away from the job's
+    defaults (a ``--config`` file's; a run directory's ``config.json`` holds each unused setting at its
+    default, so it runs again as it is)."""
+    from agents.config_io import flatten, parse_override, to_plain
+
+    def under(key: str) -> bool:
+        return any(key == k or key.startswith(f"{k}.") for k in keys)
+
+    ctx = click.get_current_context()
+    now, default = flatten(to_plain(job)), flatten(to_plain(type(job)()))
+    given = [key for key, _ in map(parse_override, overrides)]
+    given += [
+        key
+        for name, key in flags.items()
+        if ctx.get_parameter_source(name) == click.core.ParameterSource.COMMANDLINE
+    ]
+    given += [key for key, value in now.items() if value != default.get(key)]
+    unused = [key for key in dict.fromkeys(given) if under(key)]
+    if unused:
+        raise click.UsageError(f"{', '.join(unused)}: {why}; drop {'them' if len(unused) > 1 else 'it'}")
+
+
+def refuse_unused_settings(job, overrides: tuple[str, ...], flags: dict[str, str]) -> None:
+    """The general rule that a setting the job would not use is refused, not ignored: each key that
+    ``job.unused_keys()`` names (``{key: when it applies}``, from the job's own settings, e.g. simulate's
+    ``pinch`` where ``policy`` has neither fixed nor analytic) is checked against the keys given (a flag,
+    ``--set``, or a value away from the default: :func:`refuse_unused_keys`)."""
+    for key, why in job.unused_keys().items():
+        refuse_unused_keys(job, [key], overrides, flags, why)
+
+
+def check_learner(job) -> None:
+    """``ValueError`` naming the setting, before any work, where ``job``'s learner (``job.train``) cannot
+    train in its env (``job.env``): an action type it does not play, a population that does not fit the
+    batch, or domain randomisation (or a relative reward) for APG, which differentiates one fixed sheet."""
+    from agents.config import APG_FIXED_SHEET
+
+    job.train.check(job.env.action_type == "discrete")
+    if job.train.algo == "apg" and (job.env.randomize or job.env.relative_reward):
+        raise ValueError(APG_FIXED_SHEET)

@@ -6,17 +6,18 @@ from pathlib import Path
 
 import click
 
+from agents.cli import common
 
-@click.command("contours")
+
+@click.command("contours", cls=common.Command)
 @click.option(
     "--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the list here."
 )
 def command(json_path: Path | None) -> None:
     """List the built-in contours (name, closed/open, length, area)."""
-    from agents.cli.common import check_outputs
     from warpcut.contours import builtin_contours
 
-    check_outputs({"--json": json_path})
+    common.check_outputs({"--json": json_path})
     rows = [
         {
             "name": c.name,

@@ -6,8 +6,10 @@ from pathlib import Path
 
 import click
 
+from agents.cli import common
 
-@click.command("export")
+
+@click.command("export", cls=common.Command)
 @click.argument("run_dir", type=click.Path(exists=True, path_type=Path))
 @click.option(
     "--out",
@@ -18,15 +20,15 @@ import click
 )
 def command(run_dir: Path, out: Path | None) -> None:
     """Export trained policies as TorchScript and ONNX (observation -> action), with ONNX metadata saying
-    what each observation entry and action means and the scenario.
+    what each observation entry and action means, and the env the policy acts in (warpcut.options: the
+    keyword arguments of gymnasium.make("warpcut/PatternCut-v0", ...)).
 
     RUN_DIR is a run directory of 'warpcut train' (its validated best.pt, else its newest checkpoint), of
     'warpcut run' (the chosen candidate's policy) or of 'warpcut evaluate' (every contour's policy), or a
     .pt checkpoint."""
-    from agents.cli.common import check_outputs
     from agents.export import export_run
 
-    check_outputs({"--out": out})
+    common.check_outputs({"--out": out})
     for exported in export_run(run_dir, out):
         click.echo(f"exported {exported['policy']}")
         for kind in ("torchscript", "onnx"):

@@ -13,7 +13,7 @@ from agents.methods import point_text
 from warpcut.sim.config import ARM_RADIUS_MM, SEGMENT_TOLERANCE_MM, SimConfig
 
 
-@click.command("plan")
+@click.command("plan", cls=common.Command)
 @common.contour_option
 @common.count_option(
     "candidates",

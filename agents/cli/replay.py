@@ -15,6 +15,8 @@ from urllib.parse import quote
 
 import click
 
+from agents.cli import common
+
 VIEWER = [sys.executable, "-m", "rerun_cli"]
 """The rerun viewer (rerun-sdk's ``rerun`` command), as ``replay`` runs it."""
 
@@ -38,7 +40,7 @@ def web_url(web_port: int = WEB_PORT, grpc_port: int = GRPC_PORT) -> str:
     return f"http://127.0.0.1:{web_port}/?url={source}"
 
 
-@click.command("replay")
+@click.command("replay", cls=common.Command)
 @click.argument("path", type=click.Path(dir_okay=False, path_type=Path))
 @click.option(
     "--web",

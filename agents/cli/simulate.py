@@ -1,4 +1,5 @@
-"""``warpcut simulate``: cut a contour with each baseline tensioner and compare their errors."""
+"""``warpcut simulate``: cut a contour with each baseline tensioner and compare their errors
+(:func:`agents.evaluation.compare_policies`)."""
 
 from __future__ import annotations
 
@@ -7,108 +8,106 @@ from pathlib import Path
 
 import click
 
-from agents.cli.common import (
-    DEFAULTS,
-    check_outputs,
-    contour_option,
-    count_option,
-    device_option,
-    echo_recording,
-    echo_written,
-    final_cuts,
-    json_option,
-    noise_option,
-    parse_methods,
-    parse_point,
-    plots_option,
-    record_option,
-    recorder,
-    resolution_option,
-    run_dir,
-    score_option,
-    seed_option,
-    step_callbacks,
-)
+from agents.cli import common
 from agents.cli.video import video_option, videos, with_videos
 from agents.methods import BASELINES, point_text
-from warpcut.sim.config import FIXTURES, SimConfig
+
+FLAGS = {
+    "contour": "contour",
+    "policy": "policy",
+    "pinch": "pinch",
+    "trials": "trials",
+    "seed": "seed",
+    "record_envs": "record",
+    "video_envs": "video",
+}
+"""Each flag's key in the job (:class:`agents.jobs.SimulateJob`)."""
 
 
-@click.command("simulate")
-@contour_option
+@click.command("simulate", cls=common.Command)
+@click.option("--contour", default=None, help="Built-in name or a .json/.svg contour file.")
 @click.option(
-    "--policy", "policies", default=",".join(BASELINES), show_default=True, help="Comma-separated tensioners."
+    "--policy",
+    default=",".join(BASELINES),
+    show_default=True,
+    callback=lambda ctx, param, value: [v.strip() for v in value.split(",") if v.strip()],
+    help="Comma-separated tensioners.",
 )
-@click.option("--pinch", default=None, help="Pinch point X,Y (mm, material) for fixed and analytic.")
-@count_option("trials", 1, "Seeded trials per policy (they differ by process noise).")
-@noise_option
-@score_option
-@resolution_option
-@click.option("--fixture", default=DEFAULTS.fixture, show_default=True, type=click.Choice(FIXTURES))
-@device_option
-@seed_option
-@json_option
-@record_option("next to --json, or in logs/simulate-TIMESTAMP")
-@video_option
 @click.option(
-    "--export-mesh",
-    "mesh_dir",
-    type=click.Path(file_okay=False, path_type=Path),
+    "--pinch",
     default=None,
-    help="Write each policy's final sheet (its first trial) as DIR/POLICY_env0_stepN.glb (mm, z up, "
-    "strain colours; trimesh).",
+    callback=common.point_callback,
+    help="Pinch point X,Y (mm, material) of fixed and analytic; default: fixed's best by random search, "
+    "analytic's feasible centroid.",
 )
-@plots_option("regions.png/svg next to --json, or in logs/simulate-TIMESTAMP")
+@common.count_option("trials", None, "Seeded trials per tensioner, differing by noise (default: one).")
+@common.seed_option
+@common.device_option
+@common.json_option
+@common.record_flag("next to --json, or in logs/simulate-TIMESTAMP")
+@video_option
+@common.config_options
 def command(
-    contour_name: str,
-    policies: str,
-    pinch: str | None,
-    trials: int,
-    noise: float,
-    score: str,
-    resolution: int,
-    fixture: str,
-    device: str | None,
+    contour: str | None,
+    policy: list[str],
+    pinch: list[float] | None,
+    trials: int | None,
     seed: int,
+    device: str | None,
     json_path: Path | None,
     record_envs: int | None,
-    colour_by: str,
     video_envs: int | None,
-    mesh_dir: Path | None,
-    no_plots: bool,
+    config_file: str | None,
+    overrides: tuple[str, ...],
+    print_config: bool,
 ) -> None:
-    """Cut a contour with each baseline tensioner and compare their errors."""
+    """Cut a contour with each baseline tensioner and compare their errors.
+
+    Everything but the flags is set with --config FILE and --set KEY=VALUE (the physics and the protocol:
+    sim.noise_std, sim.score, sim.resolution, sim.fixture; colour_by, export_mesh=DIR, plots=false);
+    --print-config shows them all.
+    """
     from agents.evaluation import compare_policies
+    from agents.jobs import SimulateJob, contour_spec
     from warpcut.contours import load_contour
 
-    names = parse_methods(policies, "--policy", BASELINES)
-    point = parse_point(pinch, "--pinch")
-    check_outputs({"--json": json_path, "--export-mesh": mesh_dir}, [contour_name])
-    contour = load_contour(contour_name)
-    config = SimConfig(resolution=resolution, fixture=fixture, noise_std=noise, score=score).validated()
-    out = json_path.parent if json_path else run_dir(None, "simulate")
-    cuts = final_cuts(no_plots)
+    job = common.resolve(SimulateJob, config_file, overrides, FLAGS).check()
+    common.refuse_unused_settings(job, overrides, FLAGS)
+    contour = load_contour(contour_spec(job.contour))  # a bad name or file: now
+    if print_config:
+        common.print_config(job)
+        return
+    mesh_dir = None if job.export_mesh is None else Path(job.export_mesh)
+    inputs = [job.contour] if isinstance(job.contour, str) else []
+    common.check_outputs({"--json": json_path, "export_mesh": mesh_dir}, inputs)
+    if job.record is not None:
+        from warpcut.viz.process import start_recorder_process
+
+        start_recorder_process()  # its start-up overlaps the simulation's
+    out = json_path.parent if json_path else common.run_dir(None, "simulate")
+    cuts = common.final_cuts(not job.plots)
     meshes = None
     if mesh_dir is not None:
         from warpcut.viz.mesh_export import MeshExports
 
         meshes = MeshExports(mesh_dir)
+    config = job.sim.validated()
     start = time.perf_counter()
-    with recorder(out, record_envs, colour_by) as rec, videos(out, video_envs) as vid:
+    with common.recorder(out, job.record, job.colour_by) as rec, videos(out, job.video) as vid:
         report = compare_policies(
-            contour, names, trials=trials, config=config, pinch=point, device=device, seed=seed,
-            step_callbacks=with_videos(step_callbacks(rec, cuts, meshes), vid),
+            contour, job.policy, trials=job.trials, config=config, pinch=job.pinch, device=device,
+            seed=job.seed, step_callbacks=with_videos(common.step_callbacks(rec, cuts, meshes), vid),
         )  # fmt: skip
     elapsed = time.perf_counter() - start
     click.echo(
         f"contour {contour.name} ({'closed' if contour.closed else 'open'}, {contour.length:.1f} mm), "
-        f"{trials} trial(s), {config.nx}x{config.ny} on {device}, {elapsed:.1f} s"
+        f"{job.trials} trial(s), {config.nx}x{config.ny} on {device}, {elapsed:.1f} s"
     )
     click.echo(
         f"{'policy':<10} {'error (vertices)':>16} {'error (mm^2)':>13} {'improvement':>12} {'pinch (mm)':>16}"
     )
     for name, r in report["results"].items():
-        ci = f" ±{r['ci95_pct']:.1f}" if trials > 1 else ""
+        ci = f" ±{r['ci95_pct']:.1f}" if job.trials > 1 else ""
         pinch_txt = "-" if r["pinch"] is None else point_text(r["pinch"])
         click.echo(
             f"{name:<10} {r['error_vertices']:>16.1f} {r['error_mm2']:>13.1f} "
@@ -122,6 +121,6 @@ def command(
     if cuts is not None:
         from warpcut.viz.plots import plot_regions
 
-        echo_written(plot_regions(cuts.of(contour.name), out))
-    echo_written(meshes.written if meshes is not None else [])
-    echo_recording(rec)
+        common.echo_written(plot_regions(cuts.of(contour.name), out))
+    common.echo_written(meshes.written if meshes is not None else [])
+    common.echo_recording(rec)

@@ -417,6 +417,15 @@ def plot_regions(cuts: dict[str, FinalCut], out_dir: str | os.PathLike, name: st
     return save_figure(fig, out_dir, name)
 
 
+FINAL_ERROR_LABEL = "final error: error / intended area (mm²/mm²)"
+"""The learning curve's unit of the training episodes' ``final_error`` (every learner's: the cut's error area,
+by the path score unless ``sim.score`` says otherwise, over the intended area)."""
+VALIDATION_ERROR_LABEL = "validation error (vertices)"
+"""The learning curve's unit of the validation errors."""
+THROUGHPUT_LABEL = "throughput (env steps/s)"
+"""The learning curve's unit of each iteration's throughput."""
+
+
 def plot_learning_curve(
     metrics: Sequence[dict],
     validation: Sequence[dict],
@@ -425,18 +434,20 @@ def plot_learning_curve(
     title: str | None = None,
 ) -> list[Path]:
     """A training run over its learning iterations, three panels on one iteration axis (whole numbers),
-    each in one unit: the training episodes' final error, the validation error, the throughput.
+    each in one unit, which its label names: the training episodes' final error, the validation error, the
+    throughput.
 
-    Top: the mean final error of the training episodes that ended in each iteration (``final_error``,
-    error mm² / intended area; iterations where none ended are skipped). Middle: the deterministic
-    policy's validation error (vertices), its minimum marked (the policy kept as ``best.pt``). Bottom: env
-    steps per second of each iteration.
+    Top: the mean final error of the training episodes that ended in each iteration (``final_error``, as
+    every learner logs it: the cut's error area over the intended area, mm²/mm²; iterations where none
+    ended are skipped). Middle: the deterministic policy's validation error (vertices), its minimum marked
+    (the policy kept as ``best.pt``). Bottom: env steps per second of each iteration.
 
     Args:
-        metrics: One dict per iteration: ``iteration`` (iterations done, from 1), ``final_error`` (float
-            or None), ``mean_return`` (float or None, not drawn) and ``iteration_steps_per_s``.
-        validation: ``{"iterations": int, "error": float}`` per validation (0 = the initial policy);
-            may be empty.
+        metrics: One dict per iteration: ``iteration`` (iterations done, from 1), ``final_error`` (error
+            mm² / intended area mm², or None), ``mean_return`` (float or None, not drawn) and
+            ``iteration_steps_per_s``.
+        validation: ``{"iterations": int, "error": float}`` per validation (0 = the initial policy), the
+            error in vertices; may be empty.
         out_dir: Where ``NAME.png`` and ``NAME.svg`` go.
         name: File name stem.
         title: Figure title; default "Learning curve".
@@ -460,7 +471,7 @@ def learning_curve_figure(
     else:
         top.text(0.5, 0.5, "no training episode has ended", transform=top.transAxes, ha="center", color="C0")
     top.set_title("training episodes: mean final error of those ending in the iteration", fontsize="medium")
-    top.set_ylabel("error mm² / intended area")
+    top.set_ylabel(FINAL_ERROR_LABEL)
     if validation:
         x = [v["iterations"] for v in validation]
         y = [v["error"] for v in validation]
@@ -474,14 +485,14 @@ def learning_curve_figure(
     else:
         middle.text(0.5, 0.5, "no validation yet", transform=middle.transAxes, ha="center", color="C1")
     middle.set_title("deterministic policy on the validation envs", fontsize="medium")
-    middle.set_ylabel("error (vertices)")
+    middle.set_ylabel(VALIDATION_ERROR_LABEL)
     rates = [(m["iteration"], m["iteration_steps_per_s"]) for m in metrics if m.get("iteration_steps_per_s")]
     if rates:
         x, y = zip(*rates, strict=True)
         bottom.plot(x, y, color="C2", linewidth=1.2, marker="o" if len(x) == 1 else None)
         bottom.set_ylim(bottom=0.0)
     bottom.set_title("throughput", fontsize="medium")
-    bottom.set_ylabel("env steps/s")
+    bottom.set_ylabel(THROUGHPUT_LABEL)
     bottom.set_xlabel("learning iteration")
     iterations = [m["iteration"] for m in metrics] + [v["iterations"] for v in validation]
     if iterations:  # at least one whole number either side, or the locator falls back to fractions
