@@ -147,7 +147,9 @@ class TrainConfig:
             else:  # APG's runner steps whole episodes itself; rsl-rl's PPO only holds its actor
                 algorithm_cfg, steps = {"class_name": "agents.ppo.algorithm:PPO"}, 1
             critic_dims = PpoConfig().critic_hidden_dims
+        own = {"apg": dataclasses.asdict(self.apg)} if self.algo == "apg" else {}
         return {
+            **own,
             "num_steps_per_env": steps,
             "save_interval": self.save_interval,
             "obs_groups": {name: list(groups) for name, groups in OBS_GROUPS.items()},
@@ -207,8 +209,7 @@ class GradConfig:
     """How each step's gradient is estimated. "tape": the path surrogate's gradient through ``wp.Tape``
     (:mod:`warpcut.gradients`), over ``trials`` episodes. "es": evolution strategies, the gradient of the path
     score itself smoothed by Gaussian perturbations of the plan (``es_population`` perturbed plans, antithetic
-    pairs, ``es_trials`` episodes each, ranked; forward passes only, one batch a step). docs/learning.md,
-    "Evolution strategies through the batched simulator"."""
+    pairs, ``es_trials`` episodes each, ranked; forward passes only, one batch a step)."""
     iterations: int = 20
     """Adam steps (tape: each one forward and one backward pass of ``trials`` episodes; es: one batch of
     ``es_population x es_trials`` episodes)."""
@@ -227,7 +228,7 @@ class GradConfig:
     plan's plus ``K @ e``, ``e`` the x-y tracking error (mm; the vector from the scissor tip to the contour
     point it is about to cut, as it lies on the moved sheet, what the analytic controller opposes) and ``K``
     a 3 x 2 gain matrix, one per phase (the episode split into P equal parts), optimised with the plan from
-    zero (docs/learning.md, "Closed loop: es on feedback gains")."""
+    zero (docs/robustness.md, "es policies")."""
     es_feedback_only: bool = False
     """es with feedback: True keeps the plan at zero and optimises only the gains, a policy that holds still
     where the sheet does not move from where the scissors expect it (docs/robustness.md, "es policies")."""
@@ -255,7 +256,7 @@ class GradConfig:
     window: int | None = 10
     """Truncate the gradient to windows of this many env steps (a move answers only for the surrogate's
     terms up to its window's end: lower variance on a chaotic sheet, some bias); None: the whole episode.
-    10 steps and a step of 0.3 mm did best of the settings tried on 12 contours (docs/learning.md)."""
+    10 steps and a step of 0.3 mm did best of the settings tried on 12 contours (docs/results.md)."""
     optimize_pinch: bool = False
     """Also move the pinch point along its gradient (the grasped set held fixed per step), staying
     feasible."""
@@ -321,7 +322,7 @@ GRAD_CONFIGS = {
     "es": GradConfig(estimator="es", iterations=40, learning_rate=0.1),
 }
 """The optimiser's defaults per estimator (library and command line). es: 40 steps of 0.1 mm, on fls-circle
-and kidney +74.6% and +55.3% against +75.3% and +48.9% with 20 steps of 0.3 mm (docs/learning.md)."""
+and kidney +74.6% and +55.3% against +75.3% and +48.9% with 20 steps of 0.3 mm (docs/results.md)."""
 
 GRAD_ESTIMATORS = tuple(GRAD_CONFIGS)
 """How the plan optimiser may estimate its gradient (``GradConfig.estimator``): "tape" or "es"."""

@@ -31,8 +31,6 @@ import numpy as np
 
 from agents.adam import Adam
 from agents.config import (
-    EVALUATION_CANDIDATES,
-    EVALUATION_TRIALS,
     GRAD_CONFIG,
     GRAD_SEED_OFFSET,
     GradConfig,
@@ -97,7 +95,7 @@ class PlanResult:
     @classmethod
     def from_json(cls, data: dict) -> PlanResult:
         plan = np.asarray(data["plan"], dtype=np.float32).reshape(-1, 3)
-        gains = data.get("gains")  # plans written before session 21 are open loop
+        gains = data.get("gains")  # a plan without gains is open loop
         return cls(
             data["contour"], list(data["pinch"]), plan, int(data["best_iteration"]), list(data["history"]),
             float(data["seconds"]), int(data["env_steps"]),
@@ -183,7 +181,7 @@ def _gain_matrices(gains) -> np.ndarray:
     the field otherwise."""
     matrices = np.asarray(gains, dtype=np.float32)
     if matrices.ndim != 3 and matrices.size % 6 == 0:
-        matrices = matrices.reshape(-1, 3, 2)  # a flat list: the 3 x 2 matrices of plans before session 27
+        matrices = matrices.reshape(-1, 3, 2)  # a flat list of 3 x 2 matrices
     if matrices.ndim != 3 or matrices.shape[1:] not in ((3, 2), (3, 4)):
         raise ValueError(
             f"gains: expected 3 x 2 or 3 x 4 matrices, one per phase, got shape {matrices.shape}; give the "
@@ -209,7 +207,7 @@ def _read_state(state_file: Path | None, identity: dict) -> dict | None:
 
 def _settings_of(saved: dict | None) -> dict | None:
     """Settings (or an identity holding them) read from a file, with the :class:`GradConfig` fields it
-    predates at their defaults, the behaviour before each field existed (``es_feedback_sag``, session 27)."""
+    lacks at their defaults (e.g. ``es_feedback_sag``), the behaviour of a plan without them."""
     if saved is None or "estimator" not in saved:
         return saved
     return {**dataclasses.asdict(GradConfig()), **saved}
@@ -552,7 +550,7 @@ def cached_plan(
         state = done.with_suffix(".state.json")
         if done.is_file():
             data = read_json(done)
-            if _settings_of(data.get("settings", wanted)) != wanted:  # before session 20: none
+            if _settings_of(data.get("settings", wanted)) != wanted:  # none kept: as wanted
                 raise ValueError(
                     f"{done}: a plan optimised with other settings ({data['settings']}, here {wanted}); "
                     "delete it to optimise again, or run with its settings"
@@ -573,76 +571,6 @@ def cached_plan(
         write_json(done, {**result.to_json(), "settings": wanted})
         state.unlink(missing_ok=True)
     return result
-
-
-def optimize_contour(
-    contour: str | Contour,
-    out: Path | None = None,
-    *,
-    pinch: Sequence[float] | None = None,
-    settings: GradConfig = GRAD_CONFIG,
-    trials: int = EVALUATION_TRIALS,
-    config: SimConfig | None = None,
-    candidates: int = EVALUATION_CANDIDATES,
-    arm: ArmModel | None = None,
-    device: str | None = None,
-    seed: int = 0,
-    log: Callable[[str], None] = lambda _: None,
-) -> dict:
-    """``warpcut optimize``: plan the cut (segments, order and, unless ``pinch`` is given, the pinch point:
-    fixed tension's best candidate), optimise an open-loop plan there (:func:`optimize_plan`), and evaluate
-    it against no tension and fixed tension at the same pinch point on the default protocol (``trials``
-    seeded noisy trials, paired). ``out``: the run directory, where the plan (``NAME.json``), the
-    optimiser's state while it runs (an interrupted optimisation continues) and ``results.json`` go.
-
-    Returns:
-        ``{"contour", "pinch", "settings", "optimized": PlanResult.to_json(), "evaluation": {METHOD:
-        {"error_vertices", "improvement_pct", "ci95_pct"}}, "seconds"}``.
-    """
-    from agents.evaluation import Method, evaluate_suite
-    from warpcut.contours import load_contour
-    from warpcut.planning import plan_cut
-
-    start = time.perf_counter()
-    config = (config or SimConfig()).validated()
-    contour = load_contour(contour) if isinstance(contour, str) else contour
-    arm = arm or ArmModel()
-    log(f"  planning {contour.name} ({candidates} candidates)")
-    plan = plan_cut(
-        contour, config.replace(noise_std=0.0), num_candidates=candidates, seed=seed, device=device, arm=arm
-    )
-    point = np.asarray(plan.chosen["pinch"] if pinch is None else pinch, dtype=np.float64)
-    segments = plan.ordered_segments()
-    method, (result,) = grad_result(
-        [contour], [point], [segments], trials, config, settings, device, seed, out, log, arm
-    )
-    table = evaluate_suite(
-        [contour], [Method("fixed", pinches=[point]), Method("grad", result=method)], trials, config, device,
-        seed, segments=[segments],
-    )  # fmt: skip
-    row = table["rows"][0]
-    evaluation = {
-        m: {
-            "error_vertices": row[f"{m}_error_vertices"],
-            "improvement_pct": row.get(f"{m}_improvement_pct", 0.0),
-            "ci95_pct": row.get(f"{m}_ci95", 0.0),
-        }
-        for m in ("none", "fixed", "grad")
-    }
-    report = {
-        "contour": contour.name,
-        "pinch": [float(v) for v in point],
-        "settings": dataclasses.asdict(settings),
-        "trials": trials,
-        "optimized": result.to_json(),
-        "evaluation": evaluation,
-        "seconds": time.perf_counter() - start,
-    }
-    if out is not None:
-        from warpcut.io import write_json
-
-        write_json(Path(out) / "results.json", report)
-    return report
 
 
 def grad_column(

@@ -101,6 +101,12 @@ class TrainJob:
             train=train,
         )
 
+    def unused_keys(self) -> dict[str, str]:
+        """The keys this job would not use, ``{key: when it applies}`` (a setting given for nothing is
+        refused, not ignored: :func:`agents.cli.common.refuse_unused_settings`): the other learners'
+        sections, and the recording's colours without a recording."""
+        return {**other_learners(self.train), **_recording_keys(self)}
+
 
 def contour_spec(spec: Any) -> Any:
     """A job's ``contour`` as :class:`~envs.options.PatternCutOptions` takes it: a name or file as is, an
@@ -166,6 +172,16 @@ class RunJob:
                 raise ValueError(f"{name}: must be an integer >= 1, or null for the budget's (got {value!r})")
         return {**BUDGETS[self.budget], **{k: v for k, v in given.items() if v is not None}}
 
+    def unused_keys(self) -> dict[str, str]:
+        """The keys this job would not use, ``{key: when it applies}``: the learner and its env without
+        ``policy: rl``, the other learners' sections, the recording's colours without a recording."""
+        if self.policy != "rl":
+            why = "read by --policy rl only (it trains a policy per candidate)"
+            unused = {key: why for key in ("train", "env", "rl_candidates")}
+        else:
+            unused = other_learners(self.train)
+        return {**unused, **_recording_keys(self)}
+
 
 @dataclass
 class EvaluateJob:
@@ -224,6 +240,37 @@ class EvaluateJob:
         self.grad.validated()
         return self
 
+    def unused_keys(self) -> dict[str, str]:
+        """The keys this job would not use, ``{key: when it applies}``: the rl column's settings without rl,
+        its training settings with checkpoints, the grad column's without grad, the other learners'
+        sections, the recording's colours without a recording."""
+        unused: dict[str, str] = {}
+        if "rl" not in self.methods:
+            why = "read by the rl column only (--methods ...,rl)"
+            unused |= {key: why for key in ("train", "env", "checkpoints", "allow_partial")}
+        elif self.checkpoints is not None:
+            unused["train"] = "with checkpoints the rl column plays trained runs; nothing is trained"
+        else:
+            unused |= other_learners(self.train)
+            unused["allow_partial"] = "read with checkpoints only"
+        if "grad" not in self.methods:
+            unused["grad"] = "read by the grad column only (--methods ...,grad)"
+        return {**unused, **_recording_keys(self)}
+
+
+def other_learners(train: TrainConfig) -> dict[str, str]:
+    """The sections of the learners ``train`` does not train with, ``{key: when it applies}``."""
+    from agents.algorithms import ALGORITHMS
+
+    return {f"train.{name}": f"read by --algo {name} only" for name in ALGORITHMS if name != train.algo}
+
+
+def _recording_keys(job: Any) -> dict[str, str]:
+    """``colour_by`` without a recording."""
+    if getattr(job, "record", None) is None:
+        return {"colour_by": "colours a recording, and record is off (add --record [N])"}
+    return {}
+
 
 OUTPUT_KEYS = ("record", "colour_by", "video", "plots", "export_mesh")
 """The keys of a job that say only what a run writes besides its results: a resumed run may change them."""
@@ -243,10 +290,11 @@ def with_dependent_defaults(job: Any, explicit: set[str]) -> Any:
         job = dataclasses.replace(job, env=dataclasses.replace(job.env, action_type=actions))
     if hasattr(job, "grad") and job.grad.estimator in GRAD_CONFIGS:
         own = GRAD_CONFIGS[job.grad.estimator]
+        given = {key.split(".")[1] for key in explicit if key.startswith("grad.") and key.count(".") >= 1}
         keep = {
             f.name: getattr(job.grad, f.name)
             for f in dataclasses.fields(GradConfig)
-            if f"grad.{f.name}" in explicit or f.name == "estimator"
+            if f.name in given or f.name == "estimator"
         }
         job = dataclasses.replace(job, grad=dataclasses.replace(own, **keep))
     return job

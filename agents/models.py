@@ -2,11 +2,12 @@
 
 :class:`FeedbackMLPModel` is rsl-rl's :class:`~rsl_rl.models.MLPModel` whose MLP output gets a linear map of
 the (normalised) tracking error added, ``mlp(x) + K x[tracking]``, ``K`` (actions x 3) zero at the start.
-It is the structure of es's feedback gains (``warpcut optimize --feedback-only``: a still grasp that moves
-by a gain matrix times the tracking error, docs/learning.md "Closed loop: es on feedback gains") inside the
+It is the structure of the plan optimiser's feedback gains (``warpcut optimize --set
+grad.es_feedback_only=true``: a still grasp that moves by a gain matrix times the tracking error) inside the
 neural policy: the network can still use every observation, and the gains need not be found through two
-tanh layers. es's policy has it (:attr:`agents.es.config.EsConfig.feedback`). The path lives inside ``model.mlp`` (:class:`FeedbackMLP`), so rsl-rl's PPO, the TorchScript
-and ONNX exports and everything else that calls ``model.mlp`` use it unchanged.
+tanh layers. es's policy has it (:attr:`agents.es.config.EsConfig.feedback`). The path lives inside
+``model.mlp`` (:class:`FeedbackMLP`), so rsl-rl's PPO, the TorchScript and ONNX exports and everything else
+that calls ``model.mlp`` use it unchanged.
 """
 
 from __future__ import annotations

@@ -381,7 +381,7 @@ class Runner(OnPolicyRunner):
             "best_score": self.best_score,
             "best_iterations": self.best_iterations,
             "validation_baseline": self.validation_baseline,
-            "wall_time_s": self.wall_time(),
+            "wall_time_s": None if self.earlier_wall_time is None else self.wall_time(),
             "episode_start": self.env.episode_start() if hasattr(self.env, "episode_start") else None,
             **(infos or {}),
         }
@@ -708,7 +708,7 @@ def _loaded(spec):
 
 def training_env(options: PatternCutOptions, cfg: TrainConfig, seed: int = 0) -> PatternCutRslEnv:
     """The rsl-rl env a learner trains in: ``cfg``'s batch of envs of ``options``, seeded with ``seed``."""
-    env = PatternCutVecEnv(cfg.batch_size, options)
+    env = PatternCutVecEnv(cfg.batch_size, options, autoreset_mode="same_step")  # rsl-rl resets inside step
     return PatternCutRslEnv(env, torch_device=cfg.torch_device, seed=seed)
 
 

@@ -3,7 +3,9 @@
 Each env holds a gripper at 0 and a target ``d`` in {-reach, ..., reach}. Every step moves the gripper by
 -1, 0 or +1 (discrete: choice index 0, 1, 2) or by the action clipped to [-1, 1] (continuous). After
 ``horizon`` steps the episode ends with the only reward, ``-|d - x| / reach``, and a fresh target. A random
-discrete policy ends about 2 away from the target; a good one ends on it.
+discrete policy ends about 2 away from the target; a good one ends on it. Every env's episode ends on the same
+step (one clock, as warpcut's envs share one), where ``extras["episode_cost"]`` holds each env's final error
+over ``reach``: what es ranks its policies by.
 """
 
 from __future__ import annotations
@@ -13,24 +15,25 @@ from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
 FINAL_ERROR_KEY = "Episode/final_error"
+EPISODE_COST_KEY = "episode_cost"
 
 
 class ReachEnv(VecEnv):
     """Batched 1D reach task with a sparse final reward.
 
     Attributes:
-        num_action_choices: Choices per action when ``discrete`` (steps -1, 0, +1).
+        num_action_choices: Choices per action (steps -1, 0, +1) when ``discrete``, else None (continuous
+            moves: the learner reads the action type from it).
         step_calls: Number of :meth:`step` calls so far.
         interrupt_after: Raise ``KeyboardInterrupt`` on this :meth:`step` call, like a Ctrl-C mid-rollout.
     """
-
-    num_action_choices = 3
 
     def __init__(
         self, num_envs: int = 16, discrete: bool = True, horizon: int = 6, reach: int = 4, seed: int = 0
     ) -> None:
         self.num_envs = num_envs
         self.num_actions = 1
+        self.num_action_choices: int | None = 3 if discrete else None
         self.max_episode_length = horizon
         self.device = "cpu"
         self.cfg = {"discrete": discrete, "horizon": horizon, "reach": reach}
@@ -69,6 +72,8 @@ class ReachEnv(VecEnv):
         extras = {"time_outs": torch.zeros_like(dones), "log": {}}
         if dones.any():
             extras["log"][FINAL_ERROR_KEY] = final_error[dones]
+            if dones.all():
+                extras[EPISODE_COST_KEY] = (final_error / self.reach).double()
             self._reset(dones)
         return self.get_observations(), rewards, dones.long(), extras
 

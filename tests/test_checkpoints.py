@@ -1,9 +1,10 @@
 """Damaged, missing and mismatched run files: every checkpoint, options file and figure a run reads or
-writes fails with one line naming the file and the fix (issue 17); resume finds the newest readable
-checkpoint."""
+writes fails with one line naming the file and the fix; resume finds the newest readable checkpoint; a
+checkpoint describes its own policy."""
 
 from __future__ import annotations
 
+import dataclasses
 import errno
 import json
 import os
@@ -16,20 +17,24 @@ import torch
 from dummy_env import ReachEnv
 from tensordict import TensorDict
 
-from agents.cli import main
-from agents.config import TrainConfig
-from agents.export import export_policy, load_policy
-from agents.rl import check_policy_run, load_options, resume_settings, train_contour
-from agents.train import (
+from agents.checkpoints import (
     BEST_CHECKPOINT,
     LATEST_CHECKPOINT,
     latest_checkpoint,
     policy_checkpoint,
     read_checkpoint,
     resume_checkpoint,
-    train,
 )
-from envs.options import PatternCutOptions
+from agents.cli import main
+from agents.config import TrainConfig
+from agents.config_io import to_plain
+from agents.es.config import EsConfig
+from agents.export import export_policy
+from agents.jobs import TrainJob
+from agents.policies import check_policy_run, load_options, load_policy
+from agents.ppo.config import PpoConfig
+from agents.training import train, train_contour
+from envs.options import EnvConfig, PatternCutOptions
 from warpcut.contours import Contour, load_contour
 from warpcut.sim.config import SimConfig
 
@@ -40,8 +45,9 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def tiny(**overrides) -> TrainConfig:
-    defaults = {"num_envs": NUM_ENVS, "iterations": 3, "num_steps_per_env": 8, "stay_prior": 0.0}
-    return TrainConfig(**{**defaults, **overrides})
+    """PPO on the dummy env: a few short iterations from a uniform start."""
+    ppo = PpoConfig(num_steps_per_env=8, stay_prior=0.0)
+    return TrainConfig(**{"algo": "ppo", "num_envs": NUM_ENVS, "iterations": 3, "ppo": ppo, **overrides})
 
 
 @pytest.fixture(scope="module")
@@ -82,7 +88,7 @@ def cli_error(capfd, *args) -> str:
     return err
 
 
-# --- item 1: damaged checkpoints ------------------------------------------------------------------------
+# --- damaged checkpoints ------------------------------------------------------------------------------
 
 
 @pytest.mark.parametrize("kind", ["empty", "truncated", "text"])
@@ -128,16 +134,8 @@ def test_exporting_a_file_that_is_not_a_checkpoint_is_one_line(run, tmp_path, ca
     err = cli_error(capfd, "export", str(notes))
     assert f"{notes}: not a readable checkpoint (not a PyTorch checkpoint file)" in err
     assert "give a run directory written by 'warpcut train'" in err
-    err = cli_error(capfd, "export", str(run / "config.json"))
-    assert f"(such as {run})" in err
     err = cli_error(capfd, "train", "--resume", str(notes))
-    assert f"{notes}: not a readable checkpoint" in err
-    # A checkpoint without the config.json of its run.
-    alone = tmp_path / "alone"
-    alone.mkdir()
-    shutil.copy(run / "model_2.pt", alone / "model_2.pt")
-    err = cli_error(capfd, "export", str(alone / "model_2.pt"))
-    assert f"{alone / 'config.json'}: missing" in err
+    assert str(notes.parent) in err
     # A file where the output directory should be.
     err = cli_error(capfd, "export", str(run), "--out", str(notes / "sub"))
     assert f"--out: cannot write {notes / 'sub'} ({notes} is not a directory)" in err
@@ -146,25 +144,65 @@ def test_exporting_a_file_that_is_not_a_checkpoint_is_one_line(run, tmp_path, ca
         export_policy(run)
 
 
+def test_a_checkpoint_describes_its_own_policy(run, tmp_path, capfd):
+    """Every checkpoint holds its policy's description (the actor's rsl-rl config, its observation shapes and
+    actions) beside its weights: the policy loads, plays and exports from the .pt file alone, copied away
+    from its run."""
+    state = read_checkpoint(run / BEST_CHECKPOINT)
+    assert state["algo"] == "ppo"
+    assert state["policy"] == {
+        "actor": tiny().to_rsl_rl(3)["actor"],
+        "obs_groups": {"actor": ["policy"], "critic": ["policy"]},
+        "obs_shapes": {"policy": [2]},
+        "num_actions": 1,
+        "num_action_choices": 3,
+    }
+    alone = tmp_path / "elsewhere" / "any-name.pt"
+    alone.parent.mkdir()
+    shutil.copy(run / BEST_CHECKPOINT, alone)
+    actor, original = load_policy(alone), load_policy(run)
+    obs = TensorDict({"policy": torch.randn(16, 2) * 2.0}, batch_size=[16])
+    with torch.inference_mode():
+        assert torch.equal(actor(obs), original(obs))
+    for name, value in original.state_dict().items():
+        assert torch.equal(actor.state_dict()[name], value), name
+    with pytest.raises(SystemExit) as exit_info:
+        main.main(args=["export", str(alone)], prog_name="warpcut")
+    assert exit_info.value.code == 0, capfd.readouterr().err
+    assert (alone.parent / "exported" / "policy.onnx").is_file()
+
+
 def test_resuming_with_another_observation_size_names_both(run):
+    before = (run / LATEST_CHECKPOINT).read_bytes()
     with pytest.raises(ValueError, match=r"latest.pt: policy expects 2 observations, the env gives 3"):
         train(WiderReach(NUM_ENVS), tiny(iterations=4), run, resume=run, progress=False)
-    before = (run / "config.json").read_text()
-    assert json.loads(before)["env"]["obs_shapes"] == {"policy": [2]}  # not rewritten by the failed resume
+    assert (run / LATEST_CHECKPOINT).read_bytes() == before  # not rewritten by the failed resume
 
 
-def test_a_checkpoint_that_does_not_fit_its_config_json_is_named(run):
-    config = json.loads((run / "config.json").read_text())
-    config["env"]["obs_shapes"]["policy"] = [5]
-    (run / "config.json").write_text(json.dumps(config))
-    with pytest.raises(ValueError, match=r"best.pt: policy expects 2 observations, config.json gives 5"):
+def test_a_checkpoint_whose_description_does_not_fit_its_weights_is_named(run):
+    path = run / BEST_CHECKPOINT
+    state = torch.load(path, weights_only=True)
+    state["policy"]["obs_shapes"]["policy"] = [5]
+    torch.save(state, path)
+    with pytest.raises(
+        ValueError,
+        match=r"best.pt: policy expects 2 observations, its description gives 5; the file is damaged",
+    ):
         load_policy(run)
-    (run / "config.json").write_text('{"env": {}}')
-    with pytest.raises(ValueError, match=r"config.json: not a run's config.json"):
+    state["policy"] = {"actor": {}}
+    torch.save(state, path)
+    with pytest.raises(ValueError, match=r"best.pt: its policy description cannot be read \(KeyError"):
+        load_policy(run)
+    del state["policy"]
+    torch.save(state, path)
+    with pytest.raises(
+        ValueError,
+        match=r"best.pt: not a readable checkpoint \(not a checkpoint of 'warpcut train': no policy\)",
+    ):
         load_policy(run)
 
 
-# --- item 2: resume from the newest readable checkpoint ------------------------------------------------
+# --- resume from the newest readable checkpoint --------------------------------------------------------
 
 
 def test_a_run_without_latest_resumes_from_its_newest_model(run, capsys):
@@ -209,7 +247,7 @@ def test_a_run_with_no_readable_checkpoint_says_so(run, tmp_path):
         resume_checkpoint(empty)
 
 
-# --- item 3: a full disk --------------------------------------------------------------------------------
+# --- a full disk ----------------------------------------------------------------------------------------
 
 
 def full_disk(monkeypatch, module: str, names: set[str]) -> None:
@@ -228,7 +266,7 @@ def full_disk(monkeypatch, module: str, names: set[str]) -> None:
 
 def test_a_full_disk_while_saving_keeps_the_last_good_checkpoint(tmp_path, monkeypatch):
     run = tmp_path / "run"
-    full_disk(monkeypatch, "agents.train", {"model_2.pt"})
+    full_disk(monkeypatch, "agents.training", {"model_2.pt"})
     with pytest.raises(ValueError) as error:
         train(ReachEnv(NUM_ENVS), tiny(save_interval=1), run, progress=False)
     assert str(error.value) == (
@@ -251,7 +289,7 @@ def test_a_full_disk_at_best_keeps_the_best_on_disk_in_the_summary(tmp_path, mon
     run = tmp_path / "run"
     errors = iter([5.0, 6.0, 3.0])  # iterations 0 (the best so far), 1, then 2 after resuming
     train(ReachEnv(NUM_ENVS), tiny(iterations=1), run, progress=False, validate=lambda actor: next(errors))
-    full_disk(monkeypatch, "agents.train", {BEST_CHECKPOINT})
+    full_disk(monkeypatch, "agents.training", {BEST_CHECKPOINT})
     with pytest.raises(ValueError, match=r"best.pt: not written, the disk is full; the previous best.pt is"):
         train(
             ReachEnv(NUM_ENVS), tiny(iterations=2, validation_interval=1), run, resume=run, progress=False,
@@ -265,7 +303,7 @@ def test_a_full_disk_at_best_keeps_the_best_on_disk_in_the_summary(tmp_path, mon
 def test_a_full_disk_at_latest_still_records_the_model_written(tmp_path, monkeypatch):
     run = tmp_path / "run"
     train(ReachEnv(NUM_ENVS), tiny(iterations=1), run, progress=False)
-    full_disk(monkeypatch, "agents.train", {LATEST_CHECKPOINT})
+    full_disk(monkeypatch, "agents.training", {LATEST_CHECKPOINT})
     with pytest.raises(
         ValueError, match=r"latest.pt: not written, the disk is full; model_2.pt \(the newest"
     ):
@@ -277,12 +315,12 @@ def test_a_full_disk_at_latest_still_records_the_model_written(tmp_path, monkeyp
 
 
 def test_a_full_disk_at_the_summary_is_named_and_never_hides_the_first_error(tmp_path, monkeypatch):
-    full_disk(monkeypatch, "agents.train", {"summary.json"})
+    full_disk(monkeypatch, "agents.training", {"summary.json"})
     with pytest.raises(
         ValueError, match=r"summary.json: not written, the disk is full; the newest checkpoint"
     ):
         train(ReachEnv(NUM_ENVS), tiny(iterations=1), tmp_path / "a", progress=False)
-    full_disk(monkeypatch, "agents.train", {"model_0.pt", "summary.json"})
+    full_disk(monkeypatch, "agents.training", {"model_0.pt", "summary.json"})
     with pytest.raises(
         ValueError, match=r"model_0.pt: not written, the disk is full; no checkpoint"
     ) as error:
@@ -308,18 +346,23 @@ def test_a_file_where_the_run_directory_should_be_is_named(tmp_path):
         train(ReachEnv(NUM_ENVS), tiny(iterations=1), tmp_path / "run.json", progress=False)
 
 
-# --- items 4 to 8: on the real env ----------------------------------------------------------------------
+# --- on the real env ----------------------------------------------------------------------------------
 
 SMALL = SimConfig(resolution=13)
+
+JOB = TrainJob(
+    contour="circle-small",
+    sim=SMALL,
+    eval_trials=1,
+    train=TrainConfig(num_envs=2, iterations=1, validation_trials=1, es=EsConfig(population=2)),
+)
+"""A tiny run of the default learner (es, observing the contour) on circle-small."""
 
 
 @pytest.fixture(scope="module")
 def real_run(tmp_path_factory):
-    """A tiny run on circle-small (observing the contour), and its options."""
     run = tmp_path_factory.mktemp("real") / "circle-small"
-    options = PatternCutOptions(contour="circle-small", sim_config=SMALL, contour_features=True)
-    cfg = TrainConfig(num_envs=2, iterations=1, num_steps_per_env=4)
-    train_contour(options, run, cfg, eval_trials=1, progress=False, validation_trials=1)
+    train_contour(JOB, run, progress=False)
     return run
 
 
@@ -338,6 +381,7 @@ def real_copy(real_run, tmp_path):
         ('{"contour": "fls-circle", "sim_config": {"gravity_x": 1}}', "options: sim_config: unknown field"),
         ('{"contour": "fls-circle", "sim_config": {"resolution": 2}}', "options: resolution: got 2"),
         ('{"contour": "fls-circle", "pinch_point": [1, 2, 3]}', r"options: pinch_point: give \[x_mm, y_mm\]"),
+        ('{"contour": "fls-circle", "observe_pinch": true}', r"options: unknown field\(s\) observe_pinch"),
     ],
 )
 def test_a_garbage_options_file_is_named(tmp_path, content, match):
@@ -345,15 +389,6 @@ def test_a_garbage_options_file_is_named(tmp_path, content, match):
     with pytest.raises(ValueError, match=match) as error:
         load_options(tmp_path)
     assert str(error.value).startswith(f"{tmp_path / 'options.json'}: ")
-
-
-def test_a_garbage_scenario_file_is_named(tmp_path):
-    (tmp_path / "scenario.json").write_text('{"pinch": [1, 2]}')
-    with pytest.raises(ValueError, match=r"scenario.json: expected a JSON object with a \"contour\""):
-        load_options(tmp_path)
-    (tmp_path / "scenario.json").write_text('{"contour": "fls-circle", "sim": {"nope": 1}}')
-    with pytest.raises(ValueError, match=r"scenario.json: options: sim_config: unknown field\(s\) nope"):
-        load_options(tmp_path)
 
 
 def test_paths_of_the_wrong_kind_are_named(tmp_path):
@@ -380,45 +415,56 @@ def test_a_custom_contour_is_stored_in_the_run_not_its_path(tmp_path, monkeypatc
     loaded = load_options(run).contour
     assert isinstance(loaded, Contour) and loaded.name == "my-circle"
     assert np.array_equal(loaded.points, load_contour(tmp_path / "my-circle.json").points)
-    # An older run holds the path as typed: it loads where the path resolves, and says why elsewhere.
-    (run / "options.json").write_text('{"contour": "my-circle.json"}')
-    with pytest.raises(ValueError, match=r"options.json: contour 'my-circle.json' is neither a built-in"):
-        load_options(run)
-    monkeypatch.chdir(tmp_path)
-    assert load_options(run).contour == "my-circle.json"
 
 
-def test_resuming_with_other_options_fails_before_touching_the_run(real_copy):
-    before = (real_copy / "options.json").read_text()
-    options = PatternCutOptions(contour="circle-small", sim_config=SMALL, contour_features=False)
+def test_a_run_directory_records_its_job_and_options(real_run):
+    """``config.json`` is the job, its pinch point resolved (``--config`` runs it again); ``options.json``
+    what the policy acts in; the summary names the learner."""
+    config = json.loads((real_run / "config.json").read_text())
+    options = load_options(real_run)
+    assert config == to_plain(dataclasses.replace(JOB, pinch=options.pinch_point))
+    assert config["train"]["algo"] == "es" and config["env"] == to_plain(EnvConfig())
+    assert options.contour == "circle-small" and options.sim_config == SMALL and options.contour_features
+    summary = json.loads((real_run / "summary.json").read_text())
+    assert summary["algo"] == "es" and summary["status"] == "completed" and summary["iterations"] == 1
+    assert read_checkpoint(real_run / BEST_CHECKPOINT)["algo"] == "es"
+
+
+def test_resuming_with_other_settings_fails_before_touching_the_run(real_copy, capfd):
+    before = {p.name: p.read_bytes() for p in real_copy.iterdir() if p.is_file()}
+    changes = {
+        "env.contour_features": (
+            dataclasses.replace(JOB, env=EnvConfig(contour_features=False)), True, False,
+        ),
+        "seed": (dataclasses.replace(JOB, seed=5), 0, 5),
+        # the validation episodes are fixed too: model selection compares each validation with the first
+        "train.validation_trials": (
+            dataclasses.replace(JOB, train=dataclasses.replace(JOB.train, validation_trials=2)), 1, 2,
+        ),
+    }  # fmt: skip
+    for key, (job, theirs, ours) in changes.items():
+        with pytest.raises(ValueError) as error:
+            train_contour(job, real_copy, resume=real_copy, progress=False)
+        assert str(error.value) == (
+            f"{key}: the resumed run {real_copy} has {theirs!r} (its config.json), this job {ours!r}; a "
+            "resumed run keeps its settings: drop the change, or start a new run"
+        )
+    # A run without its config.json: the policy itself must fit the env.
+    (real_copy / "config.json").unlink()
+    job = changes["env.contour_features"][0]
     with pytest.raises(ValueError) as error:
-        train_contour(options, real_copy, TrainConfig(num_envs=2, iterations=2), resume=real_copy)
+        train_contour(job, real_copy, resume=real_copy, progress=False)
     message = str(error.value)
     assert message.startswith(f"{real_copy / 'latest.pt'}: policy expects 47 observations, the env gives 40")
     assert "contour_features=True in the run, False here" in message
-    assert (real_copy / "options.json").read_text() == before
-    # The validation episodes are fixed too: model selection compares each validation with the first.
-    options = PatternCutOptions(contour="circle-small", sim_config=SMALL, contour_features=True)
-    for kwargs, match in (
-        ({"validation_trials": 2}, r"validation_trials: .* validated on 1 episode\(s\), these settings on 2"),
-        ({"validation_trials": 1, "seed": 5}, r"seed: .* was trained with seed 0 \(its config.json\), these"),
-    ):
-        cfg = TrainConfig(num_envs=2, iterations=2, seed=kwargs.pop("seed", 0))
-        with pytest.raises(ValueError, match=match):
-            train_contour(options, real_copy, cfg, resume=real_copy, **kwargs)
-    assert resume_settings(real_copy) == {
-        "seed": 0, "validation_trials": 1, "num_envs": 2, "num_steps_per_env": 4, "stay_prior": 0.9,
-        "algorithm": "ppo", "es_population": TrainConfig.es_population, "actor_feedback": False,
-        "learning_rate": TrainConfig.learning_rate, "es_sigma": TrainConfig.es_sigma,
-        "es_feedback_sigma": TrainConfig.es_feedback_sigma,
-        "es_feedback_learning_rate": TrainConfig.es_feedback_learning_rate,
-    }  # fmt: skip
+    assert {p.name: p.read_bytes() for p in real_copy.iterdir() if p.is_file()} == {
+        name: data for name, data in before.items() if name != "config.json"
+    }
 
 
-def test_check_policy_run(real_copy):
+def test_check_policy_run(real_copy, capfd):
     assert check_policy_run(real_copy, "circle-small").contour == "circle-small"
-    requested = PatternCutOptions(contour="circle-small", sim_config=SMALL, contour_features=True)
-    check_policy_run(real_copy, requested)
+    check_policy_run(real_copy, PatternCutOptions(contour="circle-small", sim_config=SMALL))
     with pytest.raises(
         ValueError, match=r"circle-small: trained on contour 'circle-small', not on the requested 'fls"
     ):
@@ -427,10 +473,11 @@ def test_check_policy_run(real_copy):
     moved = Contour("circle-small", True, moved.points + [1.0, 0.0])
     with pytest.raises(ValueError, match=r"\(same name, other points\)"):
         check_policy_run(real_copy, moved)
+    blind = PatternCutOptions(contour="circle-small", sim_config=SMALL, contour_features=False)
     with pytest.raises(ValueError, match=r"other settings than requested \(contour_features=True in the run"):
-        check_policy_run(real_copy, PatternCutOptions(contour="circle-small", sim_config=SMALL))
+        check_policy_run(real_copy, blind)
     with pytest.raises(ValueError, match=r"resolution=13 in the run, 25 requested"):
-        check_policy_run(real_copy, PatternCutOptions(contour="circle-small", contour_features=True))
+        check_policy_run(real_copy, PatternCutOptions(contour="circle-small"))
 
     summary = json.loads((real_copy / "summary.json").read_text())
     (real_copy / "summary.json").write_text(json.dumps({**summary, "status": "interrupted"}))
@@ -444,31 +491,34 @@ def test_check_policy_run(real_copy):
         check_policy_run(real_copy, "circle-small")
 
     options = json.loads((real_copy / "options.json").read_text())
-    (real_copy / "options.json").write_text(json.dumps({**options, "observe_pinch": True}))
-    with pytest.raises(ValueError, match=r"best.pt: policy expects 47 observations, .*options.json gives 49"):
+    (real_copy / "options.json").write_text(json.dumps({**options, "num_fiducials": 10}))
+    with pytest.raises(ValueError, match=r"best.pt: policy expects 47 observations, .*options.json gives 41"):
         check_policy_run(real_copy, "circle-small", allow_partial=True)
+    # A file of the run that is not a checkpoint: export names the run directory to give instead.
+    err = cli_error(capfd, "export", str(real_copy / "config.json"))
+    assert f"(such as {real_copy})" in err
 
 
 def test_train_resume_needs_no_contour_and_refuses_a_conflicting_one(real_copy, capfd):
-    err = cli_error(capfd, "train", "--resume", str(real_copy), "--contour", "fls-circle")
-    assert (
-        err.startswith("error: --contour: the resumed run") and "was trained on contour 'circle-small'" in err
-    )
-    err = cli_error(capfd, "train", "--resume", str(real_copy), "--observe", "fiducials")
-    assert "--observe: the resumed run" in err and "was trained with --observe contour" in err
-    err = cli_error(capfd, "train", "--resume", str(real_copy), "--z")
-    assert "--z/--no-z: the resumed run" in err and "was trained with --no-z" in err
-    err = cli_error(capfd, "train", "--resume", str(real_copy), "--validation-trials", "16")
-    assert "--validation-trials: the resumed run" in err and "was trained with --validation-trials 1 " in err
-    err = cli_error(capfd, "train", "--resume", str(real_copy), "--seed", "3")
-    assert "--seed: the resumed run" in err and "was trained with --seed 0 " in err
-    err = cli_error(capfd, "train", "--resume", str(real_copy), "--num-envs", "8")
-    assert "--num-envs: the resumed run" in err and "was trained with --num-envs 2 " in err
+    conflicts = {
+        ("--contour", "fls-circle"): "contour: the resumed run",
+        ("--set", "env.contour_features=false"): "env.contour_features: the resumed run",
+        ("--set", "env.allow_z=false"): "env.allow_z: the resumed run",
+        ("--set", "train.validation_trials=16"): "train.validation_trials: the resumed run",
+        ("--seed", "3"): "seed: the resumed run",
+        ("--num-envs", "8"): "train.num_envs: the resumed run",
+        ("--algo", "ppo"): "train.algo: the resumed run",
+    }
+    for args, start in conflicts.items():
+        err = cli_error(capfd, "train", "--resume", str(real_copy), *args)
+        assert (
+            err.startswith(f"error: {start} {real_copy} has ") and "a resumed run keeps its settings" in err
+        )
     err = cli_error(capfd, "train", "--iterations", "1")
-    assert "--contour: give the contour to train on" in err
+    assert "contour: give the contour to train on (--contour)" in err
 
-    common = ["--eval-trials", "1"]  # no --contour, --validation-trials, --num-envs: the run knows them
-    with pytest.raises(SystemExit) as exit_info:
+    one = json.loads((real_copy / "summary.json").read_text())["env_steps"]  # one whole cut in each env
+    with pytest.raises(SystemExit) as exit_info:  # no --contour, --num-envs ...: the run knows them
         main.main(
             args=[
                 "train",
@@ -477,12 +527,14 @@ def test_train_resume_needs_no_contour_and_refuses_a_conflicting_one(real_copy, 
                 "--iterations",
                 "2",
                 "--no-progress",
-                "--no-plots",
-                *common,
+                "--set",
+                "plots=false",
             ],
             prog_name="warpcut",
         )
     assert exit_info.value.code == 0, capfd.readouterr().err
     summary = json.loads((real_copy / "summary.json").read_text())
-    assert summary["iterations"] == 2 and summary["env_steps"] == 2 * 2 * 4  # the run's 2 envs x 4 steps
-    assert json.loads((real_copy / "config.json").read_text())["train"]["num_envs"] == 2
+    assert summary["iterations"] == 2 and summary["resumed_from"] == str(real_copy / LATEST_CHECKPOINT)
+    assert summary["env_steps"] == 2 * one and [h["iteration"] for h in summary["history"]] == [1, 2]
+    config = json.loads((real_copy / "config.json").read_text())
+    assert config["train"]["num_envs"] == 2 and config["train"]["iterations"] == 2

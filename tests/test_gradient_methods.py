@@ -1,4 +1,4 @@
-"""Gradient-based tensioning: the open-loop plan optimiser (agents.gradient) and APG training (agents.apg)."""
+"""Gradient-based tensioning: the plan optimiser (agents.gradient) and APG training (agents.apg)."""
 
 import dataclasses
 import json
@@ -214,19 +214,19 @@ def test_a_kept_plan_of_other_settings_is_refused(tmp_path):
         cached_plan(contour, PINCH, None, SMALL, dataclasses.replace(settings, trials=3), folder=tmp_path)
 
 
-def _apg_env(num_envs: int):
-    from agents.rl import training_env
+def _apg_env(num_envs: int, action_type: str = "continuous"):
+    from agents.training import training_env
     from envs.options import PatternCutOptions
 
     options = PatternCutOptions(
-        contour="circle-small", sim_config=SMALL, action_type="continuous", contour_features=True
+        contour="circle-small", sim_config=SMALL, action_type=action_type, contour_features=True
     )
-    cfg = TrainConfig(num_envs=num_envs, iterations=2, algorithm="apg", discrete=False, save_interval=1)
+    cfg = TrainConfig(algo="apg", num_envs=num_envs, iterations=2, save_interval=1)
     return training_env(options, cfg), cfg
 
 
 def test_apg_trains_saves_and_resumes(tmp_path):
-    from agents.train import train
+    from agents.training import train
 
     env, cfg = _apg_env(2)
     summary = train(env, cfg, tmp_path, progress=False)
@@ -237,9 +237,7 @@ def test_apg_trains_saves_and_resumes(tmp_path):
     assert all(np.isfinite(h["final_error"]) and h["grad_norm"] > 0 for h in history)
     assert (tmp_path / "latest.pt").is_file()
     env, _ = _apg_env(2)
-    more = train(
-        env, TrainConfig(**{**cfg.__dict__, "iterations": 3}), tmp_path, resume=tmp_path, progress=False
-    )
+    more = train(env, dataclasses.replace(cfg, iterations=3), tmp_path, resume=tmp_path, progress=False)
     assert more["iterations"] == 3 and len(more["history"]) == 3
 
 
@@ -251,10 +249,11 @@ def test_apg_accept_replays_the_same_episodes_and_keeps_only_steps_that_help(mon
 
     import torch
 
-    from agents.apg import ApgRunner
+    from agents.apg.config import ApgConfig
+    from agents.apg.runner import ApgRunner
 
     env, cfg = _apg_env(3)
-    cfg = TrainConfig(**{**cfg.__dict__, "apg_accept": True, "learning_rate": 0.05})
+    cfg = dataclasses.replace(cfg, apg=ApgConfig(accept=True, learning_rate=0.05))
     runner = ApgRunner(env, cfg.to_rsl_rl(None), None)
     errors = []
     forward = runner.engine.forward
@@ -284,13 +283,13 @@ def test_apg_accept_replays_the_same_episodes_and_keeps_only_steps_that_help(mon
 
 
 def test_apg_refuses_discrete_actions():
-    from agents.train import train
+    from agents.training import train
 
-    env, _ = _apg_env(2)
-    with pytest.raises(ValueError, match="algorithm: apg"):
-        train(env, TrainConfig(num_envs=2, algorithm="apg", discrete=True), "unused", progress=False)
-    with pytest.raises(ValueError, match="algorithm: choose one of"):
-        train(env, TrainConfig(num_envs=2, algorithm="sac", discrete=False), "unused", progress=False)
+    env, cfg = _apg_env(2, action_type="discrete")
+    with pytest.raises(ValueError, match="algo: apg plays continuous moves"):
+        train(env, cfg, "unused", progress=False)
+    with pytest.raises(ValueError, match="algo: choose one of"):
+        train(env, dataclasses.replace(cfg, algo="sac"), "unused", progress=False)
 
 
 def test_optimize_pinch_moves_the_pinch_point_and_keeps_it_feasible():
@@ -457,13 +456,8 @@ def test_randomised_episodes_are_weighed_by_their_sheets_no_tension_error():
         grad_config("es", es_randomize="gravity", es_randomize_ranges={"noise": (0.0, 0.27)})
 
 
-def test_feedback_plans_are_refused_as_a_base_plan_and_a_kept_plan_must_match_its_pinch(tmp_path):
-    from agents.gradient import base_plan_options
-
+def test_a_kept_plan_must_match_its_pinch_and_closed_loop_settings_need_es(tmp_path):
     contour = load_contour("circle-small")
-    settings = GradConfig(estimator="es", es_feedback_phases=1)
-    with pytest.raises(ValueError, match="es_feedback_phases: a policy on top of a plan"):
-        base_plan_options(contour, {}, tmp_path, SMALL, (settings, None), None, 0, print)
     tape = GradConfig(iterations=1, trials=2, validation_trials=2)
     cached_plan(contour, PINCH, None, SMALL, tape, folder=tmp_path)
     with pytest.raises(ValueError, match="a plan optimised at the pinch point"):
@@ -522,13 +516,13 @@ def test_es_learns_feedback_gains_that_beat_a_still_grasp():
     assert (learnt - still).mean() - ci(learnt - still) > 0
 
 
-def test_the_readme_closed_loop_example_runs(capsys):
-    """The README's es block (feedback gains alone over randomised sheets) runs as written."""
+def test_the_usage_guides_closed_loop_example_runs(capsys):
+    """The usage guide's es block (feedback gains alone over randomised sheets) runs as written."""
     import re
     from pathlib import Path
 
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    block = next(b for b in re.findall(r"```python\n(.*?)```", readme, re.S) if "es_feedback_only" in b)
-    exec(compile(block, "README.md", "exec"), {})
+    guide = (Path(__file__).resolve().parents[1] / "docs" / "usage.md").read_text()
+    block = next(b for b in re.findall(r"```python\n(.*?)```", guide, re.S) if "es_feedback_only" in b)
+    exec(compile(block, "docs/usage.md", "exec"), {})
     out = capsys.readouterr().out
     assert out.count("[") >= 3 and "nan" not in out.lower()

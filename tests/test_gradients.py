@@ -177,14 +177,14 @@ def test_rollout_memory_grows_with_the_checkpoints_only():
     assert long["total"] < 2**30  # a default-length B = 64 rollout: well under a GiB
 
 
-def test_the_readme_gradient_example_runs(capsys):
-    """The README's gradient block runs as written (fls-circle, 4 envs, three gradient steps)."""
+def test_the_usage_guides_gradient_example_runs(capsys):
+    """The usage guide's gradient block runs as written (fls-circle, 4 envs, three gradient steps)."""
     import re
     from pathlib import Path
 
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    block = next(b for b in re.findall(r"```python\n(.*?)```", readme, re.S) if "DifferentiableRollout" in b)
-    exec(compile(block, "README.md", "exec"), {})
+    guide = (Path(__file__).resolve().parents[1] / "docs" / "usage.md").read_text()
+    block = next(b for b in re.findall(r"```python\n(.*?)```", guide, re.S) if "DifferentiableRollout" in b)
+    exec(compile(block, "docs/usage.md", "exec"), {})
     lines = capsys.readouterr().out.strip().splitlines()
     assert [line.split()[0] for line in lines] == ["0", "1", "2"]
     assert all(np.isfinite(float(line.split()[1])) for line in lines)

@@ -1,4 +1,4 @@
-"""agents.ppo_speed: the PPO speed-ups compute what rsl-rl computes."""
+"""agents.ppo.algorithm: the PPO speed-ups compute what rsl-rl computes."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import torch
 from rsl_rl.storage import RolloutStorage
 from tensordict import TensorDict
 
-from agents.ppo_speed import mini_batches
+from agents.ppo.algorithm import mini_batches
 
 
 def _filled_storage(num_envs: int = 6, steps: int = 4) -> RolloutStorage:

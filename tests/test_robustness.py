@@ -1,5 +1,5 @@
-"""Issue 20: per-env parameters changed between episodes, domain randomisation, and the sensitivity studies
-(``warpcut robustness``)."""
+"""Per-env parameters changed between episodes, domain randomisation, and the sensitivity studies
+(:mod:`agents.pipelines.robustness`; the command line's tests: tests/test_cli_robustness.py)."""
 
 import json
 import re
@@ -9,7 +9,11 @@ import pytest
 from click.testing import CliRunner
 
 from agents.cli import main
-from agents.robustness import (
+from agents.config import GradConfig, TrainConfig
+from agents.jobs import RobustnessJob, TrainJob
+from agents.pipelines import robustness
+from agents.pipelines.robustness import (
+    check_job,
     check_runs,
     check_study,
     parse_studies,
@@ -17,7 +21,7 @@ from agents.robustness import (
     robustness_table,
     robustness_target,
 )
-from envs.options import PatternCutOptions
+from envs.options import EnvConfig, PatternCutOptions
 from envs.vector import PatternCutVecEnv
 from warpcut.contours import load_contour
 from warpcut.sim.config import RANDOMIZE_LEVELS, RANDOMIZE_RANGES, ConfigError, SimConfig, randomize_ranges
@@ -140,6 +144,19 @@ def test_studies_and_their_values_are_checked():
             check_runs({label: "."})
     with pytest.raises(ValueError, match="runs: .* is not one trained policy's run"):
         check_runs({"rl": "tests"})
+    job = check_job(RobustnessJob(contour="fls-circle", study=["all"]))
+    assert job.study == ["resolution", "noise", "force"]  # one spelling: config.json compares on resume
+    for wrong, message in [
+        (dict(study=[]), "study: choose from"),
+        (dict(study=["noise", "force"], values=[0.0]), "values: give the values of one study"),
+        (dict(study=["noise"], methods=["rl"]), "methods: unknown rl; choose from none,fixed,analytic,grad"),
+        (dict(study=["noise"], trials=0), "trials: must be an integer >= 1"),
+        (dict(study=["noise"], contour=None), r"contour: give the contour \(--contour\), or trained runs"),
+        (dict(study=["noise"], plans={"fixed": "x.json"}), "plans: label 'fixed' must be a plain name"),
+        (dict(study=["noise"], grad=GradConfig(iterations=0)), "grad.iterations: must be a positive integer"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            check_job(RobustnessJob(**{"contour": "fls-circle", **wrong}))
 
 
 def test_force_study_is_one_batch_with_a_sheet_per_gravity():
@@ -266,62 +283,20 @@ def test_resolution_study_skips_a_mesh_too_coarse_for_the_contour():
     assert 0 < report["none"]["median"][1] < 100
 
 
-def test_robustness_and_randomised_training_end_to_end(tmp_path):
-    """``warpcut train --randomize`` keeps its randomisation in the run; ``warpcut robustness --run`` sweeps
-    the policy with the baselines and writes the issue's JSON and the figure."""
-    run = tmp_path / "run"
-    code, out, err = invoke(
-        ["train", "--contour", "fls-circle", "--randomize", "gravity,noise", "--randomize-range",
-         "gravity=200,800", "--relative-reward", "--iterations", "2", "--num-envs", "8",
-         "--validation-trials", "2", "--eval-trials", "2", "--device", "cpu", "--out", str(run),
-         "--no-progress", "--no-plots"]
-    )  # fmt: skip
-    assert code == 0, err
-    options = json.loads((run / "options.json").read_text())
-    assert options["relative_reward"] is True
-    assert options["randomize"] == ["gravity", "noise_std"] and options["randomize_ranges"]["gravity"] == [
-        200,
-        800,
-    ]
-    path = tmp_path / "noise.json"
-    code, out, err = invoke(
-        ["robustness", "--study", "noise", "--run", f"dr={run}", "--values", "0,0.05", "--trials", "2",
-         "--device", "cpu", "--out", str(tmp_path / "rob"), "--json", str(path)]
-    )  # fmt: skip
-    assert code == 0, err
-    report = json.loads(path.read_text())
-    assert report["study"] == "noise" and report["values"] == [0.0, 0.05]
-    assert report["methods"] == ["fixed", "analytic", "dr"] and report["runs"] == {"dr": str(run)}
-    assert len(report["dr"]["median"]) == 2 and "dr" in out
-    assert (tmp_path / "rob" / "robustness-noise.json").is_file() and (
-        tmp_path / "rob" / "robustness.png"
-    ).is_file()
-    # The first trial's noise is the same for every method: with no noise, every trial of a method is one.
-    assert report["fixed"]["q25"][0] == report["fixed"]["q75"][0]
-
-
-def test_robustness_and_randomize_flags_name_what_is_wrong(tmp_path):
+def test_train_names_a_bad_randomised_parameter(tmp_path):
     code, _, err = invoke(
-        ["train", "--contour", "fls-circle", "--randomize", "wind", "--out", str(tmp_path / "x")]
+        ["train", "--contour", "fls-circle", "--set", "env.randomize=[wind]", "--out", str(tmp_path / "x")]
     )
-    assert code == 2 and "--randomize" in err and "unknown parameter 'wind'" in err
-    code, _, err = invoke(["robustness", "--study", "noise"])
-    assert code == 2 and "--contour: give the contour" in err
-    code, _, err = invoke(["robustness", "--study", "wind", "--contour", "fls-circle"])
-    assert code == 2 and "--study" in err
-    code, _, err = invoke(["robustness", "--study", "noise", "--run", str(tmp_path)])
-    assert code == 2 and "--run" in err and "not one trained policy's run" in err
+    assert code == 2 and "randomize: unknown parameter 'wind'" in err
 
 
 def test_grad_plays_its_plan_at_every_value_and_is_optimised_once(tmp_path):
-    from agents.config import GradConfig
-    from agents.robustness import robustness
-
     settings = GradConfig(iterations=2, trials=2, validation_trials=2)
-    reports = robustness(
-        "fls-circle", "noise,force", tmp_path, methods=["none", "grad"], values=None, trials=2,
-        config=SimConfig(resolution=RES), grad=settings, device="cpu",
+    job = RobustnessJob(
+        contour="fls-circle", study=["noise", "force"], methods=["none", "grad"], trials=2,
+        sim=SimConfig(resolution=RES), grad=settings,
     )  # fmt: skip
+    reports = robustness(job, tmp_path, device="cpu")
     plan = json.loads((tmp_path / "grad" / "fls-circle.json").read_text())
     assert len(plan["history"]) == settings.iterations + 1
     for report in reports:
@@ -354,7 +329,7 @@ def test_relative_reward_weighs_each_sheet_by_its_no_tension_error():
     )
     errors = none.run(None).error_mm2
     assert scale[1] == pytest.approx(errors[0] / errors[1])
-    actions = np.zeros(3, dtype=np.int64)
+    actions = np.zeros((3, *plain.scene.action_space.shape), dtype=np.float32)  # hold still
     for _ in range(plain.scene.episode_steps):
         _, r_plain, *_ = plain.scene.step(actions)
         _, r_scaled, *_ = scaled.scene.step(actions)
@@ -371,9 +346,9 @@ def test_a_run_cut_in_another_order_is_paired_with_no_tension_in_that_order(tmp_
     runs = {}
     for label, segments in (("whole", None), ("split", other)):
         code, _, err = invoke(
-            ["train", "--contour", "fls-circle", "--iterations", "1", "--num-envs", "4",
-             "--validation-trials", "0", "--eval-trials", "2", "--device", "cpu", "--out",
-             str(tmp_path / label), "--no-progress", "--no-plots"]
+            ["train", "--contour", "fls-circle", "--iterations", "1", "--num-envs", "4", "--set",
+             "train.es.population=4", "--set", "train.validation_trials=0", "--set", "eval_trials=2",
+             "--device", "cpu", "--out", str(tmp_path / label), "--no-progress", "--set", "plots=false"]
         )  # fmt: skip
         assert code == 0, err
         if segments is not None:  # the run's own order, as a plan would give it
@@ -392,13 +367,14 @@ def test_a_run_cut_in_another_order_is_paired_with_no_tension_in_that_order(tmp_
 def test_a_randomised_run_compares_its_pinch_candidates_on_the_nominal_sheet(tmp_path):
     """``warpcut run --randomize``: each candidate's policy validated on randomised sheets; the candidates
     are compared by their policies' error on the nominal sheet's validation episodes."""
-    from agents.rl import nominal_validation_error
+    from agents.policies import nominal_validation_error
 
     out = tmp_path / "run"
     code, _, err = invoke(
-        ["run", "--contour", "circle-small", "--randomize", "gravity", "--candidates", "2", "--rl-candidates",
-         "1", "--iterations", "2", "--trials", "2", "--num-envs", "8", "--device", "cpu", "--out", str(out),
-         "--no-plots"]
+        ["run", "--contour", "circle-small", "--set", "env.randomize=[gravity]", "--set", "candidates=2",
+         "--set", "rl_candidates=1", "--set", "train.iterations=2", "--set", "trials=2", "--set",
+         "train.num_envs=8", "--set", "train.es.population=4", "--set", f"sim.resolution={RES}",
+         "--device", "cpu", "--out", str(out), "--set", "plots=false"]
     )  # fmt: skip
     assert code == 0, err
     candidate = json.loads((out / "results.json").read_text())["candidates"][0]
@@ -410,23 +386,23 @@ def test_a_randomised_run_compares_its_pinch_candidates_on_the_nominal_sheet(tmp
 
 
 def test_apg_refuses_randomised_sheets_in_the_library_and_on_the_command_line(tmp_path):
-    from agents.config import APG_FIXED_SHEET, TrainConfig
-    from agents.rl import train_contour
+    from agents.config import APG_FIXED_SHEET
+    from agents.training import train_contour
 
-    options = PatternCutOptions(
-        contour="fls-circle", resolution=RES, randomize=["gravity"], action_type="continuous", device="cpu"
-    )
-    cfg = TrainConfig(algorithm="apg", discrete=False, iterations=1, num_envs=2)
+    job = TrainJob(
+        contour="fls-circle", sim=SimConfig(resolution=RES),
+        env=EnvConfig(randomize=["gravity"], action_type="continuous"),
+        train=TrainConfig(algo="apg", iterations=1, num_envs=2, validation_trials=0),
+    )  # fmt: skip
     with pytest.raises(ValueError, match=re.escape(APG_FIXED_SHEET)):
-        train_contour(options, tmp_path / "apg", cfg, validation_trials=0, progress=False)
-    code, _, err = invoke(["train", "--contour", "fls-circle", "--algo", "apg", "--relative-reward"])
+        train_contour(job, tmp_path / "apg", device="cpu", progress=False)
+    args = ["train", "--contour", "fls-circle", "--algo", "apg", "--set", "env.relative_reward=true"]
+    code, _, err = invoke(args + ["--out", str(tmp_path / "cli")])
     assert code == 2 and APG_FIXED_SHEET in err
 
 
 def test_optimised_plans_are_played_as_methods_closed_loop_included(tmp_path):
-    from agents.config import GradConfig
     from agents.gradient import optimize_plan
-    from agents.robustness import robustness
     from warpcut.io import write_json
     from warpcut.planning import plan_cut
 
@@ -440,11 +416,12 @@ def test_optimised_plans_are_played_as_methods_closed_loop_included(tmp_path):
     result.gains = np.full((1, 3, 2), 0.5, np.float32)  # strong feedback: it must change the cut
     write_json(tmp_path / "closed.json", result.to_json())
     write_json(tmp_path / "open.json", {**result.to_json(), "gains": None})
-    plans = {"closed": tmp_path / "closed.json", "open": tmp_path / "open.json"}
-    (report,) = robustness(
-        "fls-circle", "noise", tmp_path / "out", plans=plans, methods=["none"], values=[0.0, 0.03], trials=2,
-        config=config, device="cpu",
+    plans = {"closed": str(tmp_path / "closed.json"), "open": str(tmp_path / "open.json")}
+    job = RobustnessJob(
+        contour="fls-circle", study=["noise"], plans=plans, methods=["none"], values=[0.0, 0.03], trials=2,
+        sim=config,
     )  # fmt: skip
+    (report,) = robustness(job, tmp_path / "out", device="cpu")
     assert report["methods"] == ["closed", "open"] and report["plans"]["closed"].endswith("closed.json")
     assert len(report["closed"]["median"]) == 2
     assert report["closed"]["mean"] != report["open"]["mean"]  # the gains acted
@@ -456,16 +433,3 @@ def test_optimised_plans_are_played_as_methods_closed_loop_included(tmp_path):
     (tmp_path / "bad.json").write_text("{}")
     with pytest.raises(ValueError, match="plans: .*bad.json is not an optimised plan"):
         robustness_study("fls-circle", "noise", plans={"x": tmp_path / "bad.json"}, config=config)
-
-
-def test_plan_labels_default_to_the_file_name():
-    from agents.cli.robustness import _labelled_plans
-
-    assert _labelled_plans(("a/fls-circle.json", "mine=b/fls-circle.json")) == {
-        "fls-circle": "a/fls-circle.json",
-        "mine": "b/fls-circle.json",
-    }
-    code, _, err = invoke(
-        ["robustness", "--contour", "fls-circle", "--study", "noise", "--plan", "x.json", "--plan", "x.json"]
-    )
-    assert code == 2 and "--plan" in err and "given twice" in err

@@ -1,4 +1,5 @@
-"""PPO training on rsl-rl: the categorical distribution, run directories, learning, resume, Ctrl-C, export."""
+"""Training on rsl-rl (agents.training) with PPO: the categorical distribution, run directories, learning,
+resume, Ctrl-C, export."""
 
 from __future__ import annotations
 
@@ -12,19 +13,23 @@ from onnx.reference import ReferenceEvaluator
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 from tensordict import TensorDict
 
+from agents.checkpoints import BEST_CHECKPOINT, policy_checkpoint
 from agents.config import TrainConfig
-from agents.distributions import Categorical
-from agents.export import export_policy, load_policy
-from agents.train import BEST_CHECKPOINT, Runner, policy_checkpoint, train
-from agents.train import FINAL_ERROR_KEY as TRAIN_FINAL_ERROR_KEY
+from agents.export import export_policy
+from agents.policies import load_policy
+from agents.ppo.config import PpoConfig
+from agents.ppo.distributions import Categorical
+from agents.training import FINAL_ERROR_KEY as TRAIN_FINAL_ERROR_KEY
+from agents.training import Runner, train
 
 NUM_ENVS = 32
 
 
-def tiny_config(**overrides) -> TrainConfig:
+def tiny_config(stay_prior: float = 0.0, **overrides) -> TrainConfig:
     """Small PPO settings for the dummy env, from a uniform initial policy (``stay_prior=0``: the dummy
     env's action 0 is not "stay")."""
-    defaults = {"num_envs": NUM_ENVS, "iterations": 3, "num_steps_per_env": 24, "stay_prior": 0.0}
+    ppo = PpoConfig(num_steps_per_env=24, stay_prior=stay_prior)
+    defaults = {"algo": "ppo", "num_envs": NUM_ENVS, "iterations": 3, "ppo": ppo}
     return TrainConfig(**{**defaults, **overrides})
 
 
@@ -189,26 +194,22 @@ def test_without_validation_the_latest_checkpoint_is_the_policy(trained_run):
 
 @pytest.mark.parametrize("discrete", [True, False], ids=["discrete", "continuous"])
 def test_smoke_run_writes_run_directory(tmp_path, discrete):
-    summary = train(
-        ReachEnv(NUM_ENVS, discrete=discrete), tiny_config(discrete=discrete), tmp_path, progress=True
-    )
+    summary = train(ReachEnv(NUM_ENVS, discrete=discrete), tiny_config(), tmp_path, progress=True)
 
     assert summary == json.loads((tmp_path / "summary.json").read_text())
-    assert summary["status"] == "completed" and summary["iterations"] == 3
+    assert summary["status"] == "completed" and summary["iterations"] == 3 and summary["algo"] == "ppo"
     assert summary["env_steps"] == 3 * 24 * NUM_ENVS
     assert summary["checkpoint"] == "model_2.pt" and summary["final_error"] is not None
     assert [h["iteration"] for h in summary["history"]] == [1, 2, 3]
     assert summary["history"][-1]["final_error"] == summary["final_error"]
-    config = json.loads((tmp_path / "config.json").read_text())
-    assert TrainConfig(**config["train"]) == tiny_config(discrete=discrete)
-    assert config["env"] == {
-        "num_envs": NUM_ENVS,
-        "num_actions": 1,
-        "num_action_choices": 3 if discrete else None,
-        "obs_shapes": {"policy": [2]},
-    }
     checkpoint = torch.load(tmp_path / "latest.pt", weights_only=True)
     assert checkpoint["iter"] == 2 and checkpoint["infos"]["iterations_done"] == 3
+    # Every checkpoint names its learner and describes its policy (what load_policy rebuilds it from).
+    assert checkpoint["algo"] == "ppo"
+    policy = checkpoint["policy"]
+    assert policy["obs_shapes"] == {"policy": [2]} and policy["num_actions"] == 1
+    assert policy["num_action_choices"] == (3 if discrete else None)
+    assert policy["actor"] == tiny_config().to_rsl_rl(3 if discrete else None)["actor"]
     assert {"model_0.pt", "model_2.pt"} <= {p.name for p in tmp_path.glob("model_*.pt")}
 
     assert TRAIN_FINAL_ERROR_KEY == FINAL_ERROR_KEY
@@ -300,7 +301,7 @@ def test_exported_policies_match_live_policy(tmp_path, trained_run, discrete):
     run_dir = trained_run
     if not discrete:
         run_dir = tmp_path / "run"
-        train(ReachEnv(NUM_ENVS, discrete=False), tiny_config(discrete=False), run_dir, progress=False)
+        train(ReachEnv(NUM_ENVS, discrete=False), tiny_config(), run_dir, progress=False)
     paths = export_policy(run_dir, tmp_path / "exported")
     obs = torch.randn(64, 2) * 2.0
 
@@ -325,16 +326,20 @@ def test_the_run_logs_its_hyperparameters_for_tensorboard(tmp_path):
     train(ReachEnv(NUM_ENVS), tiny_config(iterations=2), tmp_path, progress=False, validate=lambda actor: 2.5)
     events = EventAccumulator(str(tmp_path))
     events.Reload()
-    assert events.PluginTagToContent("hparams")  # the HPARAMS tab's experiment and session
+    assert events.PluginTagToContent("hparams")  # what the HPARAMS tab shows
     assert [e.value for e in events.Scalars("hparam/validation_error")] == [2.5]
 
 
-def test_collection_runs_on_one_torch_thread_and_the_update_on_all(tmp_path, monkeypatch):
+@pytest.mark.parametrize("algo", ["ppo", "es"])
+def test_collection_runs_on_one_torch_thread_and_the_update_on_all(tmp_path, monkeypatch, algo):
     """On a CPU, rsl-rl's collection shares the cores with the simulator's threads, so it runs torch on one
-    thread; the PPO update gets every thread torch had; both are restored afterwards
+    thread; the learner's update (PPO's, es's) gets every thread torch had; both are restored afterwards
     (docs/performance.md §6)."""
+    from agents.es.algorithm import ES
+    from agents.es.config import EsConfig
+
     seen = {"step": set(), "update": set()}
-    env = ReachEnv(NUM_ENVS)
+    env = ReachEnv(NUM_ENVS, discrete=algo == "ppo")
     step = env.step
 
     def counting_step(actions):
@@ -344,16 +349,22 @@ def test_collection_runs_on_one_torch_thread_and_the_update_on_all(tmp_path, mon
     monkeypatch.setattr(env, "step", counting_step)
     from rsl_rl.algorithms import PPO
 
-    update = PPO.update
+    learner = PPO if algo == "ppo" else ES
+    update = learner.update
 
     def counting_update(self, *args, **kwargs):
         seen["update"].add(torch.get_num_threads())
         return update(self, *args, **kwargs)
 
-    monkeypatch.setattr(PPO, "update", counting_update)
+    monkeypatch.setattr(learner, "update", counting_update)
+    cfg = tiny_config(iterations=2)
+    if algo == "es":
+        cfg = TrainConfig(
+            algo="es", num_envs=NUM_ENVS, iterations=2, es=EsConfig(population=4, feedback=False)
+        )
     torch.set_num_threads(2)
     try:
-        train(env, tiny_config(iterations=2), tmp_path, progress=False)
+        train(env, cfg, tmp_path, progress=False)
         assert seen == {"step": {1}, "update": {2}}
         assert torch.get_num_threads() == 2
     finally:
@@ -361,9 +372,10 @@ def test_collection_runs_on_one_torch_thread_and_the_update_on_all(tmp_path, mon
 
 
 def test_the_runner_installs_the_ppo_speed_ups():
-    from agents.ppo_speed import mini_batches
+    from agents.ppo.algorithm import PPO, mini_batches
 
     env = ReachEnv(num_envs=4)
     alg = Runner(env, tiny_config(num_envs=4).to_rsl_rl(env.num_action_choices), log_dir=None).alg
+    assert type(alg) is PPO
     assert alg.storage.mini_batch_generator.__func__ is mini_batches
     assert alg.optimizer.defaults["fused"] is True

@@ -783,9 +783,15 @@ def refuse_unused_settings(job, overrides: tuple[str, ...], flags: dict[str, str
 def check_learner(job) -> None:
     """``ValueError`` naming the setting, before any work, where ``job``'s learner (``job.train``) cannot
     train in its env (``job.env``): an action type it does not play, a population that does not fit the
-    batch, or domain randomisation (or a relative reward) for APG, which differentiates one fixed sheet."""
+    batch, an actor's feedback path on a tracking error the policy does not observe, or domain
+    randomisation (or a relative reward) for APG, which differentiates one fixed sheet."""
     from agents.config import APG_FIXED_SHEET
 
     job.train.check(job.env.action_type == "discrete")
+    if job.train.feedback and not job.env.contour_features:
+        raise ValueError(
+            "feedback: the policy observes no tracking error (env.contour_features=false); observe the "
+            f"contour, or train without the feedback path (train.{job.train.algo}.feedback=false)"
+        )
     if job.train.algo == "apg" and (job.env.randomize or job.env.relative_reward):
         raise ValueError(APG_FIXED_SHEET)

@@ -1,5 +1,5 @@
-"""``warpcut optimize``: an open-loop tension plan optimised through the differentiable simulator
-(:func:`agents.gradient.optimize_contour`)."""
+"""``warpcut optimize``: a plan of grasp moves optimised through the simulator, then evaluated
+(:func:`agents.pipelines.optimize_contour`)."""
 
 from __future__ import annotations
 
@@ -8,138 +8,98 @@ from pathlib import Path
 import click
 
 from agents.cli import common
-from agents.config import EVALUATION_CANDIDATES, EVALUATION_TRIALS, GRAD_CONFIG, GRAD_CONFIGS, grad_config
+from agents.config import EVALUATION_TRIALS, GRAD_CONFIG, GRAD_CONFIGS, GRAD_ESTIMATORS
 from agents.methods import point_text
-from warpcut.sim.config import SimConfig
 
-GRAD_FLAGS = {
-    "estimator": "--estimator", "iterations": "--iterations", "trials": "--episodes", "learning_rate": "--lr",
-    "es_population": "--population", "es_trials": "--population-episodes", "es_sigma_mm": "--sigma",
-    "es_feedback_phases": "--feedback-phases", "es_feedback_only": "--feedback-only",
-    "es_feedback_sag": "--feedback-sag", "es_randomize": "--randomize",
-    "es_randomize_ranges": "--randomize-range", "optimize_pinch": "--optimize-pinch",
-}  # fmt: skip
-"""The optimiser's settings (:class:`agents.config.GradConfig` fields) by the flags that set them."""
+FLAGS = {
+    "contour": "contour",
+    "pinch": "pinch",
+    "estimator": "grad.estimator",
+    "iterations": "grad.iterations",
+    "trials": "trials",
+    "seed": "seed",
+}
+"""Each flag's key in the job (:class:`agents.jobs.OptimizeJob`)."""
 
 
-@click.command("optimize")
-@common.contour_option
+@click.command("optimize", cls=common.Command)
+@click.option("--contour", default=None, help="Built-in name or a .json/.svg contour file.")
 @click.option(
     "--pinch",
     default=None,
+    callback=common.point_callback,
     help="Pinch point X,Y (mm); default: the plan's (fixed tension's best candidate).",
 )
-@common.estimator_option("estimator", "the optimiser")
+@click.option(
+    "--estimator",
+    type=click.Choice(GRAD_ESTIMATORS),
+    default=GRAD_CONFIG.estimator,
+    show_default=True,
+    help="How the optimiser estimates its gradient: 'tape', the path surrogate's through wp.Tape; 'es', "
+    "evolution strategies on the path score itself (perturbed plans cut in one batch; with "
+    "grad.es_feedback_phases, feedback gains too).",
+)
 @common.count_option(
     "iterations",
     None,
-    f"Adam steps; default {GRAD_CONFIGS['tape'].iterations} (tape: a forward and a backward pass each), "
-    f"{GRAD_CONFIGS['es'].iterations} (es: one batch of perturbed plans each).",
-)
-@common.count_option(
-    "episodes", GRAD_CONFIG.trials, "Noisy episodes per tape step (their noise is not the evaluation's)."
-)
-@click.option(
-    "--lr",
-    "learning_rate",
-    default=None,
-    type=common.FloatRange(min=0.0, min_open=True),
-    help=f"Adam's step (mm per grasp move); default {GRAD_CONFIGS['tape'].learning_rate} (tape), "
-    f"{GRAD_CONFIGS['es'].learning_rate} (es).",
-)
-@common.count_option("population", GRAD_CONFIGS["es"].es_population, "Perturbed plans per es step (even).")
-@common.count_option(
-    "population-episodes", GRAD_CONFIGS["es"].es_trials, "Noisy episodes per perturbed plan (es)."
-)
-@click.option(
-    "--sigma",
-    default=GRAD_CONFIGS["es"].es_sigma_mm,
-    show_default=True,
-    type=common.FloatRange(min=0.0, min_open=True),
-    help="Standard deviation of es's perturbation of each move (mm).",
-)
-@common.feedback_options("", "the policy")
-@click.option(
-    "--randomize",
-    default=None,
-    metavar="PARAMS",
-    help="es: physical parameters drawn anew at every step for the episodes, comma-separated from "
-    "warpcut.sim.config.RANDOMIZE_RANGES (over those ranges, or --randomize-range's); errors weighed by the "
-    "nominal sheet's no-tension error over their own sheet's. Default: the nominal sheet.",
-)
-@common.randomize_range_option
-@click.option(
-    "--optimize-pinch",
-    is_flag=True,
-    help="Also move the pinch point along its gradient (kept feasible).",
+    f"Optimiser steps; default the estimator's: {GRAD_CONFIGS['tape'].iterations} (tape: a forward and a "
+    f"backward pass each), {GRAD_CONFIGS['es'].iterations} (es: one batch of perturbed plans each).",
 )
 @common.count_option("trials", EVALUATION_TRIALS, "Evaluation trials (none, fixed and grad, paired).")
-@common.count_option("candidates", EVALUATION_CANDIDATES, "Pinch candidates of the plan.")
-@common.noise_option
-@common.score_option
-@common.arm_length_option
-@common.device_option
 @common.seed_option
-@common.out_option("logs/optimize-TIMESTAMP; the plan, the optimiser's state and results.json")
-@common.run_dir_options
+@common.device_option
+@common.out_option("logs/optimize-CONTOUR-TIMESTAMP; the plan, the optimiser's state and results.json")
+@click.option(
+    "--resume",
+    is_flag=True,
+    help="Continue the run in --out (interrupted, or to finish it): a finished plan is kept, an interrupted "
+    "optimisation continues from its state; the settings must be the run's (its config.json).",
+)
+@click.option("--overwrite", is_flag=True, help="Replace the run directory's contents (an earlier run's).")
 @common.json_option
+@common.config_options
 def command(
-    contour_name: str,
-    pinch: str | None,
+    contour: str | None,
+    pinch: list[float] | None,
     estimator: str,
     iterations: int | None,
-    episodes: int,
-    learning_rate: float | None,
-    population: int,
-    population_episodes: int,
-    sigma: float,
-    feedback_phases: int | None,
-    feedback_only: bool,
-    feedback_sag: bool,
-    randomize: str | None,
-    randomize_range: tuple[str, ...],
-    optimize_pinch: bool,
     trials: int,
-    candidates: int,
-    noise: float,
-    score: str,
-    arm_length: float,
-    device: str | None,
     seed: int,
+    device: str | None,
     out: Path | None,
     resume: bool,
     overwrite: bool,
     json_path: Path | None,
+    config_file: str | None,
+    overrides: tuple[str, ...],
+    print_config: bool,
 ) -> None:
-    """Optimise grasp moves by gradient descent through the simulator (tape or es gradients; with es, also
-    feedback gains), then evaluate them."""
-    from agents.gradient import optimize_contour
-    from warpcut.io import write_json
-    from warpcut.planning import ArmModel
+    """Optimise grasp moves through the simulator (tape or es gradients; with es, also feedback gains), then
+    evaluate them against no tension and fixed tension at the same pinch point.
 
-    point = common.parse_point(pinch, "--pinch")
-    _, ranges = common.parse_randomization(randomize, randomize_range)
-    common.check_outputs({"--json": json_path}, [contour_name])
-    try:
-        settings = grad_config(
-            estimator, iterations=iterations, trials=episodes, learning_rate=learning_rate,
-            es_population=population, es_trials=population_episodes, es_sigma_mm=sigma,
-            es_feedback_phases=feedback_phases, es_feedback_only=feedback_only, es_feedback_sag=feedback_sag,
-            es_randomize=randomize, es_randomize_ranges=ranges or None, optimize_pinch=optimize_pinch,
-        )  # fmt: skip
-    except ValueError as error:
-        raise common.flag_error(error, GRAD_FLAGS) from None
-    out, claim = common.claim(out, "optimize", resume, overwrite)
+    Everything but the flags is set with --config FILE and --set KEY=VALUE (the optimiser: grad.*, e.g.
+    grad.learning_rate, grad.es_population, grad.es_feedback_phases, grad.es_randomize; the physics and
+    noise: sim.*; candidates, arm.length_mm); --print-config shows them all.
+    """
+    from agents.jobs import OptimizeJob, contour_spec
+    from agents.pipelines import optimize_contour
+    from warpcut.contours import load_contour
+    from warpcut.io import safe_name, write_json
+
+    job = common.resolve(OptimizeJob, config_file, overrides, FLAGS).check()
+    common.refuse_unused_settings(job, overrides, FLAGS)
+    contour_name = load_contour(contour_spec(job.contour)).name  # a bad name or file: now
+    if print_config:
+        common.print_config(job)
+        return
+    common.check_outputs({"--json": json_path}, [job.contour] if isinstance(job.contour, str) else [])
+    out, claim = common.claim(out, f"optimize-{safe_name(contour_name)}", resume, overwrite)
     with claim:
-        report = optimize_contour(
-            contour_name, out, pinch=point, settings=settings, trials=trials,
-            config=SimConfig(noise_std=noise, score=score), candidates=candidates,
-            arm=ArmModel(length_mm=arm_length), device=device, seed=seed, log=common.log,
-        )  # fmt: skip
+        report = optimize_contour(job, out, resume=resume, device=device, log=common.log)
     optimized = report["optimized"]
     click.echo(
         f"{report['contour']}: pinch {point_text(optimized['pinch'])}, kept iteration "
-        f"{optimized['best_iteration']} of {settings.iterations}, {optimized['seconds']:.0f} s, "
+        f"{optimized['best_iteration']} of {job.grad.iterations}, {optimized['seconds']:.0f} s, "
         f"{optimized['env_steps']} env steps"
     )
     click.echo(f"{'method':<8} {'error (vertices)':>16} {'improvement':>12}")

@@ -109,6 +109,7 @@ class ES:
         self._seen: list[torch.Tensor] = []
         self._costs: np.ndarray | None = None
         self._warm_up = actor.obs_normalization and int(actor.obs_normalizer.count) == 0
+        self._rng_start = self.rng.bit_generator.state  # before this iteration's perturbations were drawn
 
     @staticmethod
     def construct_algorithm(obs: TensorDict, env: VecEnv, cfg: dict, device: str) -> ES:
@@ -199,7 +200,11 @@ class ES:
     def save(self) -> dict:
         return {
             "actor_state_dict": self.actor.state_dict(),
-            "optimizer_state_dict": {"adam": self.adam.state(), "rng": self.rng.bit_generator.state},
+            # mid-iteration (Ctrl-C): the stream as the iteration began; a resume draws its perturbations again
+            "optimizer_state_dict": {
+                "adam": self.adam.state(),
+                "rng": self._rng_start if self._step else self.rng.bit_generator.state,
+            },
         }
 
     def load(self, loaded_dict: dict, load_cfg: dict | None, strict: bool) -> bool:
@@ -209,7 +214,8 @@ class ES:
             raise ValueError("not an es checkpoint (no es optimiser state); resume it with its own algo")
         self.adam.load(state["adam"])
         self.rng.bit_generator.state = state["rng"]
-        self._warm_up = False
+        # a checkpoint saved before the warm-up iteration ended (Ctrl-C) has not taught its normaliser yet
+        self._warm_up = self.actor.obs_normalization and int(self.actor.obs_normalizer.count) == 0
         return True
 
     def broadcast_parameters(self) -> None:
@@ -220,6 +226,7 @@ class ES:
     def _begin_iteration(self) -> None:
         """Draw the iteration's perturbations (none in a warm-up iteration) and build the population."""
         theta = self._theta()
+        self._rng_start = self.rng.bit_generator.state
         if self._warm_up:
             self._warm_up = False
             self._eps = None

@@ -9,3 +9,7 @@ from agents.pipelines.run import RunReport, run_pipeline
 from agents.pipelines.table import TableReport, evaluate_table
 
 __all__ = ["RunReport", "TableReport", "evaluate_table", "robustness", "run_pipeline"]
+
+from agents.pipelines.optimize import optimize_contour  # noqa: E402  (``warpcut optimize``)
+
+__all__ += ["optimize_contour"]

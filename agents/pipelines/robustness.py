@@ -28,7 +28,6 @@ policy diverged in more trials than no tension against the policy.
 from __future__ import annotations
 
 import dataclasses
-import json
 import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -38,9 +37,10 @@ import numpy as np
 from agents.config import EVALUATION_TRIALS, GRAD_CONFIG, GradConfig
 from agents.evaluation import run_method
 from agents.gradient import PlanResult
+from agents.jobs import RobustnessJob, contour_spec
 from agents.methods import BASELINES, check_methods, tensioner
+from agents.pipelines.common import claims_out, record_job
 from warpcut.contours import Contour, ContourError
-from warpcut.io import finite_json, read_json, write_json
 from warpcut.scoring import bootstrap_ci, bootstrap_difference_ci, paired_improvement
 from warpcut.sim.config import GRAVITY_MM_S2, SimConfig
 from warpcut.task import segments_key
@@ -323,22 +323,27 @@ def check_plans(
     """``plans`` (``{label: plan file}``) read, each checked to be ``contour``'s; ``ValueError`` naming
     ``plans`` for a label taken by a method, a run or a report field, a file that is not an optimised plan,
     or a plan of another contour."""
-    from warpcut.io import read_json
-
     checked = {}
     for label, path in dict(plans or {}).items():
         _check_label("plans", label, taken=runs)
-        try:
-            result = PlanResult.from_json(read_json(path))
-        except (OSError, ValueError, KeyError, TypeError) as error:
-            raise ValueError(
-                f"plans: {path} is not an optimised plan ({error}); give a NAME.json of 'warpcut optimize' "
-                "(or a grad/NAME.json of 'warpcut evaluate')"
-            ) from None
+        result = _read_plan(path)
         if result.contour != contour.name:
             raise ValueError(f"plans: {path} is a plan for {result.contour!r}, not {contour.name!r}")
         checked[str(label)] = result
     return checked
+
+
+def _read_plan(path: str | Path) -> PlanResult:
+    """The optimised plan in ``path``; ``ValueError`` naming ``plans`` for a file that is not one."""
+    from warpcut.io import read_json
+
+    try:
+        return PlanResult.from_json(read_json(path))
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        raise ValueError(
+            f"plans: {path} is not an optimised plan ({error}); give a NAME.json of 'warpcut optimize' "
+            "(or a grad/NAME.json of 'warpcut evaluate')"
+        ) from None
 
 
 def _scenario(contour, runs: dict[str, Path], config, device, seed, log) -> dict:
@@ -481,7 +486,8 @@ def robustness_table(report: dict) -> list[str]:
 
 
 TARGET_BAND = 0.1
-"""Issue 20's noise half: a policy's improvement stays within this fraction of its nominal improvement."""
+"""The target's noise half (:func:`robustness_target`): a policy's improvement stays within this fraction
+of its nominal improvement across the noise sweep."""
 
 
 def _trials(report: dict, method: str, k: int) -> np.ndarray:
@@ -502,9 +508,10 @@ def _verdict(interval: tuple[float, float] | None, low: float, high: float = flo
 
 
 def robustness_target(reports: Mapping[str, dict], policy: str, band: float = TARGET_BAND) -> dict:
-    """Issue 20's target for the method ``policy`` in the force and noise reports of one contour
-    (:func:`robustness_study`'s, by study name): never below no tension in the force sweep, and within
-    ``band`` of its nominal improvement across the noise sweep, judged two ways.
+    """The robustness target for the method ``policy`` in the force and noise reports of one contour
+    (:func:`robustness_study`'s, by study name): a policy that never does worse than no tension across the
+    force sweep (its median improvement >= 0 at every gravity), and whose improvement stays within ``band``
+    of its nominal improvement across the noise sweep, judged two ways.
 
     - ``median``: on the medians over trials, as the target reads.
     - ``ci``: on 95% bootstrap intervals: a force value is ``in`` if its median's interval lies at or above
@@ -602,6 +609,7 @@ __all__ = [
     "STUDY_METHODS",
     "STUDY_UNITS",
     "STUDY_VALUES",
+    "check_job",
     "check_runs",
     "check_study",
     "parse_studies",
@@ -627,44 +635,62 @@ def parse_studies(value: str | Sequence[str]) -> list[str]:
     return list(dict.fromkeys(names))
 
 
+def check_job(job: RobustnessJob) -> RobustnessJob:
+    """``job`` checked before any work, its studies in their one spelling (``all``: every study): its ranges
+    (:meth:`~agents.jobs.RobustnessJob.check`), the studies and their values, the methods, the contour (or
+    runs of it), each run a trained policy's and each plan an optimised one; ``ValueError`` naming the
+    field."""
+    job = job.check()
+    studies = parse_studies(job.study)
+    if job.values is not None and len(studies) != 1:
+        raise ValueError("values: give the values of one study (or leave them out: each study's own)")
+    for study in studies:
+        check_study(study, job.values)
+    check_methods(job.methods, "methods", STUDY_METHODS)
+    if job.contour is None and not job.runs:
+        raise ValueError("contour: give the contour (--contour), or trained runs of it (--run)")
+    check_runs(job.runs)
+    for label, path in job.plans.items():
+        _check_label("plans", label, taken=job.runs)
+        _read_plan(path)
+    return dataclasses.replace(job, study=studies)
+
+
+@claims_out
 def robustness(
-    contour: str | Contour | None,
-    studies: str | Sequence[str],
-    out: Path,
+    job: RobustnessJob,
+    out: str | Path,
     *,
-    runs: Mapping[str, str | Path] | str | Path | None = None,
-    plans: Mapping[str, str | Path] | None = None,
-    methods: Sequence[str] | None = None,
-    values: Sequence[float] | None = None,
-    trials: int = EVALUATION_TRIALS,
-    config: SimConfig | None = None,
-    grad: GradConfig = GRAD_CONFIG,
-    device: str | None = None,
-    seed: int = 0,
     resume: bool = False,
+    overwrite: bool = False,
+    device: str | None = None,
     log: Callable[[str], None] = lambda _: None,
 ) -> list[dict]:
-    """``warpcut robustness``: :func:`robustness_study` for each of ``studies`` (``values`` only with one),
-    each report written to ``out/robustness-STUDY.json`` as it finishes. With ``resume``, the settings must
-    be those ``out`` was started with (``request.json``), and a study already written is read back."""
+    """``warpcut robustness``: :func:`robustness_study` for each of ``job.study``, in order.
+
+    Args:
+        job: The contour, studies, methods, runs, plans, sweep and trials
+            (:class:`agents.jobs.RobustnessJob`).
+        out: Run directory: ``config.json`` (the job), each study's ``robustness-STUDY.json`` as it finishes
+            and ``grad/`` (the ``grad`` method's plan). Locked while it runs; refused if it holds another
+            run (:func:`warpcut.io.claim_run_dir`).
+        resume: Continue the run in ``out`` (started with the same job): a study already written is read
+            back.
+        overwrite: Delete what ``out`` holds first.
+        device: Warp device.
+        log: Called with each progress line.
+
+    Returns:
+        The studies' reports (:func:`robustness_study`'s), in order.
+    """
     from warpcut.io import read_json
 
-    studies = parse_studies(studies)
-    if values is not None and len(studies) != 1:
-        raise ValueError("values: give the values of one study (or leave them out: each study's defaults)")
-    for study in studies:  # before the request is recorded: bad values leave no run behind
-        check_study(study, values)
-    runs = check_runs(runs)
+    job = check_job(job)  # before the job is recorded: bad settings leave no run behind
     out = Path(out)
-    named = None if contour is None else str(getattr(contour, "name", contour))
-    _record_request(
-        out, "robustness", resume, contour=named,
-        studies=studies, runs={k: str(v) for k, v in runs.items()},
-        plans={k: str(v) for k, v in (plans or {}).items()}, methods=list(methods or BASELINES),
-        values=values, trials=trials, config=config or SimConfig(), grad=grad, seed=seed,
-    )  # fmt: skip
+    record_job(out, job, resume)
+    contour = None if job.contour is None else contour_spec(job.contour)
     reports = []
-    for study in studies:
+    for study in job.study:
         path = out / f"robustness-{study}.json"
         if resume and path.is_file():
             log(f"  {study}: kept {path}")
@@ -672,42 +698,9 @@ def robustness(
             continue
         log(f"{study} study")
         report = robustness_study(
-            contour, study, out, runs=runs, plans=plans, methods=methods, values=values, trials=trials,
-            config=config,
-            grad=grad, device=device, seed=seed, log=log,
+            contour, study, out, runs=job.runs or None, plans=job.plans or None, methods=job.methods,
+            values=job.values, trials=job.trials, config=job.sim, grad=job.grad, device=device, seed=job.seed,
+            log=log,
         )  # fmt: skip
         reports.append(report)
     return reports
-
-
-REQUEST_FILE = "request.json"
-
-
-def _record_request(out: Path, command: str, resume: bool, **arguments) -> None:
-    """Write ``out/request.json``; with ``resume``, first check that ``arguments`` are those the run was
-    started with (a ValueError names each difference)."""
-    request = {"command": command, "arguments": _jsonable(arguments)}
-    path = out / REQUEST_FILE
-    if resume and path.is_file():
-        before = read_json(path)
-        if before.get("command") != command:
-            raise ValueError(f"--resume: {out} holds a '{before.get('command')}' run, not '{command}'")
-        old, new = before.get("arguments", {}), request["arguments"]
-        changed = [k for k in sorted(set(old) | set(new)) if old.get(k) != new.get(k)]
-        if changed:
-            shown = "; ".join(f"{k}: {old.get(k)!r} then, {new.get(k)!r} now" for k in changed)
-            raise ValueError(
-                f"--resume: {out} was started with other settings ({shown}); repeat the run's settings, "
-                "or start a new run (another --out, or --overwrite)"
-            )
-    write_json(path, request)
-
-
-def _jsonable(obj):
-    """``obj`` as :func:`~warpcut.io.write_json` would write and read it back (tuples as lists, dataclasses
-    as dicts, paths as strings)."""
-
-    def plain(value):
-        return finite_json(dataclasses.asdict(value)) if dataclasses.is_dataclass(value) else str(value)
-
-    return json.loads(json.dumps(finite_json(obj), default=plain))

@@ -1,0 +1,96 @@
+"""One contour's optimised plan, :func:`optimize_contour` (``warpcut optimize``): plan the cut, optimise
+a plan of grasp moves at the chosen pinch point through the simulator (:func:`agents.gradient.optimize_plan`),
+and evaluate it against no tension and fixed tension there."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from agents.evaluation import Method, evaluate_suite
+from agents.gradient import grad_result
+from agents.jobs import OptimizeJob, contour_spec
+from agents.pipelines.common import claims_out, record_job
+from warpcut.contours import load_contour
+from warpcut.io import write_json
+from warpcut.planning import plan_cut
+
+RESULTS_FILE = "results.json"
+"""The run directory's report (:func:`optimize_contour`'s)."""
+
+
+@claims_out
+def optimize_contour(
+    job: OptimizeJob,
+    out: str | Path,
+    *,
+    resume: bool = False,
+    overwrite: bool = False,
+    device: str | None = None,
+    log: Callable[[str], None] = lambda _: None,
+) -> dict:
+    """Plan ``job.contour``'s cut (segments, order and, unless ``job.pinch`` is given, the pinch point: fixed
+    tension's best of ``job.candidates``), optimise a plan there with ``job.grad``, and evaluate it against
+    no tension and fixed tension at the same pinch point over ``job.trials`` seeded noisy trials (paired).
+
+    Args:
+        job: The contour, pinch point, physics, optimiser and evaluation (:class:`agents.jobs.OptimizeJob`).
+        out: Run directory: ``config.json`` (the job), the plan (``NAME.json``), the optimiser's state while
+            it runs (``NAME.state.json``: an interrupted optimisation continues from it) and
+            ``results.json``. Locked while it runs; refused if it holds another run
+            (:func:`warpcut.io.claim_run_dir`).
+        resume: Continue the run in ``out`` (started with the same job): a finished plan is kept, an
+            interrupted optimisation continues from its state.
+        overwrite: Delete what ``out`` holds first.
+        device: Warp device.
+        log: Called with each progress line.
+
+    Returns:
+        ``{"contour", "pinch", "settings" (the optimiser's), "trials", "optimized": PlanResult.to_json(),
+        "evaluation": {METHOD: {"error_vertices", "improvement_pct", "ci95_pct"}}, "seconds"}``, also written
+        to ``out/results.json``.
+    """
+    job = job.check()
+    out = Path(out)
+    config = job.sim.validated()
+    contour = load_contour(contour_spec(job.contour))
+    record_job(out, job, resume)
+    start = time.perf_counter()
+    log(f"  planning {contour.name} ({job.candidates} candidates)")
+    plan = plan_cut(
+        contour, config.replace(noise_std=0.0), num_candidates=job.candidates, seed=job.seed, device=device,
+        arm=job.arm,
+    )  # fmt: skip
+    point = np.asarray(plan.chosen["pinch"] if job.pinch is None else job.pinch, dtype=np.float64)
+    segments = plan.ordered_segments()
+    method, (result,) = grad_result(
+        [contour], [point], [segments], job.trials, config, job.grad, device, job.seed, out, log, job.arm
+    )
+    table = evaluate_suite(
+        [contour], [Method("fixed", pinches=[point]), Method("grad", result=method)], job.trials, config,
+        device, job.seed, segments=[segments],
+    )  # fmt: skip
+    row = table["rows"][0]
+    evaluation = {
+        m: {
+            "error_vertices": row[f"{m}_error_vertices"],
+            "improvement_pct": row.get(f"{m}_improvement_pct", 0.0),
+            "ci95_pct": row.get(f"{m}_ci95", 0.0),
+        }
+        for m in ("none", "fixed", "grad")
+    }
+    report = {
+        "contour": contour.name,
+        "pinch": [float(v) for v in point],
+        "settings": dataclasses.asdict(job.grad),
+        "trials": job.trials,
+        "optimized": result.to_json(),
+        "evaluation": evaluation,
+        "seconds": time.perf_counter() - start,
+    }
+    write_json(out / RESULTS_FILE, report)
+    return report
