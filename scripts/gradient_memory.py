@@ -1,9 +1,10 @@
 """Memory and time of a differentiable rollout (warpcut.gradients): fls-circle, its default length, at the
 default pinch point, for each batch size: the forward pass (with checkpoints), the backward pass (median of
-``--repeats``), the process's peak resident memory and the estimate of ``rollout_memory``.
+``--repeats``), the process's peak resident memory and the estimate of ``rollout_memory``. The figures in
+docs/architecture.md, "Differentiable rollouts".
 
-Run: python scripts/gradient_memory.py [--batch-sizes 8,64] [--repeats 3]
-Each batch size runs in a fresh process, so each peak is its own. Writes logs/gradient_memory.txt.
+Run: python scripts/gradient_memory.py [--batch-sizes 8,64] [--repeats 3] [--out FILE]
+Each batch size runs in a fresh process, so each peak is its own. --out also writes the lines to FILE.
 """
 
 from __future__ import annotations
@@ -58,9 +59,12 @@ def measure(batch: int, repeats: int) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--batch-sizes", default="8,64")
-    parser.add_argument("--repeats", type=int, default=3)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--batch-sizes", default="8,64", help="comma-separated, one process each")
+    parser.add_argument("--repeats", type=int, default=3, help="backward passes timed, the median kept")
+    parser.add_argument("--out", type=Path, default=None, help="also write the lines to this file")
     parser.add_argument("--one", type=int, default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.one is not None:
@@ -80,9 +84,9 @@ def main() -> None:
             f"{est['checkpoints']:.0f} MB + one step's tape {est['tape']:.0f} MB"
         )
         print(lines[-1], flush=True)
-    out = Path("logs/gradient_memory.txt")
-    out.parent.mkdir(exist_ok=True)
-    out.write_text("\n".join(lines) + "\n")
+    if args.out is not None:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text("\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":

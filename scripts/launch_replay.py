@@ -1,9 +1,9 @@
 """What replaying recorded launches saves (``warpcut.sim._warp.LaunchRecord``): tensioned ``fls-circle`` cuts
 (a grasp move and the scissors' updates per step, as a training env steps the simulator), whole episodes,
 alternately with the per-update launches replayed (as warpcut runs) and launched afresh through ``wp.launch``
-(argument packing at every call, as before session 32), in one process. Prints the median seconds per step
-of each, and checks that both leave the same sheets bit for bit. The figures in docs/performance.md,
-section 6 (session 32).
+(its arguments packed at every call), in one process. Prints the median milliseconds per step of each, and
+checks that both leave the same sheets bit for bit. The figures in docs/performance.md, "The whole step
+path" (replayed launches).
 
 Run: python scripts/launch_replay.py [--envs 64,256] [--rounds 8]
 """

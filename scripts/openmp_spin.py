@@ -1,11 +1,11 @@
 """What GNU OpenMP's spin count does to PPO at the training batch: per ``GOMP_SPINCOUNT`` value, the env
-steps' times inside a training run by their place in the iteration (the first after each PPO update, the
+steps' times inside a PPO training run by their place in the iteration (the first after each PPO update, the
 next six, the rest), the update's time and a whole iteration's, median over the steady iterations. Each
 value runs in its own process (libgomp reads the variable once, when torch loads), alternating over rounds.
-The figures in docs/performance.md, section 6 (session 29).
+The figures in docs/performance.md, "The whole step path" (OpenMP spin count).
 
-Run: python scripts/openmp_spin.py [--envs 256] [--rounds 4] [--values 300000,30000]
-     (300000 is libgomp's default; ``agents`` sets :data:`agents.OPENMP_SPIN_COUNT` unless it is set)
+Run: python scripts/openmp_spin.py [--envs 256] [--iterations 10] [--rounds 4] [--values 300000,30000]
+     (300000 is libgomp's default; importing ``agents`` sets :data:`agents.OPENMP_SPIN_COUNT` unless set)
 """
 
 from __future__ import annotations
@@ -20,26 +20,25 @@ import sys
 CHILD = r"""
 import json, sys, tempfile, time
 import numpy as np
-import rsl_rl.algorithms.ppo as ppo
-from agents.config import RECIPE, TrainConfig
-from agents.rl import training_env
-from agents.train import train
+from agents.config import TrainConfig
+from agents.ppo.algorithm import PPO
+from agents.training import train, training_env
 from envs.options import PatternCutOptions
 
 n, iterations = int(sys.argv[1]), int(sys.argv[2])
-cfg = TrainConfig(num_envs=n, iterations=iterations, num_steps_per_env=32, save_interval=10**6)
-env = training_env(PatternCutOptions(contour="fls-circle", **RECIPE), cfg)
+cfg = TrainConfig(algo="ppo", num_envs=n, iterations=iterations, save_interval=10**6)
+env = training_env(PatternCutOptions(contour="fls-circle", action_type="discrete"), cfg)
 steps, updates = [], []
-env_step, update = env.step, ppo.PPO.update
+env_step, update = env.step, PPO.update
 def timed_step(action):
     start = time.perf_counter(); out = env_step(action); steps.append(time.perf_counter() - start); return out
 def timed_update(self, *args, **kwargs):
     start = time.perf_counter(); out = update(self, *args, **kwargs)
     updates.append(time.perf_counter() - start); return out
-env.step, ppo.PPO.update = timed_step, timed_update
+env.step, PPO.update = timed_step, timed_update
 with tempfile.TemporaryDirectory() as out:
     train(env, cfg, out, progress=False)
-per = cfg.num_steps_per_env
+per = cfg.ppo.num_steps_per_env
 t = 1e3 * np.array(steps[per:]).reshape(-1, per)  # the iterations after the first (which follow an update)
 u = 1e3 * np.array(updates[:-1])  # the update before each of them
 print(json.dumps({"first": float(np.median(t[:, 0])), "next 6": float(np.median(t[:, 1:7])),
@@ -52,9 +51,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--envs", type=int, default=256)
-    parser.add_argument("--iterations", type=int, default=10)
-    parser.add_argument("--rounds", type=int, default=4)
+    parser.add_argument("--envs", type=int, default=256, help="the batch (default 256, PPO's)")
+    parser.add_argument("--iterations", type=int, default=10, help="PPO iterations per run (at least 2)")
+    parser.add_argument("--rounds", type=int, default=4, help="runs per value, alternating")
     parser.add_argument("--values", default="300000,30000", help="GOMP_SPINCOUNT values, comma-separated")
     args = parser.parse_args()
     values = args.values.split(",")

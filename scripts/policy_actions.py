@@ -1,8 +1,11 @@
 """What a trained policy does on sheets of different gravity: one deterministic episode per gravity (the
 run's nominal sheet otherwise, seed 1), the count of each discrete action, the grasp's final displacement
-and the error. docs/robustness.md quotes it for the randomised policies at zero gravity.
+and the error. docs/robustness.md quotes it for the randomised PPO policies at zero gravity.
 
-    python scripts/policy_actions.py logs/robust/wave-1-randomized [--gravity 0,130.25,521]
+    python scripts/policy_actions.py RUN [--gravity 0,130.25,521]
+
+RUN: a run directory of a discrete policy (``warpcut train --algo ppo``, or one of ``warpcut run``'s
+candidates).
 """
 
 from __future__ import annotations
@@ -13,8 +16,7 @@ import dataclasses
 import numpy as np
 import torch
 
-from agents.export import load_policy, policy_runs
-from agents.rl import _tensordict, policy_options
+from agents.policies import _tensordict, load_policy, policy_options, policy_runs
 from envs.core import DISCRETE_MOVES
 from envs.vector import PatternCutVecEnv
 
@@ -22,9 +24,11 @@ NAMES = ("stay", "+x", "-x", "+y", "-y", "+z", "-z")
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("run")
-    parser.add_argument("--gravity", default="0,130.25,521")
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("run", help="a run directory of a discrete policy")
+    parser.add_argument("--gravity", default="0,130.25,521", help="gravities (mm/s^2), one episode each")
     args = parser.parse_args()
     gravity = [float(g) for g in args.gravity.split(",")]
     run = policy_runs(args.run)[0][0]

@@ -1,7 +1,8 @@
-"""What domain randomisation costs per episode: env steps/s of a 64-env vector env cutting fls-circle with
-random discrete moves, the nominal sheet against ``randomize=gravity,elasticity,noise`` (a new draw per env
-at every reset). The first episodes of a randomised env settle the level combinations they meet; the
-median over episodes is what training sees once they are kept.
+"""What domain randomisation costs per episode (docs/robustness.md, "Cost"): env steps/s of a 64-env vector
+env cutting fls-circle with random discrete moves, the nominal sheet against
+``randomize=gravity,elasticity,noise`` (a new draw per env at every reset). The first episodes of a
+randomised env settle the level combinations they meet; the median over episodes is what training sees
+once they are kept.
 
     python scripts/randomization_cost.py [--episodes 12] [--envs 64]
 """
@@ -18,14 +19,18 @@ from envs.vector import PatternCutVecEnv
 
 
 def episode_rates(randomize: list[str], envs: int, episodes: int) -> list[float]:
-    env = PatternCutVecEnv(envs, PatternCutOptions(contour="fls-circle", randomize=randomize, device="cpu"))
+    options = PatternCutOptions(
+        contour="fls-circle", action_type="discrete", randomize=randomize, device="cpu"
+    )
+    env = PatternCutVecEnv(envs, options)
+    choices = int(env.single_action_space.n)
     rng = np.random.default_rng(0)
     env.reset(seed=0)
     rates = []
     for _ in range(episodes):
         start, steps = time.perf_counter(), 0
         while True:  # the vector env resets itself (drawing anew) after the last step
-            _, _, terminated, truncated, _ = env.step(rng.integers(0, 5, size=envs))
+            _, _, terminated, truncated, _ = env.step(rng.integers(0, choices, size=envs))
             steps += envs
             if terminated.any() or truncated.any():
                 break
@@ -34,9 +39,11 @@ def episode_rates(randomize: list[str], envs: int, episodes: int) -> list[float]
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--episodes", type=int, default=12)
-    parser.add_argument("--envs", type=int, default=64)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--episodes", type=int, default=12, help="whole episodes timed per setting")
+    parser.add_argument("--envs", type=int, default=64, help="the batch")
     args = parser.parse_args()
     nominal = episode_rates([], args.envs, args.episodes)
     randomized = episode_rates(["gravity", "elasticity", "noise_std"], args.envs, args.episodes)

@@ -1,4 +1,5 @@
-"""How much recording an episode with rerun slows a run down (docs/performance.md, "Recording overhead").
+"""How much recording an episode with rerun slows a run down (docs/performance.md, "Recording overhead";
+the README quotes its whole-command figure).
 
 Times, interleaved with runs without recording so that machine load hits all variants alike, the median
 wall time of
@@ -25,7 +26,7 @@ Two phases, each interleaved with its own plain runs: first ``process`` for ever
 process that has not imported rerun (as in the CLI); then the in-process variants, which import it.
 
 With ``--cli-repeats K`` (default 5; 0 skips it) it also times what a user sees: the whole command
-``warpcut simulate --contour fls-circle --policy none --trials 1 --no-plots`` with and without
+``warpcut simulate --contour fls-circle --policy none --trials 1 --set plots=false`` with and without
 ``--record`` (default N = 1), K runs of each, interleaved, and prints the median overhead.
 
     python scripts/recording_overhead.py [--repeats 15] [--batches 1,64] [--phases 1,2] [--cli-repeats 5]
@@ -116,7 +117,7 @@ def summarize(times: dict[str, list[tuple[float, float, float]]]) -> dict:
 def time_cli(repeats: int, out_dir: Path) -> dict:
     """Median wall times (s) of ``warpcut simulate`` without and with ``--record``, interleaved."""
     base = [sys.executable, "-m", "warpcut", "simulate", "--contour", "fls-circle", "--policy", "none"]
-    base += ["--trials", "1", "--device", "cpu", "--no-plots"]
+    base += ["--trials", "1", "--device", "cpu", "--set", "plots=false"]
     times: dict[str, list[float]] = {"plain": [], "record": []}
     for k in range(repeats + 1):  # the first pair warms the kernel cache and the file system
         for variant in times:
@@ -199,7 +200,7 @@ def main() -> None:
     if "cli" in report:
         cli = report["cli"]
         print(
-            f"warpcut simulate (fls-circle, one trial, --no-plots; medians of {args.cli_repeats}): "
+            f"warpcut simulate (fls-circle, one trial, no plots; medians of {args.cli_repeats}): "
             f"{cli['median_wall_s']['plain']:.2f} s, with --record {cli['median_wall_s']['record']:.2f} s: "
             f"{cli['overhead_pct']:+.1f}% (paired {cli['paired_overhead_pct']:+.1f}%)"
         )

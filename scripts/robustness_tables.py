@@ -13,7 +13,7 @@ import json
 import math
 from pathlib import Path
 
-from agents.robustness import robustness_target
+from agents.pipelines.robustness import robustness_target
 
 
 def table(report: dict) -> list[str]:
@@ -48,8 +48,8 @@ def _counts(verdicts: list[str], table: bool = False) -> str:
 
 
 def targets(reports: dict[str, dict], policy: str) -> list[str]:
-    """The robustness target check (agents.robustness.robustness_target) as lines: the medians' reading, then
-    the 95% intervals' (per value: in, open = undecided at these trials, out)."""
+    """The robustness target check (agents.pipelines.robustness.robustness_target) as lines: the medians'
+    reading, then the 95% intervals' (per value: in, open = undecided at these trials, out)."""
     result = robustness_target(reports, policy)
     out = []
     force = result.get("force")

@@ -1,4 +1,5 @@
-"""Stable-Baselines3 PPO throughput: the batched Warp adapter (envs.sb3) against SB3 on single envs.
+"""Stable-Baselines3 PPO throughput: the batched Warp adapter (envs.sb3) against SB3 on single envs (the
+README's SB3 speed figures).
 
 Three ways to give SB3 the same scenario, each trained with the same PPO settings and the same rollout size
 (``--rollout`` env steps per PPO iteration, split over the envs):
@@ -9,9 +10,10 @@ Three ways to give SB3 the same scenario, each trained with the same PPO setting
 
 Per repeat it times ``model.learn`` over ``--iterations`` PPO iterations and, through a callback, the
 rollouts alone (env steps plus policy forward passes, no gradient updates). It prints medians over
-``--repeats`` and writes them as JSON.
+``--repeats`` (and, with ``--json``, writes them there).
 
 Run: python scripts/sb3_throughput.py [--num-envs 64] [--repeats 3] [--device cpu] [--json PATH]
+Needs stable-baselines3 (pip install -e ".[sb3]").
 """
 
 from __future__ import annotations
@@ -89,7 +91,9 @@ def measure(make_env: Callable[[], VecEnv | PatternCutEnv], num_envs: int, args:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--num-envs", type=int, default=64, help="B: the adapter's and DummyVecEnv's envs")
     parser.add_argument("--rollout", type=int, default=5120, help="env steps per PPO iteration (all envs)")
     parser.add_argument("--iterations", type=int, default=2, help="PPO iterations per repeat")
@@ -102,7 +106,7 @@ def main() -> None:
     parser.add_argument("--device", default="cpu", help="Warp device of the simulator")
     parser.add_argument("--torch-threads", type=int, default=1, help="torch threads (0: torch's default)")
     parser.add_argument("--skip-dummy", action="store_true", help="leave out the DummyVecEnv of B envs")
-    parser.add_argument("--json", type=Path, default=Path("logs/sb3_throughput.json"))
+    parser.add_argument("--json", type=Path, default=None, help="also write the settings and medians here")
     args = parser.parse_args()
     if args.rollout % args.num_envs:
         parser.error(f"--rollout ({args.rollout}) must be a multiple of --num-envs ({args.num_envs})")
@@ -143,9 +147,11 @@ def main() -> None:
         "machine": {"platform": platform.platform(), "cpus": os.cpu_count(), "load_average": load},
         "median_of_repeats": results,
     }
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(report, indent=2) + "\n")
-    print(f"\nload average {load}; wrote {args.json}")
+    print(f"\nload average {load}")
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(report, indent=2) + "\n")
+        print(f"wrote {args.json}")
 
 
 if __name__ == "__main__":

@@ -1,16 +1,16 @@
 """Env updates/s of the simulator's CPU backends side by side, by batch size, and the cost of packing the
-``simd`` backend's state.
+``simd`` backend's state: the figures in docs/performance.md, "CPU backends".
 
-    python scripts/simd_bench.py                                  # simd and colours, B = 1, 8, 64, 1024
+    python scripts/simd_bench.py --repeats 3                      # simd and colours, B = 1, 8, 64, 1024
     python scripts/simd_bench.py --batches 1024 --threads 2       # two threads (simd steps block slices)
 
-Settings: default physics (structural + shear springs, 20 sweeps, process noise) and the paper's
-(``warpcut.bench.PAPER_SWEEPS``: structural springs, 5 sweeps, noise-free). Each backend runs as
-``Simulator(config, B, backend=..., threads=...)`` with cutting active, ``--updates`` whole-batch updates
-per timed repeat (at least 256 env updates); the backends alternate within each repeat (the machine may
-be shared, so compare numbers of one run), and the table gives the median over ``--repeats`` (and the
-range) and the ratio to the first backend. Packing the env-major state into the SIMD blocks (per reset)
-and unpacking it (per read-back) are timed last, at the largest batch.
+Settings: the default physics (``SimConfig()``: structural + shear springs, 7 Chebyshev-accelerated sweeps,
+process noise) and the paper's (``warpcut.bench.PAPER_SWEEPS``: structural springs, 5 plain sweeps,
+noise-free). Each backend runs as ``Simulator(config, B, backend=..., threads=...)`` with cutting active,
+``--updates`` whole-batch updates per timed repeat (at least 256 env updates); the backends alternate within
+each repeat (the machine may be shared, so compare numbers of one run), and the table gives the median over
+``--repeats`` (and the range) and the ratio to the first backend. Packing the env-major state into the SIMD
+blocks (per reset) and unpacking it (per read-back) are timed last, at the largest batch.
 """
 
 import argparse
@@ -38,7 +38,13 @@ def stepping(sim: Simulator, updates: int):
 
 
 def bench_setting(label: str, config: SimConfig, args) -> None:
-    print(f"\n{label}: 25x25, {'+'.join(config.springs)} springs; env updates/s, median of {args.repeats}")
+    sweeps = f"{config.sweeps} sweeps" + (
+        f" (Chebyshev rho {config.chebyshev_rho:g})" if config.chebyshev_rho else ""
+    )
+    print(
+        f"\n{label}: {config.resolution}x{config.resolution}, {'+'.join(config.springs)} springs, {sweeps}, "
+        f"noise {config.noise_std:g} mm; env updates/s, median of {args.repeats}"
+    )
     for b in args.batches:
         updates = max(args.updates, 256 // b)  # small batches: enough updates to time
         runners = {

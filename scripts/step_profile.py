@@ -1,24 +1,27 @@
-"""Where an env step's time goes: a tensioned ``fls-circle`` cut at the training batch (64 envs), layer by
-layer, each timed alone over whole episodes (median of repeats), from the simulator's updates up to a PPO
-iteration. The figures in docs/performance.md, "The whole step path".
+"""Where an env step's time goes: a tensioned ``fls-circle`` cut at the training batch (256 envs), layer by
+layer, each timed alone over whole episodes (median of repeats), from the simulator's updates up to a whole
+learning iteration (PPO's by default, as docs/performance.md, "The whole step path", quotes it).
 
 Layers (each includes the ones above it):
   1. updates     ``Simulator.update`` x ``updates_per_step``, path tracing on (as a cut runs)
   2. task step   + the grasp move and the scissor tips' upload (``CuttingTask.step``)
   3. env step    + observations, rewards, divergence checks, episode bookkeeping (``PatternCutVecEnv.step``)
   4. rsl-rl step + torch conversions and the TensorDict (``PatternCutRslEnv.step``)
-  5. PPO collection: + the policy's forward pass, sampling and rollout storage (rsl-rl's runner)
-  6. PPO iteration: + the PPO update (collection + learning)
+  5. collection  + the policy's forward pass, sampling and rollout storage (rsl-rl's runner)
+  6. iteration   + the learner's update (collection + learning)
 
-Then a cProfile of layer 4 (the functions with the largest own time) and of one PPO iteration.
+Layers 1-4 play a fixed continuous pull (the env's default actions); layers 5-6 train the ``--algo``
+learner with its own actions (PPO: discrete moves). With ``--profile``, a cProfile of layer 4 (the functions
+with the largest own time) and of the training run.
 
-Run: python scripts/step_profile.py [--envs 64] [--repeats 5]
+Run: python scripts/step_profile.py [--envs 256] [--repeats 5] [--iterations 6] [--algo ppo|es] [--profile]
 """
 
 from __future__ import annotations
 
 import argparse
 import cProfile
+import dataclasses
 import io
 import pstats
 import statistics
@@ -27,16 +30,14 @@ import time
 
 import numpy as np
 import torch
+from gymnasium.vector import AutoresetMode
 
-from agents.config import RECIPE, TrainConfig
-from agents.rl import training_env
-from agents.train import train
+from agents.algorithms import algorithm
+from agents.config import TrainConfig
+from agents.training import train, training_env
 from envs.options import PatternCutOptions
 from envs.rsl import PatternCutRslEnv
 from envs.vector import PatternCutVecEnv
-
-RECIPE_OPTIONS = {k: v for k, v in RECIPE.items() if k != "action_type"}
-"""The observations and rewards training uses (warpcut's recipe), with continuous actions for a fixed pull."""
 
 
 def per_step(fn, steps: int, repeats: int) -> float:
@@ -51,8 +52,8 @@ def per_step(fn, steps: int, repeats: int) -> float:
 
 
 def layers(num_envs: int, repeats: int) -> dict[str, float]:
-    options = PatternCutOptions(contour="fls-circle", action_type="continuous", **RECIPE_OPTIONS)
-    vec = PatternCutVecEnv(num_envs, options)
+    options = PatternCutOptions(contour="fls-circle", action_type="continuous")
+    vec = PatternCutVecEnv(num_envs, options, autoreset_mode=AutoresetMode.SAME_STEP)
     vec.reset(seed=0)
     task = vec.scene.task
     steps = task.num_steps
@@ -82,7 +83,7 @@ def layers(num_envs: int, repeats: int) -> dict[str, float]:
         for _ in range(steps):
             vec.step(env_action)
 
-    rsl = PatternCutRslEnv(PatternCutVecEnv(num_envs, options))
+    rsl = PatternCutRslEnv(PatternCutVecEnv(num_envs, options, autoreset_mode=AutoresetMode.SAME_STEP))
     torch_action = torch.as_tensor(env_action)
 
     def rsl_steps() -> None:
@@ -105,21 +106,30 @@ def layers(num_envs: int, repeats: int) -> dict[str, float]:
     return out, profile, rsl
 
 
-def ppo(num_envs: int, iterations: int) -> tuple[dict[str, float], cProfile.Profile]:
-    cfg = TrainConfig(num_envs=num_envs, iterations=iterations, num_steps_per_env=32, save_interval=10**6)
-    options = PatternCutOptions(contour="fls-circle", **RECIPE)
+def learning(algo: str, num_envs: int, iterations: int) -> tuple[dict[str, float], cProfile.Profile]:
+    """Layers 5 and 6: ``algo`` training on its own actions, no validation, the iterations after the first."""
+    cfg = TrainConfig(algo=algo, num_envs=num_envs, iterations=iterations, save_interval=10**6)
+    if algo == "es":  # the default population where it divides the batch, else the largest even one that does
+        largest = min(num_envs, cfg.es.population)
+        population = max(p for p in range(2, largest + 1, 2) if num_envs % p == 0)
+        cfg = dataclasses.replace(cfg, es=dataclasses.replace(cfg.es, population=population))
+    options = PatternCutOptions(contour="fls-circle", action_type=algorithm(algo).action_type)
     profile = cProfile.Profile()
     with tempfile.TemporaryDirectory() as out:
         env = training_env(options, cfg)
+        steps = cfg.ppo.num_steps_per_env if algo == "ppo" else int(env.max_episode_length)
         profile.enable()
         summary = train(env, cfg, out, progress=False)
         profile.disable()
-    steady = summary["history"][1:]
-    per_iteration = cfg.num_envs * cfg.num_steps_per_env
+    steady = summary["history"][1:] or summary["history"]
+    per_iteration = num_envs * steps
     collect = statistics.median(per_iteration / m["collection_steps_per_s"] for m in steady)
     whole = statistics.median(per_iteration / m["iteration_steps_per_s"] for m in steady)
-    steps = cfg.num_steps_per_env
-    return {"5. PPO collection": 1e6 * collect / steps, "6. PPO iteration": 1e6 * whole / steps}, profile
+    name = algo.upper() if algo != "es" else "es"
+    return {
+        f"5. {name} collection": 1e6 * collect / steps,
+        f"6. {name} iteration": 1e6 * whole / steps,
+    }, profile
 
 
 def top(profile: cProfile.Profile, count: int = 15) -> str:
@@ -132,17 +142,18 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--envs", type=int, default=64)
-    parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--iterations", type=int, default=6)
+    parser.add_argument("--envs", type=int, default=256, help="the batch (default 256, the training batch)")
+    parser.add_argument("--repeats", type=int, default=5, help="timed episodes per layer, the median kept")
+    parser.add_argument("--iterations", type=int, default=6, help="training iterations (the first not timed)")
+    parser.add_argument("--algo", default="ppo", choices=["ppo", "es"], help="the learner of layers 5-6")
     parser.add_argument("--profile", action="store_true", help="print the cProfile tables too")
     parser.add_argument("--torch-threads", type=int, default=None, help="default: torch's (the CLI's)")
     args = parser.parse_args()
     if args.torch_threads:
         torch.set_num_threads(args.torch_threads)
     times, env_profile, _ = layers(args.envs, args.repeats)
-    ppo_times, ppo_profile = ppo(args.envs, args.iterations)
-    times.update(ppo_times)
+    learn_times, learn_profile = learning(args.algo, args.envs, args.iterations)
+    times.update(learn_times)
     print(
         f"\nMicroseconds per env step of the whole batch ({args.envs} envs, tensioned fls-circle), median:\n"
     )
@@ -154,4 +165,4 @@ if __name__ == "__main__":
         before = us
     if args.profile:
         print("\ncProfile of the rsl-rl env steps (own time):\n" + top(env_profile))
-        print("\ncProfile of a PPO run (own time):\n" + top(ppo_profile, 25))
+        print(f"\ncProfile of the {args.algo} run (own time):\n" + top(learn_profile, 25))

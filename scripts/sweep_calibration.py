@@ -1,5 +1,5 @@
-"""Calibrate the Chebyshev-accelerated sweeps against the sheet of 20 plain Gauss-Seidel sweeps (the
-default before issue 21): the figures in docs/physics.md, "Fewer sweeps".
+"""Calibrate the Chebyshev-accelerated sweeps (the default: SimConfig's 7 sweeps at rho 0.94) against the
+sheet of 20 plain Gauss-Seidel sweeps: the figures in docs/physics.md, "Fewer sweeps".
 
 1. Settled sheet (noise-free, 200 updates) per (sweeps, rho): centre sag, structural stretch, drift over
    100 more updates, RMS and largest distance of the vertices from the 20-sweep sheet, and the Chebyshev
@@ -10,6 +10,7 @@ default before issue 21): the figures in docs/physics.md, "Fewer sweeps".
 4. The default at every resolution: settles (sag), or is refused / diverges.
 
 Run: python scripts/sweep_calibration.py [--quick]
+     (--quick, a smoke run: part 1 for the default alone, part 2 at 2 trials, no parts 3 and 4)
 """
 
 from __future__ import annotations

@@ -1,7 +1,8 @@
-"""What the PPO update costs by its passes and minibatches: one rollout of warpcut's recipe on fls-circle is
-collected, then updated again and again with each (epochs, minibatches) pair in turn, over rounds; the
-median time of each pair after its first round. The same stored rollout for every pair, so only the update
-differs. The figures in docs/performance.md, section 6 (session 31).
+"""What the PPO update costs by its passes and minibatches: one rollout of PPO (its discrete moves) on
+``fls-circle`` is collected, then updated again and again with each (epochs, minibatches) pair in turn, over
+rounds; the median time of each pair after its first round. The same stored rollout for every pair, so only
+the update differs. The figures in docs/performance.md, "The whole step path" (three passes over each
+rollout).
 
 Run: python scripts/update_passes.py [--envs 256] [--rounds 6] [--threads 2] [--pairs 5x4,3x4,5x2,4x2]
 """
@@ -27,16 +28,14 @@ def main() -> None:
 
     import torch
 
-    from agents.config import RECIPE, TrainConfig
-    from agents.rl import training_env
-    from agents.train import Runner
+    from agents.config import TrainConfig
+    from agents.training import Runner, training_env
     from envs.options import PatternCutOptions
 
-    cfg = TrainConfig(num_envs=args.envs, save_interval=10**6)
-    env = training_env(PatternCutOptions(contour="fls-circle", **RECIPE), cfg)
-    env.seed(cfg.seed)
+    cfg = TrainConfig(algo="ppo", num_envs=args.envs, save_interval=10**6)
+    env = training_env(PatternCutOptions(contour="fls-circle", action_type="discrete"), cfg)
     with tempfile.TemporaryDirectory() as out:
-        runner = Runner(env, cfg.to_rsl_rl(getattr(env, "num_action_choices", None)), out, cfg.torch_device)
+        runner = Runner(env, cfg.to_rsl_rl(env.num_action_choices), out, cfg.torch_device)
         runner.learn(1)  # collects the rollout that every update below reuses
         torch.set_num_threads(args.threads)
         times: dict[tuple[int, int], list[float]] = {pair: [] for pair in pairs}
@@ -46,9 +45,9 @@ def main() -> None:
                 start = time.perf_counter()
                 runner.alg.update()
                 times[pair].append(time.perf_counter() - start)
-    samples = args.envs * cfg.num_steps_per_env
+    samples = args.envs * cfg.ppo.num_steps_per_env
     print(
-        f"PPO update of {samples:,} samples ({args.envs} envs x {cfg.num_steps_per_env} steps), "
+        f"PPO update of {samples:,} samples ({args.envs} envs x {cfg.ppo.num_steps_per_env} steps), "
         f"{args.threads} torch threads"
     )
     for (epochs, minibatches), values in times.items():

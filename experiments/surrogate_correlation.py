@@ -1,5 +1,6 @@
-"""How well the path surrogate (what warpcut.gradients differentiates) tracks the path score (the paper's
-symmetric difference): both measured on random open-loop plans, per contour of the built-in suite.
+"""How well the path surrogate (what warpcut.gradients differentiates; grad's tape estimator and APG descend
+it) tracks the path score (the paper's symmetric difference): both measured on random open-loop plans, per
+contour of the built-in suite.
 
 Each contour is cut in one batch of ``--plans`` envs at its planned pinch point and order (noisy, the
 default protocol's noise): env 0 holds still (fixed tension), the others play random plans, smooth
@@ -8,8 +9,7 @@ of a random strength. Reported per contour: the Pearson and Spearman correlation
 (mean squared material distance, mm^2) and the path error (vertices) over the plans, and over the suite:
 their medians and the pooled rank correlation (each contour's values ranked within it).
 
-Run: python scripts/surrogate_correlation.py [--plans 64] [--contours all] [--json PATH]
-Writes logs/surrogate_correlation.txt (and the JSON with --json).
+Run: python experiments/surrogate_correlation.py [--plans 64] [--contours all] [--out FILE] [--json PATH]
 """
 
 from __future__ import annotations
@@ -67,11 +67,14 @@ def measure(name: str, plans_per_contour: int, seed: int) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--plans", type=int, default=64)
-    parser.add_argument("--contours", default="all")
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--plans", type=int, default=64, help="plans per contour, the first holding still")
+    parser.add_argument("--contours", default="all", help="all, or comma-separated names")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--out", type=Path, default=None, help="also write the lines to this file")
+    parser.add_argument("--json", type=Path, default=None, help="write the summary and rows here")
     args = parser.parse_args()
     names = list(builtin_contours()) if args.contours == "all" else args.contours.split(",")
     rows = []
@@ -99,9 +102,9 @@ def main() -> None:
         f"({args.plans} plans each)"
     )
     print(lines[-1])
-    out = Path("logs/surrogate_correlation.txt")
-    out.parent.mkdir(exist_ok=True)
-    out.write_text("\n".join(lines) + "\n")
+    if args.out is not None:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text("\n".join(lines) + "\n")
     if args.json:
         for row in rows:
             del row["ranks"]

@@ -1,11 +1,12 @@
-"""The feedback gains alone: copy an ``evaluate`` run's trained policies (RUN/policies/NAME) with the MLP's
-output layer zeroed in each ``best.pt``, so each policy moves by its feedback path only; evaluate the copy
-with ``--checkpoints`` against the run itself. The figures in docs/learning.md, "es with separate steps for
-the feedback path" ("What the MLP adds").
+"""What the MLP adds to es's policy (the MLP plus a linear feedback path on the tracking error): copy an
+``evaluate`` run's trained policies (RUN/policies/NAME) with the MLP's output layer zeroed in each policy
+checkpoint (``best.pt``, else the newest), so each policy moves by its feedback path only; then evaluate the
+copies with ``--checkpoints`` and compare with the run itself.
 
-Run: python scripts/feedback_only.py --run logs/suite-s25a --out logs/ablate-s25a/policies
-then: warpcut evaluate --contours all --methods none,fixed,analytic,rl --recipe es --checkpoints
-logs/ablate-s25a/policies --trials 10 --no-plots --out logs/ablate-s25a/eval --json logs/ablate-s25a.json
+Run: python experiments/feedback_only.py --run RUN --out COPIES
+then: warpcut evaluate --contours all --methods none,fixed,analytic,rl --checkpoints COPIES --trials 10
+      --out EVAL --json EVAL.json --set plots=false
+(RUN: a 'warpcut evaluate' run of the es learner, which trained the rl column; --contours as that run's)
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from pathlib import Path
 
 import torch
 
-from agents.train import read_checkpoint
+from agents.checkpoints import policy_checkpoint, read_checkpoint
 
 
 def zero_mlp_output(path: Path) -> str:
@@ -24,7 +25,7 @@ def zero_mlp_output(path: Path) -> str:
     checkpoint = read_checkpoint(path)
     state = checkpoint["actor_state_dict"]
     if "mlp.feedback.weight" not in state:
-        raise SystemExit(f"{path}: the actor has no feedback path (train with --recipe es)")
+        raise SystemExit(f"{path}: the actor has no feedback path (train with es: train.es.feedback=true)")
     layers = {k.rsplit(".", 1)[0] for k in state if k.startswith("mlp.body.") and k.endswith(".weight")}
     last = max(layers, key=lambda name: int(name.rsplit(".", 1)[1]))
     for key in (f"{last}.weight", f"{last}.bias"):
@@ -36,7 +37,9 @@ def zero_mlp_output(path: Path) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--run", type=Path, required=True, help="an evaluate run directory with policies/")
     parser.add_argument("--out", type=Path, required=True, help="where the copies go (must not exist)")
     args = parser.parse_args()
@@ -47,7 +50,8 @@ def main() -> None:
         raise SystemExit(f"--out: {args.out} exists; give a new directory")
     shutil.copytree(source, args.out)
     for run in sorted(p for p in args.out.iterdir() if p.is_dir()):
-        print(f"{run.name}: zeroed {zero_mlp_output(run / 'best.pt')}")
+        checkpoint = policy_checkpoint(run)
+        print(f"{run.name}: zeroed {zero_mlp_output(checkpoint)} in {checkpoint.name}")
 
 
 if __name__ == "__main__":

@@ -1,5 +1,7 @@
 """Is the tape gradient of the path surrogate a descent direction for finite steps? A line search along it
-on the same noisy episodes (the same noise seed), against the change the gradient predicts.
+on the same noisy episodes (the same noise seed), against the change the gradient promises: the measurement
+behind smoothing the gradient (es's estimate, ``grad.estimator=es``) and behind the tape's window
+(``grad.window``).
 
 Each contour is cut as planned (pinch point and order) by ``--envs`` noisy episodes of one seed, holding
 still (fixed tension) or playing ``--plan FILE`` (a grad plan, ``{"plan": [[dx, dy, dz], ...]}``). The
@@ -12,8 +14,8 @@ episodes and windows of 5 and 10 steps) gives the direction ``d = -g / max|g|`` 
 - the same for ``--random`` random directions of the same size (the roughness floor: how much any change
   of that size moves the surrogate).
 
-Run: python scripts/surrogate_roughness.py [--contours fls-circle,blob-lumpy] [--envs 8]
-Writes logs/surrogate_roughness.txt.
+Run: python experiments/surrogate_roughness.py [--contours fls-circle,blob-lumpy] [--envs 8] [--random 5]
+     [--plan FILE] [--out FILE]
 """
 
 from __future__ import annotations
@@ -75,21 +77,24 @@ def measure(name: str, envs: int, plan_file: Path | None, random: int, seed: int
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--contours", default="fls-circle,blob-lumpy")
-    parser.add_argument("--envs", type=int, default=8)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--contours", default="fls-circle,blob-lumpy", help="comma-separated names")
+    parser.add_argument("--envs", type=int, default=8, help="noisy episodes (one seed)")
     parser.add_argument("--plan", type=Path, default=None, help="a grad plan JSON to start from")
     parser.add_argument("--random", type=int, default=5, help="random directions per step size")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", type=Path, default=None, help="also write the lines to this file")
     args = parser.parse_args()
     lines = []
     for name in args.contours.split(","):
         for line in measure(name, args.envs, args.plan, args.random, args.seed):
             print(line, flush=True)
             lines.append(line)
-    out = Path("logs/surrogate_roughness.txt")
-    out.parent.mkdir(exist_ok=True)
-    out.write_text("\n".join(lines) + "\n")
+    if args.out is not None:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text("\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":

@@ -1,8 +1,9 @@
-"""Error of constant grasp moves (stay, +-x, +-y, +-z every step) against no tension, for every built-in
-contour cut as one loop with the grasp at the centroid (or the nearest feasible point): which contours
-need the sheet lifted, which need a pull, and where holding still is enough. Quoted in docs/learning.md.
+"""Error of constant grasp moves (stay, +-x, +-y, +-z every step, 1 mm a step up to the 10 mm limit) against
+no tension, for every built-in contour cut as one loop with the grasp at the centroid (or the nearest
+feasible point), noisy (one trial each): which contours need the sheet lifted (why the moves include z:
+``env.allow_z``), which need a pull, and where holding still is enough.
 
-Run: python scripts/constant_moves.py [--device cpu]
+Run: python experiments/constant_moves.py [--device cpu]
 """
 
 from __future__ import annotations
@@ -48,6 +49,8 @@ def main(device: str | None) -> None:
 
 
 if __name__ == "__main__":
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--device", default=None)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--device", default=None, help="Warp device: cpu or cuda (default: Warp's)")
     main(parser.parse_args().device)
