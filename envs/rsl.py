@@ -15,12 +15,11 @@ short by ``max_episode_steps``: a completed cut is a true terminal state (its re
 not bootstrap past it, nor past an env that diverged (it ended when it diverged, and idled since). On the
 step where cuts complete, ``extras["log"]`` holds one value per env of ``Episode/final_error``
 (:data:`FINAL_ERROR_KEY`: ``error_mm2 / area_mm2``, minus the final reward), ``Cut/error_mm2`` and
-``Cut/error_vertices``; rsl-rl's logger records their means under those names. The
-key is absent on other steps (and after truncated episodes, which have no score). On the step where the batch's
-episode ends, ``extras["episode_cost"]`` (:data:`EPISODE_COST_KEY`) holds every env's cost of the cut that
-ended, (B,) float: its path error over the intended area, weighed as its reward is weighed
-(``relative_reward``), NaN where the env diverged or the episode was cut short (es ranks its policies by
-it).
+``Cut/error_vertices``; rsl-rl's logger records their means under those names. The key is absent on other
+steps (and after truncated episodes, which have no score). On the step where the batch's episode ends,
+``extras["episode_cost"]`` (:data:`EPISODE_COST_KEY`) holds every env's cost of the cut that ended, (B,)
+float: its path error over the intended area, weighed as its reward is weighed (``relative_reward``), NaN
+where the env diverged or the episode was cut short (es ranks its policies by it).
 
 Training can restart the current episode exactly as it began (:meth:`PatternCutRslEnv.episode_start`,
 :meth:`PatternCutRslEnv.restart_episode`): a resumed run continues the episodes' stream where it stopped.
@@ -48,7 +47,8 @@ class PatternCutRslEnv(VecEnv):
     """Adapter from a :class:`~envs.vector.PatternCutVecEnv` to ``rsl_rl.env.VecEnv``.
 
     Args:
-        env: The batched env (any action type); it is reset here.
+        env: The batched env (any action type), built with ``autoreset_mode=AutoresetMode.SAME_STEP`` (not
+            its default): rsl-rl expects resets inside ``step``. It is reset here.
         torch_device: Torch device of the returned tensors (the simulator's Warp device is
             ``env.options.device``).
         seed: Seed of the first reset.
@@ -67,7 +67,7 @@ class PatternCutRslEnv(VecEnv):
         if env.autoreset_mode is not AutoresetMode.SAME_STEP:
             raise ValueError(
                 "env: rsl-rl resets envs inside step, so the batched env needs "
-                f"autoreset_mode=AutoresetMode.SAME_STEP (the default; got {env.autoreset_mode!r})"
+                f"autoreset_mode=AutoresetMode.SAME_STEP; build it with that (got {env.autoreset_mode!r})"
             )
         self.env = env
         self.device = torch.device(torch_device)

@@ -73,8 +73,9 @@ class PatternCutSB3Env(VecEnv):
     """Adapter from a :class:`~envs.vector.PatternCutVecEnv` to Stable-Baselines3's ``VecEnv``.
 
     Args:
-        env: The batched env (any action type, ``autoreset_mode`` SAME_STEP: the default). It is reset by
-            the first :meth:`reset` (SB3's ``learn`` does that).
+        env: The batched env (any action type), built with ``autoreset_mode=AutoresetMode.SAME_STEP`` (not
+            its default; :func:`make_sb3_env` does). It is reset by the first :meth:`reset` (SB3's ``learn``
+            does that).
 
     ``get_attr`` reads an attribute of the one batched env (the same value for every index);
     ``set_attr`` and ``env_method`` act on it once and so take no index subset (``indices=None``, or all
@@ -84,14 +85,14 @@ class PatternCutSB3Env(VecEnv):
     def __init__(self, env: PatternCutVecEnv):
         if not isinstance(env, PatternCutVecEnv):
             raise ValueError(
-                f"env: expected an envs.PatternCutVecEnv (got {type(env).__name__}); build one with "
-                "envs.PatternCutVecEnv(num_envs, **options) or use envs.sb3.make_sb3_env"
+                f"env: expected an envs.PatternCutVecEnv (got {type(env).__name__}); use envs.sb3."
+                "make_sb3_env, or build one with envs.PatternCutVecEnv(B, autoreset_mode='same_step', ...)"
             )
         mode = env.metadata.get("autoreset_mode")
         if mode is not AutoresetMode.SAME_STEP:
             raise ValueError(
                 "env: SB3 resets envs inside step, so the batched env needs "
-                f"autoreset_mode=AutoresetMode.SAME_STEP (the default; got {mode!r})"
+                f"autoreset_mode=AutoresetMode.SAME_STEP; build it so, or use make_sb3_env (got {mode!r})"
             )
         self.env = env
         super().__init__(env.num_envs, env.single_observation_space, env.single_action_space)
@@ -214,6 +215,7 @@ def make_sb3_env(
     """
     if not isinstance(num_envs, int | np.integer) or isinstance(num_envs, bool) or num_envs < 1:
         raise ValueError(f"num_envs: must be an integer >= 1 (got {num_envs!r})")
+    kwargs.setdefault("autoreset_mode", AutoresetMode.SAME_STEP)  # SB3 resets inside step
     env = PatternCutSB3Env(PatternCutVecEnv(int(num_envs), options, **kwargs))
     return VecMonitor(env) if monitor else env
 

@@ -3,13 +3,7 @@
 All B envs share one episode clock, so every episode ends on the same step. How the batch restarts is
 ``autoreset_mode`` (https://farama.org/Vector-Autoreset-Mode), ``metadata["autoreset_mode"]``:
 
-``AutoresetMode.SAME_STEP`` (the default):
-    the env resets all envs at once inside the ending ``step`` and returns the new episodes' first
-    observations. The ending step's observations and score are in ``info["final_obs"]`` (an object array
-    of B observations) and ``info["final_info"]`` (a dict of (B,) arrays), each with its ``"_final_obs"`` /
-    ``"_final_info"`` mask (all True). The default because rsl-rl (:mod:`envs.rsl`) expects resets inside
-    ``step``, and because it wastes no step.
-``AutoresetMode.NEXT_STEP``:
+``AutoresetMode.NEXT_STEP`` (the default, as Gymnasium's own vector envs):
     the ending step returns the final observations, with the score in its ``info`` (each key with its
     ``_key`` mask); the next ``step`` ignores its actions, resets every env and returns the first
     observations, zero rewards and no ``terminated`` / ``truncated``. Gymnasium's vector observation
@@ -18,6 +12,12 @@ All B envs share one episode clock, so every episode ends on the same step. How 
     ``step`` call per episode, the reset that SAME_STEP does inside the ending step anyway: the same
     simulation work (``tests/test_gym_conventions.py`` counts it; timed, the seconds per episode of a 64-env
     fls-circle batch are the same within the noise).
+``AutoresetMode.SAME_STEP``:
+    the env resets all envs at once inside the ending ``step`` and returns the new episodes' first
+    observations. The ending step's observations and score are in ``info["final_obs"]`` (an object array
+    of B observations) and ``info["final_info"]`` (a dict of (B,) arrays), each with its ``"_final_obs"`` /
+    ``"_final_info"`` mask (all True). What rsl-rl (:mod:`envs.rsl`) and Stable-Baselines3 (:mod:`envs.sb3`)
+    expect, resets inside ``step``: their adapters are built on it.
 ``AutoresetMode.DISABLED``:
     as NEXT_STEP, but a ``step`` after the episode's end raises ``RuntimeError``: call ``reset()``.
 
@@ -76,8 +76,8 @@ class PatternCutVecEnv(VectorEnv):
         num_envs: Batch size B.
         options: The scenario; keyword arguments (any :class:`~envs.options.PatternCutOptions` field)
             replace its fields. Per-env lists (contours, physical parameters, pinch points) have length B.
-        autoreset_mode: ``AutoresetMode.SAME_STEP`` (default), ``NEXT_STEP`` or ``DISABLED``, or its value
-            (``"SameStep"``, ...) or name (``"next_step"``, ...); module docstring.
+        autoreset_mode: ``AutoresetMode.NEXT_STEP`` (default), ``SAME_STEP`` or ``DISABLED``, or its value
+            (``"NextStep"``, ...) or name (``"same_step"``, ...); module docstring.
         render_mode: ``None`` or ``"rgb_array"`` (module docstring).
         render_envs: How many envs :meth:`render` draws, the first ones; default all.
         render_size: Rendered image size in pixels: ``N`` (square) or ``(width, height)``.
@@ -88,7 +88,7 @@ class PatternCutVecEnv(VectorEnv):
     """
 
     metadata = {
-        "autoreset_mode": AutoresetMode.SAME_STEP,
+        "autoreset_mode": AutoresetMode.NEXT_STEP,
         "render_modes": VECTOR_RENDER_MODES,
         "render_fps": 31,
     }
@@ -98,7 +98,7 @@ class PatternCutVecEnv(VectorEnv):
         num_envs: int = 1,
         options: PatternCutOptions | None = None,
         *,
-        autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         render_mode: str | None = None,
         render_envs: int | None = None,
         render_size: int | tuple[int, int] = 256,

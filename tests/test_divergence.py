@@ -1,4 +1,4 @@
-"""Nothing a user made is lost, and no wrong result is reported as right (issue 17): batches too big for
+"""Nothing a user made is lost, and no wrong result is reported as right: batches too big for
 memory are refused before they are allocated, blow-ups are detected and never scored, absurd physical
 parameters and non-finite pinch points are rejected in one line, a corrupt Warp kernel cache is named."""
 
@@ -24,7 +24,9 @@ from warpcut.task import CuttingTask, SimulationDiverged
 
 SMALL = SimConfig(resolution=9)
 CONTOUR = load_contour("circle-small")
-ENV = {"contour": "circle-small", "resolution": 9, "device": "cpu"}
+PAPER = {"action_type": "discrete", "allow_z": False, "contour_features": False, "dense_reward": False}
+ENV = {"contour": "circle-small", "resolution": 9, "device": "cpu", **PAPER}
+"""The paper's env on a small sheet: x-y moves of 1 mm (1: +x), 12 fiducials observed, the final reward."""
 
 
 def invoke(args):
@@ -60,8 +62,8 @@ def test_batches_too_big_for_memory_are_refused_naming_the_parameter(monkeypatch
     with pytest.raises(ValueError, match=r"^trials: 300 x 2 = 600 envs .* use at most \d+"):
         run_method([CONTOUR, CONTOUR], [None, None], None, 300, config, "cpu", 0)
     code, _, stderr = invoke(
-        ["simulate", "--contour", "circle-small", "--trials", "1000", "--device", "cpu", "--no-plots",
-         "--json", str(tmp_path / "r.json")]
+        ["simulate", "--contour", "circle-small", "--trials", "1000", "--device", "cpu",
+         "--set", "plots=false", "--json", str(tmp_path / "r.json")]
     )  # fmt: skip
     assert code == 2 and one_line_error(stderr).startswith("error: trials: 1000 envs would need")
     # A batch that fits runs, under the same limit.
@@ -138,7 +140,7 @@ def test_huge_dt_or_gravity_are_rejected_in_one_line():
 
 
 def test_the_single_env_ends_a_diverged_episode_with_zero_observation_and_nan_score():
-    env = PatternCutEnv(noise_std=1e30, contour_features=True, **ENV)
+    env = PatternCutEnv(noise_std=1e30, **{**ENV, "contour_features": True})
     obs, _ = env.reset(seed=0)
     obs, reward, terminated, truncated, info = env.step(1)
     assert terminated and not truncated and reward == 0.0 and info["diverged"] is True
@@ -155,7 +157,7 @@ def test_the_single_env_ends_a_diverged_episode_with_zero_observation_and_nan_sc
 
 
 def test_the_vector_env_terminates_only_the_diverged_env():
-    vec = PatternCutVecEnv(3, noise_std=[0.03, 1e30, 0.03], **ENV)
+    vec = PatternCutVecEnv(3, noise_std=[0.03, 1e30, 0.03], autoreset_mode="same_step", **ENV)
     vec.reset(seed=0)
     obs, rewards, terminated, truncated, info = vec.step(np.array([1, 1, 1]))
     assert terminated.tolist() == [False, True, False] and not truncated.any()
@@ -199,8 +201,9 @@ def test_evaluation_counts_diverged_trials_and_stops_with_one_line(tmp_path):
     ):
         evaluate_suite([CONTOUR], [Method("rl", result=nan_result)], trials=2, config=SMALL, device="cpu")
     code, _, stderr = invoke(
-        ["simulate", "--contour", "circle-small", "--noise", "1e30", "--policy", "none", "--resolution", "9",
-         "--device", "cpu", "--no-plots", "--json", str(tmp_path / "r.json")]
+        ["simulate", "--contour", "circle-small", "--policy", "none", "--set", "sim.noise_std=1.0e+30",
+         "--set", "sim.resolution=9", "--device", "cpu", "--set", "plots=false",
+         "--json", str(tmp_path / "r.json")]
     )  # fmt: skip
     assert code == 2 and "simulation diverged in 1 of 1 trials of circle-small" in one_line_error(stderr)
     assert not (tmp_path / "r.json").exists()
@@ -232,8 +235,9 @@ def test_a_corrupt_kernel_cache_is_named_in_one_line(tmp_path):
     env = dict(os.environ, WARP_CACHE_PATH=str(cache))
     env.pop("WARPCUT_VERBOSE", None)
     proc = subprocess.run(
-        [sys.executable, "-m", "warpcut", "simulate", "--contour", "circle-small", "--resolution", "5",
-         "--policy", "none", "--device", "cpu", "--no-plots", "--json", str(tmp_path / "r.json")],
+        [sys.executable, "-m", "warpcut", "simulate", "--contour", "circle-small", "--policy", "none",
+         "--set", "sim.resolution=5", "--device", "cpu", "--set", "plots=false",
+         "--json", str(tmp_path / "r.json")],
         env=env, capture_output=True, text=True, timeout=300,
     )  # fmt: skip
     assert proc.returncode == 2, proc.stderr
@@ -251,7 +255,7 @@ def test_envs_without_fiducials_observe_time_and_grasp():
     assert env.observation_space.shape == (4,) and obs in env.observation_space
     obs, reward, *_ = env.step(1)
     assert obs.shape == (4,) and obs[1] > 0  # the grasp moved +x
-    vec = PatternCutVecEnv(2, num_fiducials=0, contour_features=True, **ENV)
+    vec = PatternCutVecEnv(2, num_fiducials=0, **{**ENV, "contour_features": True})
     obs, _ = vec.reset(seed=0)
     assert obs.shape == (2, 11) and obs in vec.observation_space
     with pytest.raises(ValueError, match=r"^num_fiducials: must be a non-negative integer"):

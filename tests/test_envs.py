@@ -19,15 +19,19 @@ from warpcut.sim.config import SheetGrid, SimConfig
 
 SMALL = {"contour": "circle-small", "resolution": 9}
 """A 9 x 9 sheet and a 94 mm contour: 48 steps per episode."""
+PAPER = {"action_type": "discrete", "contour_features": False, "allow_z": False, "dense_reward": False}
+"""The paper's env (the defaults are the default learner's): x-y moves of 1 mm, fiducials only, the final
+reward alone."""
 OBS_DIM = 4 + 3 * 12
+"""The paper's observation: the clock, the last move and 12 fiducials."""
+CONTOUR_FEATURES = 7
+"""What ``contour_features`` adds: the scissor tip, its cutting flag and the tracking error."""
 
 
 @pytest.mark.parametrize(
     "options",
-    [
-        {"action_type": "discrete"},
-        {"action_type": "continuous", "allow_z": True, "contour_features": True, "dense_reward": True},
-    ],
+    [PAPER, {}],
+    ids=["paper", "defaults"],
 )
 def test_check_env_passes_without_warnings(options):
     env = gym.make(ENV_ID, device="cpu", noise_std=0.05, **SMALL, **options)
@@ -37,13 +41,20 @@ def test_check_env_passes_without_warnings(options):
 
 
 def test_make_and_make_vec_build_the_registered_envs():
+    """The defaults are the default learner's: contour features observed, continuous x-y-z moves; the
+    vector env restarts as Gymnasium's own vector envs do (NEXT_STEP)."""
     env = gym.make(ENV_ID, device="cpu", **SMALL)
     assert isinstance(env.unwrapped, PatternCutEnv) and env.spec.id == ENV_ID
-    assert env.observation_space.shape == (OBS_DIM,) and env.action_space == gym.spaces.Discrete(5)
+    assert env.observation_space.shape == (OBS_DIM + CONTOUR_FEATURES,)
+    assert env.action_space == gym.spaces.Box(-1.0, 1.0, (3,), np.float32)
     vec = gym.make_vec(ENV_ID, num_envs=3, vectorization_mode="vector_entry_point", device="cpu", **SMALL)
     assert isinstance(vec, PatternCutVecEnv) and vec.num_envs == 3 and vec.task.num_envs == 3
-    assert vec.metadata["autoreset_mode"] is AutoresetMode.SAME_STEP
-    assert vec.action_space == gym.spaces.MultiDiscrete([5, 5, 5])
+    assert vec.metadata["autoreset_mode"] is AutoresetMode.NEXT_STEP is vec.autoreset_mode
+    assert vec.action_space == gym.spaces.Box(-1.0, 1.0, (3, 3), np.float32)
+    paper = gym.make_vec(ENV_ID, num_envs=3, vectorization_mode="vector_entry_point", device="cpu", **SMALL,
+                         **PAPER)  # fmt: skip
+    assert paper.action_space == gym.spaces.MultiDiscrete([5, 5, 5])
+    assert paper.single_observation_space.shape == (OBS_DIM,)
     assert isinstance(envs.make(num_envs=2, device="cpu", **SMALL), PatternCutVecEnv)
     with pytest.raises(TypeError, match="unknown option"):
         gym.make(ENV_ID, contuor="fls-circle")
@@ -53,12 +64,28 @@ STEP_INFO = ["cut_deviation_mm", "running_path_error_mm2"]
 
 
 def test_vector_env_shapes_dtypes_and_discrete_moves(device):
-    vec = PatternCutVecEnv(4, device=device, contour_features=True, allow_z=True, **SMALL)
+    vec = PatternCutVecEnv(
+        4,
+        device=device,
+        action_type="discrete",
+        contour_features=True,
+        allow_z=True,
+        dense_reward=False,
+        **SMALL,
+    )
     obs, info = vec.reset(seed=0)
-    assert obs.shape == (4, OBS_DIM + 7) and obs.dtype == np.float32 and obs in vec.observation_space
+    assert (
+        obs.shape == (4, OBS_DIM + CONTOUR_FEATURES)
+        and obs.dtype == np.float32
+        and obs in vec.observation_space
+    )
     assert info == {} and vec.single_action_space == gym.spaces.Discrete(7)
     obs, rewards, terminated, truncated, info = vec.step(np.array([1, 2, 3, 6]))
-    assert obs.shape == (4, OBS_DIM + 7) and obs.dtype == np.float32 and obs in vec.observation_space
+    assert (
+        obs.shape == (4, OBS_DIM + CONTOUR_FEATURES)
+        and obs.dtype == np.float32
+        and obs in vec.observation_space
+    )
     assert rewards.shape == (4,) and rewards.dtype == np.float64 and np.all(rewards == 0.0)
     assert terminated.dtype == bool and truncated.dtype == bool and not (terminated.any() or truncated.any())
     assert sorted(info) == sorted(STEP_INFO + [f"_{k}" for k in STEP_INFO])
@@ -74,7 +101,7 @@ def test_vector_env_shapes_dtypes_and_discrete_moves(device):
 
 
 def test_seeded_resets_repeat_and_fiducials_differ_between_envs():
-    vec = PatternCutVecEnv(2, device="cpu", **SMALL)
+    vec = PatternCutVecEnv(2, device="cpu", **SMALL, **PAPER)
     first, _ = vec.reset(seed=1)
     again, _ = vec.reset(seed=1)
     other, _ = vec.reset(seed=2)
@@ -86,8 +113,9 @@ def test_seeded_resets_repeat_and_fiducials_differ_between_envs():
 
 def test_vector_autoreset_is_same_step_with_final_obs_and_score():
     vec = PatternCutVecEnv(
-        2, device="cpu", contour=["circle-small", "edge-bite"], resolution=9, damping=[0.99, 0.98]
-    )
+        2, device="cpu", contour=["circle-small", "edge-bite"], resolution=9, damping=[0.99, 0.98],
+        autoreset_mode="same_step", **PAPER,
+    )  # fmt: skip
     start, _ = vec.reset(seed=3)
     num_steps = vec.task.num_steps
     for _ in range(num_steps - 1):
@@ -116,7 +144,15 @@ def test_vector_autoreset_is_same_step_with_final_obs_and_score():
 
 
 def test_truncated_episodes_have_no_score_and_reset_in_the_same_step():
-    vec = PatternCutVecEnv(2, device="cpu", max_episode_steps=3, resample_fiducials=True, **SMALL)
+    vec = PatternCutVecEnv(
+        2,
+        device="cpu",
+        max_episode_steps=3,
+        resample_fiducials=True,
+        autoreset_mode="same_step",
+        **SMALL,
+        **PAPER,
+    )
     start, _ = vec.reset(seed=0)
     for _ in range(3):
         obs, rewards, terminated, truncated, info = vec.step(np.array([0, 0]))
@@ -146,7 +182,7 @@ def test_fiducials_hidden_under_the_shaft_or_cut_away_keep_their_last_visible_po
 
 
 def test_a_fiducial_on_the_contour_is_cut_away_and_stays_put():
-    vec = PatternCutVecEnv(1, device="cpu", num_fiducials=2, **SMALL)
+    vec = PatternCutVecEnv(1, device="cpu", num_fiducials=2, **SMALL, **PAPER)
     vec.reset(seed=0)
     contour = vec.task.contours[0]
     start = contour.points[np.argmax(contour.points[:, 0])]  # where the scissors enter
@@ -169,14 +205,13 @@ def test_a_fiducial_on_the_contour_is_cut_away_and_stays_put():
         ("num_fiducials", True, "num_fiducials: must be a non-negative integer"),
         ("max_episode_steps", 2.5, "max_episode_steps: must be an integer >= 1"),
         ("max_episode_steps", "3", "max_episode_steps: must be an integer >= 1"),
-        ("residual_gain", None, "residual_gain: must be a finite number >= 0"),
         ("shaft_radius_mm", "5", "shaft_radius_mm: must be a finite number >= 0"),
         ("noise_std", "0.1", "noise_std: give a number, or a list of one number per env"),
         ("gravity", [1.0, "x"], "gravity: give a number, or a list of one number per env"),
         ("noise_std", -1.0, "noise_std: must be >= 0"),
         ("contour", 123, "contour: give a built-in name, a contour file"),
         ("pinch_point", [1, 2, 3], r"pinch_point: give \[x_mm, y_mm\]"),
-        ("sim_config", {}, "sim_config: give a SimConfig"),
+        ("sim_config", 5, "sim_config: give an object of SimConfig fields"),
     ],
 )
 def test_options_of_the_wrong_type_are_refused_by_name(field, value, message):
@@ -193,7 +228,7 @@ def test_options_of_the_wrong_type_are_refused_by_name(field, value, message):
 
 
 def test_stepping_before_the_first_reset_is_refused_and_info_keeps_its_types():
-    env = PatternCutEnv(device="cpu", **SMALL)
+    env = PatternCutEnv(device="cpu", **SMALL, **PAPER)
     with pytest.raises(RuntimeError, match="step: call reset\\(\\) first"):
         env.step(0)
     assert env.scene.step_index == 0  # nothing was simulated
@@ -206,7 +241,7 @@ def test_stepping_before_the_first_reset_is_refused_and_info_keeps_its_types():
 
 
 def test_invalid_actions_raise_and_continuous_actions_are_clipped():
-    env = PatternCutEnv(device="cpu", **SMALL)
+    env = PatternCutEnv(device="cpu", **SMALL, **PAPER)
     env.reset(seed=0)
     for bad in (np.nan, 5, 1.5, -1):
         with pytest.raises(ValueError, match="action"):
@@ -221,7 +256,7 @@ def test_invalid_actions_raise_and_continuous_actions_are_clipped():
 
 
 def test_sparse_reward_is_zero_until_the_last_step_then_minus_the_relative_error():
-    env = gym.make(ENV_ID, device="cpu", **SMALL)
+    env = gym.make(ENV_ID, device="cpu", **SMALL, **PAPER)
     env.reset(seed=0)
     rewards, terminated, info = [], False, {}
     while not terminated:
@@ -251,7 +286,7 @@ def test_sparse_reward_is_zero_until_the_last_step_then_minus_the_relative_error
 
 
 def test_separated_score_drives_the_reward_when_chosen():
-    env = gym.make(ENV_ID, device="cpu", sim_config=SimConfig(score="separated"), **SMALL)
+    env = gym.make(ENV_ID, device="cpu", sim_config=SimConfig(score="separated"), **SMALL, **PAPER)
     env.reset(seed=0)
     terminated = False
     while not terminated:
@@ -261,7 +296,7 @@ def test_separated_score_drives_the_reward_when_chosen():
 
 
 def test_dense_reward_penalises_the_cut_deviation_every_step():
-    env = PatternCutEnv(device="cpu", dense_reward=True, **SMALL)
+    env = PatternCutEnv(device="cpu", **SMALL, **{**PAPER, "dense_reward": True})
     env.reset(seed=0)
     steps = [env.step(1) for _ in range(20)]  # pulling +x drags the contour off the scissors' path
     rewards = [s[1] for s in steps]
@@ -272,7 +307,9 @@ def test_dense_reward_penalises_the_cut_deviation_every_step():
 
 
 def test_rsl_adapter_steps_logs_and_resets_itself():
-    env = PatternCutRslEnv(PatternCutVecEnv(3, device="cpu", **SMALL), seed=0)
+    env = PatternCutRslEnv(
+        PatternCutVecEnv(3, device="cpu", autoreset_mode="same_step", **SMALL, **PAPER), seed=0
+    )
     obs = env.get_observations()
     assert list(obs.keys()) == ["policy"] and obs["policy"].shape == (3, OBS_DIM)
     assert obs["policy"].dtype == torch.float32 and obs.batch_size == torch.Size([3])
@@ -295,7 +332,8 @@ def test_rsl_adapter_steps_logs_and_resets_itself():
 
 
 def test_rsl_adapter_reports_time_outs_for_truncated_episodes():
-    vec = PatternCutVecEnv(2, device="cpu", action_type="continuous", max_episode_steps=2, **SMALL)
+    vec = PatternCutVecEnv(2, device="cpu", max_episode_steps=2, autoreset_mode="same_step", **SMALL,
+                           **{**PAPER, "action_type": "continuous"})  # fmt: skip
     env = PatternCutRslEnv(vec)
     assert env.num_actions == 2 and env.num_action_choices is None and env.max_episode_length == 2
     for _ in range(2):
@@ -307,7 +345,7 @@ def test_rsl_adapter_reports_time_outs_for_truncated_episodes():
 
 
 def test_rsl_rl_ppo_runs_on_the_adapter():
-    env = PatternCutRslEnv(PatternCutVecEnv(2, device="cpu", action_type="continuous", **SMALL))
+    env = PatternCutRslEnv(PatternCutVecEnv(2, device="cpu", autoreset_mode="same_step", **SMALL))
     model = {"class_name": "rsl_rl.models:MLPModel", "hidden_dims": [8]}
     cfg = {
         "num_steps_per_env": 8,
@@ -335,8 +373,21 @@ def test_segments_one_path_for_all_or_one_per_env():
         PatternCutVecEnv(2, contour="circle-small", resolution=9, segments=[[right], [[[1.0, 2.0]]]])
 
 
-def test_observe_pinch_appends_the_normalised_pinch_point():
-    env = PatternCutVecEnv(2, **SMALL, pinch_point=[[30.0, 40.0], [70.0, 55.0]], observe_pinch=True)
-    obs, _ = env.reset(seed=0)
-    assert obs.shape == (2, OBS_DIM + 2) and env.single_observation_space.contains(obs[0])
-    assert obs[:, -2:] == pytest.approx(np.array([[-0.4, -0.2], [0.4, 0.1]]))
+def test_training_builds_its_rsl_env_with_same_step_autoreset_not_the_gym_default():
+    """The vector env restarts as Gymnasium's do (NEXT_STEP, its default); rsl-rl resets inside ``step``,
+    so the env a learner trains in is built with SAME_STEP, and the adapter refuses any other."""
+    from agents.config import TrainConfig
+    from agents.training import training_env
+    from envs.options import PatternCutOptions
+    from envs.rsl import EPISODE_COST_KEY
+
+    options = PatternCutOptions(device="cpu", **SMALL)
+    assert PatternCutVecEnv(2, options).autoreset_mode is AutoresetMode.NEXT_STEP
+    with pytest.raises(ValueError, match="rsl-rl resets envs inside step.*SAME_STEP"):
+        PatternCutRslEnv(PatternCutVecEnv(2, options))
+    env = training_env(options, TrainConfig(num_envs=2))
+    assert env.env.autoreset_mode is AutoresetMode.SAME_STEP and env.num_actions == 3
+    for _ in range(env.max_episode_length):
+        obs, _, dones, extras = env.step(torch.zeros(2, 3))
+    assert dones.tolist() == [1, 1] and extras[EPISODE_COST_KEY].shape == (2,)
+    assert torch.all(obs["policy"][:, 0] == 0.0)  # already the next episode's first observation

@@ -1,8 +1,8 @@
-"""Property-based tests of the physical parameters (issue 17): whatever a user sets, a cut either runs to
+"""Property-based tests of the physical parameters: whatever a user sets, a cut either runs to
 finite scores, or its diverged envs are flagged with NaN scores, or it fails with a one-line ``ValueError``
 naming what to change; never another exception, never a NaN score without ``diverged``, never a NaN
 observation. Examples per test: the hypothesis profile's (tests/conftest.py: "ci" by default, "long" for a
-real fuzzing session); the sheets are small so each example takes milliseconds."""
+real fuzzing run); the sheets are small so each example takes milliseconds."""
 
 import math
 
@@ -114,8 +114,9 @@ def test_any_physics_runs_or_fails_in_one_line(**physics):
 def test_env_observations_and_rewards_are_never_nan(**physics):
     try:
         vec = PatternCutVecEnv(
-            NUM_ENVS, contour="circle-small", sim_config=SHORT, device="cpu", contour_features=True, **physics
-        )
+            NUM_ENVS, contour="circle-small", sim_config=SHORT, device="cpu", contour_features=True,
+            action_type="discrete", autoreset_mode="same_step", **physics,
+        )  # fmt: skip
     except ValueError as error:
         assert_one_line(error)
         event(f"refused: {type(error).__name__} {str(error).split(':')[0][:30]}")

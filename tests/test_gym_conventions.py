@@ -15,7 +15,10 @@ from gymnasium.wrappers import vector as vector_wrappers
 import envs
 from envs import ENV_ID, PatternCutVecEnv
 
-SMALL = {"contour": "circle-small", "resolution": 9, "device": "cpu"}
+PAPER = {"action_type": "discrete", "contour_features": False, "allow_z": False, "dense_reward": False}
+"""The paper's env: x-y moves of 1 mm (``Discrete(5)``), 12 fiducials observed (40 values), the final reward
+alone."""
+SMALL = {"contour": "circle-small", "resolution": 9, "device": "cpu", **PAPER}
 """A 9 x 9 sheet and a 94 mm contour: 48 steps per episode."""
 STEPS = 48
 
@@ -71,7 +74,11 @@ def test_an_env_that_diverged_is_terminated_at_a_truncated_batch_end_not_truncat
             obs, rewards, terminated, truncated, info = vec.step(np.ones(3, dtype=int))
         assert terminated.tolist() == [False, True, False] and truncated.tolist() == [True, False, True]
         assert info["diverged"].tolist() == [False, True, False]
-    rsl = PatternCutRslEnv(PatternCutVecEnv(3, noise_std=[0.03, 1e30, 0.03], max_episode_steps=3, **SMALL))
+    rsl = PatternCutRslEnv(
+        PatternCutVecEnv(
+            3, autoreset_mode="same_step", noise_std=[0.03, 1e30, 0.03], max_episode_steps=3, **SMALL
+        )
+    )
     for _ in range(3):
         _, _, dones, extras = rsl.step(torch.ones(3, dtype=torch.long))
     assert dones.tolist() == [1, 1, 1] and extras["time_outs"].tolist() == [True, False, True]
@@ -83,6 +90,8 @@ def test_the_rsl_adapter_refuses_envs_that_do_not_reset_inside_step():
     for mode in ("next_step", "disabled"):
         with pytest.raises(ValueError, match="rsl-rl resets envs inside step.*SAME_STEP"):
             PatternCutRslEnv(PatternCutVecEnv(2, autoreset_mode=mode, **SMALL))
+    with pytest.raises(ValueError, match="rsl-rl resets envs inside step.*SAME_STEP"):
+        PatternCutRslEnv(PatternCutVecEnv(2, **SMALL))  # the default, Gymnasium's: NEXT_STEP
     with pytest.raises(ValueError, match="env: expected an envs.PatternCutVecEnv"):
         PatternCutRslEnv(gym.make(ENV_ID, **SMALL))
 
@@ -114,13 +123,13 @@ WRAPPERS = {
 
 
 def test_gymnasium_vector_observation_wrappers_run_across_episodes():
-    same_step = PatternCutVecEnv(2, **SMALL)
+    """The wrappers need NEXT_STEP (or DISABLED): the vector env's default, so ``gym.make_vec`` as is."""
+    same_step = PatternCutVecEnv(2, autoreset_mode="same_step", **SMALL)
     for wrap in WRAPPERS.values():  # Gymnasium's own check: these wrappers refuse same-step autoreset
         with pytest.raises(ValueError, match="NEXT_STEP or DISABLED"):
             wrap(same_step)
-    env = gym.make_vec(
-        ENV_ID, num_envs=2, vectorization_mode="vector_entry_point", autoreset_mode="NextStep", **SMALL
-    )
+    env = gym.make_vec(ENV_ID, num_envs=2, vectorization_mode="vector_entry_point", **SMALL)
+    assert env.metadata["autoreset_mode"] is AutoresetMode.NEXT_STEP
     for wrap in WRAPPERS.values():
         env = wrap(env)
     env = vector_wrappers.RecordEpisodeStatistics(env)
@@ -250,7 +259,7 @@ def test_a_users_own_agents_package_does_not_shadow_the_env(tmp_path):
         """,
         str(tmp_path),
     )
-    assert done.returncode == 0 and done.stdout.strip() == "(40,) (2, 40)", done.stderr
+    assert done.returncode == 0 and done.stdout.strip() == "(47,) (2, 47)", done.stderr  # the defaults
 
 
 @pytest.mark.parametrize(
@@ -289,4 +298,4 @@ assert sys.modules["envs"].MINE
         str(tmp_path),
     )
     assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == "_warpcut_envs.pattern_cut (40,) (2, 40)", done.stdout
+    assert done.stdout.strip() == "_warpcut_envs.pattern_cut (47,) (2, 47)", done.stdout

@@ -1,4 +1,5 @@
-"""The pipelines as library calls (agents.pipeline), and the README's Python example that uses them."""
+"""The pipelines as library calls (agents.pipelines), each taking its job (agents.jobs), and the README's
+Python example that uses them."""
 
 import json
 import re
@@ -7,28 +8,38 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.pipeline import analytic_pinches, evaluate_table, resolve_contours, run_pipeline
-from warpcut.contours import builtin_names, load_contour
+from agents.config import BUDGETS
+from agents.config_io import apply, read_file, to_plain
+from agents.jobs import EvaluateJob, RunJob, with_dependent_defaults
+from agents.pipelines import evaluate_table, run_pipeline
+from agents.pipelines.common import analytic_pinches
+from warpcut.contours import builtin_names, load_contour, resolve_contours
 from warpcut.sim.config import SimConfig
 
 SMALL = SimConfig(resolution=13)
 
 
-def test_the_readme_python_example_runs(tmp_path, monkeypatch, capsys):
-    """The README's first Python block (the pipelines) runs as written, in a scratch directory."""
+def test_the_readme_python_examples_run(tmp_path, monkeypatch, capsys):
+    """The README's Python blocks of the env and of the pipelines run as written, in a scratch directory."""
     readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    block = re.search(r"## Python API.*?```python\n(.*?)```", readme, re.S).group(1)
-    assert "run_pipeline(" in block and "evaluate_table(" in block
+    blocks = re.findall(r"```python\n(.*?)```", readme, re.S)
+    gym_block = next(b for b in blocks if "gym.make(" in b)
+    pipelines = next(b for b in blocks if "run_pipeline(" in b and "evaluate_table(" in b)
+    assert "from agents.pipelines import" in pipelines and "agents.pipeline " not in pipelines
     monkeypatch.chdir(tmp_path)
-    exec(compile(block, "README.md", "exec"), {})
+    scope = {}
+    exec(compile(gym_block, "README.md", "exec"), scope)
+    assert scope["env"].observation_space.shape == (47,) and scope["env"].action_space.shape == (3,)
+    exec(compile(pipelines, "README.md", "exec"), {})
     printed = capsys.readouterr().out
-    assert "| fls-circle |" in printed and "| wave-3 |" in printed
-    assert (tmp_path / "logs/example-run/results.json").is_file()
-    assert (tmp_path / "logs/example-table/plans.json").is_file()
+    assert "| **mean** |" in printed
+    runs = {p.parent for p in tmp_path.rglob("results.json")}
+    assert len(runs) == 2 and all((run / "config.json").is_file() for run in runs)
 
 
-def test_run_pipeline_with_the_fixed_selector_writes_its_report(tmp_path):
-    report = run_pipeline("circle-small", tmp_path, selector="fixed", candidates=3, trials=2, config=SMALL)
+def test_run_pipeline_with_the_fixed_selector_writes_its_report_and_its_job(tmp_path):
+    job = RunJob(contour="circle-small", policy="fixed", candidates=3, trials=2, sim=SMALL)
+    report = run_pipeline(job, tmp_path)
     assert report.methods == ["none", "fixed", "analytic"] and report.chosen_candidate == 0
     assert report.row["fixed_pinch"] == pytest.approx(report.plan.chosen["pinch"])
     assert len(report.candidates) == len(report.plan.candidates)  # fixed ranks every candidate
@@ -36,11 +47,14 @@ def test_run_pipeline_with_the_fixed_selector_writes_its_report(tmp_path):
     assert written["policy"] == "fixed" and written["rows"][0]["contour"] == "circle-small"
     assert written["plan"]["pinch"] == pytest.approx(report.plan.chosen["pinch"])
     assert json.loads((tmp_path / "plan.json").read_text())["chosen"] == report.plan.to_json()["chosen"]
-    assert report.policy_runs == []
+    assert report.policy_runs == [] and not (tmp_path / "request.json").exists()
+    saved = json.loads((tmp_path / "config.json").read_text())
+    assert saved == to_plain(job) == to_plain(apply(RunJob(), saved, "config.json"))  # the job, read back
 
 
 def test_run_pipeline_with_the_analytic_selector_scores_every_candidate(tmp_path):
-    report = run_pipeline("circle-small", tmp_path, selector="analytic", candidates=3, trials=2, config=SMALL)
+    job = RunJob(contour="circle-small", policy="analytic", candidates=3, trials=2, sim=SMALL)
+    report = run_pipeline(job, tmp_path)
     scores = [c["analytic_error_vertices"] for c in report.candidates]
     assert report.chosen_candidate == int(np.argmin(scores))
     assert report.row["analytic_pinch"] == pytest.approx(report.candidates[report.chosen_candidate]["pinch"])
@@ -48,15 +62,27 @@ def test_run_pipeline_with_the_analytic_selector_scores_every_candidate(tmp_path
 
 def test_pipelines_reject_bad_settings_by_name(tmp_path):
     with pytest.raises(ValueError, match="budget: choose one of fast, paper"):
-        run_pipeline("fls-circle", tmp_path, budget="huge")
-    with pytest.raises(ValueError, match="selector: choose one of fixed, analytic, rl"):
-        run_pipeline("fls-circle", tmp_path, selector="none")
+        run_pipeline(RunJob(budget="huge"), tmp_path)
+    with pytest.raises(ValueError, match="policy: choose one of fixed, analytic, rl"):
+        run_pipeline(RunJob(policy="none"), tmp_path)
+    with pytest.raises(ValueError, match="candidates: must be an integer >= 1"):
+        run_pipeline(RunJob(candidates=0), tmp_path)
     with pytest.raises(ValueError, match="methods: unknown magic"):
-        evaluate_table(["fls-circle"], tmp_path, methods=["none", "magic"])
+        evaluate_table(EvaluateJob(contours=["fls-circle"], methods=["none", "magic"]), tmp_path)
     with pytest.raises(ValueError, match="checkpoints: no trained run for 'fls-circle'"):
-        evaluate_table(["fls-circle"], tmp_path, checkpoints=tmp_path)
+        evaluate_table(EvaluateJob(contours=["fls-circle"], checkpoints=str(tmp_path)), tmp_path)
     with pytest.raises(ValueError, match="analytic_pinch: choose one of feasible, centroid"):
         analytic_pinches("middle", [load_contour("fls-circle")], None)
+    assert not (tmp_path / "config.json").exists()  # refused before anything was written
+
+
+def test_the_budgets_leave_the_iterations_to_the_learner():
+    """A budget sets the candidates and trials; each policy trains for its learner's own iterations unless
+    ``train.iterations`` is given."""
+    assert RunJob().settings() == BUDGETS["fast"] == {"candidates": 8, "rl_candidates": 1, "trials": 10}
+    assert RunJob(budget="paper", trials=3).settings() == {**BUDGETS["paper"], "trials": 3}
+    assert all("iterations" not in budget for budget in BUDGETS.values())
+    assert RunJob().train.iterations is None
 
 
 def test_resolve_contours_expands_all_after_the_named_ones():
@@ -70,9 +96,10 @@ def test_resolve_contours_expands_all_after_the_named_ones():
 
 
 def test_evaluate_table_without_a_plan_pairs_every_method_with_no_tension(tmp_path):
-    report = evaluate_table(
-        ["circle-small"], tmp_path, methods=["fixed", "analytic"], trials=2, config=SMALL, plan=False
+    job = EvaluateJob(
+        contours=["circle-small"], methods=["fixed", "analytic"], trials=2, sim=SMALL, plan=False
     )
+    report = evaluate_table(job, tmp_path)
     assert report.plans is None and not (tmp_path / "plans.json").exists()
     row = report.table["rows"][0]
     assert "none_improvement_pct" not in row and row["none_error_vertices"] > 0
@@ -81,35 +108,50 @@ def test_evaluate_table_without_a_plan_pairs_every_method_with_no_tension(tmp_pa
         report.markdown().splitlines()[0] == "| contour | no tension (vertices) | fixed (%) | analytic (%) |"
     )
     assert json.loads((tmp_path / "results.json").read_text())["planned"] is False
+    assert (tmp_path / "results.md").read_text() == report.markdown() + "\n"  # always written
+    assert json.loads((tmp_path / "config.json").read_text()) == to_plain(job)
 
 
-def test_evaluate_table_trains_with_the_papers_recipe_and_records_the_kept_iteration(tmp_path):
-    """--recipe paper: sparse reward, fiducials only, x-y moves, no validation: the last policy is kept."""
-    from agents.config import RECIPES
-
-    report = evaluate_table(
-        "circle-small", tmp_path, methods=["fixed", "rl"], trials=2, config=SMALL, plan=False,
-        recipe=RECIPES["paper"], iterations=2, num_envs=4,
-    )  # fmt: skip
+def test_evaluate_table_trains_with_the_papers_learner_and_records_the_kept_iteration(tmp_path):
+    """``--config paper``: PPO, sparse reward, fiducials only, x-y moves, no validation: the last policy is
+    kept."""
+    job = EvaluateJob(contours=["circle-small"], methods=["fixed", "rl"], trials=2, sim=SMALL, plan=False)
+    job = apply(job, read_file("paper"), "paper")
+    job = apply(job, {"train.iterations": 2, "train.num_envs": 4}, "--set")
+    assert job.train.algo == "ppo" and job.env.action_type == "discrete"
+    report = evaluate_table(job, tmp_path)
     options = json.loads((tmp_path / "policies/circle-small/options.json").read_text())
     assert not options["dense_reward"] and not options["contour_features"] and not options["allow_z"]
+    assert options["action_type"] == "discrete"
     row = report.table["rows"][0]
     assert row["rl_policy_iteration"] == 2 and report.table["rl_initial_policy_contours"] == 0
     assert np.isfinite(row["rl_improvement_pct"]) and report.policy_runs == [
         tmp_path / "policies/circle-small"
     ]
+    trained = json.loads((tmp_path / "policies/circle-small/config.json").read_text())
+    assert trained["train"]["algo"] == "ppo" and trained["train"]["validation_trials"] == 0
+
+
+def test_the_papers_preset_names_only_settings_the_jobs_have():
+    """The preset reads into every job that trains, and ``ppo`` keeps its discrete moves as a default
+    that follows it."""
+    for job_class in (RunJob, EvaluateJob):
+        job = with_dependent_defaults(apply(job_class(), read_file("paper"), "paper"), set())
+        assert job.train.algo == "ppo" and job.env.action_type == "discrete" and not job.env.allow_z
 
 
 def test_evaluate_table_resumes_with_the_plans_it_saved(tmp_path, monkeypatch):
-    import agents.pipeline as pipeline
+    import agents.pipelines.table as table
 
-    kwargs = dict(methods=["none", "fixed"], trials=1, config=SMALL, candidates=2)
-    first = evaluate_table(["circle-small", "wave-1"], tmp_path, **kwargs)
+    job = EvaluateJob(
+        contours=["circle-small", "wave-1"], methods=["none", "fixed"], trials=1, sim=SMALL, candidates=2
+    )
+    first = evaluate_table(job, tmp_path)
     planned = []
-    real = pipeline.plan_cut
-    monkeypatch.setattr(pipeline, "plan_cut", lambda contour, *a, **kw: planned.append(contour.name))
+    real = table.plan_cut
+    monkeypatch.setattr(table, "plan_cut", lambda contour, *a, **kw: planned.append(contour.name))
     lines = []
-    again = evaluate_table(["circle-small", "wave-1"], tmp_path, resume=True, log=lines.append, **kwargs)
+    again = evaluate_table(job, tmp_path, resume=True, log=lines.append)
     assert planned == [] and any("kept the 2 plan(s)" in line for line in lines)
     assert again.table["rows"] == first.table["rows"]  # the same pinch points and orders, the same cuts
     assert [p.to_json() for p in again.plans] == [p.to_json() for p in first.plans]
@@ -117,12 +159,12 @@ def test_evaluate_table_resumes_with_the_plans_it_saved(tmp_path, monkeypatch):
     del saved["wave-1"]  # e.g. a run that stopped while writing it (it is written whole, atomically)
     (tmp_path / "plans.json").write_text(json.dumps(saved))
     monkeypatch.setattr(
-        pipeline,
+        table,
         "plan_cut",
         lambda contour, *a, **kw: planned.append(contour.name) or real(contour, *a, **kw),
     )
     lines.clear()
-    third = evaluate_table(["circle-small", "wave-1"], tmp_path, resume=True, log=lines.append, **kwargs)
+    third = evaluate_table(job, tmp_path, resume=True, log=lines.append)
     assert planned == ["circle-small", "wave-1"]
     assert any("planning again" in line and "no plan for 'wave-1'" in line for line in lines)
     assert third.table["rows"] == first.table["rows"]
@@ -135,8 +177,10 @@ def test_evaluate_table_reports_each_stage_as_it_advances(tmp_path):
     def stages(stage, done, total):
         seen.append((stage, done, total))
 
-    evaluate_table(["circle-small", "wave-1"], tmp_path, methods=["none", "fixed"], trials=1, config=SMALL,
-                   candidates=2, stages=stages)  # fmt: skip
+    job = EvaluateJob(
+        contours=["circle-small", "wave-1"], methods=["none", "fixed"], trials=1, sim=SMALL, candidates=2
+    )
+    evaluate_table(job, tmp_path, stages=stages)
     assert [s for s in seen if s[0] == "planning"] == [
         ("planning", 0, 2),
         ("planning", 1, 2),
@@ -146,18 +190,8 @@ def test_evaluate_table_reports_each_stage_as_it_advances(tmp_path):
     assert evaluating[0][1] == 0 and evaluating[-1] == ("evaluating", 2, 2)
 
     seen.clear()  # without "none" listed, the suite runs it too: three batches
-    evaluate_table("circle-small", tmp_path / "b", methods=["fixed", "analytic"], trials=1, config=SMALL,
-                   plan=False, stages=stages)  # fmt: skip
+    job = EvaluateJob(
+        contours=["circle-small"], methods=["fixed", "analytic"], trials=1, sim=SMALL, plan=False
+    )
+    evaluate_table(job, tmp_path / "b", stages=stages)
     assert [done for stage, done, _ in seen if stage == "evaluating"] == [0, 1, 2, 3]
-
-
-def test_run_trains_apg_for_its_own_iterations_unless_told():
-    """The budgets' iterations are PPO's (fast: 60); an APG recipe trains APG's default (30) unless
-    ``iterations`` is given."""
-    from agents.config import APG_BATCH, BUDGETS, RECIPES
-    from agents.pipeline import _settings
-
-    none = {"candidates": None, "rl_candidates": None, "iterations": None, "trials": None}
-    assert _settings("fast", "rl", none, RECIPES["warpcut"])["iterations"] == BUDGETS["fast"]["iterations"]
-    assert _settings("fast", "rl", none, RECIPES["apg"])["iterations"] == APG_BATCH["iterations"]
-    assert _settings("paper", "rl", {**none, "iterations": 5}, RECIPES["apg"])["iterations"] == 5

@@ -1,8 +1,10 @@
-"""Issue 17: nothing a user made is lost. Run directories (claimed, locked, resumed), file names derived from
+"""Nothing a user made is lost. Run directories (claimed, locked, resumed), file names derived from
 contour names, outputs that would overwrite inputs, recordings cut short, and SIGTERM/SIGHUP."""
 
+import dataclasses
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -14,15 +16,23 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-import agents.pipeline as pipeline
+import agents.training
 from agents.cli import main
-from agents.pipeline import evaluate_table, run_pipeline
+from agents.config import TrainConfig
+from agents.config_io import to_plain
+from agents.es.config import EsConfig
+from agents.jobs import EvaluateJob, RunJob, TrainJob
+from agents.pipelines import evaluate_table, run_pipeline
+from agents.pipelines.common import TrainingInterrupted
 from warpcut.io import LOCK_FILE, claim_run_dir, safe_name, write_json
 from warpcut.sim.config import SimConfig
 from warpcut.viz.process import RecordingError, place_file
 
 SMALL = SimConfig(resolution=13)
 ROOT = Path(__file__).resolve().parents[1]
+TINY = TrainConfig(num_envs=4, iterations=2, validation_trials=0, es=EsConfig(population=4))
+"""es on 4 envs for 2 iterations (one whole cut each), no validation: a policy in a few seconds."""
+TINY_FLAGS = ["--set", "train.num_envs=4", "--set", "train.es.population=4", "--set", "sim.resolution=13"]
 
 
 def invoke(args):
@@ -59,7 +69,7 @@ def test_a_contour_name_never_becomes_a_path_outside_the_run(tmp_path):
     out = tmp_path / "runs" / "deep" / "out"
     code, output = invoke(
         ["evaluate", "--contours", ",".join(map(str, files)), "--methods", "none,fixed", "--trials", "1",
-         "--candidates", "2", "--out", str(out)]
+         "--set", "candidates=2", "--set", "sim.resolution=13", "--out", str(out)]
     )  # fmt: skip
     assert code == 0, output
     assert not victim.exists() and not list(tmp_path.glob("victim*")) and not escaped.exists()
@@ -73,13 +83,16 @@ def test_a_contour_name_never_becomes_a_path_outside_the_run(tmp_path):
 def test_two_contours_with_one_name_are_refused(tmp_path):
     files = [contour_file(tmp_path / "a.json", "same"), contour_file(tmp_path / "b.json", "same")]
     with pytest.raises(ValueError, match="both named 'same'"):
-        evaluate_table([str(f) for f in files], tmp_path / "out", methods=["none"], trials=1, config=SMALL)
+        evaluate_table(
+            EvaluateJob(contours=[str(f) for f in files], methods=["none"], trials=1, sim=SMALL),
+            tmp_path / "out",
+        )
 
 
 def test_an_existing_run_is_refused_unless_resumed_or_overwritten(tmp_path):
     out = tmp_path / "run"
     args = ["evaluate", "--contours", "circle-small", "--methods", "none,fixed", "--trials", "1",
-            "--candidates", "2", "--no-plots", "--out", str(out)]  # fmt: skip
+            "--set", "candidates=2", "--set", "plots=false", "--out", str(out)]  # fmt: skip
     assert invoke(args)[0] == 0
     before = (out / "results.json").read_bytes()
     code, output = invoke(args)
@@ -101,18 +114,27 @@ def test_an_existing_run_is_refused_unless_resumed_or_overwritten(tmp_path):
     assert code == 2 and "--out" in output
 
 
-def test_bad_inputs_are_refused_before_any_work_and_leave_no_run_behind(tmp_path):
-    """NaN through a float range, a seed past 32 bits, an output that cannot be written, --resume of a run
-    that does not exist, and a study's bad values: each one line naming the flag, before anything runs."""
+def test_bad_inputs_are_refused_before_any_work_and_leave_no_run_behind(tmp_path, monkeypatch):
+    """NaN through a number, a seed past 32 bits, an output that cannot be written, --resume of a run that
+    does not exist, a setting the command would ignore, a learner that cannot train in its env, and a
+    study's bad values: each one line naming the flag or key, before anything runs."""
+    monkeypatch.chdir(tmp_path)  # a command that went ahead would write its default run directory here
     fresh = str(tmp_path / "new")
     for args, message in [
         (
-            ["train", "--contour", "circle-small", "--stay-prior", "nan"],
-            "'--stay-prior': nan is not a finite",
+            ["train", "--contour", "circle-small", "--algo", "ppo", "--set", "train.ppo.stay_prior=.nan"],
+            "train.ppo.stay_prior: expected a number (got nan)",
         ),
-        (["optimize", "--contour", "circle-small", "--lr", "inf"], "'--lr': inf is not a finite number"),
-        (["simulate", "--contour", "circle-small", "--noise", "nan"], "'--noise': nan is not a finite"),
+        (
+            ["optimize", "--contour", "circle-small", "--set", "grad.learning_rate=.inf"],
+            "grad.learning_rate: must be a positive number",
+        ),
+        (["simulate", "--contour", "circle-small", "--set", "sim.noise_std=.nan"], "sim.noise_std: expected"),
         (["train", "--contour", "circle-small", "--seed", str(2**40)], "'--seed': 1099511627776 is not in"),
+        (
+            ["train", "--contour", "circle-small", "--contour", "wave-1"],
+            "--contour: given twice; give it once",
+        ),
         (
             ["plan", "--contour", "circle-small", "--json", "/proc/x.json"],
             "--json: cannot write /proc/x.json",
@@ -124,35 +146,60 @@ def test_bad_inputs_are_refused_before_any_work_and_leave_no_run_behind(tmp_path
             "drop --resume to start one",
         ),
         (
-            ["run", "--contour", "circle-small", "--policy", "fixed", "--rl-candidates", "3"],
-            "only with --policy rl",
+            ["run", "--contour", "circle-small", "--policy", "fixed", "--set", "rl_candidates=3"],
+            "rl_candidates: only with --policy rl",
         ),
         (
-            ["evaluate", "--contours", "circle-small", "--methods", "none", "--iterations", "5"],
-            "rl in --methods",
+            ["evaluate", "--contours", "circle-small", "--methods", "none", "--set", "train.iterations=5"],
+            "train.iterations: only with rl in --methods",
         ),
         (
-            ["evaluate", "--methods", "rl", "--grad-feedback-phases", "2"],
-            "--grad-feedback-phases: only with grad",
+            ["evaluate", "--methods", "rl", "--set", "grad.es_feedback_phases=2"],
+            "grad.es_feedback_phases: only with grad in --methods",
         ),
         (
-            ["run", "--recipe", "apg", "--randomize", "gravity"],
-            "one fixed sheet; choose a PPO or es --recipe",
+            ["run", "--algo", "apg", "--set", "env.randomize=[gravity]"],
+            "env.randomize: APG differentiates one fixed sheet; train with es or ppo",
         ),
-        (["run", "--recipe", "es", "--num-envs", "2"], "--num-envs: es plays 64 perturbed policies"),
-        (["evaluate", "--recipe", "es", "--num-envs", "96"], "give a multiple of 64"),
-        (["evaluate", "--methods", "grad", "--grad-feedback-sag"], "give --grad-feedback-phases >= 1"),
-        (["optimize", "--contour", "circle-small", "--population", "3"], "--population: must be even"),
+        (
+            [
+                "train",
+                "--contour",
+                "circle-small",
+                "--algo",
+                "apg",
+                "--set",
+                "env.relative_reward=true",
+                "--out",
+                fresh,
+            ],
+            "APG differentiates one fixed sheet",
+        ),  # fmt: skip
+        (["run", "--set", "train.num_envs=2"], "64 must divide num_envs (2)"),
+        (["evaluate", "--set", "train.num_envs=96"], "e.g. es.population=48"),
+        (
+            ["train", "--contour", "circle-small", "--algo", "apg", "--set", "env.action_type=discrete"],
+            "algo: apg",
+        ),
+        (
+            ["evaluate", "--methods", "grad", "--set", "grad.es_feedback_sag=true"],
+            "give es_feedback_phases >= 1",
+        ),
+        (
+            ["optimize", "--contour", "circle-small", "--set", "grad.es_population=3"],
+            "grad.es_population: must be even",
+        ),
     ]:
         code, output = invoke(args)
         assert code == 2 and message in output, (args, output)
-    assert not Path(fresh).exists()
+        assert len(output.strip().splitlines()) == 1, (args, output)
+    assert not Path(fresh).exists() and not list(tmp_path.iterdir())
     out = tmp_path / "study"
-    args = ["robustness", "--contour", "circle-small", "--study", "noise", "--trials", "1", "--no-plots",
-            "--out", str(out)]  # fmt: skip
-    code, output = invoke([*args, "--values", "-1"])
+    args = ["robustness", "--contour", "circle-small", "--study", "noise", "--trials", "1",
+            "--set", "plots=false", "--out", str(out)]  # fmt: skip
+    code, output = invoke([*args, "--set", "values=[-1]"])
     assert code != 0 and "values: noise -1" in output
-    assert not (out / "request.json").exists()  # so the same --out takes the corrected command
+    assert not (out / "config.json").exists()  # so the same --out takes the corrected command
     run = tmp_path / "train"
     code, output = invoke(["train", "--contour", "circle-small", "--pinch", "500,500", "--out", str(run)])
     assert code != 0 and "lies off the 100 x 100 mm sheet" in output
@@ -188,10 +235,9 @@ def test_a_run_directory_is_locked_while_a_process_writes_it(tmp_path):
 def test_an_output_that_is_an_input_is_refused(tmp_path):
     contour = contour_file(tmp_path / "disc.json", "disc")
     before = contour.read_bytes()
-    for option in ("--json", "--markdown"):
-        code, output = invoke(["evaluate", "--contours", str(contour), "--methods", "none", "--trials", "1",
-                               option, str(contour), "--out", str(tmp_path / option)])  # fmt: skip
-        assert code == 2 and f"{option}" in output and "is an input" in output
+    code, output = invoke(["evaluate", "--contours", str(contour), "--methods", "none", "--trials", "1",
+                           "--json", str(contour), "--out", str(tmp_path / "eval")])  # fmt: skip
+    assert code == 2 and "--json" in output and "is an input" in output
     code, output = invoke(["simulate", "--contour", str(contour), "--json", str(contour)])
     assert code == 2 and "is an input" in output
     code, output = invoke(["run", "--contour", str(contour), "--policy", "fixed", "--json", str(contour),
@@ -248,8 +294,9 @@ def test_a_recording_on_a_full_disk_keeps_the_earlier_one(tmp_path):
         import resource, signal, sys
         from click.testing import CliRunner
         from agents.cli import main
-        args = ["simulate", "--contour", "circle-small", "--policy", "none", "--resolution", "9", "--trials",
-                "2", "--no-plots", "--record", "2", "--json", sys.argv[1] + "/results.json"]
+        args = ["simulate", "--contour", "circle-small", "--policy", "none", "--set", "sim.resolution=9",
+                "--trials", "2", "--set", "plots=false", "--record", "2",
+                "--json", sys.argv[1] + "/results.json"]
         if sys.argv[2] == "full":
             signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
             size = int(sys.argv[3]) // 3
@@ -278,41 +325,45 @@ def test_a_recording_on_a_full_disk_keeps_the_earlier_one(tmp_path):
 
 def test_evaluate_resumes_after_an_interruption_keeping_finished_policies(tmp_path, monkeypatch):
     contours = ["circle-small", "wave-1"]
-    kwargs = dict(methods=["none", "rl"], trials=1, config=SMALL, plan=False, iterations=2, num_envs=4)
+    job = EvaluateJob(contours=contours, methods=["none", "rl"], trials=1, sim=SMALL, plan=False, train=TINY)
     trained = []
-    real = pipeline.train_contour
+    real = agents.training.train_contour
 
-    def train_then_stop(options, out_dir, cfg, **kw):
+    def train_then_stop(train_job, out_dir, **kw):
         trained.append(Path(out_dir).name)
         if trained == ["circle-small", "wave-1"]:
             raise KeyboardInterrupt  # Ctrl-C as the second policy starts training
-        return real(options, out_dir, cfg, **kw)
+        return real(train_job, out_dir, **kw)
 
-    monkeypatch.setattr(pipeline, "train_contour", train_then_stop)
+    monkeypatch.setattr(agents.training, "train_contour", train_then_stop)
     out = tmp_path / "table"
-    with pytest.raises(pipeline.TrainingInterrupted) as stopped:
-        evaluate_table(contours, out, **kwargs)
+    with pytest.raises(TrainingInterrupted) as stopped:
+        evaluate_table(job, out)
     assert stopped.value.run_dir == out / "policies" / "wave-1"
     with pytest.raises(ValueError, match="already holds a run"):
-        evaluate_table(contours, out, **kwargs)
-    with pytest.raises(ValueError, match="trials: 1 then, 2 now"):
-        evaluate_table(contours, out, resume=True, **{**kwargs, "trials": 2})
+        evaluate_table(job, out)
+    with pytest.raises(ValueError, match=r"trials: 1 then, 2 now.*--config .*config.json"):
+        evaluate_table(dataclasses.replace(job, trials=2), out, resume=True)
     finished = (out / "policies/circle-small/summary.json").read_bytes()
     trained.clear()
-    report = evaluate_table(contours, out, resume=True, **kwargs)
+    report = evaluate_table(
+        dataclasses.replace(job, record=1, plots=False), out, resume=True
+    )  # outputs may change
     assert trained == ["wave-1"]  # circle-small's finished policy was kept, not trained again
     assert (out / "policies/circle-small/summary.json").read_bytes() == finished
     assert [r["contour"] for r in report.table["rows"]] == contours
-    assert json.loads((out / "request.json").read_text())["command"] == "evaluate"
+    assert json.loads((out / "config.json").read_text())["trials"] == 1
 
 
 def test_run_pipeline_resumes_its_candidates(tmp_path):
-    kwargs = dict(candidates=2, rl_candidates=2, iterations=2, trials=1, num_envs=4, config=SMALL)
-    first = run_pipeline("circle-small", tmp_path, **kwargs)
+    job = RunJob(contour="circle-small", candidates=2, rl_candidates=2, trials=1, sim=SMALL, train=TINY)
+    first = run_pipeline(job, tmp_path)
     stamps = {p: p.stat().st_mtime_ns for p in tmp_path.glob("rl/candidate-*/summary.json")}
-    again = run_pipeline("circle-small", tmp_path, resume=True, **kwargs)
+    assert len(stamps) == 2
+    again = run_pipeline(job, tmp_path, resume=True)
     assert {p: p.stat().st_mtime_ns for p in stamps} == stamps  # nothing retrained
     assert again.row == first.row
+    assert json.loads((tmp_path / "config.json").read_text()) == to_plain(job)
 
 
 @pytest.mark.parametrize("signum, status", [(signal.SIGTERM, 143), (signal.SIGHUP, 129)])
@@ -320,14 +371,14 @@ def test_sigterm_and_sighup_save_the_training_and_say_how_to_resume(tmp_path, si
     out = tmp_path / "table"
     proc = subprocess.Popen(
         [sys.executable, "-m", "warpcut", "evaluate", "--contours", "circle-small", "--methods", "none,rl",
-         "--trials", "1", "--iterations", "5000", "--num-envs", "4", "--no-plan", "--no-plots",
-         "--out", str(out)],
+         "--trials", "1", "--set", "train.iterations=5000", *TINY_FLAGS, "--set", "plan=false",
+         "--set", "plots=false", "--out", str(out)],
         stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=ROOT,
     )  # fmt: skip
     lines = []
     for line in proc.stderr:
         lines.append(line)
-        if "training rl for circle-small" in line:
+        if "training es for circle-small" in line:
             break
     summary = out / "policies/circle-small/summary.json"
     deadline = time.monotonic() + 60
@@ -344,32 +395,38 @@ def test_sigterm_and_sighup_save_the_training_and_say_how_to_resume(tmp_path, si
 
 
 def test_checkpoints_of_another_contour_or_an_unfinished_run_are_refused(tmp_path):
-    """Issue 17, item 9: a circle-small policy filed as fls-circle was scored as fls-circle's."""
-    from agents.config import TrainConfig
-    from agents.rl import train_contour
-    from envs.options import PatternCutOptions
+    """A circle-small policy filed as fls-circle is refused, not scored as fls-circle's."""
+    from agents.training import train_contour
 
     runs = tmp_path / "runs"
-    options = PatternCutOptions(contour="circle-small", sim_config=SMALL, dense_reward=True,
-                                contour_features=True, allow_z=True)  # fmt: skip
-    cfg = TrainConfig(num_envs=4, iterations=1, num_steps_per_env=4)
-    train_contour(options, runs / "fls-circle", cfg, eval_trials=1, progress=False, validation_trials=0)
-    kwargs = dict(methods=["none", "rl"], trials=1, config=SMALL, plan=False, checkpoints=runs)
+    train = dataclasses.replace(TINY, iterations=1)
+    trained = TrainJob(contour="circle-small", sim=SMALL, eval_trials=1, train=train)
+    train_contour(trained, runs / "fls-circle", progress=False)
+    job = EvaluateJob(
+        contours=["fls-circle"],
+        methods=["none", "rl"],
+        trials=1,
+        sim=SMALL,
+        plan=False,
+        checkpoints=str(runs),
+    )
     with pytest.raises(
         ValueError, match="trained on contour 'circle-small', not on the requested 'fls-circle'"
     ):
-        evaluate_table("fls-circle", tmp_path / "a", **kwargs)
+        evaluate_table(job, tmp_path / "a")
 
     (runs / "fls-circle").rename(runs / "circle-small")
     summary = runs / "circle-small" / "summary.json"
     summary.write_text(json.dumps({**json.loads(summary.read_text()), "status": "interrupted"}))
-    with pytest.raises(ValueError, match="--allow-partial"):
-        evaluate_table("circle-small", tmp_path / "b", **kwargs)
-    report = evaluate_table("circle-small", tmp_path / "c", allow_partial=True, **kwargs)
+    job = dataclasses.replace(job, contours=["circle-small"])
+    with pytest.raises(ValueError, match="allow.partial"):
+        evaluate_table(job, tmp_path / "b")
+    report = evaluate_table(dataclasses.replace(job, allow_partial=True), tmp_path / "c")
     assert np.isfinite(report.table["rows"][0]["rl_improvement_pct"])
     code, output = invoke(["evaluate", "--contours", "circle-small", "--methods", "none,rl", "--trials", "1",
-                           "--checkpoints", str(runs), "--out", str(tmp_path / "d")])  # fmt: skip
-    assert code == 2 and "--allow-partial" in output and len(output.strip().splitlines()) == 1
+                           "--set", "sim.resolution=13", "--checkpoints", str(runs),
+                           "--out", str(tmp_path / "d")])  # fmt: skip
+    assert code == 2 and re.search("allow.partial", output) and len(output.strip().splitlines()) == 1
 
 
 def test_plan_json_never_overwrites_its_contour(tmp_path):
@@ -381,8 +438,8 @@ def test_plan_json_never_overwrites_its_contour(tmp_path):
 
 def test_train_refuses_an_existing_run_and_stops_on_sigterm_with_a_checkpoint(tmp_path):
     run = tmp_path / "run"
-    args = ["train", "--contour", "circle-small", "--num-envs", "4", "--steps-per-env", "4",
-            "--eval-trials", "1", "--validation-trials", "0", "--no-progress", "--no-plots",
+    args = ["train", "--contour", "circle-small", *TINY_FLAGS, "--set", "eval_trials=1",
+            "--set", "train.validation_trials=0", "--no-progress", "--set", "plots=false",
             "--out", str(run)]  # fmt: skip
     proc = subprocess.Popen(
         [sys.executable, "-m", "warpcut", *args, "--iterations", "5000"],
@@ -406,9 +463,10 @@ def test_train_refuses_an_existing_run_and_stops_on_sigterm_with_a_checkpoint(tm
 
     code, output = invoke([*args, "--iterations", "2"])
     assert code == 2 and "already holds a run" in output
+    code, output = invoke(["train", "--resume", str(run), "--set", "train.es.sigma=0.5"])
+    assert code == 2 and "train.es.sigma" in output and "keeps its settings" in output
     code, output = invoke(["train", "--resume", str(run), "--iterations", str(summary["iterations"] + 1),
-                           "--num-envs", "4", "--steps-per-env", "4", "--eval-trials", "1", "--no-progress",
-                           "--no-plots"])  # fmt: skip
+                           "--no-progress"])  # fmt: skip
     assert code == 0, output
     assert json.loads((run / "summary.json").read_text())["status"] == "completed"
 

@@ -25,7 +25,9 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 ROOT = Path(__file__).resolve().parents[1]
 
-SMALL = {"contour": "circle-small", "resolution": 9, "device": "cpu"}
+PAPER = {"action_type": "discrete", "contour_features": False, "allow_z": False, "dense_reward": False}
+"""The paper's env: x-y moves of 1 mm (``Discrete(5)``), 12 fiducials observed, the final reward alone."""
+SMALL = {"contour": "circle-small", "resolution": 9, "device": "cpu", **PAPER}
 """A 9 x 9 sheet and a 94 mm contour: 48 steps per episode."""
 STEPS = 48
 OBS_DIM = 4 + 3 * 12
@@ -33,7 +35,7 @@ SCORE_KEYS = {"relative_error", "error_mm2", "error_vertices", "path_error_mm2",
 
 
 def test_steps_autoreset_and_infos_match_a_dummy_vec_env_of_single_envs():
-    env = PatternCutSB3Env(PatternCutVecEnv(3, **SMALL))
+    env = make_sb3_env(3, monitor=False, **SMALL)
     assert env.num_envs == 3 and env.action_space == gym.spaces.Discrete(5) and env.render_mode is None
     assert env.observation_space == env.env.single_observation_space
     obs = env.reset()
@@ -59,7 +61,7 @@ def test_steps_autoreset_and_infos_match_a_dummy_vec_env_of_single_envs():
 
 
 def test_truncated_continuous_episodes_are_flagged_for_bootstrapping():
-    env = PatternCutSB3Env(PatternCutVecEnv(2, action_type="continuous", max_episode_steps=2, **SMALL))
+    env = make_sb3_env(2, monitor=False, max_episode_steps=2, **{**SMALL, "action_type": "continuous"})
     assert env.action_space == gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
     env.reset()
     _, _, dones, infos = env.step(np.zeros((2, 2), dtype=np.float32))
@@ -72,7 +74,9 @@ def test_truncated_continuous_episodes_are_flagged_for_bootstrapping():
 
 
 def test_a_diverged_env_ends_alone_then_idles_until_the_batch_ends():
-    env = PatternCutSB3Env(PatternCutVecEnv(3, noise_std=[0.03, 1e30, 0.03], **SMALL))
+    env = PatternCutSB3Env(
+        PatternCutVecEnv(3, autoreset_mode="same_step", noise_std=[0.03, 1e30, 0.03], **SMALL)
+    )
     env.reset()
     obs, rewards, dones, infos = env.step(np.ones(3, dtype=np.int64))
     assert dones.tolist() == [False, True, False] and [i["diverged"] for i in infos] == [False, True, False]
@@ -88,7 +92,7 @@ def test_a_diverged_env_ends_alone_then_idles_until_the_batch_ends():
 
 
 def test_seeds_attributes_and_methods_act_on_the_one_batch():
-    env = PatternCutSB3Env(PatternCutVecEnv(2, **SMALL))
+    env = PatternCutSB3Env(PatternCutVecEnv(2, autoreset_mode="same_step", **SMALL))
     assert env.seed(3) == [3, 4]
     first = env.reset()
     env.seed(3)
@@ -128,16 +132,18 @@ def test_renders_the_batch_and_refuses_next_step_autoreset():
         assert make_sb3_env(2, monitor=False, **SMALL).get_images() == [None, None]
     with pytest.raises(ValueError, match="env: SB3 resets envs inside step.*SAME_STEP"):
         PatternCutSB3Env(PatternCutVecEnv(2, autoreset_mode="next_step", **SMALL))
+    with pytest.raises(ValueError, match="env: SB3 resets envs inside step.*SAME_STEP"):
+        PatternCutSB3Env(PatternCutVecEnv(2, **SMALL))  # the vector env's default, Gymnasium's: NEXT_STEP
 
 
 @pytest.mark.parametrize("action_type", ["discrete", "continuous"])
 def test_sb3_env_checker_passes_on_the_single_env(action_type):
-    check_env(PatternCutEnv(action_type=action_type, **SMALL), warn=True)
+    check_env(PatternCutEnv(**{**SMALL, "action_type": action_type}), warn=True)
 
 
 @pytest.mark.parametrize("action_type", ["discrete", "continuous"])
 def test_sb3_ppo_trains_on_the_batch(action_type):
-    env = make_sb3_env(4, action_type=action_type, **SMALL)
+    env = make_sb3_env(4, **{**SMALL, "action_type": action_type})
     model = PPO(
         "MlpPolicy", env, n_steps=64, batch_size=128, n_epochs=1, policy_kwargs={"net_arch": [16]}, seed=0
     )

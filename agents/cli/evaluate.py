@@ -87,7 +87,14 @@ def command(
     from warpcut.contours import resolve_contours
     from warpcut.io import safe_name, write_json
 
-    job = common.resolve(EvaluateJob, config_file, overrides, FLAGS).check()
+    job = common.resolve(EvaluateJob, config_file, overrides, FLAGS)
+    unused = {"rl": ["train", "env", "checkpoints", "allow_partial"], "grad": ["grad"]}
+    for method, keys in unused.items():
+        if method not in job.methods:
+            common.refuse_unused_keys(job, keys, overrides, FLAGS, f"only with {method} in --methods")
+    job = job.check()
+    if "rl" in job.methods and job.checkpoints is None:
+        common.check_learner(job)
     resolve_contours(job.contours)  # a bad name or file: now
     if print_config:
         common.print_config(job)

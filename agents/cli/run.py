@@ -95,7 +95,11 @@ def command(
     job.settings()
     contour_name = load_contour(contour_spec(job.contour)).name
     if job.policy == "rl":
-        job.train.check(job.env.action_type == "discrete")
+        common.check_learner(job)
+    else:
+        common.refuse_unused_keys(
+            job, ["rl_candidates", "train", "env"], overrides, FLAGS, "only with --policy rl"
+        )
     if print_config:
         common.print_config(job)
         return

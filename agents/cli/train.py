@@ -92,7 +92,7 @@ def command(
     if run is not None:
         check_resumed_job(run, job)
     options = job.options(device)
-    job.train.check(options.action_type == "discrete")
+    common.check_learner(job)
     contour_name = options.per_env(1)[0][0].name  # a bad contour or an infeasible default pinch: now
     if print_config:
         common.print_config(job)

@@ -92,6 +92,8 @@ def run_pipeline(
     """
     settings = job.settings()
     config = job.sim.validated()
+    if job.policy == "rl":  # before any work: the learner can train in the env
+        job.train.check(job.env.action_type == "discrete")
     out = Path(out)
     loaded = load_contour(contour_spec(job.contour))
     record_job(out, job, resume)

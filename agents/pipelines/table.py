@@ -112,6 +112,8 @@ def evaluate_table(
     loaded = [c for _, c in named]
     if job.checkpoints is not None and "rl" in methods:
         _check_checkpoints(Path(job.checkpoints), loaded, job)
+    elif "rl" in methods:  # before any work: the learner can train in the env
+        job.train.check(job.env.action_type == "discrete")
     record_job(out, job, resume)
     start = time.perf_counter()
     settings = dict(num_candidates=job.candidates, seed=seed, device=device, arm=job.arm)
