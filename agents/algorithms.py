@@ -78,7 +78,7 @@ DEFAULT_ALGORITHM = "es"
 def algorithm(name: str) -> Algorithm:
     """The registry's entry for ``name``; ``ValueError`` naming ``algo`` for an unknown one."""
     if name not in ALGORITHMS:
-        raise ValueError(f"algo: choose one of {', '.join(ALGORITHMS)} (got {name!r})")
+        raise ValueError(f"train.algo: choose one of {', '.join(ALGORITHMS)} (got {name!r})")
     return ALGORITHMS[name]
 
 

@@ -78,20 +78,23 @@ class TrainConfig:
         for name in ("num_envs", "iterations"):
             value = getattr(self, name)
             if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
-                raise ValueError(f"{name}: must be an integer >= 1, or null for the learner's (got {value!r})")
+                raise ValueError(
+                    f"train.{name}: must be an integer >= 1, or null for the learner's (got {value!r})"
+                )
         for name in ("validation_interval", "save_interval"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"{name}: must be an integer >= 1 (got {value!r})")
+                raise ValueError(f"train.{name}: must be an integer >= 1 (got {value!r})")
         trials = self.validation_trials
         if isinstance(trials, bool) or not isinstance(trials, int) or trials < 0:
-            raise ValueError(f"validation_trials: must be an integer >= 0, 0 for none (got {trials!r})")
+            raise ValueError(f"train.validation_trials: must be an integer >= 0, 0 for none (got {trials!r})")
         margin = self.selection_margin
         if isinstance(margin, bool) or not isinstance(margin, int | float) or not 0 <= margin < math.inf:
-            raise ValueError(f"selection_margin: must be a finite number >= 0 (got {margin!r})")
+            raise ValueError(f"train.selection_margin: must be a finite number >= 0 (got {margin!r})")
         if discrete and entry.continuous_only:
             raise ValueError(
-                f"algo: {self.algo} plays continuous moves; set env.action_type=continuous (or train with ppo)"
+                f"train.algo: {self.algo} plays continuous moves; set env.action_type=continuous "
+                "(or train with ppo)"
             )
         section = getattr(self, self.algo)
         section.check(self.batch_size) if self.algo == "es" else section.check()
@@ -130,7 +133,9 @@ class TrainConfig:
         actor = dict(model)
         if self.feedback:
             if feedback_inputs is None:
-                raise ValueError("feedback: the actor's feedback path needs the tracking error in the observation")
+                raise ValueError(
+                    "feedback: the actor's feedback path needs the tracking error in the observation"
+                )
             actor.update(class_name="agents.models:FeedbackMLPModel", feedback_inputs=list(feedback_inputs))
         if self.algo == "ppo":
             ppo = self.ppo.rsl_rl(discrete, num_action_choices)
@@ -160,7 +165,11 @@ class TrainConfig:
                 "obs_normalization": self.obs_normalization,
                 "distribution_cfg": distribution,
             },
-            "critic": {**model, "hidden_dims": list(critic_dims), "obs_normalization": self.obs_normalization},
+            "critic": {
+                **model,
+                "hidden_dims": list(critic_dims),
+                "obs_normalization": self.obs_normalization,
+            },
             "algorithm": algorithm_cfg,
         }
 
@@ -302,7 +311,9 @@ class GradConfig:
                 f"least 1 (got {self.validation_trials!r})"
             )
         if not isinstance(self.validation_trials, int) or self.validation_trials < 0:
-            raise ValueError(f"validation_trials: must be an integer >= 0 (got {self.validation_trials!r})")
+            raise ValueError(
+                f"train.validation_trials: must be an integer >= 0 (got {self.validation_trials!r})"
+            )
         if self.window is not None and (not isinstance(self.window, int) or self.window < 1):
             raise ValueError(f"window: must be a positive number of steps or None (got {self.window!r})")
         for name in ("learning_rate", "pinch_learning_rate", "es_sigma_mm"):

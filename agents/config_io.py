@@ -62,7 +62,9 @@ def read_file(source: str | Path) -> dict:
 
             data = yaml.safe_load(text) if suffix != ".json" else json.loads(text)
         else:
-            raise ValueError(f"--config: {path}: unknown format {suffix or '(none)'}; give .toml, .yaml or .json")
+            raise ValueError(
+                f"--config: {path}: unknown format {suffix or '(none)'}; give .toml, .yaml or .json"
+            )
     except (OSError, UnicodeDecodeError) as exc:
         raise ValueError(f"--config: {path}: cannot be read ({exc})") from None
     except ValueError as exc:
@@ -157,7 +159,8 @@ def _set(config: Any, path: list[str], value: Any, key: str, where: str) -> Any:
 
 
 def _convert(value: Any, hint: Any, key: str, where: str) -> Any:
-    """``value`` as the type ``hint`` takes it (a list for a tuple field becomes a tuple), or ``ValueError``."""
+    """``value`` as the type ``hint`` takes it (a list for a tuple field becomes a tuple), or
+    ``ValueError``."""
     converted = _try(value, hint)
     if converted is _NO:
         raise ValueError(f"{where}: {key}: expected {_describe(hint)} (got {value!r:.60})")
@@ -185,8 +188,12 @@ def _try(value: Any, hint: Any) -> Any:
     if hint is int:
         return value if isinstance(value, int) and not isinstance(value, bool) else _NO
     if hint is float:
-        if isinstance(value, str) and value.strip().lower().lstrip("+") in ("inf", ".inf", "infinity"):
-            return math.inf  # JSON has no infinity: to_plain writes it as "inf"
+        if isinstance(value, str):  # "inf" (to_plain's, as JSON has no infinity), or "1e-3" (YAML 1.1 text)
+            try:
+                value = float(value)
+            except ValueError:
+                return _NO
+            return _NO if math.isnan(value) else value
         ok = isinstance(value, int | float) and not isinstance(value, bool)
         return float(value) if ok and not (isinstance(value, float) and math.isnan(value)) else _NO
     if hint is str:
@@ -216,7 +223,11 @@ def _try(value: Any, hint: Any) -> Any:
         if not args:
             return dict(value)
         items = {k: _try(v, args[1]) for k, v in value.items()}
-        return _NO if any(v is _NO for v in items.values()) or not all(isinstance(k, str) for k in items) else items
+        return (
+            _NO
+            if any(v is _NO for v in items.values()) or not all(isinstance(k, str) for k in items)
+            else items
+        )
     if dataclasses.is_dataclass(hint):
         return _NO
     return value  # another type: the dataclass's own checks judge it
@@ -234,7 +245,7 @@ def _describe(hint: Any) -> str:
         return "a list"
     if origin in (list, tuple, Sequence, typing.Sequence):
         args = typing.get_args(hint)
-        return f"a list of {_describe(args[0])}s" if args and args[-1] is not Ellipsis or len(args) == 2 else "a list"
+        return f"a list ({_describe(args[0])} each)" if args else "a list"
     if origin is dict:
         return "a mapping"
     return getattr(hint, "__name__", str(hint))

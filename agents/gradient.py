@@ -585,7 +585,8 @@ def grad_column(
     log: Callable[[str], None],
     step_callbacks: StepCallbacks | None = None,
 ) -> tuple[MethodResult, Callable[[dict], None]]:
-    """:func:`agents.pipelines.table.evaluate_table`'s grad column (:func:`grad_result`, kept in ``out/grad``) at
+    """:func:`agents.pipelines.table.evaluate_table`'s grad column (:func:`grad_result`, kept in
+    ``out/grad``) at
     the planned pinch points and segments (unplanned: the feasible centroid, the contour as one loop);
     ``settings`` is the optimiser's config and the cutting arm. Returns the result and ``note(table)``,
     which adds each row's ``grad_best_iteration``, ``grad_seconds`` and ``grad_env_steps``, and how many

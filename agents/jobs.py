@@ -86,7 +86,9 @@ class TrainJob:
         )
 
     @classmethod
-    def for_options(cls, options: PatternCutOptions, train: TrainConfig, seed: int, eval_trials: int) -> TrainJob:
+    def for_options(
+        cls, options: PatternCutOptions, train: TrainConfig, seed: int, eval_trials: int
+    ) -> TrainJob:
         """The job that trains ``train``'s learner in ``options`` (e.g. a pipeline's policy for one contour at
         one pinch candidate); its contour stored by name or inline, so the job runs from any directory."""
         data = options.to_dict()
@@ -235,7 +237,9 @@ class EvaluateJob:
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name}: must be an integer >= 1 (got {value!r})")
         if self.analytic_pinch not in ANALYTIC_PINCHES:
-            raise ValueError(f"analytic_pinch: choose one of {', '.join(ANALYTIC_PINCHES)} (got {self.analytic_pinch!r})")
+            raise ValueError(
+                f"analytic_pinch: choose one of {', '.join(ANALYTIC_PINCHES)} (got {self.analytic_pinch!r})"
+            )
         self.sim.validated()
         self.grad.validated()
         return self

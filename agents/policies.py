@@ -108,11 +108,9 @@ def policy_runs(source: str | Path) -> list[tuple[Path, str]]:
     )
 
 
-
 def is_run(run_dir: str | Path) -> bool:
     """Whether ``run_dir`` holds a trained run's options (so :func:`load_options` can read it)."""
     return (Path(run_dir) / OPTIONS_FILE).is_file()
-
 
 
 def load_options(run_dir: str | Path, device: str | None = None) -> PatternCutOptions:
@@ -133,7 +131,9 @@ def load_options(run_dir: str | Path, device: str | None = None) -> PatternCutOp
     if path.exists() and not path.is_file():
         raise ValueError(f"{path}: is a directory, not a file; remove it, or retrain the run")
     if not path.is_file():
-        raise FileNotFoundError(f"{run_dir}: no {OPTIONS_FILE}; give a run directory written by 'warpcut train'")
+        raise FileNotFoundError(
+            f"{run_dir}: no {OPTIONS_FILE}; give a run directory written by 'warpcut train'"
+        )
     try:
         options = PatternCutOptions.from_dict(read_json(path))
     except ValueError as exc:
@@ -170,7 +170,6 @@ def rollout_errors(
     check_layout(actor.state_dict(), checkpoint, options, str(Path(run_dir) / OPTIONS_FILE), OPTIONS_FIX)
     env = PatternCutVecEnv(trials, options)
     return policy_errors(actor, env, seed=seed, on_step=on_step, paired_noise=paired_noise)
-
 
 
 def nominal_validation_error(
@@ -257,7 +256,7 @@ def check_policy_run(
 
     Raises:
         FileNotFoundError: ``run_dir`` is not a run (no options file) or has no checkpoint.
-        ValueError: Naming the run and the mismatch: unfinished training (pass ``--allow-partial`` or resume
+        ValueError: Naming the run and the mismatch: unfinished training (set ``allow_partial`` or resume
             it), another contour, other observations, actions or simulation settings, or an unreadable
             checkpoint.
     """
@@ -296,7 +295,7 @@ def check_policy_run(
 def _check_finished(run_dir: Path) -> None:
     """A ``ValueError`` unless ``run_dir``'s ``summary.json`` says its training completed."""
     path = run_dir / "summary.json"
-    partial = "pass --allow-partial to evaluate its last saved policy, or resume the training"
+    partial = "set allow_partial=true to evaluate its last saved policy, or resume the training"
     resume = f"'warpcut train --resume {run_dir}'"
     if not path.is_file():
         raise ValueError(
@@ -425,5 +424,3 @@ def evaluate_run(
         "pinch": row["rl_pinch"],
         "seconds": time.perf_counter() - start,
     }
-
-

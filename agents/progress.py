@@ -62,7 +62,8 @@ def training_progress(
 
 @contextlib.contextmanager
 def stage_bars(enabled: bool = True):
-    """A pipeline's ``stages(stage, done, total)`` callback (:data:`agents.pipelines.table.Stages`) drawing one
+    """A pipeline's ``stages(stage, done, total)`` callback (:data:`agents.pipelines.table.Stages`) drawing
+    one
     progress bar per stage (planning, training, evaluating) with elapsed time and ETA, on stderr; a no-op
     when not ``enabled``."""
     if not enabled:
@@ -72,12 +73,18 @@ def stage_bars(enabled: bool = True):
         TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
         TextColumn("ETA"), TimeRemainingColumn(),
     )  # fmt: skip
-    with Progress(*columns, console=Console(stderr=True), transient=False) as bars:
-        tasks: dict[str, int] = {}
+    bars = Progress(*columns, console=Console(stderr=True), transient=False)
+    tasks: dict[str, int] = {}
 
-        def stages(stage: str, done: int, total: int) -> None:
-            if stage not in tasks:
-                tasks[stage] = bars.add_task(stage, total=total)
-            bars.update(tasks[stage], completed=done, total=total)
+    def stages(stage: str, done: int, total: int) -> None:
+        if not tasks:  # started at the first stage: a pipeline that stops before one draws nothing
+            bars.start()
+        if stage not in tasks:
+            tasks[stage] = bars.add_task(stage, total=total)
+        bars.update(tasks[stage], completed=done, total=total)
 
+    try:
         yield stages
+    finally:
+        if tasks:
+            bars.stop()

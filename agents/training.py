@@ -18,7 +18,8 @@ A run directory holds::
     summary.json       status (completed, interrupted, failed), iterations, env steps, speed, last metrics,
                        ``checkpoint`` (the newest one written whole), ``error`` (why a failed run stopped),
                        ``resumed_from``, ``history`` (every iteration's metrics), ``validation`` (the
-                       validation scores) and ``best``; ``wall_time_s``: training seconds of the whole run, the
+                       validation scores) and ``best``; ``wall_time_s``: training seconds of the whole run,
+                       the
                        runs before a resume included, ``run_wall_time_s``: this run's alone
     evaluation.json    the trained policy against no tension (:func:`agents.policies.evaluate_run`)
 
@@ -108,7 +109,7 @@ def train(
     validate: Callable[[torch.nn.Module], float | np.ndarray] | None = None,
     label: str | None = None,
 ) -> dict:
-    """Train a policy on ``env`` with ``cfg``'s learner and write its checkpoints and summary into ``out_dir``.
+    """Train a policy on ``env`` with ``cfg``'s learner; write its checkpoints and summary into ``out_dir``.
 
     Ctrl-C saves a checkpoint and an "interrupted" summary, then re-raises the ``KeyboardInterrupt``.
 
@@ -133,7 +134,9 @@ def train(
     discrete = getattr(env, "num_action_choices", None) is not None
     cfg.check(discrete)
     if env.num_envs != cfg.batch_size:
-        raise ValueError(f"num_envs: the env has {env.num_envs} envs but the config asks for {cfg.batch_size}")
+        raise ValueError(
+            f"num_envs: the env has {env.num_envs} envs but the config asks for {cfg.batch_size}"
+        )
     episode_steps = int(env.max_episode_length)
     iterations = cfg.total_iterations(episode_steps)
     out_dir = make_run_dir(out_dir)
@@ -240,7 +243,6 @@ def _log_hparams(writer, cfg: TrainConfig, runner: Runner) -> None:
         writer.add_scalar(name, value, runner.iterations_done)
 
 
-
 def _flat(settings: dict, prefix: str = "") -> dict:
     """Nested settings as one level of dotted keys."""
     flat = {}
@@ -300,7 +302,6 @@ def _write_summary(path: Path, summary: dict, checkpoint: Path | None, ending: B
         if ending is None or not isinstance(exc.__cause__, OSError):
             raise
         ending.add_note(str(exc))
-
 
 
 class Runner(OnPolicyRunner):
@@ -506,7 +507,8 @@ class Runner(OnPolicyRunner):
         state = read_checkpoint(path, map_location=self.device) if state is None else state
         if state.get("algo") != self.algo:
             raise ValueError(
-                f"{path}: a checkpoint of {state.get('algo')!r}, not of {self.algo!r}; resume it with its own "
+                f"{path}: a checkpoint of {state.get('algo')!r}, not of {self.algo!r}; resume it with its "
+                "own "
                 f"algo (train.algo={state.get('algo')}), or start a new run"
             )
         mismatch = layout_mismatch(state["actor_state_dict"], self.alg.get_policy().state_dict(), "the env")

@@ -23,7 +23,8 @@ SIM_OVERRIDES = ("fixture", "resolution", "damping", "dt", "gravity", "elasticit
 """The :class:`PatternCutOptions` fields that override ``sim_config``'s."""
 
 ACTION_TYPES = ("discrete", "continuous")
-"""How a policy acts: ``discrete`` (stay or a 1 mm move along one axis) or ``continuous`` (a move of up to 1 mm
+"""How a policy acts: ``discrete`` (stay or a 1 mm move along one axis) or ``continuous`` (a move of up to
+1 mm
 per axis)."""
 
 
@@ -46,7 +47,8 @@ class EnvConfig:
     """Radius of the cutting arm's shaft, which hides the fiducials under it (mm)."""
     contour_features: bool = True
     """Add the scissor tip, its cutting flag and the tracking error (the vector from the tip to the contour
-    point it is about to cut, as it lies on the moved sheet) to the observation (the paper: fiducials only)."""
+    point it is about to cut, as it lies on the moved sheet) to the observation (the paper: fiducials
+    only)."""
     action_type: str = "continuous"
     """``"continuous"`` (moves of up to ``max_step_mm`` per axis) or ``"discrete"`` (the paper's: stay, or
     a 1 mm move along one axis)."""
@@ -128,13 +130,17 @@ class PatternCutOptions(EnvConfig):
         # to_dict()'s output given back as keyword arguments (e.g. to gymnasium.make): its dicts read here
         if isinstance(self.sim_config, dict):
             self.sim_config = sim_config_from_dict(self.sim_config, "sim_config")
-        if isinstance(self.contour, dict) or isinstance(self.contour, list) and any(
-            isinstance(c, dict) for c in self.contour
+        if (
+            isinstance(self.contour, dict)
+            or isinstance(self.contour, list)
+            and any(isinstance(c, dict) for c in self.contour)
         ):
             self.contour = _read_contours(self.contour, self.sim_config)
         super().__post_init__()
         if not isinstance(self.sim_config, SimConfig):
-            raise ValueError(f"sim_config: give a SimConfig or a dict of its fields (got {self.sim_config!r:.80})")
+            raise ValueError(
+                f"sim_config: give a SimConfig or a dict of its fields (got {self.sim_config!r:.80})"
+            )
 
     @classmethod
     def env_settings(cls, options: PatternCutOptions) -> EnvConfig:
@@ -241,7 +247,9 @@ class PatternCutOptions(EnvConfig):
         if isinstance(fields.get("sim_config"), dict):
             fields["sim_config"] = sim_config_from_dict(fields["sim_config"], "options: sim_config")
         if "contour" in fields:
-            fields["contour"] = _read_contours(fields["contour"], fields.get("sim_config", SimConfig()), "options: ")
+            fields["contour"] = _read_contours(
+                fields["contour"], fields.get("sim_config", SimConfig()), "options: "
+            )
         try:
             options = cls(**fields)
             options.config()  # the simulation settings, checked now

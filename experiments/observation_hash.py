@@ -21,7 +21,8 @@ def episodes_hash(contour, num_envs: int, episodes: int, seed: int, action_type:
     from envs.options import PatternCutOptions
     from envs.vector import PatternCutVecEnv
 
-    env = PatternCutVecEnv(num_envs, PatternCutOptions(contour=contour, action_type=action_type))
+    options = PatternCutOptions(contour=contour, action_type=action_type)
+    env = PatternCutVecEnv(num_envs, options, autoreset_mode="same_step")  # as training steps it
     digest = hashlib.sha256()
     obs, _ = env.reset(seed=seed)
     digest.update(obs.tobytes())

@@ -22,7 +22,7 @@ def episode_rates(randomize: list[str], envs: int, episodes: int) -> list[float]
     options = PatternCutOptions(
         contour="fls-circle", action_type="discrete", randomize=randomize, device="cpu"
     )
-    env = PatternCutVecEnv(envs, options)
+    env = PatternCutVecEnv(envs, options, autoreset_mode="same_step")  # resets in the ending step
     choices = int(env.single_action_space.n)
     rng = np.random.default_rng(0)
     env.reset(seed=0)

@@ -517,7 +517,7 @@ def test_train_es_trains_its_feedback_path_and_refuses_a_population_that_does_no
     assert policy["obs_shapes"]["policy"] == [40]  # the paper's observation: no contour features
     code, _, stderr = invoke([*args, "--set", "train.es.population=6", "--out", str(tmp_path / "other")])
     assert code == 2 and "es.population: 6 must divide num_envs (8)" in stderr
-    assert "e.g. es.population=8" in stderr and not (tmp_path / "other").exists()
+    assert "e.g. train.es.population=8" in stderr and not (tmp_path / "other").exists()
 
 
 def test_evaluate_trains_apg_on_its_own_default_batch(tmp_path):
@@ -654,9 +654,6 @@ def to_plain_value(value):
     return to_plain(value)
 
 
-@pytest.mark.xfail(
-    strict=True, reason="agents.config_io.parse_override reads YAML 1.1: 1e-3 is text, not a number"
-)
 def test_set_reads_numbers_in_exponent_notation():
     code, stdout, stderr = invoke(["run", "--set", "sim.noise_std=1e-3", "--print-config"])
     assert code == 0, stderr

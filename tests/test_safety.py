@@ -176,7 +176,7 @@ def test_bad_inputs_are_refused_before_any_work_and_leave_no_run_behind(tmp_path
             "APG differentiates one fixed sheet",
         ),  # fmt: skip
         (["run", "--set", "train.num_envs=2"], "64 must divide num_envs (2)"),
-        (["evaluate", "--set", "train.num_envs=96"], "e.g. es.population=48"),
+        (["evaluate", "--set", "train.num_envs=96"], "e.g. train.es.population=48"),
         (
             ["train", "--contour", "circle-small", "--algo", "apg", "--set", "env.action_type=discrete"],
             "algo: apg",

@@ -30,9 +30,11 @@ class ApgConfig:
         for name in ("learning_rate", "max_grad_norm"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | float) or not (0 < value < math.inf):
-                raise ValueError(f"apg.{name}: must be a finite number > 0 (got {value!r})")
+                raise ValueError(f"train.apg.{name}: must be a finite number > 0 (got {value!r})")
         window = self.window
         if window is not None and (isinstance(window, bool) or not isinstance(window, int) or window < 1):
-            raise ValueError(f"apg.window: must be an integer >= 1 or null, the whole episode (got {window!r})")
+            raise ValueError(
+                f"train.apg.window: must be an integer >= 1 or null, the whole episode (got {window!r})"
+            )
         if not isinstance(self.accept, bool):
-            raise ValueError(f"apg.accept: must be true or false (got {self.accept!r})")
+            raise ValueError(f"train.apg.accept: must be true or false (got {self.accept!r})")

@@ -53,7 +53,8 @@ class EpisodeRunner(Runner):
             raise ValueError(f"env.action_type: {self.name} plays continuous moves; set it to continuous")
         if self.scene.episode_steps < self.scene.task.num_steps:
             raise ValueError(
-                f"env.max_episode_steps: {self.name} runs whole cuts ({self.scene.task.num_steps} steps), not "
+                f"env.max_episode_steps: {self.name} runs whole cuts ({self.scene.task.num_steps} steps), "
+                "not "
                 f"{self.scene.episode_steps}; leave max_episode_steps unset"
             )
         self.steps_per_iteration = env.num_envs * self.scene.task.num_steps  # one whole cut per env
@@ -96,7 +97,9 @@ class EpisodeRunner(Runner):
         super().load_checkpoint(path, state)
         infos = state.get("infos") or {}
         if f"{self.name}_rng" not in infos:
-            raise ValueError(f"{path}: not an {self.name.upper()} run's checkpoint; resume it with its own algo")
+            raise ValueError(
+                f"{path}: not an {self.name.upper()} run's checkpoint; resume it with its own algo"
+            )
         self.episode_rng.bit_generator.state = infos[f"{self.name}_rng"]
         self._load_extra(infos)
 
@@ -198,7 +201,8 @@ class ApgRunner(EpisodeRunner):
 
     def _policy(self, moves: list | None, observations: list | None):
         """The policy the differentiable rollout calls before each step: the actor's clamped mean move, as
-        the env plays it. ``moves`` collects the moves with their graph (None: no graph, a replay); ``observations`` collects each step's observations for the normaliser to learn
+        the env plays it. ``moves`` collects the moves with their graph (None: no graph, a replay);
+        ``observations`` collects each step's observations for the normaliser to learn
         from after the step (with ``accept``; None: it learns from them as they come, except in a replay)."""
         from tensordict import TensorDict
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-import functools
 import math
 import os
 import re
@@ -15,9 +14,7 @@ from pathlib import Path
 
 import click
 
-from agents.config import ANALYTIC_PINCHES, GRAD_CONFIG, GRAD_ESTIMATORS
-from warpcut.sim.config import ARM_LENGTH_MM, RESOLUTION_RANGE, SCORES, SimConfig
-from warpcut.viz import COLOUR_FIELDS
+from warpcut.sim.config import ARM_LENGTH_MM, RESOLUTION_RANGE, SimConfig
 from warpcut.viz.process import RecordingError
 
 
@@ -141,46 +138,6 @@ def _negative_record(kwargs: dict, args: tuple, exc: click.NoSuchOption) -> str 
     return None
 
 
-def record_option(what: str):
-    """``--record [N]`` and ``--colour-by`` (passed to the command as ``record_envs`` and ``colour_by``)."""
-    record = click.option(
-        "--record",
-        "record_envs",
-        type=click.IntRange(min=1),
-        is_flag=False,
-        flag_value=1,
-        default=None,
-        metavar="[N]",
-        help=f"Write recording.rrd ({what}) of the first N envs (default 1) of each method; "
-        "view it with 'warpcut replay'.",
-    )
-    colour = click.option(
-        "--colour-by",
-        type=click.Choice(COLOUR_FIELDS),
-        default="strain",
-        show_default=True,
-        help="What the recorded sheet's vertex colours show: the stretch of its springs, or its height.",
-    )
-
-    def check(command):
-        @functools.wraps(command)
-        def checked(**kwargs):
-            source = click.get_current_context().get_parameter_source("colour_by")
-            if kwargs["record_envs"] is None and source == click.core.ParameterSource.COMMANDLINE:
-                raise click.UsageError(
-                    "--colour-by: colours a recording; add --record [N], or drop --colour-by"
-                )
-            if kwargs["record_envs"] is not None:
-                from warpcut.viz.process import start_recorder_process
-
-                start_recorder_process()  # its start-up overlaps the command's own
-            return command(**kwargs)
-
-        return checked
-
-    return lambda command: record(colour(check(command)))
-
-
 def _resolve_device(ctx: click.Context, param: click.Parameter, value: str | None) -> str:
     from warpcut.sim.simulator import resolve_device
 
@@ -225,66 +182,6 @@ seed_option = click.option(
 DEFAULTS = SimConfig()
 """The library's defaults, which the options below show and pass on (one set for library and CLI)."""
 
-noise_option = click.option(
-    "--noise",
-    default=DEFAULTS.noise_std,
-    show_default=True,
-    type=FloatRange(min=0.0),
-    help="Process noise sigma (mm per update): seeded trials differ by their noise stream; 0: noise-free.",
-)
-score_option = click.option(
-    "--score",
-    default=DEFAULTS.score,
-    show_default=True,
-    type=click.Choice(SCORES),
-    help="What tables and rewards use: path (the paper's: the region the scissors' path through the "
-    "material encloses) or separated (the material that came free). Both are reported.",
-)
-
-
-def estimator_option(name: str, what: str):
-    """``--NAME tape|es``: how ``what`` estimates its gradient (``GradConfig.estimator``; the library's
-    default, each one's settings in :data:`agents.config.GRAD_CONFIGS`)."""
-    return click.option(
-        f"--{name}",
-        type=click.Choice(GRAD_ESTIMATORS),
-        default=GRAD_CONFIG.estimator,
-        show_default=True,
-        help=f"How {what} estimates its gradient: 'tape', the path surrogate's through wp.Tape; 'es', "
-        "evolution strategies on the path score itself (perturbed plans cut in one batch, forward passes "
-        "only).",
-    )
-
-
-def feedback_options(prefix: str, what: str):
-    """``--PREFIXfeedback-phases P``, ``--PREFIXfeedback-only`` and ``--PREFIXfeedback-sag``: es's feedback
-    gains for ``what`` (``GradConfig.es_feedback_phases``, ``es_feedback_only``, ``es_feedback_sag``; unset:
-    the estimator's default, open loop)."""
-
-    def decorate(f):
-        f = click.option(
-            f"--{prefix}feedback-sag",
-            is_flag=True,
-            help=f"es with --{prefix}feedback-phases: {what}'s gains scheduled on how far the sheet hangs "
-            "before the cut (3 x 4 matrices on the tracking error and on it times the sag), so a sheet "
-            "without gravity can be held still.",
-        )(f)
-        f = click.option(
-            f"--{prefix}feedback-only",
-            is_flag=True,
-            help=f"es with --{prefix}feedback-phases: {what}'s gains alone, the plan left at zero (a still "
-            "grasp that reacts to the tracking error).",
-        )(f)
-        return click.option(
-            f"--{prefix}feedback-phases",
-            default=None,
-            type=click.IntRange(min=0),
-            help=f"es: {what} with feedback on the tracking error, one 3 x 2 gain matrix per P-th of the "
-            "cut, optimised with the plan (a closed-loop policy); default 0, open loop.",
-        )(f)
-
-    return decorate
-
 
 arm_length_option = click.option(
     "--arm-length",
@@ -295,21 +192,6 @@ arm_length_option = click.option(
     "inf (the paper's cylinder): the whole way, so the grasp never holds the piece being cut; a short "
     "footprint (e.g. 15) lets it hold the piece (docs/learning.md).",
 )
-
-
-analytic_pinch_option = click.option(
-    "--analytic-pinch",
-    default=ANALYTIC_PINCHES[0],
-    show_default=True,
-    type=click.Choice(ANALYTIC_PINCHES),
-    help="Where the analytic policy pinches: the centroid (the paper's choice) when it is feasible, else the "
-    "feasible point nearest to it (feasible); or the centroid even under the cutting arm or on the cut line "
-    "(centroid: a grasp the robot could not make).",
-)
-
-
-def plots_option(what: str):
-    return click.option("--no-plots", is_flag=True, help=f"Do not write the plots ({what}).")
 
 
 json_option = click.option(
@@ -397,20 +279,6 @@ def _unwritable(path: Path) -> str | None:
     return None
 
 
-def refuse_unused(names: list[str], why: str) -> None:
-    """A UsageError naming the options among ``names`` (parameter names) given on the command line, which
-    this invocation would ignore (``why``: when they apply), instead of ignoring them without a word."""
-    ctx = click.get_current_context()
-    given = [
-        param.opts[0]
-        for param in ctx.command.params
-        if param.name in names
-        and ctx.get_parameter_source(param.name) == click.core.ParameterSource.COMMANDLINE
-    ]
-    if given:
-        raise click.UsageError(f"{', '.join(given)}: {why}; drop {'them' if len(given) > 1 else 'it'}")
-
-
 def count_option(name: str, default: int | None, help: str):
     """A positive integer option ``--NAME`` (shows its default when it has one)."""
     return click.option(
@@ -430,77 +298,6 @@ resolution_option = click.option(
 )
 
 
-def randomize_range_option(f):
-    """``--randomize-range NAME=LOW,HIGH`` (repeatable; :func:`parse_randomization` reads it)."""
-    return click.option(
-        "--randomize-range",
-        "randomize_range",
-        multiple=True,
-        metavar="NAME=LOW,HIGH",
-        help="The range of a randomised parameter, in its units (repeatable), e.g. gravity=0,1042.",
-    )(f)
-
-
-def randomize_options(f):
-    """``--randomize PARAMS`` and ``--randomize-range NAME=LOW,HIGH`` (domain randomisation while training;
-    :func:`parse_randomization` reads them)."""
-    from warpcut.sim.config import RANDOMIZE_ALIASES, RANDOMIZE_RANGES
-
-    f = click.option(
-        "--relative-reward",
-        is_flag=True,
-        help="Scale each env's reward by the nominal sheet's no-tension error over its own sheet's (at most "
-        "10x): with --randomize, a sheet that hangs flat counts as much as the nominal one, as in the "
-        "evaluation's relative improvement (docs/robustness.md).",
-    )(f)
-    f = randomize_range_option(f)
-    return click.option(
-        "--randomize",
-        default=None,
-        metavar="PARAMS",
-        help="Domain randomisation while training: physical parameters drawn anew per env at every reset, "
-        f"comma-separated from {','.join([*RANDOMIZE_RANGES, *RANDOMIZE_ALIASES])} (ranges: "
-        "warpcut.sim.config.RANDOMIZE_RANGES, --randomize-range). Validation draws them too; the "
-        "evaluation runs the nominal sheet (docs/robustness.md).",
-    )(f)
-
-
-def parse_randomization(names: str | None, ranges: tuple[str, ...]) -> tuple[list[str], dict]:
-    """``--randomize`` as parameter names and ``--randomize-range`` as ``{name: (low, high)}``, checked
-    (:func:`envs.options.randomize_ranges`); a usage error names the flag and the fix."""
-    from warpcut.sim.config import RANDOMIZE_ALIASES, randomize_ranges
-
-    given = {}
-    for item in ranges:
-        name, _, bounds = item.partition("=")
-        try:
-            low, high = (float(v) for v in bounds.split(","))
-        except ValueError:
-            raise click.BadParameter(
-                f"expected NAME=LOW,HIGH, e.g. gravity=0,1042 (got {item!r})", param_hint="--randomize-range"
-            ) from None
-        given[RANDOMIZE_ALIASES.get(name.strip(), name.strip())] = (low, high)
-    try:
-        chosen = randomize_ranges(names or "", given)
-    except ValueError as error:
-        flag = "--randomize-range" if str(error).startswith("randomize_ranges") else "--randomize"
-        raise click.BadParameter(str(error).split(": ", 1)[1], param_hint=flag) from None
-    return list(chosen), {k: v for k, v in chosen.items() if k in given}
-
-
-def flag_error(error: ValueError, flags: dict[str, str]) -> click.UsageError:
-    """``error`` (a library ``ValueError`` naming settings by their field names) as a usage error naming this
-    command's flags instead (``flags``: field name -> flag). Plain words (no underscore, e.g. ``trials``)
-    are renamed only where they lead the message, the field it is about."""
-    text = str(error)
-    for field in sorted(flags, key=len, reverse=True):
-        if "_" in field or field == "estimator":
-            text = re.sub(rf"\b{field}\b", flags[field], text)
-        elif text.startswith(f"{field}: "):
-            text = flags[field] + text[len(field) :]
-    return click.UsageError(text)
-
-
 def parse_point(value: str | None, name: str) -> tuple[float, float] | None:
     """``X,Y`` (mm) as a point; None stays None."""
     if value is None:
@@ -512,16 +309,6 @@ def parse_point(value: str | None, name: str) -> tuple[float, float] | None:
     if not (math.isfinite(x) and math.isfinite(y)):
         raise click.BadParameter(f"X and Y must be finite numbers in mm (got {value!r})", param_hint=name)
     return x, y
-
-
-def parse_methods(value: str, option: str, allowed: tuple[str, ...]) -> list[str]:
-    """The comma-separated method names of ``option``; a usage error naming it for an unknown one."""
-    from agents.methods import parse_methods as parse
-
-    try:
-        return parse(value, option, allowed)
-    except ValueError as error:
-        raise click.BadParameter(str(error).removeprefix(f"{option}: "), param_hint=option) from None
 
 
 def run_dir(out: Path | None, prefix: str) -> Path:
@@ -740,7 +527,9 @@ def saved_job(job_class, path: Path):
         )
     data = read_json(path)
     if not isinstance(data, dict):
-        raise click.BadParameter(f"{path}: not a run's settings; restore it, or start a new run", param_hint="--resume")
+        raise click.BadParameter(
+            f"{path}: not a run's settings; restore it, or start a new run", param_hint="--resume"
+        )
     return apply(job_class(), data, str(path))
 
 

@@ -88,10 +88,7 @@ def command(
     from warpcut.io import safe_name, write_json
 
     job = common.resolve(EvaluateJob, config_file, overrides, FLAGS)
-    unused = {"rl": ["train", "env", "checkpoints", "allow_partial"], "grad": ["grad"]}
-    for method, keys in unused.items():
-        if method not in job.methods:
-            common.refuse_unused_keys(job, keys, overrides, FLAGS, f"only with {method} in --methods")
+    common.refuse_unused_settings(job, overrides, FLAGS)
     job = job.check()
     if "rl" in job.methods and job.checkpoints is None:
         common.check_learner(job)
@@ -135,7 +132,9 @@ def command(
         shown = ["none"] + [m for m in job.methods if m != "none"]
         common.echo_written(cuts.plot(out / "regions", shown, [c.name for c in report.contours]))
         for p in report.plans or []:
-            common.echo_written(plot_pinch_candidates(p, report.config, out / "plans", name=safe_name(p.contour.name)))
+            common.echo_written(
+                plot_pinch_candidates(p, report.config, out / "plans", name=safe_name(p.contour.name))
+            )
         common.plot_learning_curves({run: run.name for run in report.policy_runs})
     common.echo_recording(rec)
     click.echo(f"wrote {out}")

@@ -22,7 +22,9 @@ def command_help(name: str) -> str:
     from agents.cli import main
 
     command = main.commands[name]
-    with click.Context(command, info_name=f"warpcut {name}", terminal_width=100, max_content_width=100) as ctx:
+    with click.Context(
+        command, info_name=f"warpcut {name}", terminal_width=100, max_content_width=100
+    ) as ctx:
         return command.get_help(ctx)
 
 

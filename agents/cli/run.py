@@ -24,7 +24,10 @@ FLAGS = {
 
 @click.command("run", cls=common.Command)
 @click.option(
-    "--contour", default=DEFAULT_CONTOUR, show_default=True, help="Built-in name or a .json/.svg contour file."
+    "--contour",
+    default=DEFAULT_CONTOUR,
+    show_default=True,
+    help="Built-in name or a .json/.svg contour file.",
 )
 @click.option(
     "--budget",
@@ -93,13 +96,10 @@ def command(
 
     job = common.resolve(RunJob, config_file, overrides, FLAGS)
     job.settings()
+    common.refuse_unused_settings(job, overrides, FLAGS)
     contour_name = load_contour(contour_spec(job.contour)).name
     if job.policy == "rl":
         common.check_learner(job)
-    else:
-        common.refuse_unused_keys(
-            job, ["rl_candidates", "train", "env"], overrides, FLAGS, "only with --policy rl"
-        )
     if print_config:
         common.print_config(job)
         return
@@ -109,7 +109,12 @@ def command(
     cuts = common.final_cuts(not job.plots)
     with claim, common.recorder(out, job.record, job.colour_by) as rec:
         report = run_pipeline(
-            job, out, resume=resume, device=device, log=common.log, step_callbacks=common.step_callbacks(rec, cuts)
+            job,
+            out,
+            resume=resume,
+            device=device,
+            log=common.log,
+            step_callbacks=common.step_callbacks(rec, cuts),
         )
     name, pinch, row = report.contour.name, report.plan.chosen["pinch"], report.row
     click.echo(
@@ -128,7 +133,11 @@ def command(
     if cuts is not None:
         from warpcut.viz.plots import plot_improvements, plot_pinch_candidates, plot_regions
 
-        titles = {run: f"{name}, pinch {point_text(c['pinch'])}" for c in report.candidates if (run := out / c.get("run", "")) in report.policy_runs}
+        titles = {
+            run: f"{name}, pinch {point_text(c['pinch'])}"
+            for c in report.candidates
+            if (run := out / c.get("run", "")) in report.policy_runs
+        }
         common.plot_learning_curves(titles)
         common.echo_written(plot_regions(cuts.of(name, report.methods), out))
         common.echo_written(plot_improvements(report.to_json(), report.methods[1:], out))

@@ -53,7 +53,9 @@ FLAGS = {
     "--iterations, to train longer, may change.",
 )
 @click.option(
-    "--overwrite", is_flag=True, help="Replace what an earlier run of warpcut wrote in --out instead of refusing."
+    "--overwrite",
+    is_flag=True,
+    help="Replace what an earlier run of warpcut wrote in --out instead of refusing.",
 )
 @common.record_flag("of the final evaluation, in the run directory")
 @click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
@@ -91,6 +93,8 @@ def command(
     job = common.resolve(TrainJob, config_file, overrides, FLAGS, base)
     if run is not None:
         check_resumed_job(run, job)
+    else:  # a resumed run's config.json holds every setting it was started with
+        common.refuse_unused_settings(job, overrides, FLAGS)
     options = job.options(device)
     common.check_learner(job)
     contour_name = options.per_env(1)[0][0].name  # a bad contour or an infeasible default pinch: now

@@ -147,14 +147,17 @@ class ES:
             out = self._forward(self.actor.get_latent(obs))
         return torch.clamp(out, -1.0, 1.0)
 
-    def process_env_step(self, obs: TensorDict, rewards: torch.Tensor, dones: torch.Tensor, extras: dict) -> None:
+    def process_env_step(
+        self, obs: TensorDict, rewards: torch.Tensor, dones: torch.Tensor, extras: dict
+    ) -> None:
         """Keep the costs of the cuts that ended (the iteration's one episode)."""
         from envs.rsl import EPISODE_COST_KEY
 
         if EPISODE_COST_KEY in extras:
             if self._costs is not None:
                 raise ValueError(
-                    "es: the env's episodes must be whole iterations (num_steps_per_env = the episode's steps)"
+                    "es: the env's episodes must be whole iterations (num_steps_per_env = the episode's "
+                    "steps)"
                 )
             self._costs = extras[EPISODE_COST_KEY].detach().cpu().double().numpy()
 
@@ -164,7 +167,9 @@ class ES:
     def update(self) -> dict[str, float]:
         """The es step (module docstring), or a warm-up iteration's normaliser; the iteration's losses."""
         if self._costs is None:
-            raise ValueError("es: the iteration ended before the cut did; give num_steps_per_env = the episode's steps")
+            raise ValueError(
+                "es: the iteration ended before the cut did; give num_steps_per_env = the episode's steps"
+            )
         costs, self._costs, self._step = self._costs, None, 0
         seen, self._seen = self._seen, []
         if self._eps is None:  # the warm-up: the initial policy in every env
@@ -200,7 +205,7 @@ class ES:
     def save(self) -> dict:
         return {
             "actor_state_dict": self.actor.state_dict(),
-            # mid-iteration (Ctrl-C): the stream as the iteration began; a resume draws its perturbations again
+            # mid-iteration (Ctrl-C): the stream as the iteration began; a resume draws them again
             "optimizer_state_dict": {
                 "adam": self.adam.state(),
                 "rng": self._rng_start if self._step else self.rng.bit_generator.state,

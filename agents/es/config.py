@@ -57,22 +57,31 @@ class EsConfig:
         """``ValueError`` naming the first field out of range (``num_envs``: the batch the population must
         divide)."""
         population = self.population
-        if isinstance(population, bool) or not isinstance(population, int) or population < 2 or population % 2:
-            raise ValueError(f"es.population: must be an even integer >= 2, antithetic pairs (got {population!r})")
+        if (
+            isinstance(population, bool)
+            or not isinstance(population, int)
+            or population < 2
+            or population % 2
+        ):
+            raise ValueError(
+                f"train.es.population: must be an even integer >= 2, antithetic pairs (got {population!r})"
+            )
         if num_envs is not None and num_envs % population:
             fits = max((p for p in range(2, min(num_envs, 64) + 1, 2) if num_envs % p == 0), default=None)
-            fix = f"e.g. es.population={fits}" if fits else "give an even num_envs"
+            fix = f"e.g. train.es.population={fits}" if fits else "give an even num_envs"
             raise ValueError(
-                f"es.population: {population} must divide num_envs ({num_envs}), each perturbed policy playing "
+                f"train.es.population: {population} must divide num_envs ({num_envs}), each perturbed "
+                "policy playing "
                 f"as many episodes; {fix}"
             )
         for name in ("sigma", "feedback_sigma", "learning_rate", "feedback_learning_rate"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | float) or not (0 < value < math.inf):
-                raise ValueError(f"es.{name}: must be a finite number > 0 (got {value!r})")
+                raise ValueError(f"train.es.{name}: must be a finite number > 0 (got {value!r})")
 
     def rsl_rl(self) -> dict:
-        """rsl-rl's ``algorithm`` section (``class_name`` and the arguments of :class:`agents.es.algorithm.ES`)."""
+        """rsl-rl's ``algorithm`` section (``class_name`` and the arguments of
+        :class:`agents.es.algorithm.ES`)."""
         return {
             "class_name": "agents.es.algorithm:ES",
             "population": self.population,

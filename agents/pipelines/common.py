@@ -55,7 +55,12 @@ def train_policy(
     checkpoint = resume and any(Path(run_dir).glob("*.pt"))
     try:
         result = train_contour(
-            job, run_dir, resume=run_dir if checkpoint else None, device=device, progress=progress, label=label
+            job,
+            run_dir,
+            resume=run_dir if checkpoint else None,
+            device=device,
+            progress=progress,
+            label=label,
         )
         return result["summary"]
     except KeyboardInterrupt as interrupt:

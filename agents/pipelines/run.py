@@ -101,7 +101,9 @@ def run_pipeline(
 
     sampled = f"{settings['candidates']} sampled pinch candidates (+ the centroid if feasible)"
     log(f"[1/3] planning {loaded.name}: {sampled}")
-    plan = plan_cut(loaded, config, num_candidates=settings["candidates"], seed=job.seed, device=device, arm=job.arm)
+    plan = plan_cut(
+        loaded, config, num_candidates=settings["candidates"], seed=job.seed, device=device, arm=job.arm
+    )
     write_json(out / "plan.json", plan.to_json())
     pinch = plan.chosen["pinch"]
     log(
@@ -218,15 +220,19 @@ def _train_candidates(
     )
     runs = []
     what = f"{job.train.algo} policy for each of the best {len(listed)} pinch candidate(s)"
-    log(f"[2/3] training a{'n' if job.train.algo[0] in 'aeiou' else ''} {what} ({job.train.batch_size} envs each)")
+    article = "an" if job.train.algo[0] in "aeiou" else "a"
+    log(f"[2/3] training {article} {what} ({job.train.batch_size} envs each)")
     for k, candidate in enumerate(listed):
         run_dir = out / "rl" / f"candidate-{k}"
         segments = [s.tolist() for s in plan.ordered_segments(candidate["order"])]
         train_job = policy_job(
             options, job, job.seed, trials, pinch_point=candidate["pinch"], segments=segments
         )
-        label = f"{job.train.algo.upper()} {contour.name}, candidate {k + 1}/{len(listed)} {point_text(candidate['pinch'])}"
-        summary = train_policy(train_job, run_dir, device=device, progress=progress, resume=resume, label=label)
+        where = f"candidate {k + 1}/{len(listed)} {point_text(candidate['pinch'])}"
+        label = f"{job.train.algo.upper()} {contour.name}, {where}"
+        summary = train_policy(
+            train_job, run_dir, device=device, progress=progress, resume=resume, label=label
+        )
         best = summary["best"]
         candidate["rl_best_iteration"] = best["iterations"] if best else summary["iterations"]
         if best is not None:
@@ -242,7 +248,8 @@ def _train_candidates(
         runs.append(run_dir)
         nominal = ", nominal sheet" if "rl_training_validation_error" in candidate else ""
         log(
-            f"      candidate {point_text(candidate['pinch'])}: fixed {candidate['fixed_error_vertices']:.1f}, "
+            f"      candidate {point_text(candidate['pinch'])}: "
+            f"fixed {candidate['fixed_error_vertices']:.1f}, "
             f"rl {candidate['rl_validation_error_vertices']:.1f} vertices (validation{nominal})"
         )
     chosen = min(range(len(listed)), key=lambda k: (listed[k]["rl_validation_error_vertices"], k))

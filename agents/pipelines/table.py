@@ -117,7 +117,9 @@ def evaluate_table(
     record_job(out, job, resume)
     start = time.perf_counter()
     settings = dict(num_candidates=job.candidates, seed=seed, device=device, arm=job.arm)
-    plans = _table_plans(plans if plans is not None else job.plan, loaded, config, settings, out, log, stages, resume)
+    plans = _table_plans(
+        plans if plans is not None else job.plan, loaded, config, settings, out, log, stages, resume
+    )
     specs, runs, notes = [Method(m) for m in methods], [], []  # notes: add a column's own fields to the table
     for spec in specs:
         if spec.name == "fixed" and plans is not None:
@@ -125,7 +127,9 @@ def evaluate_table(
         elif spec.name == "analytic":
             spec.pinches = analytic_pinches(job.analytic_pinch, loaded, plans)
         elif spec.name == "rl":
-            spec.result, runs, kept = _rl_result(job, named, plans, out, device, resume, log, step_callbacks, stages)
+            spec.result, runs, kept = _rl_result(
+                job, named, plans, out, device, resume, log, step_callbacks, stages
+            )
             notes.append(functools.partial(_note_rl_iterations, kept))
         elif spec.name == "grad":
             spec.result, note = grad_column(
@@ -270,7 +274,6 @@ def _rl_result(
     what = "trained" if checkpoints is None else "rolled out"
     log(f"  rl: {what} {len(named)} policy(ies) in {time.perf_counter() - started:.0f} s")
     return MethodResult.from_rollouts(rollouts), runs, iterations
-
 
 
 def _check_checkpoints(checkpoints: Path, contours: list[Contour], job: EvaluateJob) -> None:

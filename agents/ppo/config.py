@@ -58,15 +58,15 @@ class PpoConfig:
         for name in ("num_steps_per_env", "num_learning_epochs", "num_mini_batches"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"ppo.{name}: must be an integer >= 1 (got {value!r})")
+                raise ValueError(f"train.ppo.{name}: must be an integer >= 1 (got {value!r})")
         if self.schedule not in ("adaptive", "fixed"):
-            raise ValueError(f"ppo.schedule: choose adaptive or fixed (got {self.schedule!r})")
+            raise ValueError(f"train.ppo.schedule: choose adaptive or fixed (got {self.schedule!r})")
         if not (isinstance(self.stay_prior, int | float) and 0 <= self.stay_prior < 1):
-            raise ValueError(f"ppo.stay_prior: must be in [0, 1) (got {self.stay_prior!r})")
+            raise ValueError(f"train.ppo.stay_prior: must be in [0, 1) (got {self.stay_prior!r})")
         for name in ("learning_rate", "desired_kl", "clip_param", "max_grad_norm", "init_noise_std"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | float) or not 0 < value < float("inf"):
-                raise ValueError(f"ppo.{name}: must be a finite number > 0 (got {value!r})")
+                raise ValueError(f"train.ppo.{name}: must be a finite number > 0 (got {value!r})")
 
     def rsl_rl(self, discrete: bool, num_action_choices: int | None) -> dict:
         """rsl-rl's ``algorithm`` section, the actor's ``distribution_cfg`` and the ``critic`` section's
@@ -74,11 +74,17 @@ class PpoConfig:
         if discrete:
             if num_action_choices is None:
                 raise ValueError("discrete training needs the env's num_action_choices")
-            distribution = {"class_name": "agents.ppo.distributions:Categorical", "num_choices": num_action_choices}
+            distribution = {
+                "class_name": "agents.ppo.distributions:Categorical",
+                "num_choices": num_action_choices,
+            }
             if self.stay_prior > 0:
                 distribution.update(init_choice=0, init_choice_prob=self.stay_prior)
         else:
-            distribution = {"class_name": "rsl_rl.modules:GaussianDistribution", "init_std": self.init_noise_std}
+            distribution = {
+                "class_name": "rsl_rl.modules:GaussianDistribution",
+                "init_std": self.init_noise_std,
+            }
         algorithm = {
             "class_name": "agents.ppo.algorithm:PPO",
             "num_learning_epochs": self.num_learning_epochs,
@@ -93,4 +99,8 @@ class PpoConfig:
             "value_loss_coef": self.value_loss_coef,
             "max_grad_norm": self.max_grad_norm,
         }
-        return {"algorithm": algorithm, "distribution": distribution, "critic_hidden_dims": self.critic_hidden_dims}
+        return {
+            "algorithm": algorithm,
+            "distribution": distribution,
+            "critic_hidden_dims": self.critic_hidden_dims,
+        }

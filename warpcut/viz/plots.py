@@ -689,7 +689,8 @@ ROBUSTNESS_FLOOR_PCT = -100.0
 def plot_robustness(
     reports: Sequence[dict], out_dir: str | os.PathLike, name: str = "robustness"
 ) -> list[Path]:
-    """The paper's Fig. 5 for ``reports`` of :func:`agents.pipelines.robustness.robustness_study`: one panel per report,
+    """The paper's Fig. 5 for ``reports`` of :func:`agents.pipelines.robustness.robustness_study`: one panel
+    per report,
     each method's median over trials at every value of the sweep with its interquartile band, the nominal
     value dashed; improvement studies mark 0 (no tension). Writes ``NAME.png`` and ``NAME.svg``."""
     return save_figure(robustness_figure(reports), out_dir, name)
