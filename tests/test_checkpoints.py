@@ -482,7 +482,7 @@ def test_check_policy_run(real_copy, capfd):
     summary = json.loads((real_copy / "summary.json").read_text())
     (real_copy / "summary.json").write_text(json.dumps({**summary, "status": "interrupted"}))
     with pytest.raises(
-        ValueError, match=r"training interrupted at iteration 1 \(summary.json\); pass --allow-p"
+        ValueError, match=r"training interrupted at iteration 1 \(summary.json\); set allow_partial=true"
     ):
         check_policy_run(real_copy, "circle-small")
     check_policy_run(real_copy, "circle-small", allow_partial=True)

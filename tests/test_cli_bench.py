@@ -107,7 +107,10 @@ def test_bench_refuses_a_batch_the_default_learner_cannot_train_on():
     """es's population must divide the batch: refused before anything is measured."""
     code, stdout, stderr = invoke(["bench", "--train-envs", "64,4"])
     assert code == 2 and not stdout
-    assert "--train-envs: 4: es cannot train on 4 envs (es.population: 64 must divide num_envs (4)" in stderr
+    assert (
+        "--train-envs: 4: es cannot train on 4 envs (train.es.population: 64 must divide num_envs (4)"
+        in stderr
+    )
 
 
 def test_bench_measures_training_at_the_default_batches():

@@ -357,7 +357,9 @@ def test_es_refuses_what_it_cannot_train(tmp_path):
         with pytest.raises(ValueError, match=match):
             es = EsConfig(**{"population": 2, name: value})
             train(env, dataclasses.replace(cfg, es=es), tmp_path / "x", progress=False)
-    divide = r"es.population: 8 must divide num_envs \(4\), each perturbed policy .*; e.g. es.population=4"
+    divide = (
+        r"es.population: 8 must divide num_envs \(4\), each perturbed policy .*; e.g. train.es.population=4"
+    )
     with pytest.raises(ValueError, match=divide):
         train(env, dataclasses.replace(cfg, es=EsConfig(population=8)), tmp_path / "x", progress=False)
     with pytest.raises(ValueError, match=r"num_envs: the env has 4 envs but the config asks for 8"):

@@ -151,3 +151,11 @@ def test_python_dash_m_warpcut_runs_the_command_line():
     )
     assert done.returncode == 0, done.stderr
     assert "fls-circle" in done.stdout
+
+
+def test_the_command_reference_is_every_commands_help():
+    """docs/cli.md is what ``python -m agents.cli.reference`` writes: each command's ``--help`` as it is."""
+    from agents.cli.reference import reference
+
+    written = (ROOT / "docs" / "cli.md").read_text()
+    assert written == reference(), "docs/cli.md is stale: python -m agents.cli.reference > docs/cli.md"

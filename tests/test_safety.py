@@ -147,15 +147,15 @@ def test_bad_inputs_are_refused_before_any_work_and_leave_no_run_behind(tmp_path
         ),
         (
             ["run", "--contour", "circle-small", "--policy", "fixed", "--set", "rl_candidates=3"],
-            "rl_candidates: only with --policy rl",
+            "rl_candidates: read by --policy rl only",
         ),
         (
             ["evaluate", "--contours", "circle-small", "--methods", "none", "--set", "train.iterations=5"],
-            "train.iterations: only with rl in --methods",
+            "train.iterations: read by the rl column only",
         ),
         (
             ["evaluate", "--methods", "rl", "--set", "grad.es_feedback_phases=2"],
-            "grad.es_feedback_phases: only with grad in --methods",
+            "grad.es_feedback_phases: read by the grad column only",
         ),
         (
             ["run", "--algo", "apg", "--set", "env.randomize=[gravity]"],

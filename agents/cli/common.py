@@ -175,7 +175,7 @@ seed_option = click.option(
     default=0,
     show_default=True,
     type=click.IntRange(*SEED_RANGE),
-    help=f"Seed of everything random (noise, sampling, PPO); an integer in [0, {SEED_RANGE[1]}].",
+    help=f"Seed of everything random (noise, sampling, training); an integer in [0, {SEED_RANGE[1]}].",
 )
 
 

@@ -36,7 +36,9 @@ FLAGS = {
     type=click.Choice(list(BUDGETS)),
     help="; ".join(
         f"{name}: {b['candidates']} pinch candidates (plus the centroid when feasible), a policy for "
-        + ("every one" if b["rl_candidates"] is None else f"the best {b['rl_candidates']}")
+        + {None: "every one", 1: "the best one by fixed tension"}.get(
+            b["rl_candidates"], f"each of the best {b['rl_candidates']}"
+        )
         + f", {b['trials']} trials"
         for name, b in BUDGETS.items()
     )
