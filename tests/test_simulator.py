@@ -303,7 +303,7 @@ def test_simd_state_survives_a_switch_to_the_taped_path():
 
 def test_authors_preset_reproduces_their_settled_sheet():
     """Their released code, ported and run as released: rows pinned, 200 updates, centre sag 12.5 mm,
-    largest structural stretch 10.0%, mean 2.3% (issue 14). Tolerance: 1 mm, 1.5 and 0.4 points."""
+    largest structural stretch 10.0%, mean 2.3%. Tolerance: 1 mm, 1.5 and 0.4 points."""
     from warpcut.sim.checks import settled_figures
 
     config = SimConfig.authors()

@@ -190,7 +190,7 @@ arm_length_option = click.option(
     type=FloatRange(min=0.0, allow_inf=True),
     help="Reach of the cutting arm's footprint from the scissor tip toward +x (mm), for pinch feasibility; "
     "inf (the paper's cylinder): the whole way, so the grasp never holds the piece being cut; a short "
-    "footprint (e.g. 15) lets it hold the piece (docs/learning.md).",
+    "footprint (e.g. 15) lets it hold the piece (docs/results.md).",
 )
 
 

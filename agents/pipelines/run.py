@@ -219,9 +219,13 @@ def _train_candidates(
         contour=contour, sim_config=job.sim, **{name: getattr(job.env, name) for name in ENV_FIELDS}
     )
     runs = []
-    what = f"{job.train.algo} policy for each of the best {len(listed)} pinch candidate(s)"
     article = "an" if job.train.algo[0] in "aeiou" else "a"
-    log(f"[2/3] training {article} {what} ({job.train.batch_size} envs each)")
+    where = (
+        "at the best pinch candidate"
+        if len(listed) == 1
+        else f"for each of the best {len(listed)} candidates"
+    )
+    log(f"[2/3] training {article} {job.train.algo} policy {where} ({job.train.batch_size} envs)")
     for k, candidate in enumerate(listed):
         run_dir = out / "rl" / f"candidate-{k}"
         segments = [s.tolist() for s in plan.ordered_segments(candidate["order"])]

@@ -33,7 +33,7 @@ ARM_LENGTH_MM = math.inf
 """How far the cutting arm's footprint reaches from the scissor tip toward +x (mm), for pinch feasibility:
 the paper's model, a cylinder along the whole sheet, by default. Then nothing inside a closed contour is
 feasible: the grasp holds the sheet around the piece, never the piece (:func:`warpcut.planning.under_arm`).
-A short footprint (e.g. 15 mm) lets the gripper hold the piece being cut (docs/learning.md)."""
+A short footprint (e.g. 15 mm) lets the gripper hold the piece being cut (docs/results.md)."""
 PINCH_CANDIDATES = 30
 """Pinch points a plan or a fixed-pinch search samples from the feasible region (the paper's N = 30)."""
 SEGMENT_TOLERANCE_MM = 1.0
