@@ -202,6 +202,7 @@ def make_sb3_env(
     num_envs: int,
     options: PatternCutOptions | None = None,
     monitor: bool = True,
+    torch_threads: int | None = 1,
     **kwargs: Any,
 ) -> VecEnv:
     """A :class:`PatternCutSB3Env` of ``num_envs`` sheets, in a ``VecMonitor`` unless ``monitor`` is False.
@@ -212,11 +213,20 @@ def make_sb3_env(
             :class:`~envs.vector.PatternCutVecEnv`'s ``render_mode``, ``render_envs``, ...) replace its
             fields.
         monitor: Wrap in ``VecMonitor`` (``info["episode"]``: SB3's ``ep_rew_mean`` / ``ep_len_mean``).
+        torch_threads: Where the simulator runs on the CPU, set torch to this many threads
+            (``torch.set_num_threads``; None: leave torch as it is). The simulator steps the batch on
+            threads of its own, and torch's threads spinning beside them made SB3's PPO about ten times
+            slower on a 2-core machine (``python scripts/sb3_throughput.py``); SB3's small MLPs gain nothing
+            from more threads.
     """
     if not isinstance(num_envs, int | np.integer) or isinstance(num_envs, bool) or num_envs < 1:
         raise ValueError(f"num_envs: must be an integer >= 1 (got {num_envs!r})")
     kwargs.setdefault("autoreset_mode", AutoresetMode.SAME_STEP)  # SB3 resets inside step
     env = PatternCutSB3Env(PatternCutVecEnv(int(num_envs), options, **kwargs))
+    if torch_threads is not None and str(env.env.task.sim.device).startswith("cpu"):
+        import torch
+
+        torch.set_num_threads(int(torch_threads))
     return VecMonitor(env) if monitor else env
 
 

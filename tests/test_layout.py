@@ -159,3 +159,87 @@ def test_the_command_reference_is_every_commands_help():
 
     written = (ROOT / "docs" / "cli.md").read_text()
     assert written == reference(), "docs/cli.md is stale: python -m agents.cli.reference > docs/cli.md"
+
+
+def test_no_import_circles():
+    """No module of warpcut, envs or agents imports, through others, a module that imports it (imports
+    inside functions count): every package reads from the bottom up."""
+    modules = {}
+    for package in PACKAGES:
+        for path in sources(package):
+            parts = path.relative_to(ROOT).with_suffix("").parts
+            name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+            modules[name] = path
+    graph = {}
+    for name, path in modules.items():
+        tree = ast.parse(path.read_text(), str(path))
+        targets = set()
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                base = node.module
+                if node.level:  # relative: from the module's package
+                    package = name.split(".")[
+                        : len(name.split(".")) - node.level + (path.name == "__init__.py")
+                    ]
+                    base = ".".join([*package, node.module])
+                targets.add(base)
+                targets.update(f"{base}.{alias.name}" for alias in node.names)
+            elif isinstance(node, ast.Import):
+                targets.update(alias.name for alias in node.names)
+        graph[name] = {t for t in targets if t in modules and t != name and not name.startswith(f"{t}.")}
+        graph[name] -= {t for t in graph[name] if modules[t].name == "__init__.py"}  # a package's face
+    done, stack, circles = set(), [], []
+
+    def visit(node: str) -> None:
+        if node in stack:
+            circles.append(stack[stack.index(node) :] + [node])
+            return
+        if node in done:
+            return
+        stack.append(node)
+        for target in sorted(graph[node]):
+            visit(target)
+        stack.pop()
+        done.add(node)
+
+    for name in sorted(graph):
+        visit(name)
+    assert not circles, f"import circles: {circles[:3]}"
+
+
+PROCESS_WORDS = re.compile(r"\b(sessions?|issues?) [0-9]+|\bsitting\b", re.IGNORECASE)
+"""Words of a project's history, not of its software."""
+
+
+def test_project_text_speaks_of_the_software_not_its_history():
+    """README, docs, code, comments, tests and scripts say what the software does; the road to it is in
+    version control."""
+    files = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+    for folder in (*PACKAGES, "tests", "scripts", "experiments"):
+        files += sorted(p for p in (ROOT / folder).rglob("*") if p.suffix in (".py", ".md", ".sh", ".yaml"))
+    found = [
+        f"{path.relative_to(ROOT)}:{k}: {line.strip()[:80]}"
+        for path in files
+        for k, line in enumerate(path.read_text().splitlines(), 1)
+        if PROCESS_WORDS.search(line) and path != Path(__file__)
+    ]
+    assert not found, "\n".join(found[:10])
+
+
+def test_the_readme_is_a_short_manual():
+    assert len((ROOT / "README.md").read_text().splitlines()) <= 200
+
+
+def test_scripts_regenerate_the_docs_and_experiments_are_indexed():
+    """scripts/ holds setup and the scripts whose figures the docs cite; every probe in experiments/ has its
+    line in experiments/README.md."""
+    docs = (ROOT / "README.md").read_text() + "".join(p.read_text() for p in (ROOT / "docs").rglob("*.md"))
+    uncited = [
+        p.name
+        for p in sorted((ROOT / "scripts").iterdir())
+        if p.name != "setup.sh" and f"scripts/{p.name}" not in docs
+    ]
+    assert not uncited, f"scripts no doc cites (move them to experiments/, or delete them): {uncited}"
+    index = (ROOT / "experiments" / "README.md").read_text()
+    unindexed = [p.name for p in sorted((ROOT / "experiments").glob("*.py")) if f"`{p.name}`" not in index]
+    assert not unindexed, f"experiments without a line in experiments/README.md: {unindexed}"

@@ -176,3 +176,21 @@ def test_envs_import_without_sb3_and_the_adapter_says_what_to_install():
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
     assert "pip install 'warpcut[sb3]'" in done.stdout, done.stdout + done.stderr
+
+
+def test_the_batched_adapter_puts_torch_on_one_thread_beside_a_cpu_simulator():
+    """The simulator's threads use the cores: torch's spinning beside them made SB3 about ten times slower
+    on 2 cores, so make_sb3_env sets one torch thread on the CPU (and leaves torch alone when told)."""
+    import torch
+
+    from envs.sb3 import make_sb3_env
+
+    before = torch.get_num_threads()
+    try:
+        torch.set_num_threads(2)
+        make_sb3_env(2, torch_threads=None, **SMALL)
+        assert torch.get_num_threads() == 2
+        make_sb3_env(2, **SMALL)
+        assert torch.get_num_threads() == 1
+    finally:
+        torch.set_num_threads(before)
