@@ -33,9 +33,7 @@ from agents.methods import BASELINES, SELECTORS, TABLE_METHODS, check_methods
 from envs.options import ENV_FIELDS, EnvConfig, PatternCutOptions
 from warpcut.planning.feasibility import ArmModel
 from warpcut.sim.config import SimConfig
-
-COLOUR_FIELDS = ("strain", "height")
-"""What a recording's vertex colours show (``colour_by``)."""
+from warpcut.viz.colours import COLOUR_FIELDS
 
 
 @dataclass
