@@ -22,9 +22,9 @@ def command_help(name: str) -> str:
     from agents.cli import main
 
     command = main.commands[name]
-    with click.Context(
-        command, info_name=f"warpcut {name}", terminal_width=100, max_content_width=100
-    ) as ctx:
+    settings = {**main.context_settings, "terminal_width": 100, "max_content_width": 100}
+    parent = click.Context(main, info_name="warpcut", **settings)
+    with click.Context(command, parent=parent, info_name=name, **settings) as ctx:
         return command.get_help(ctx)
 
 
