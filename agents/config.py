@@ -18,6 +18,7 @@ from agents.apg.config import ApgConfig
 from agents.es.config import EsConfig
 from agents.ppo.config import PpoConfig
 from warpcut.sim.config import PINCH_CANDIDATES, RANDOMIZE_ALIASES, randomize_ranges
+from warpcut.validation import is_integer, is_number
 
 EVALUATION_TRIALS = 10
 """Seeded trials per method of an evaluation (the paper's Table I: 10)."""
@@ -310,15 +311,15 @@ class GradConfig:
                 "validation_trials: estimator 'es' scores each iterate on held-out episodes only; give at "
                 f"least 1 (got {self.validation_trials!r})"
             )
-        if not isinstance(self.validation_trials, int) or self.validation_trials < 0:
+        if not is_integer(self.validation_trials) or self.validation_trials < 0:
             raise ValueError(
                 f"train.validation_trials: must be an integer >= 0 (got {self.validation_trials!r})"
             )
-        if self.window is not None and (not isinstance(self.window, int) or self.window < 1):
+        if self.window is not None and (not is_integer(self.window) or self.window < 1):
             raise ValueError(f"window: must be a positive number of steps or None (got {self.window!r})")
         for name in ("learning_rate", "pinch_learning_rate", "es_sigma_mm"):
             value = getattr(self, name)
-            if not (isinstance(value, int | float) and 0 < value < float("inf")):
+            if not (is_number(value) and 0 < value < float("inf")):
                 raise ValueError(f"{name}: must be a positive number of mm (got {value!r})")
         if self.es_randomize_ranges:  # one spelling, lists of floats, so a saved run's settings compare equal
             names = [RANDOMIZE_ALIASES.get(k, k) for k in self.es_randomize_ranges]

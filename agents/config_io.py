@@ -26,6 +26,8 @@ from typing import Any
 
 import numpy as np
 
+from warpcut.validation import ConfigError
+
 PRESETS_DIR = Path(__file__).parent / "presets"
 """Where the named presets live: ``NAME.yaml``."""
 
@@ -149,13 +151,20 @@ def _set(config: Any, path: list[str], value: Any, key: str, where: str) -> Any:
         if isinstance(current, dict) or current is None and _is_free_mapping(name):
             merged = dict(current or {})
             merged[".".join(rest)] = value
-            return dataclasses.replace(config, **{name: _convert(merged, hint, key, where)})
+            try:
+                return dataclasses.replace(config, **{name: _convert(merged, hint, key, where)})
+            except ConfigError as error:
+                raise error.renamed(f"{where}: {key}") from None
         raise ValueError(f"{where}: {key}: {'.'.join(path[:1])} is a single setting, not a section")
     if dataclasses.is_dataclass(current) and not isinstance(value, dict):
         raise ValueError(f"{where}: {key}: is a section; set its fields, e.g. {key}.FIELD=VALUE")
     if dataclasses.is_dataclass(current):
         return dataclasses.replace(config, **{name: apply(current, value, where)})
-    return dataclasses.replace(config, **{name: _convert(value, hint, key, where)})
+    converted = _convert(value, hint, key, where)
+    try:  # a dataclass that checks its fields as it is made (warpcut.validation) names them as Class.field
+        return dataclasses.replace(config, **{name: converted})
+    except ConfigError as error:
+        raise error.renamed(f"{where}: {key}") from None
 
 
 def _convert(value: Any, hint: Any, key: str, where: str) -> Any:

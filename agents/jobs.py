@@ -33,6 +33,7 @@ from agents.methods import BASELINES, SELECTORS, TABLE_METHODS, check_methods
 from envs.options import ENV_FIELDS, EnvConfig, PatternCutOptions
 from warpcut.planning.feasibility import ArmModel
 from warpcut.sim.config import SimConfig
+from warpcut.validation import ConfigError
 from warpcut.viz.colours import COLOUR_FIELDS
 
 
@@ -238,7 +239,7 @@ class EvaluateJob:
             raise ValueError(
                 f"analytic_pinch: choose one of {', '.join(ANALYTIC_PINCHES)} (got {self.analytic_pinch!r})"
             )
-        self.sim.validated()
+        _sim_validated(self.sim)
         self.grad.validated()
         return self
 
@@ -308,6 +309,14 @@ def _count(name: str, value: Any) -> None:
         raise ValueError(f"{name}: must be an integer >= 1 (got {value!r})")
 
 
+def _sim_validated(sim: SimConfig) -> SimConfig:
+    """``sim`` validated, or ``ValueError`` naming the ``sim.`` key (``sim.elasticity: ...``)."""
+    try:
+        return sim.validated()
+    except ConfigError as error:
+        raise error.renamed(f"sim.{error.field}") from None
+
+
 def _grad_validated(grad: GradConfig) -> GradConfig:
     """``grad`` validated (its one spelling of ranges), or ``ValueError`` naming the ``grad.`` key."""
     try:
@@ -353,7 +362,7 @@ class OptimizeJob:
             _count(name, getattr(self, name))
         if self.pinch is not None and (len(self.pinch) != 2 or not all(math.isfinite(v) for v in self.pinch)):
             raise ValueError(f"pinch: give [x, y], finite numbers in mm (got {self.pinch!r})")
-        self.sim.validated()
+        _sim_validated(self.sim)
         return dataclasses.replace(self, grad=_grad_validated(self.grad))
 
     def unused_keys(self) -> dict[str, str]:
@@ -417,7 +426,7 @@ class RobustnessJob:
         for name in ("runs", "plans"):
             if not all(isinstance(v, str) and v for v in getattr(self, name).values()):
                 raise ValueError(f"{name}: give {{label: path}}, each path a directory or file")
-        self.sim.validated()
+        _sim_validated(self.sim)
         return dataclasses.replace(self, grad=_grad_validated(self.grad))
 
     def unused_keys(self) -> dict[str, str]:
@@ -479,10 +488,7 @@ class SimulateJob:
                 _count(name, getattr(self, name))
         if self.colour_by not in COLOUR_FIELDS:
             raise ValueError(f"colour_by: choose one of {', '.join(COLOUR_FIELDS)} (got {self.colour_by!r})")
-        try:
-            self.sim.validated()
-        except ValueError as error:
-            raise ValueError(f"sim.{error}") from None
+        _sim_validated(self.sim)
         return self
 
     def unused_keys(self) -> dict[str, str]:

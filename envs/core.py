@@ -57,9 +57,10 @@ import numpy as np
 
 from warpcut.sim.config import sample_parameters
 from warpcut.task import CuttingTask, NoTensionReference
+from warpcut.validation import check_instance, check_integer
 
 from .observations import Fiducials, normalise_positions, observation_bounds, sample_fiducials
-from .options import ACTION_TYPES, PatternCutOptions
+from .options import PatternCutOptions
 
 DISCRETE_MOVES = np.array(
     [[0, 0, 0], [1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.float32
@@ -85,15 +86,9 @@ class PatternCut:
     """
 
     def __init__(self, options: PatternCutOptions, num_envs: int):
-        if options.action_type not in ACTION_TYPES:
-            raise ValueError(f"action_type: choose one of {ACTION_TYPES} (got {options.action_type!r})")
-        if not isinstance(options.num_fiducials, int) or options.num_fiducials < 0:
-            raise ValueError(f"num_fiducials: must be a non-negative integer (got {options.num_fiducials!r})")
-        _check_pinch_option(options)
-        if not options.shaft_radius_mm >= 0:
-            raise ValueError(f"shaft_radius_mm: must be >= 0 mm (got {options.shaft_radius_mm!r})")
-        if options.max_episode_steps is not None and options.max_episode_steps < 1:
-            raise ValueError(f"max_episode_steps: must be >= 1 or None (got {options.max_episode_steps!r})")
+        check_instance("PatternCut.options", options, PatternCutOptions, "a PatternCutOptions")
+        num_envs = check_integer("PatternCut.num_envs", num_envs, 1)
+        options.validated()  # its fields may have been changed since it was made
         self._randomized = options.randomized()
         self.options = options
         self.num_envs = num_envs
@@ -284,23 +279,6 @@ def _score_info(score) -> dict[str, np.ndarray]:
     if not info["diverged"].any():
         del info["diverged"]
     return info
-
-
-def _check_pinch_option(options: PatternCutOptions) -> None:
-    """Raise ``ValueError`` naming ``pinch_point`` unless every pinch point given is
-    finite: a NaN or infinite pinch point would silently mean "no grasp"."""
-    given = [("pinch_point", options.pinch_point)]
-    for name, point in given:
-        if point is None:
-            continue
-        try:
-            values = np.asarray(point, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError(f"{name}: expected material coordinates (x, y) in mm, got {point!r}") from None
-        if not np.all(np.isfinite(values)):
-            raise ValueError(
-                f"{name}: {values.tolist()} is not finite; give material coordinates (x, y) on the sheet (mm)"
-            )
 
 
 def check_reset_options(options: dict[str, Any] | None, allowed: tuple[str, ...] = ()) -> dict[str, Any]:

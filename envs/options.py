@@ -16,7 +16,25 @@ import numpy as np
 from warpcut.contours import Contour, builtin_names, contour_from_json, load_contour
 from warpcut.fiducials import NUM_FIDUCIALS, SHAFT_RADIUS_MM
 from warpcut.planning import default_pinch
-from warpcut.sim.config import PHYSICAL_PARAMETERS, PerEnv, SimConfig, randomize_ranges
+from warpcut.sim.config import (
+    RANDOMIZE_ALIASES,
+    RANDOMIZE_RANGES,
+    PerEnv,
+    SimConfig,
+    check_sim_field,
+    randomize_ranges,
+)
+from warpcut.validation import (
+    ConfigError,
+    check_choice,
+    check_flag,
+    check_instance,
+    check_integer,
+    check_number,
+    check_text,
+    fail,
+    is_number,
+)
 
 ContourSpec = str | os.PathLike | Contour
 SIM_OVERRIDES = ("fixture", "resolution", "damping", "dt", "gravity", "elasticity", "noise_std")
@@ -76,10 +94,47 @@ class EnvConfig:
     takes its :data:`~warpcut.sim.config.RANDOMIZE_RANGES` default."""
 
     def __post_init__(self):
-        for f in dataclasses.fields(self):  # wrong types named here, not deep inside the env
-            problem = _field_problem(f.name, getattr(self, f.name))
-            if problem:
-                raise ValueError(f"{f.name}: {problem} (got {getattr(self, f.name)!r:.80})")
+        self._check_fields()
+
+    def validated(self) -> EnvConfig:
+        """Itself, every field checked again (they may have been changed since it was made); a
+        :class:`~warpcut.validation.ConfigError` names ``Class.field`` and what it takes."""
+        self._check_fields()
+        return self
+
+    def _check_fields(self) -> None:
+        """Each field on its own, wrong types and values named here, not deep inside the env
+        (:mod:`warpcut.validation`); whether ``randomize_ranges`` fits ``randomize`` is :meth:`randomized`'s
+        (a file or ``--set`` may give one before the other)."""
+        owner = type(self).__name__
+        for name in _FLAGS:
+            setattr(self, name, check_flag(f"{owner}.{name}", getattr(self, name)))
+        self.num_fiducials = check_integer(f"{owner}.num_fiducials", self.num_fiducials, 0)
+        check_number(f"{owner}.shaft_radius_mm", self.shaft_radius_mm, 0, unit="mm")
+        self.shaft_radius_mm = plain(self.shaft_radius_mm)
+        check_choice(f"{owner}.action_type", self.action_type, ACTION_TYPES)
+        self.max_episode_steps = check_integer(
+            f"{owner}.max_episode_steps", self.max_episode_steps, 1, optional=True, note="the whole cut"
+        )
+        names = self.randomize
+        if not (isinstance(names, list | tuple) and all(isinstance(n, str) for n in names)):
+            fail(f"{owner}.randomize", "a list of parameter names, e.g. ['gravity', 'noise_std']", names)
+        unknown = [n for n in names if n not in RANDOMIZE_RANGES and n not in RANDOMIZE_ALIASES]
+        if unknown:
+            known = ", ".join([*RANDOMIZE_RANGES, *RANDOMIZE_ALIASES])
+            raise ConfigError(f"{owner}.randomize", f"unknown parameter {unknown[0]!r}; choose from {known}")
+        ranges = self.randomize_ranges
+        if ranges is not None and not (
+            isinstance(ranges, dict)
+            and all(
+                isinstance(k, str)
+                and isinstance(v, list | tuple | np.ndarray)
+                and len(v) == 2
+                and all(is_number(x) for x in v)
+                for k, v in ranges.items()
+            )
+        ):
+            fail(f"{owner}.randomize_ranges", "{parameter: [low, high]} of numbers, or None", ranges)
 
 
 ENV_FIELDS = tuple(f.name for f in dataclasses.fields(EnvConfig))
@@ -127,20 +182,40 @@ class PatternCutOptions(EnvConfig):
     """Warp device of the simulator (``"cpu"``, ``"cuda"``); default: CUDA when available."""
 
     def __post_init__(self):
+        owner = type(self).__name__
         # to_dict()'s output given back as keyword arguments (e.g. to gymnasium.make): its dicts read here
         if isinstance(self.sim_config, dict):
-            self.sim_config = sim_config_from_dict(self.sim_config, "sim_config")
-        if (
-            isinstance(self.contour, dict)
-            or isinstance(self.contour, list)
-            and any(isinstance(c, dict) for c in self.contour)
-        ):
-            self.contour = _read_contours(self.contour, self.sim_config)
-        super().__post_init__()
-        if not isinstance(self.sim_config, SimConfig):
-            raise ValueError(
-                f"sim_config: give a SimConfig or a dict of its fields (got {self.sim_config!r:.80})"
+            self.sim_config = sim_config_from_dict(self.sim_config, f"{owner}.sim_config")
+        check_instance(
+            f"{owner}.sim_config", self.sim_config, SimConfig, "a SimConfig, or a dict of its fields"
+        )
+        specs = self.contour if isinstance(self.contour, list | tuple) else [self.contour]
+        if not (specs and all(isinstance(c, str | os.PathLike | Contour | dict) and c for c in specs)):
+            fail(
+                f"{owner}.contour",
+                "a built-in name, a .json or .svg contour file, a Contour or its JSON object {name, closed, "
+                "points}, or a list of them, one per env",
+                self.contour,
             )
+        if any(isinstance(c, dict) for c in specs):
+            self.contour = _read_contours(self.contour, self.sim_config, f"{owner}.")
+        super().__post_init__()
+
+    def _check_fields(self) -> None:
+        super()._check_fields()
+        owner = type(self).__name__
+        if self.pinch_point is not None:
+            _check_pinch_point(f"{owner}.pinch_point", self.pinch_point)
+        if self.segments is not None and not isinstance(self.segments, list | tuple | np.ndarray):
+            fail(
+                f"{owner}.segments",
+                "a list of polylines [[x_mm, y_mm], ...], or one such list per env, or None",
+                self.segments,
+            )
+        for name in SIM_OVERRIDES:
+            if getattr(self, name) is not None:
+                setattr(self, name, check_sim_field(f"{owner}.{name}", name, getattr(self, name)))
+        check_text(f"{owner}.device", self.device, optional=True, note="the default device")
 
     @classmethod
     def env_settings(cls, options: PatternCutOptions) -> EnvConfig:
@@ -239,23 +314,12 @@ class PatternCutOptions(EnvConfig):
             raise ValueError(
                 f"options: unknown field(s) {', '.join(unknown)}; known: {', '.join(sorted(names))}"
             )
-        fields = dict(data)
-        for name, value in fields.items():
-            problem = _field_problem(name, value)
-            if problem:
-                raise ValueError(f"options: {name}: {problem} (got {value!r:.80})")
-        if isinstance(fields.get("sim_config"), dict):
-            fields["sim_config"] = sim_config_from_dict(fields["sim_config"], "options: sim_config")
-        if "contour" in fields:
-            fields["contour"] = _read_contours(
-                fields["contour"], fields.get("sim_config", SimConfig()), "options: "
-            )
         try:
-            options = cls(**fields)
+            options = cls(**data)
             options.config()  # the simulation settings, checked now
             options.randomized()
-        except (TypeError, ValueError) as exc:  # TypeError: a setting of the wrong type, e.g. "x" > 0
-            message = str(exc)
+        except ValueError as exc:  # "PatternCutOptions.FIELD: ..." read as "options: FIELD: ..."
+            message = str(exc).removeprefix(f"{cls.__name__}.")
             raise ValueError(message if message.startswith("options: ") else f"options: {message}") from None
         return options
 
@@ -268,82 +332,48 @@ def _read_contours(spec: Any, sim: SimConfig, prefix: str = "") -> Any:
         if not isinstance(item, dict):
             return item
         sheet = item.get("sheet_size", (sim.width_mm, sim.height_mm))
-        if not (isinstance(sheet, list | tuple) and len(sheet) == 2 and all(_is_number(v) for v in sheet)):
+        if not (isinstance(sheet, list | tuple) and len(sheet) == 2 and all(is_number(v) for v in sheet)):
             raise ValueError(f"{prefix}contour: sheet_size: give [width_mm, height_mm] (got {sheet!r})")
         return contour_from_json(item, f"{prefix}contour", tuple(float(v) for v in sheet))
 
-    return [read(s) for s in spec] if isinstance(spec, list) else read(spec)
+    return [read(s) for s in spec] if isinstance(spec, list | tuple) else read(spec)
 
 
 def sim_config_from_dict(data: dict[str, Any], where: str) -> SimConfig:
     """A :class:`SimConfig` from a dict of its fields (JSON lists back to the tuples it holds); ``ValueError``
-    naming ``where`` and an unknown field."""
+    naming ``where`` and an unknown field, or ``where.FIELD`` and a bad value."""
     known = {f.name for f in dataclasses.fields(SimConfig)}
     unknown = sorted(set(data) - known)
     if unknown:
         raise ValueError(f"{where}: unknown field(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
-    return SimConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
+    try:
+        return SimConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
+    except ConfigError as error:
+        raise error.renamed(f"{where}.{error.field}") from None
 
 
-def _is_number(value: Any) -> bool:
-    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
-
-
-def _is_count(value: Any, least: int) -> bool:
-    return isinstance(value, int | np.integer) and not isinstance(value, bool) and value >= least
+def _check_pinch_point(where: str, value: Any) -> None:
+    """``ConfigError`` naming ``where`` unless ``value`` is one finite point ``[x_mm, y_mm]`` or one per
+    env: a NaN or infinite pinch point would silently mean "no grasp"."""
+    numbers = isinstance(value, list | tuple | np.ndarray)
+    try:
+        points = np.asarray(value, dtype=np.float64) if numbers else None
+    except (TypeError, ValueError):
+        points = None
+    flat = np.ravel(np.asarray(value, dtype=object)) if points is not None else ()
+    if (
+        points is None
+        or points.ndim not in (1, 2)
+        or points.shape[-1] != 2
+        or not all(is_number(v) for v in flat)
+        or not np.isfinite(points).all()
+    ):
+        fail(
+            where, "a finite point [x_mm, y_mm] on the sheet, or one per env, or None for the default", value
+        )
 
 
 _FLAGS = ("resample_fiducials", "contour_features", "allow_z", "dense_reward", "relative_reward")
-
-
-def _field_problem(name: str, value: Any) -> str | None:
-    """What is wrong with the JSON ``value`` of the options field ``name`` (None: nothing this checks; the
-    env checks the values themselves)."""
-    if name in _FLAGS and not isinstance(value, bool):
-        return "must be true or false"
-    if name == "contour":
-        specs = value if isinstance(value, list) else [value]
-        if not specs or not all(isinstance(c, str | dict | os.PathLike | Contour) and c for c in specs):
-            return "give a built-in name, a contour file, a contour object {name, closed, points}, or a list"
-    if name == "sim_config" and not isinstance(value, dict | SimConfig):
-        return "give an object of SimConfig fields"
-    if name == "action_type":
-        if value not in ACTION_TYPES:
-            return f"choose one of {', '.join(ACTION_TYPES)}"
-    if name == "num_fiducials" and not _is_count(value, 0):
-        return "must be a non-negative integer"
-    if name == "max_episode_steps" and value is not None and not _is_count(value, 1):
-        return "must be an integer >= 1, or null"
-    if name == "shaft_radius_mm" and not (_is_number(value) and 0 <= value < np.inf):
-        return "must be a finite number >= 0"
-    lists = ("pinch_point", "segments")
-    if name in lists and value is not None and not isinstance(value, list | tuple | np.ndarray):
-        return "must be a list, or null"
-    if name == "pinch_point" and value is not None:
-        try:
-            points = np.asarray(value, dtype=np.float64)
-        except (TypeError, ValueError):
-            points = None
-        if points is None or points.ndim not in (1, 2) or points.shape[-1] != 2:
-            return "give [x_mm, y_mm], or one such pair per env"
-        if not np.isfinite(points).all():
-            return f"{points.tolist()} is not finite; give material coordinates (x, y) on the sheet (mm)"
-    if name == "randomize" and not (
-        isinstance(value, list | tuple) and all(isinstance(v, str) for v in value)
-    ):
-        return 'give a list of parameter names, e.g. ["gravity", "noise_std"]'
-    if name == "randomize_ranges" and value is not None and not isinstance(value, dict):
-        return "give {parameter: [low, high]}, or null"
-    if name in ("fixture", "device") and value is not None and not isinstance(value, str):
-        return "must be a string, or null"
-    if name in PHYSICAL_PARAMETERS and value is not None:
-        try:
-            values = list(np.ravel(value)) if isinstance(value, list | tuple | np.ndarray) else [value]
-        except ValueError:  # ragged
-            values = []
-        if not values or not all(_is_number(v) for v in values):
-            return "give a number, or a list of one number per env, or null"
-    return None
 
 
 def _contour_spec(contour: ContourSpec) -> str | dict:

@@ -61,6 +61,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from warpcut.task import CuttingTask
+from warpcut.validation import check_integer
 
 from .core import PatternCut, check_reset_options
 from .options import PatternCutOptions
@@ -105,17 +106,12 @@ class PatternCutVecEnv(VectorEnv):
         render_view: str = "top",
         **kwargs: Any,
     ):
-        if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or num_envs < 1:
-            raise ValueError(f"num_envs: must be an integer >= 1 (got {num_envs!r})")
-        num_envs = int(num_envs)
+        num_envs = check_integer("PatternCutVecEnv.num_envs", num_envs, 1)
         self.autoreset_mode = _autoreset_mode(autoreset_mode)
         check_render_mode(render_mode, VECTOR_RENDER_MODES)
-        if render_envs is not None and (
-            isinstance(render_envs, bool) or not isinstance(render_envs, int | np.integer) or render_envs < 1
-        ):
-            raise ValueError(
-                f"render_envs: must be an integer >= 1 or None for all envs (got {render_envs!r})"
-            )
+        render_envs = check_integer(
+            "PatternCutVecEnv.render_envs", render_envs, 1, optional=True, note="all envs"
+        )
         if render_mode is not None:
             from warpcut.viz.render import check_render_settings
 

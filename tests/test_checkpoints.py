@@ -375,12 +375,21 @@ def real_copy(real_run, tmp_path):
     "content, match",
     [
         ("[1, 2]", "options: expected a JSON object"),
-        ('{"contour": 5}', "options: contour: give a built-in name"),
-        ('{"contour": "fls-circle", "allow_z": "yes"}', "options: allow_z: must be true or false"),
-        ('{"contour": "fls-circle", "action_type": "jump"}', "options: action_type: choose one of"),
+        ('{"contour": 5}', "options: contour: a built-in name"),
+        ('{"contour": "fls-circle", "allow_z": "yes"}', "options: allow_z: True or False"),
+        (
+            '{"contour": "fls-circle", "action_type": "jump"}',
+            "options: action_type: one of 'discrete', 'continuous'",
+        ),
         ('{"contour": "fls-circle", "sim_config": {"gravity_x": 1}}', "options: sim_config: unknown field"),
-        ('{"contour": "fls-circle", "sim_config": {"resolution": 2}}', "options: resolution: got 2"),
-        ('{"contour": "fls-circle", "pinch_point": [1, 2, 3]}', r"options: pinch_point: give \[x_mm, y_mm\]"),
+        (
+            '{"contour": "fls-circle", "sim_config": {"resolution": 2}}',
+            r"options: sim_config\.resolution: an integer in \[5, 100\]",
+        ),
+        (
+            '{"contour": "fls-circle", "pinch_point": [1, 2, 3]}',
+            r"options: pinch_point: a finite point \[x_mm, y_mm\]",
+        ),
         ('{"contour": "fls-circle", "observe_pinch": true}', r"options: unknown field\(s\) observe_pinch"),
     ],
 )

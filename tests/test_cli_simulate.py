@@ -239,8 +239,14 @@ def test_simulate_set_may_repeat_but_not_one_key(capfd):
         (["--contour", "fls-circle", "--pinch", "150,40", "--policy", "fixed"], "pinch_points.*off the"),
         (["--contour", "fls-circle", "--trials", "0"], "--trials"),
         (["--contour", "fls-circle", "--set", "trials=0"], "trials: must be an integer >= 1"),
-        (["--contour", "fls-circle", "--set", "sim.resolution=2"], r"sim\.resolution: got 2"),
-        (["--contour", "fls-circle", "--set", "sim.score=best"], r"sim\.score: choose one of"),
+        (
+            ["--contour", "fls-circle", "--set", "sim.resolution=2"],
+            r"--set: sim\.resolution: an integer in \[5, 100\]",
+        ),
+        (
+            ["--contour", "fls-circle", "--set", "sim.score=best"],
+            r"--set: sim\.score: one of 'path', 'separated' \(got 'best'\)",
+        ),
         (["--contour", "fls-circle", "--set", "colour_by=rainbow", "--record"], "colour_by: choose one of"),
         (["--contour", "fls-circle", "--set", "noise=0"], "--set: noise: unknown setting"),
         (["--contour", "fls-circle", "--set", "export_mesh=/dev/null/m"], r"export_mesh: cannot write"),

@@ -200,30 +200,30 @@ def test_a_fiducial_on_the_contour_is_cut_away_and_stays_put():
 @pytest.mark.parametrize(
     "field, value, message",
     [
-        ("dense_reward", "no", "dense_reward: must be true or false"),  # a truthy string, not a flag
-        ("allow_z", "false", "allow_z: must be true or false"),
-        ("num_fiducials", True, "num_fiducials: must be a non-negative integer"),
-        ("max_episode_steps", 2.5, "max_episode_steps: must be an integer >= 1"),
-        ("max_episode_steps", "3", "max_episode_steps: must be an integer >= 1"),
-        ("shaft_radius_mm", "5", "shaft_radius_mm: must be a finite number >= 0"),
-        ("noise_std", "0.1", "noise_std: give a number, or a list of one number per env"),
-        ("gravity", [1.0, "x"], "gravity: give a number, or a list of one number per env"),
-        ("noise_std", -1.0, "noise_std: must be >= 0"),
-        ("contour", 123, "contour: give a built-in name, a contour file"),
-        ("pinch_point", [1, 2, 3], r"pinch_point: give \[x_mm, y_mm\]"),
-        ("sim_config", 5, "sim_config: give an object of SimConfig fields"),
+        ("dense_reward", "no", r"dense_reward: True or False \(got 'no'\)"),  # a truthy string, not a flag
+        ("allow_z", "false", "allow_z: True or False"),
+        ("num_fiducials", True, r"num_fiducials: an integer >= 0 \(got True\)"),
+        ("max_episode_steps", 2.5, "max_episode_steps: an integer >= 1, or None for the whole cut"),
+        ("max_episode_steps", "3", "max_episode_steps: an integer >= 1"),
+        ("shaft_radius_mm", "5", "shaft_radius_mm: a number >= 0 mm"),
+        ("noise_std", "0.1", "noise_std: a number >= 0 mm, or a list of one per env"),
+        ("gravity", [1.0, "x"], "gravity: a number in .*, or a list of one per env"),
+        ("noise_std", -1.0, "noise_std: a number >= 0"),
+        ("contour", 123, "contour: a built-in name, a .json or .svg contour file"),
+        ("pinch_point", [1, 2, 3], r"pinch_point: a finite point \[x_mm, y_mm\]"),
+        ("sim_config", 5, "sim_config: a SimConfig, or a dict of its fields"),
     ],
 )
 def test_options_of_the_wrong_type_are_refused_by_name(field, value, message):
     for make in (PatternCutEnv, lambda **kw: PatternCutVecEnv(2, **kw)):
-        with pytest.raises(ValueError, match=message):
+        with pytest.raises(ValueError, match=f"^PatternCutOptions.{message}"):
             make(device="cpu", **{**SMALL, field: value})
     with pytest.raises(
         ValueError, match="options: expected PatternCutOptions .* PatternCutOptions.from_dict"
     ):
         PatternCutEnv(options={"dense_reward": True})
     for num_envs in (0, -1, 2.0, True, "2"):
-        with pytest.raises(ValueError, match="num_envs: must be an integer >= 1"):
+        with pytest.raises(ValueError, match=r"^PatternCutVecEnv\.num_envs: an integer >= 1"):
             PatternCutVecEnv(num_envs, device="cpu", **SMALL)
 
 

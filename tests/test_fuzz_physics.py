@@ -1,8 +1,9 @@
 """Property-based tests of the physical parameters: whatever a user sets, a cut either runs to
 finite scores, or its diverged envs are flagged with NaN scores, or it fails with a one-line ``ValueError``
 naming what to change; never another exception, never a NaN score without ``diverged``, never a NaN
-observation. Examples per test: the hypothesis profile's (tests/conftest.py: "ci" by default, "long" for a
-real fuzzing run); the sheets are small so each example takes milliseconds."""
+observation (any value of any type for every config field: tests/test_validation.py). Examples per test:
+the hypothesis profile's (tests/conftest.py: "ci" by default, "long" for a real fuzzing run); the sheets
+are small so each example takes milliseconds."""
 
 import math
 
@@ -75,8 +76,8 @@ ANY = {
 
 def run(physics: dict) -> None:
     """Cut with ``physics``: finite scores, flagged divergence, or a one-line ValueError."""
-    config = SimConfig(resolution=5, settle_updates=30, **physics)
-    try:
+    try:  # a config checks each field as it is made
+        config = SimConfig(resolution=5, settle_updates=30, **physics)
         task = CuttingTask(config, CONTOUR, num_envs=NUM_ENVS, device="cpu", seed=1)
         score = task.run(None)
     except ValueError as error:  # ConfigError, SimulationDiverged (a ValueError) or another bad input

@@ -87,7 +87,11 @@ def test_randomize_ranges_take_aliases_defaults_and_name_what_is_wrong():
         ("wind", None, "randomize: unknown parameter 'wind'; choose from gravity"),
         ("gravity", {"gravity": [5.0, 1.0]}, "randomize_ranges: gravity: give finite low <= high"),
         ("gravity", {"gravity": [0.0]}, r"randomize_ranges: gravity: give \[low, high\]"),
-        ("gravity", {"gravity": [-5.0, 1.0]}, "randomize_ranges: gravity: .*gravity: must lie in"),
+        (
+            "gravity",
+            {"gravity": [-5.0, 1.0]},
+            r"randomize_ranges: gravity: \[-5, 1\]: a number in \[0, 100000\] mm/s\^2",
+        ),
         ("gravity", {"noise_std": [0.0, 0.1]}, "randomize_ranges: noise_std not randomised; add it"),
     ]:
         with pytest.raises(ValueError, match=message):
@@ -123,7 +127,7 @@ def test_options_keep_the_randomisation_and_evaluate_on_the_nominal_sheet():
     again = PatternCutOptions.from_dict(json.loads(json.dumps(options.to_dict())))
     assert again.randomized() == {"gravity": (100.0, 900.0)}
     assert again.nominal().randomized() == {} and again.nominal().contour == options.contour
-    with pytest.raises(ValueError, match="options: randomize: give a list of parameter names"):
+    with pytest.raises(ValueError, match="options: randomize: a list of parameter names"):
         PatternCutOptions.from_dict({**options.to_dict(), "randomize": "gravity"})
     with pytest.raises(ValueError, match="options: randomize: unknown parameter 'wind'"):
         PatternCutOptions.from_dict({**options.to_dict(), "randomize": ["wind"]})

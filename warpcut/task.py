@@ -21,7 +21,8 @@ from warpcut.sim.checks import DIVERGENCE_REASONS, check_pinch_points
 from warpcut.sim.config import SheetGrid, SimConfig, SimulationDiverged
 from warpcut.sim.material import interpolate, interpolate_corners, material_cells, material_to_world
 from warpcut.sim.memory import check_batch_memory
-from warpcut.sim.simulator import Simulator, resolve_device
+from warpcut.sim.simulator import BACKENDS, Simulator, resolve_device
+from warpcut.validation import check_choice, check_flag, check_instance, check_integer, check_text, fail
 
 if TYPE_CHECKING:
     from warpcut.fiducials import Fiducials
@@ -144,7 +145,7 @@ class CuttingTask:
     Args:
         config: Simulation parameters.
         contours: One contour for every env, or one per env.
-        num_envs: Batch size; default ``len(contours)`` or 1.
+        num_envs: Batch size, >= 1; default ``len(contours)`` (1 for a single contour).
         pinch_points: (B, 2) or (2,) material coordinates of the pinch point (mm), finite; a row of
             NaN in a (B, 2) array, or ``None`` for all: no grasp (the no-tension case). Anything else not
             finite (an inf, a half-NaN row, a NaN (2,) point) is a ``ValueError``.
@@ -156,7 +157,9 @@ class CuttingTask:
         trace_path: Trace the cut path (:meth:`Simulator.trace_path`) for the path score; without it
             :meth:`score` has only the separated-material score (its path fields are NaN), a little faster.
 
-    A batch that would not fit in memory is refused before anything is allocated (``ValueError`` naming
+    Every argument is checked first (:mod:`warpcut.validation`): a wrong type or value is a
+    :class:`~warpcut.validation.ConfigError` naming ``CuttingTask.<argument>``. A batch that would not fit in
+    memory is refused before anything is allocated (``ValueError`` naming
     ``num_envs``; :mod:`warpcut.sim.memory`); so is a sheet that does not settle (:class:`SimulationDiverged`,
     naming the parameters to change). An env that diverges during the cut (:meth:`diverged`) is scored
     NaN (:meth:`score`).
@@ -175,17 +178,32 @@ class CuttingTask:
         threads: int | None = None,
         trace_path: bool = True,
     ):
+        check_instance("CuttingTask.config", config, SimConfig, "a SimConfig")
+        num_envs = check_integer("CuttingTask.num_envs", num_envs, 1, optional=True, note="one per contour")
         if isinstance(contours, Contour):
             contours = [contours] * (num_envs or 1)
+        many = isinstance(contours, list | tuple) and contours
+        if not (many and all(isinstance(c, Contour) for c in contours)):
+            fail(
+                "CuttingTask.contours",
+                "a Contour (load_contour(...)), or a list of them, one per env",
+                contours,
+            )
         contours = list(contours)
         num_envs = num_envs or len(contours)
         if len(contours) != num_envs:
-            raise ValueError(f"contours: got {len(contours)} for {num_envs} envs; give one or one per env")
+            raise ValueError(
+                f"CuttingTask.contours: got {len(contours)} for {num_envs} envs; give one or one per env"
+            )
+        check_integer("CuttingTask.seed", seed, 0)
+        check_text("CuttingTask.device", device, optional=True, note="the default device")
+        check_choice("CuttingTask.backend", backend, BACKENDS)
+        check_integer("CuttingTask.threads", threads, 1, optional=True, note="one per core")
+        check_flag("CuttingTask.trace_path", trace_path)
         config = config.validated()
         device = resolve_device(device)
-        if isinstance(num_envs, int) and num_envs >= 1:  # else Simulator names the problem
-            estimate = estimate_horizon(contours, segments, config)
-            check_batch_memory(num_envs, config.nx * config.ny, estimate, device=device)
+        estimate = estimate_horizon(contours, segments, config)
+        check_batch_memory(num_envs, config.nx * config.ny, estimate, device=device)
         self.sim = Simulator(config, num_envs, device=device, seed=seed, backend=backend, threads=threads)
         self.config, self.grid, self.num_envs = self.sim.config, self.sim.grid, num_envs
         for contour in {id(c): c for c in contours}.values():

@@ -44,6 +44,7 @@ from warpcut.contours import Contour, ContourError
 from warpcut.scoring import bootstrap_ci, bootstrap_difference_ci, paired_improvement
 from warpcut.sim.config import GRAVITY_MM_S2, SimConfig
 from warpcut.task import segments_key
+from warpcut.validation import ConfigError
 
 STUDIES = ("resolution", "noise", "force")
 """The studies, in the paper's order (Fig. 5a-c)."""
@@ -114,8 +115,8 @@ def check_study(study: str, values: Sequence[float] | None) -> list[float]:
     for v in values:  # each value must be one SimConfig accepts
         try:
             SimConfig(**{STUDY_FIELDS[study]: v}).validated()
-        except ValueError as error:
-            raise ValueError(f"values: {study} {v}: {error}") from None
+        except ConfigError as error:  # the field as the study sweeps it: "values: force -1.0: gravity: ..."
+            raise ValueError(f"values: {study} {v}: {error.field}: {error.requirement}") from None
     return values
 
 

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from warpcut.validation import is_number
+
 
 @dataclass
 class PpoConfig:
@@ -61,7 +63,7 @@ class PpoConfig:
                 raise ValueError(f"train.ppo.{name}: must be an integer >= 1 (got {value!r})")
         if self.schedule not in ("adaptive", "fixed"):
             raise ValueError(f"train.ppo.schedule: choose adaptive or fixed (got {self.schedule!r})")
-        if not (isinstance(self.stay_prior, int | float) and 0 <= self.stay_prior < 1):
+        if not (is_number(self.stay_prior) and 0 <= self.stay_prior < 1):
             raise ValueError(f"train.ppo.stay_prior: must be in [0, 1) (got {self.stay_prior!r})")
         for name in ("learning_rate", "desired_kl", "clip_param", "max_grad_norm", "init_noise_std"):
             value = getattr(self, name)

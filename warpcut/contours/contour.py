@@ -25,6 +25,7 @@ from shapely.geometry import LinearRing, LineString, Polygon, box
 
 from warpcut.contours.polyline import arc_lengths, resample_polyline, ring
 from warpcut.sim.config import RESOLUTION_RANGE
+from warpcut.validation import check_flag, check_text, fail, is_number
 
 DEFAULT_SHEET_MM = (100.0, 100.0)
 EDGE_REACH_MM = 5.0
@@ -45,7 +46,8 @@ class Contour:
 
     Build it with :func:`validate`, :func:`~warpcut.contours.loaders.load_contour` or
     :func:`~warpcut.contours.suite.builtin_contours`, which check and normalise the points; the
-    constructor itself checks nothing. Instances compare by identity (``points`` is an array).
+    constructor itself checks only the fields' types (a :class:`~warpcut.validation.ConfigError` naming
+    ``Contour.field``), not the geometry. Instances compare by identity (``points`` is an array).
     """
 
     name: str
@@ -55,6 +57,27 @@ class Contour:
     counter-clockwise. Open: in the given order, both ends on sheet edges."""
     sheet_size: tuple[float, float] = DEFAULT_SHEET_MM
     """Sheet width (x) and height (y) in mm."""
+
+    def __post_init__(self) -> None:
+        check_text("Contour.name", self.name)
+        object.__setattr__(self, "closed", check_flag("Contour.closed", self.closed))
+        points = self.points
+        if not (
+            isinstance(points, np.ndarray)
+            and points.dtype.kind in "iuf"
+            and points.ndim == 2
+            and points.shape[0] >= 2
+            and points.shape[1] == 2
+            and np.isfinite(points).all()
+        ):
+            fail(
+                "Contour.points", "an (N, 2) array of finite x, y (mm), N >= 2 (validate() makes one)", points
+            )
+        size = self.sheet_size
+        pair = isinstance(size, list | tuple) and len(size) == 2 and all(is_number(v) for v in size)
+        if not (pair and all(0 < v < math.inf for v in size)):
+            fail("Contour.sheet_size", "(width_mm, height_mm), two finite numbers > 0", size)
+        object.__setattr__(self, "sheet_size", (float(size[0]), float(size[1])))
 
     @property
     def length(self) -> float:
@@ -175,7 +198,7 @@ def check_sheet_size(sheet_size: tuple[float, float]) -> tuple[float, float]:
         ContourError: unless both are finite and positive.
     """
     try:
-        width, height = (float(v) for v in sheet_size)
+        width, height = (float(v) if is_number(v) else math.nan for v in sheet_size)
     except (TypeError, ValueError):
         raise ContourError(f"sheet_size: give (width_mm, height_mm) (got {sheet_size!r})") from None
     if not (math.isfinite(width) and math.isfinite(height) and width > 0 and height > 0):

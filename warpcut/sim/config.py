@@ -10,10 +10,22 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+
+from warpcut.validation import (
+    ConfigError,
+    check_choice,
+    check_flag,
+    check_integer,
+    check_number,
+    check_numbers,
+    fail,
+    is_integer,
+)
 
 FIXTURES = ("corners", "rows")
 SCORES = ("path", "separated")
@@ -60,10 +72,6 @@ SETTLED_REACH_SHEETS = 1.0
 outline, in any direction, does not hang but falls through its springs: the settling diverged. (At the
 default sweeps the sheet sags ~17 mm at the default gravity and dt, ~75 mm when ``gravity * dt**2`` is
 5 mm, and more than its size beyond ~15 mm per update.)"""
-
-
-class ConfigError(ValueError):
-    """A configuration value is invalid; the message names the field and how to fix it."""
 
 
 class SimulationDiverged(ValueError):
@@ -249,116 +257,109 @@ class SimConfig:
         values = np.atleast_1d(np.asarray(getattr(self, name), dtype=np.float64)).astype(np.float32)
         if values.ndim != 1 or values.size not in (1, num_envs):
             raise ConfigError(
-                f"{name}: got {values.size} values for {num_envs} envs; give one value or one per env"
+                f"SimConfig.{name}",
+                f"got {values.size} values for {num_envs} envs; give one value or one per env",
             )
         return values
 
+    def __post_init__(self) -> None:
+        self._check_fields()
+
+    def _check_fields(self) -> None:
+        """Check each field on its own (:func:`check_sim_field`), NumPy scalars and lists stored as Python
+        numbers and tuples; what depends on several fields is :meth:`validated`'s."""
+        for f in dataclasses.fields(self):
+            setattr(self, f.name, check_sim_field(f"SimConfig.{f.name}", f.name, getattr(self, f.name)))
+
     def validated(self) -> SimConfig:
-        """Check every field; raise :class:`ConfigError` naming the field and the fix."""
-        for name in ("width_mm", "height_mm"):
-            value = getattr(self, name)
-            _require(
-                isinstance(value, int | float | np.number) and math.isfinite(value) and value > 0,
-                name,
-                "must be a positive number (mm)",
-            )
-        res = self.resolution
-        if isinstance(res, int | np.integer):
-            res = (int(res), int(res))
-        low, high = RESOLUTION_RANGE
-        if len(res) != 2 or not all(isinstance(r, int | np.integer) and low <= r <= high for r in res):
-            raise ConfigError(
-                f"resolution: got {self.resolution!r}; give n or (nx, ny) with {low} <= n <= {high}"
-            )
-        for name in PHYSICAL_PARAMETERS:
-            values = np.atleast_1d(np.asarray(getattr(self, name), dtype=np.float64))
-            _require(values.ndim == 1 and values.size >= 1, name, "give one number or a list, one per env")
-            _require(
-                bool(np.all(np.isfinite(values)) and np.all(np.abs(values) <= np.finfo(np.float32).max)),
-                name,
-                "must be finite (and within float32 range)",
-            )
-        _require(
-            bool(np.all(np.asarray(self.damping) >= 0) and np.all(np.asarray(self.damping) <= 1)),
-            "damping",
-            "must lie in [0, 1] (paper: 0.99)",
-        )
-        _require(
-            bool(np.all(np.asarray(self.dt) > 0) and np.all(np.asarray(self.dt) <= DT_MAX_S)),
-            "dt",
-            f"must lie in (0, {DT_MAX_S:g}] s (paper: 0.016)",
-        )
-        _require(
-            bool(
-                np.all(np.asarray(self.gravity) >= 0)
-                and np.all(np.asarray(self.gravity) <= GRAVITY_MAX_MM_S2)
-            ),
-            "gravity",
-            f"must lie in [0, {GRAVITY_MAX_MM_S2:g}] mm/s^2 (downward; default {GRAVITY_MM_S2:g})",
-        )
-        _require(
-            bool(np.all(np.asarray(self.elasticity) > 0) and np.all(np.asarray(self.elasticity) < 2)),
-            "elasticity",
-            "must lie in (0, 2): 1 is plain Gauss-Seidel (paper), above 1 over-relaxes",
-        )
-        _require(bool(np.all(np.asarray(self.noise_std) >= 0)), "noise_std", "must be >= 0 (mm)")
-        _require(
-            isinstance(self.sweeps, int) and 1 <= self.sweeps <= 200,
-            "sweeps",
-            "must be an integer in [1, 200]",
-        )
-        _require(
-            isinstance(self.chebyshev_rho, int | float | np.number)
-            and not isinstance(self.chebyshev_rho, bool)
-            and 0 <= self.chebyshev_rho < CHEBYSHEV_RHO_MAX,
-            "chebyshev_rho",
-            f"must lie in [0, {CHEBYSHEV_RHO_MAX:g}): 0 is plain Gauss-Seidel, larger extrapolates further "
-            f"(default {SimConfig.chebyshev_rho:g})",
-        )
+        """Itself, every field checked again (they may have been changed since) and the fields that depend
+        on each other checked together; :class:`ConfigError` naming ``SimConfig.field`` and the fix."""
+        self._check_fields()
         elasticity = np.asarray(self.elasticity, dtype=np.float32)  # (as the kernels read it)
         if self.chebyshev_rho > 0 and np.any(elasticity > np.float32(CHEBYSHEV_ELASTICITY_MAX)):
             raise ConfigError(
-                f"elasticity: above {CHEBYSHEV_ELASTICITY_MAX:g} the sweeps over-relax, and the Chebyshev "
-                f"extrapolation on top of that (chebyshev_rho {self.chebyshev_rho:g}) breaks the sheet; keep "
-                f"elasticity <= {CHEBYSHEV_ELASTICITY_MAX:g}, or set chebyshev_rho=0 (plain sweeps, "
-                "elasticity up to 2) and raise sweeps"
+                "SimConfig.elasticity",
+                f"above {CHEBYSHEV_ELASTICITY_MAX:g} the sweeps over-relax, and the Chebyshev extrapolation "
+                f"on top of that (chebyshev_rho {self.chebyshev_rho:g}) breaks the sheet; keep elasticity <= "
+                f"{CHEBYSHEV_ELASTICITY_MAX:g}, or set chebyshev_rho=0 (plain sweeps, elasticity up to 2) "
+                "and raise sweeps",
             )
         if self.sweeps >= 2 and self.chebyshev_rho > chebyshev_rho_limit(self.sweeps):
             raise ConfigError(
-                f"chebyshev_rho: {self.chebyshev_rho:g} extrapolates too far for {self.sweeps} sweeps (the "
-                f"sheet would oscillate and blow up); give at most {chebyshev_rho_limit(self.sweeps):.3f}, "
-                "0 (plain Gauss-Seidel), or more sweeps"
-            )
-        unknown = [s for s in self.springs if s not in SPRING_FAMILIES]
-        _require(
-            not unknown and "structural" in self.springs,
-            "springs",
-            f"choose from {SPRING_FAMILIES}, including 'structural' (got {tuple(self.springs)})",
-        )
-        _require(self.fixture in FIXTURES, "fixture", f"choose one of {FIXTURES} (got {self.fixture!r})")
-        for name in ("settle_updates", "updates_per_step"):
-            _require(
-                isinstance(getattr(self, name), int) and getattr(self, name) >= (name != "settle_updates"),
-                name,
-                "must be a non-negative integer" if name == "settle_updates" else "must be >= 1",
-            )
-        for name in ("trajectory_spacing_mm", "max_step_mm", "max_displacement_mm"):
-            value = getattr(self, name)
-            _require(
-                isinstance(value, int | float) and math.isfinite(value) and value > 0,
-                name,
-                "must be a positive number (mm)",
-            )
-        _require(self.score in SCORES, "score", f"choose one of {SCORES} (got {self.score!r})")
-        for name in ("cut_radius_mm", "grasp_radius_mm", "cut_height_mm"):
-            value = getattr(self, name)
-            _require(
-                value is None or (math.isfinite(value) and value > 0),
-                name,
-                "must be a positive number (mm) or None for the default"
-                + (" (no limit)" if name == "cut_height_mm" else ""),
+                "SimConfig.chebyshev_rho",
+                f"{self.chebyshev_rho:g} extrapolates too far for {self.sweeps} sweeps (the sheet would "
+                f"oscillate and blow up); give at most {chebyshev_rho_limit(self.sweeps):.3f}, 0 (plain "
+                "Gauss-Seidel), or more sweeps",
             )
         return self
+
+
+def _positive_mm(where: str, value: Any, optional: bool = False, note: str = "") -> None:
+    check_number(where, value, 0, low_open=True, unit="mm", optional=optional, note=note)
+
+
+def _resolution(where: str, value: Any) -> int | tuple[int, int]:
+    low, high = RESOLUTION_RANGE
+    requirement = f"an integer in [{low}, {high}], or a pair (nx, ny) of them (the paper: 25)"
+    if is_integer(value):
+        if not low <= value <= high:
+            fail(where, requirement, value)
+        return int(value)
+    pair = isinstance(value, list | tuple) or (isinstance(value, np.ndarray) and value.ndim == 1)
+    if not (pair and len(value) == 2 and all(is_integer(n) and low <= n <= high for n in value)):
+        fail(where, requirement, value)
+    return (int(value[0]), int(value[1]))
+
+
+def _springs(where: str, value: Any) -> tuple[str, ...]:
+    families = ", ".join(repr(s) for s in SPRING_FAMILIES)
+    ok = isinstance(value, list | tuple) and all(isinstance(s, str) and s in SPRING_FAMILIES for s in value)
+    if not (ok and "structural" in value):
+        fail(where, f"a list of spring families from {families}, including 'structural'", value)
+    return tuple(value)
+
+
+_FIELD_RULES: dict[str, Callable[[str, Any], Any]] = {
+    "width_mm": _positive_mm,
+    "height_mm": _positive_mm,
+    "resolution": _resolution,
+    "damping": lambda w, v: check_numbers(w, v, 0, 1, note="paper: 0.99"),
+    "dt": lambda w, v: check_numbers(w, v, 0, DT_MAX_S, low_open=True, unit="s", note="paper: 0.016"),
+    "gravity": lambda w, v: check_numbers(
+        w, v, 0, GRAVITY_MAX_MM_S2, unit="mm/s^2", note=f"downward; default {GRAVITY_MM_S2:g}"
+    ),
+    "elasticity": lambda w, v: check_numbers(
+        w, v, 0, 2, low_open=True, high_open=True, note="1 is plain Gauss-Seidel, above 1 over-relaxes"
+    ),
+    "noise_std": lambda w, v: check_numbers(w, v, 0, unit="mm", note="0: no process noise"),
+    "sweeps": lambda w, v: check_integer(w, v, 1, 200),
+    "chebyshev_rho": lambda w, v: check_number(
+        w, v, 0, CHEBYSHEV_RHO_MAX, high_open=True, note="0 is plain Gauss-Seidel; default 0.94"
+    ),
+    "springs": _springs,
+    "fixture": lambda w, v: check_choice(w, v, FIXTURES),
+    "first_order_z": check_flag,
+    "settle_updates": lambda w, v: check_integer(w, v, 0),
+    "updates_per_step": lambda w, v: check_integer(w, v, 1),
+    "trajectory_spacing_mm": _positive_mm,
+    "cut_radius_mm": lambda w, v: _positive_mm(w, v, True, "one grid spacing"),
+    "cut_height_mm": lambda w, v: _positive_mm(w, v, True, "no limit"),
+    "grasp_radius_mm": lambda w, v: _positive_mm(w, v, True, "1.6 grid spacings"),
+    "max_step_mm": _positive_mm,
+    "max_displacement_mm": _positive_mm,
+    "score": lambda w, v: check_choice(w, v, SCORES),
+}
+"""How each :class:`SimConfig` field is checked (:mod:`warpcut.validation`)."""
+
+
+def check_sim_field(where: str, name: str, value: Any) -> Any:
+    """``value`` checked as :class:`SimConfig`'s field ``name`` (whoever holds it: ``where`` names it in
+    the error), as the config stores it: NumPy scalars as Python numbers, ``resolution`` and ``springs``
+    as tuples. Raises :class:`ConfigError`."""
+    normalised = _FIELD_RULES[name](where, value)
+    if name in ("resolution", "springs"):
+        return normalised
+    return value.item() if isinstance(value, np.generic) else value
 
 
 def chebyshev_weights(sweeps: int, rho: float) -> np.ndarray:
@@ -385,11 +386,6 @@ def chebyshev_rho_limit(sweeps: int) -> float:
     return min(CHEBYSHEV_RHO_MAX, 1.0 / math.cosh(math.acosh(1.0 / CHEBYSHEV_RESIDUAL_MAX) / sweeps))
 
 
-def _require(ok: bool, name: str, fix: str) -> None:
-    if not ok:
-        raise ConfigError(f"{name}: {fix}")
-
-
 @dataclass
 class SheetGrid:
     """The rest (material) layout of the vertices: ``v = row * nx + col``, at ``(col * hx, row * hy)``."""
@@ -402,6 +398,11 @@ class SheetGrid:
     """(ny * nx, 2) rest positions (mm)."""
 
     def __post_init__(self) -> None:
+        self.nx, self.ny = (
+            check_integer(f"SheetGrid.{name}", getattr(self, name), 2) for name in ("nx", "ny")
+        )
+        for name in ("width_mm", "height_mm"):
+            _positive_mm(f"SheetGrid.{name}", getattr(self, name))
         xs = np.linspace(0.0, self.width_mm, self.nx)
         ys = np.linspace(0.0, self.height_mm, self.ny)
         gx, gy = np.meshgrid(xs, ys)
@@ -433,7 +434,7 @@ class SheetGrid:
         elif fixture == "rows":
             mask[[0, -1], :] = True
         else:
-            raise ConfigError(f"fixture: choose one of {FIXTURES} (got {fixture!r})")
+            check_choice("SheetGrid.fixture_mask", fixture, FIXTURES)
         return mask.ravel()
 
     def disc_mask(self, center_mm: np.ndarray, radius_mm: float) -> np.ndarray:
@@ -471,8 +472,8 @@ def randomize_ranges(
             raise ValueError(f"randomize_ranges: {name}: give finite low <= high (got [{low:g}, {high:g}])")
         try:  # each end must be a value SimConfig accepts
             SimConfig(**{name: low}).validated(), SimConfig(**{name: high}).validated()
-        except ValueError as error:
-            raise ValueError(f"randomize_ranges: {name}: [{low:g}, {high:g}]: {error}") from None
+        except ConfigError as error:
+            raise ValueError(f"randomize_ranges: {name}: [{low:g}, {high:g}]: {error.requirement}") from None
         chosen[name] = (low, high)
     if given:
         raise ValueError(

@@ -23,6 +23,7 @@ from warpcut.sim.memory import check_batch_memory
 from warpcut.sim.reads import StateReads
 from warpcut.sim.settling import SETTLE_PARAMETERS, SettledSheets
 from warpcut.sim.springs import spring_colours
+from warpcut.validation import check_choice, check_flag, check_instance, check_integer, check_text
 
 __all__ = [
     "DIVERGENCE_REASONS",
@@ -96,14 +97,19 @@ class Simulator(StateReads):
         threads: int | None = None,
         capture: bool | None = None,
     ):
-        if not isinstance(num_envs, int) or num_envs < 1:
-            raise ValueError(f"num_envs: must be a positive integer (got {num_envs!r})")
+        check_instance("Simulator.config", config, SimConfig, "a SimConfig")
+        num_envs = check_integer("Simulator.num_envs", num_envs, 1)
+        check_text("Simulator.device", device, optional=True, note="the default device")
+        backend = check_choice("Simulator.backend", backend, BACKENDS)
+        threads = check_integer("Simulator.threads", threads, 1, optional=True, note="one per core")
+        if capture is not None:
+            check_flag("Simulator.capture", capture)
         self.config = config.validated()
         self.num_envs = num_envs
         self.device = resolve_device(device)
         check_batch_memory(num_envs, self.config.nx * self.config.ny, device=self.device)
         self._seed_base = wp.zeros(1, dtype=wp.int32, device=self.device)
-        self.seed = int(seed)
+        self.seed = seed
         self.grid = SheetGrid.from_config(self.config)
         self.colours = spring_colours(self.config.springs)
         self.params = {name: self.config.per_env(name, num_envs) for name in PHYSICAL_PARAMETERS}
@@ -140,8 +146,6 @@ class Simulator(StateReads):
         self.grasped = np.zeros(num_envs, dtype=bool)
         self.x, self.x_prev, self._spare = self._buffers
         self.alive = self._alive[0]
-        if backend not in BACKENDS:
-            raise ValueError(f"backend: choose one of {BACKENDS} (got {backend!r})")
         is_cpu = self._is_cpu = wp.get_device(self.device).is_cpu
         self.backend = ("simd" if is_cpu else "colours") if backend == "auto" else backend
         if self.backend == "simd" and not is_cpu:
@@ -197,7 +201,7 @@ class Simulator(StateReads):
 
     @seed.setter
     def seed(self, value: int) -> None:
-        self._seed = int(value)
+        self._seed = check_integer("Simulator.seed", value, 0)
         # The colours path (and its captured graphs) reads the seed from device memory.
         self._seed_base.assign(np.array([self._noise_seed_base()], dtype=np.int32))
 

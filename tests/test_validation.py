@@ -1,0 +1,260 @@
+"""Every public config and constructor checks what it is given where it comes in (:mod:`warpcut.validation`):
+a wrong type or value is a one-line ``ValueError`` naming ``Class.field``, never a run with a value taken for
+another (a bool for a number, 0 envs for "the default") nor an error from deep inside."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import types
+import typing
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from hypothesis import event, given
+from hypothesis import strategies as st
+
+from envs import PatternCutEnv, PatternCutVecEnv
+from envs.options import EnvConfig, PatternCutOptions
+from warpcut import CuttingTask, SheetGrid, SimConfig, Simulator
+from warpcut.contours import Contour, load_contour
+
+CONTOUR = load_contour("circle-small")
+SMALL = SimConfig(resolution=5, settle_updates=5)
+
+
+def refused(build, where: str) -> str:
+    """The message of the ValueError ``build()`` raises: one line, starting with ``where: ``."""
+    with pytest.raises(ValueError) as error:
+        build()
+    message = str(error.value)
+    assert message.startswith(f"{where}: ") and "\n" not in message, message
+    return message
+
+
+# ------------------------------------------------------------------ what a hostile user found
+@pytest.mark.parametrize("num_envs", [0, -1, 2.0, True, "2"])
+def test_a_batch_of_no_envs_is_refused_not_run_as_one(num_envs):
+    message = refused(
+        lambda: CuttingTask(SMALL, CONTOUR, num_envs=num_envs, device="cpu"), "CuttingTask.num_envs"
+    )
+    assert message.endswith(f"an integer >= 1, or None for one per contour (got {num_envs!r})")
+    refused(lambda: Simulator(SMALL, num_envs, device="cpu"), "Simulator.num_envs")
+    refused(
+        lambda: PatternCutVecEnv(num_envs, contour="circle-small", device="cpu"), "PatternCutVecEnv.num_envs"
+    )
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [("noise_std", True), ("gravity", False), ("width_mm", True), ("damping", [True, 0.9]), ("sweeps", True)],
+)
+def test_a_bool_is_not_a_number(field, value):
+    assert refused(lambda: SimConfig(**{field: value}), f"SimConfig.{field}").endswith(f"(got {value!r})")
+
+
+def test_wrong_values_name_the_field_and_what_it_takes():
+    message = refused(lambda: SimConfig(gravity="high"), "SimConfig.gravity")
+    assert message == (
+        "SimConfig.gravity: a number in [0, 100000] mm/s^2, or a list of one per env (downward; default 521) "
+        "(got 'high')"
+    )
+    message = refused(lambda: SimConfig(resolution=25.5), "SimConfig.resolution")
+    assert message == (
+        "SimConfig.resolution: an integer in [5, 100], or a pair (nx, ny) of them (the paper: 25) (got 25.5)"
+    )
+    message = refused(lambda: SimConfig(cut_radius_mm="wide"), "SimConfig.cut_radius_mm")
+    assert message == "SimConfig.cut_radius_mm: a number > 0 mm, or None for one grid spacing (got 'wide')"
+
+
+def test_numpy_scalars_are_numbers_and_stored_as_python_ones():
+    config = SimConfig(
+        resolution=np.int64(9), sweeps=np.int32(7), gravity=np.float32(500.0), width_mm=np.float64(90.0)
+    )
+    assert (config.resolution, config.nx, config.sweeps) == (9, 9, 7) and type(config.resolution) is int
+    assert type(config.gravity) is float and type(config.width_mm) is float
+    assert SimConfig(resolution=[np.int64(9), 11]).resolution == (9, 11)
+    assert SimConfig(noise_std=np.array([0.01, 0.02])).per_env("noise_std", 2).tolist() == pytest.approx(
+        [0.01, 0.02]
+    )
+    assert SheetGrid(np.int64(5), 5, 100.0, 100.0).nx == 5
+    assert CuttingTask(SMALL, CONTOUR, num_envs=np.int64(2), seed=np.int64(3), device="cpu").num_envs == 2
+    assert PatternCutOptions(num_fiducials=np.int64(4), max_episode_steps=np.int32(5)).num_fiducials == 4
+
+
+def test_a_config_changed_after_it_was_made_is_checked_again():
+    config = SimConfig(resolution=5)
+    config.noise_std = True  # a dataclass's fields may be assigned; the task checks them all again
+    refused(lambda: CuttingTask(config, CONTOUR, device="cpu"), "SimConfig.noise_std")
+    options = PatternCutOptions(contour="circle-small", sim_config=SMALL, device="cpu")
+    options.num_fiducials = 2.0
+    refused(lambda: PatternCutVecEnv(1, options), "PatternCutOptions.num_fiducials")
+
+
+def test_the_envs_name_their_options_and_gym_make_too():
+    refused(lambda: PatternCutEnv(noise_std=True, device="cpu"), "PatternCutOptions.noise_std")
+    refused(
+        lambda: gym.make("warpcut/PatternCut-v0", contour="circle-small", num_fiducials=2.0),
+        "PatternCutOptions.num_fiducials",
+    )
+    refused(lambda: PatternCutVecEnv(2, render_envs=0, device="cpu"), "PatternCutVecEnv.render_envs")
+
+
+def test_a_json_options_file_names_the_field_as_the_file_has_it():
+    message = str(
+        pytest.raises(ValueError, PatternCutOptions.from_dict, {"sim_config": {"resolution": 2.5}}).value
+    )
+    assert message.startswith("options: sim_config.resolution: an integer in [5, 100]"), message
+    message = str(pytest.raises(ValueError, PatternCutOptions.from_dict, {"allow_z": "yes"}).value)
+    assert message == "options: allow_z: True or False (got 'yes')"
+
+
+# ------------------------------------------------------------------ every field of every public config
+def hint_kind(hint) -> str | None:
+    """What a field's type hint says it takes (None: a field with its own wrong values, :data:`SPECIAL`)."""
+    args = typing.get_args(hint) if typing.get_origin(hint) in (typing.Union, types.UnionType) else (hint,)
+    optional = type(None) in args
+    core = tuple(a for a in args if a is not type(None))
+    kinds = {(bool,): "flag", (int,): "count", (float,): "number", (str,): "text"}
+    kind = kinds.get(core)
+    if kind is None and float in core and int in core and np.ndarray in core:
+        kind = "per_env"
+    if kind is None and len(core) == 1 and dataclasses.is_dataclass(core[0]):
+        kind = "section"
+    return None if kind is None else kind + ("?" if optional else "")
+
+
+WRONG = {
+    "flag": [1, 0, "true", None],
+    "count": [True, 2.5, 2.0, "3", math.nan, None],
+    "number": [True, "1.0", math.nan, math.inf, -math.inf, None],
+    "text": [1, True, None],
+    "per_env": [True, "0.1", [0.1, "x"], [True, 0.5], math.nan, [math.nan], math.inf, [[0.1]], [], None],
+    "section": [5, "x"],
+}
+"""Values of the wrong type for each kind of field (``kind?``, an optional field: these but None)."""
+
+SPECIAL = {
+    "resolution": [25.5, True, "25", (5,), (5, 5.0), [5, True], 4, 101],
+    "springs": ["structural", ("shear",), ("structural", 1), None],
+    "contour": [123, None, [], [""], [5]],
+    "pinch_point": [[1, 2, 3], "ab", [math.nan, 1.0], [True, 1.0], 5],
+    "segments": ["abc", 5],
+    "sim_config": [5, "x", None],
+    "randomize": ["gravity", ["wind"], [1], None],
+    "randomize_ranges": [5, {"gravity": 5}, {"gravity": [0, "x"]}, {"gravity": [True, 1]}],
+    "Contour.name": [1, "", None],
+    "Contour.points": [
+        [[0, 0], [1, 1]],
+        np.zeros((3, 3)),
+        np.array([[0.0, 0.0], [np.nan, 1.0]]),
+        np.zeros((1, 2)),
+    ],
+    "Contour.sheet_size": [(100.0,), (True, 100.0), (100.0, math.inf), (0, 100), "ab", None],
+}
+"""Fields whose hint says too little: their own wrong values (by name, or ``Class.name``)."""
+
+
+def wrong_values(cls: type, name: str, hint) -> list:
+    special = SPECIAL.get(f"{cls.__name__}.{name}", SPECIAL.get(name))
+    if special is not None:
+        return special
+    kind = hint_kind(hint)
+    assert kind is not None, f"{cls.__name__}.{name}: add its wrong values to SPECIAL"
+    return [v for v in WRONG[kind.rstrip("?")] if not (kind.endswith("?") and v is None)]
+
+
+DATACLASS_BASES = {
+    SimConfig: {},
+    SheetGrid: {"nx": 5, "ny": 5, "width_mm": 100.0, "height_mm": 100.0},
+    EnvConfig: {},
+    PatternCutOptions: {},
+    Contour: {"name": "c", "closed": True, "points": CONTOUR.points},
+}
+"""The public config dataclasses, and the fields each needs to be made."""
+
+FIELD_CASES = [
+    (cls, f.name, value)
+    for cls, base in DATACLASS_BASES.items()
+    for f in dataclasses.fields(cls)
+    if f.init
+    for value in wrong_values(cls, f.name, typing.get_type_hints(cls)[f.name])
+]
+
+
+@pytest.mark.parametrize(
+    "cls, field, value", FIELD_CASES, ids=[f"{c.__name__}.{f}={v!r:.20}" for c, f, v in FIELD_CASES]
+)
+def test_every_config_field_refuses_a_wrong_value_by_name(cls, field, value):
+    refused(lambda: cls(**{**DATACLASS_BASES[cls], field: value}), f"{cls.__name__}.{field}")
+
+
+CONSTRUCTOR_CASES = {
+    "config": [None, {"resolution": 5}, "SimConfig()"],
+    "contours": [None, "circle-small", [], [CONTOUR, "x"]],
+    "num_envs": [0, 2.0, True, "1"],
+    "seed": [-1, 1.5, True, "0", None],
+    "device": [0, True],
+    "backend": ["magic", 1, None],
+    "threads": [0, 2.0, True],
+    "trace_path": [1, "yes", None],
+    "capture": [1, "yes"],
+}
+"""Wrong arguments of the constructors that are not dataclasses."""
+
+
+@pytest.mark.parametrize("arg", sorted(CONSTRUCTOR_CASES))
+def test_the_task_and_simulator_refuse_a_wrong_argument_by_name(arg):
+    task = {"config": SMALL, "contours": CONTOUR, "num_envs": 1, "device": "cpu"}
+    sim = {"config": SMALL, "num_envs": 1, "device": "cpu"}
+    for value in CONSTRUCTOR_CASES[arg]:
+        if arg != "capture":
+            refused(lambda v=value: CuttingTask(**{**task, arg: v}), f"CuttingTask.{arg}")
+        if arg not in ("contours", "trace_path"):
+            refused(lambda v=value: Simulator(**{**sim, arg: v}), f"Simulator.{arg}")
+
+
+# ------------------------------------------------------------------ fuzzing: a valid object or one line
+def anything() -> st.SearchStrategy:
+    """Values of every type a config field might be given, sane and not."""
+    scalars = st.one_of(
+        st.none(),
+        st.booleans(),
+        st.integers(-3, 300),
+        st.floats(allow_nan=True, allow_infinity=True),
+        st.sampled_from(
+            [np.int64(7), np.float32(0.5), np.bool_(True), "corners", "rows", "", "x", "structural"]
+        ),
+    )
+    return st.one_of(scalars, st.lists(scalars, max_size=3), st.lists(scalars, max_size=3).map(tuple))
+
+
+@pytest.mark.parametrize("cls", list(DATACLASS_BASES), ids=lambda c: c.__name__)
+@given(data=st.data())
+def test_any_value_of_any_field_makes_a_config_or_one_line_naming_the_field(cls, data):
+    names = [f.name for f in dataclasses.fields(cls) if f.init]
+    chosen = data.draw(st.lists(st.sampled_from(names), min_size=1, max_size=3, unique=True))
+    given_values = {name: data.draw(anything(), label=name) for name in chosen}
+    try:
+        made = cls(**{**DATACLASS_BASES[cls], **given_values})
+    except ValueError as error:  # never a TypeError, an AttributeError...
+        where = one_line_naming(error, cls.__name__)
+        assert where.split(".")[1] in given_values, str(error)
+        event(f"refused {where}")
+        return
+    if isinstance(made, SimConfig):
+        try:
+            made.validated()  # the fields that depend on each other: one of them is named
+        except ValueError as error:
+            event(f"refused {one_line_naming(error, 'SimConfig')}")
+            return
+    event("made")
+
+
+def one_line_naming(error: ValueError, owner: str) -> str:
+    """The ``Class.field`` an error names: one line, ``owner``'s field."""
+    message = str(error)
+    where = message.split(": ", 1)[0]
+    assert "\n" not in message and where.startswith(f"{owner}.") and ": " in message, message
+    return where
