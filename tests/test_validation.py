@@ -6,8 +6,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import subprocess
+import sys
 import types
 import typing
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -20,6 +24,7 @@ from envs.options import EnvConfig, PatternCutOptions
 from warpcut import CuttingTask, SheetGrid, SimConfig, Simulator
 from warpcut.contours import Contour, load_contour
 
+ROOT = Path(__file__).resolve().parents[1]
 CONTOUR = load_contour("circle-small")
 SMALL = SimConfig(resolution=5, settle_updates=5)
 
@@ -258,3 +263,45 @@ def one_line_naming(error: ValueError, owner: str) -> str:
     where = message.split(": ", 1)[0]
     assert "\n" not in message and where.startswith(f"{owner}.") and ": " in message, message
     return where
+
+
+# ------------------------------------------------------------------ errors that name the real cause
+
+
+CACHE_PROBE = """
+import errno, os, sys
+if sys.argv[1] == "read-only":  # what a read-only folder gives, for a user who is not root
+    real = os.makedirs
+    def makedirs(path, *args, **kwargs):
+        if str(path).startswith(os.environ["WARP_CACHE_PATH"]):
+            raise PermissionError(errno.EACCES, "Permission denied", str(path))
+        return real(path, *args, **kwargs)
+    os.makedirs = makedirs
+try:
+    from warpcut.sim.simulator import resolve_device
+
+    resolve_device("cpu")
+except ValueError as error:
+    print(type(error).__name__, error)
+"""
+
+
+@pytest.mark.parametrize("case", ["below-a-file", "read-only"])
+def test_an_unwritable_kernel_cache_is_named_with_the_fix(tmp_path, case):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    cache = blocker / "cache" if case == "below-a-file" else tmp_path / "cache"
+    env = {**os.environ, "WARP_CACHE_PATH": str(cache)}
+    env.pop("WARPCUT_VERBOSE", None)
+    done = subprocess.run(
+        [sys.executable, "-c", CACHE_PROBE, case],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env=env,
+        timeout=120,
+    )
+    line = done.stdout.strip()
+    assert done.returncode == 0 and "\n" not in line, done.stdout + done.stderr
+    assert line.startswith("KernelCacheError Warp kernels: cannot create or write the kernel cache, ")
+    assert f"WARP_CACHE_PATH={cache}" in line and "point WARP_CACHE_PATH at one" in line, line

@@ -10,12 +10,17 @@ initialised here, at import, with its standard error silenced when the driver ca
 ``wp.config`` options that ``wp.init()`` reads, such as the kernel cache, by their environment variables,
 e.g. ``WARP_CACHE_PATH``, or before importing warpcut's simulator).
 
+Warpcut initialises Warp through :func:`init` (at import, or when a device is resolved): a kernel cache
+that cannot be created or written (``WARP_CACHE_PATH`` pointing at a read-only folder, or below a file)
+raises :class:`KernelCacheError`, one line naming the cache and the fix, instead of a bare errno.
+
 warpcut launches its kernels through :func:`launch`, which loads each module once through
 :func:`load_module`: a module Warp cannot load (a corrupt kernel cache) raises :class:`KernelCacheError`,
 one line naming the cache directory to delete, instead of Warp's traceback.
 """
 
 import ctypes
+import errno
 import os
 import shlex
 import sys
@@ -54,9 +59,57 @@ def _init_quietly() -> None:
 
 
 class KernelCacheError(ValueError):
-    """Warp could not load (or compile) one of warpcut's kernel modules, most often because its kernel
-    cache holds truncated or garbled files; the message names the cache directory and how to clear it.
-    A ``ValueError`` so that the CLI reports it in one line."""
+    """Warp could not use its kernel cache: a cache folder that cannot be created or written (:func:`init`,
+    :func:`load_module`), or one of warpcut's kernel modules that could not be loaded, most often because
+    the cache holds truncated or garbled files; the message names the cache and the fix. A ``ValueError``
+    so that the CLI reports it in one line."""
+
+
+CACHE_ENV = "WARP_CACHE_PATH"
+"""The environment variable that moves Warp's kernel cache (read by ``wp.init()``)."""
+
+_UNWRITABLE = (errno.EACCES, errno.EPERM, errno.EROFS, errno.ENOTDIR, errno.EEXIST)
+"""What ``os.makedirs`` or a write in the cache fails with when the folder cannot be made or written."""
+
+
+def _cache_text() -> str:
+    """The kernel cache as the user knows it: ``WARP_CACHE_PATH=...`` where set, else Warp's folder."""
+    given = os.environ.get(CACHE_ENV)
+    if given:
+        return f"{CACHE_ENV}={given}"
+    return f"Warp's kernel cache {wp.config.kernel_cache_dir or '(its default folder)'}"
+
+
+def _unwritable_cache(error: OSError) -> KernelCacheError:
+    where = f" ({error.filename})" if error.filename else ""
+    reason = error.strerror or type(error).__name__
+    return KernelCacheError(
+        f"Warp kernels: cannot create or write the kernel cache, {_cache_text()}{where}: {reason}; make it a "
+        f"writable folder, or point {CACHE_ENV} at one (e.g. {CACHE_ENV}=/tmp/warp-cache)"
+    )
+
+
+def init() -> None:
+    """``wp.init()`` (quietly where the CUDA driver cannot be loaded, unless ``WARPCUT_VERBOSE``).
+
+    Raises:
+        KernelCacheError: The kernel cache folder cannot be created or written; the message names it
+            (``WARP_CACHE_PATH``) and the fix.
+    """
+    global _initialised
+    if _initialised:
+        return
+    quiet = not os.environ.get("WARPCUT_VERBOSE") and not _cuda_driver_loadable()
+    try:
+        _init_quietly() if quiet else wp.init()
+    except OSError as error:
+        if error.errno in _UNWRITABLE or isinstance(error, PermissionError):
+            raise _unwritable_cache(error) from None
+        raise
+    _initialised = True
+
+
+_initialised = False
 
 
 _loaded: set[tuple[str, str]] = set()
@@ -66,23 +119,31 @@ def load_module(module: wp.Module, device: str) -> None:
     """Load ``module`` on ``device`` (compile it, or read it from Warp's kernel cache) unless done before.
 
     Raises:
-        KernelCacheError: Warp failed (e.g. a corrupt cached binary or ``.meta`` file); the message says
-            where the cache is (``wp.config.kernel_cache_dir``) and to delete it.
+        KernelCacheError: Warp failed (e.g. a corrupt cached binary or ``.meta`` file, or a cache it cannot
+            write); the message says where the cache is (``wp.config.kernel_cache_dir``) and what to do.
     """
     key = (module.name, str(device))
     if key in _loaded:
         return
     try:
         wp.load_module(module, device=wp.get_device(device))
-    except Exception as error:  # Warp raises bare Exceptions, JSONDecodeError, OSError...
-        cache = wp.config.kernel_cache_dir
-        detail = " ".join(f"{type(error).__name__}: {error}".split())
-        raise KernelCacheError(
-            f"Warp kernels: could not load module {module.name!r} on {device} ({detail}); its kernel cache "
-            f"{cache!r} may be corrupt: delete that directory (rm -rf {shlex.quote(str(cache))}) and run "
-            "again, Warp recompiles the kernels"
-        ) from error
+    except OSError as error:
+        if error.errno in _UNWRITABLE or isinstance(error, PermissionError):
+            raise _unwritable_cache(error) from error
+        raise _corrupt_cache(module, device, error) from error
+    except Exception as error:  # Warp raises bare Exceptions, JSONDecodeError...
+        raise _corrupt_cache(module, device, error) from error
     _loaded.add(key)
+
+
+def _corrupt_cache(module: wp.Module, device: str, error: Exception) -> KernelCacheError:
+    cache = wp.config.kernel_cache_dir
+    detail = " ".join(f"{type(error).__name__}: {error}".split())
+    return KernelCacheError(
+        f"Warp kernels: could not load module {module.name!r} on {device} ({detail}); its kernel cache "
+        f"{cache!r} may be corrupt: delete that directory (rm -rf {shlex.quote(str(cache))}) and run "
+        "again, Warp recompiles the kernels"
+    )
 
 
 def launch(kernel: wp.Kernel, dim, inputs=(), outputs=(), device: str | None = None, **options) -> None:
@@ -158,6 +219,15 @@ class LaunchRecords(dict):
 if not os.environ.get("WARPCUT_VERBOSE"):
     wp.config.log_level = wp.LOG_WARNING
     if not _cuda_driver_loadable():
-        _init_quietly()
+        init()
 
-__all__ = ["KernelCacheError", "LaunchRecord", "LaunchRecords", "launch", "load_module", "wp"]
+__all__ = [
+    "CACHE_ENV",
+    "KernelCacheError",
+    "LaunchRecord",
+    "LaunchRecords",
+    "init",
+    "launch",
+    "load_module",
+    "wp",
+]

@@ -15,7 +15,7 @@ from concurrent.futures import ThreadPoolExecutor, wait
 import numpy as np
 
 from warpcut.sim import kernels
-from warpcut.sim._warp import LaunchRecords, launch, wp
+from warpcut.sim._warp import LaunchRecords, init, launch, wp
 from warpcut.sim.checks import DIVERGENCE_REASONS, check_pinch_points
 from warpcut.sim.config import PHYSICAL_PARAMETERS, SheetGrid, SimConfig, SimulationDiverged
 from warpcut.sim.kernels_simd import SimdModel, SimdState
@@ -47,7 +47,7 @@ def default_device() -> str:
 
 def resolve_device(device: str | None) -> str:
     """Check a device name against what Warp sees; raise ValueError naming the fix."""
-    wp.init()
+    init()
     device = device or default_device()
     names = [str(d) for d in wp.get_devices()]
     if device == "cuda" and not wp.is_cuda_available():
