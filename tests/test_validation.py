@@ -266,6 +266,19 @@ def one_line_naming(error: ValueError, owner: str) -> str:
 
 
 # ------------------------------------------------------------------ errors that name the real cause
+def test_a_contour_path_that_is_not_a_regular_file_says_what_it_is(tmp_path):
+    fifo = tmp_path / "shape.json"
+    os.mkfifo(fifo)  # reading it would block: it is never opened
+    with pytest.raises(
+        ValueError, match=r"shape\.json' is not a regular file \(a FIFO\); give a built-in name"
+    ):
+        load_contour(fifo)
+    zero = tmp_path / "zero.json"
+    zero.symlink_to("/dev/zero")  # reading it would never end
+    with pytest.raises(ValueError, match=r"zero\.json' is not a regular file \(a character device\)"):
+        load_contour(zero)
+    with pytest.raises(ValueError, match=r"and no such file"):
+        load_contour(tmp_path / "missing.json")
 
 
 CACHE_PROBE = """

@@ -32,6 +32,7 @@ import json
 import math
 import os
 import re
+import stat
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from pathlib import Path
@@ -63,21 +64,46 @@ def load_contour(
         return builtin_contours(sheet_size)[key]
     path = Path(key)
     suffix = path.suffix.lower()
-    if path.is_file() and suffix == ".json":
+    kind = file_kind(path)
+    if kind == "file" and suffix == ".json":
         return _load_json(path, sheet_size)
-    if path.is_file() and suffix == ".svg":
+    if kind == "file" and suffix == ".svg":
         return _load_svg(path, sheet_size)
-    why = (
-        "a directory, not a contour file"
-        if path.is_dir()
-        else "no such file"
-        if not path.is_file()
-        else f"'{path.suffix}' is not a supported file type"
-    )
+    if kind not in (None, "file", "directory"):  # never opened: a FIFO would block, /dev/zero never end
+        raise ContourError(
+            f"contour {key!r} is not a regular file ({kind}); give a built-in name or a path to a .json or "
+            ".svg contour file"
+        )
+    why = {
+        None: "no such file",
+        "file": f"'{path.suffix}' is not a supported file type",
+        "directory": "a directory, not a contour file",
+    }[kind]
     raise ContourError(
         f"unknown contour {key!r}: not a built-in name (known: {', '.join(builtin_names())}) and {why}; "
         "give a built-in name or a path to a .json or .svg contour"
     )
+
+
+def file_kind(path: Path) -> str | None:
+    """What ``path`` is, following symbolic links: ``"file"`` (a regular file), ``"directory"``, another
+    kind in words (``"a FIFO"``, ``"a character device"``, ...: never opened, so reading a FIFO cannot block
+    and ``/dev/zero`` is not read forever), or None where nothing is there (or it cannot be looked at)."""
+    try:
+        mode = path.stat().st_mode
+    except (OSError, ValueError):  # ValueError: a NUL byte in the name
+        return None
+    if stat.S_ISREG(mode):
+        return "file"
+    if stat.S_ISDIR(mode):
+        return "directory"
+    kinds = {
+        stat.S_ISFIFO: "a FIFO",
+        stat.S_ISCHR: "a character device",
+        stat.S_ISBLK: "a block device",
+        stat.S_ISSOCK: "a socket",
+    }
+    return next((name for test, name in kinds.items() if test(mode)), "not a file")
 
 
 def _load_json(path: Path, sheet_size: tuple[float, float]) -> Contour:
