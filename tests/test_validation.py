@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import re
 import subprocess
 import sys
 import types
@@ -318,3 +319,16 @@ def test_an_unwritable_kernel_cache_is_named_with_the_fix(tmp_path, case):
     assert done.returncode == 0 and "\n" not in line, done.stdout + done.stderr
     assert line.startswith("KernelCacheError Warp kernels: cannot create or write the kernel cache, ")
     assert f"WARP_CACHE_PATH={cache}" in line and "point WARP_CACHE_PATH at one" in line, line
+
+
+def test_the_memory_limit_names_what_simulate_controls(monkeypatch):
+    from agents.baselines import search_fixed_pinch
+
+    monkeypatch.setenv("WARPCUT_MEMORY_LIMIT_GB", "0.002")
+    with pytest.raises(ValueError) as error:
+        search_fixed_pinch(CONTOUR, SimConfig(resolution=25), device="cpu")
+    message = str(error.value)
+    assert re.match(
+        r"fixed's pinch search \(one env per candidate pinch point\): \d+ envs would need", message
+    )
+    assert "give fixed a pinch point (simulate --pinch X,Y)" in message and "num_envs" not in message

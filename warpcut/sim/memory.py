@@ -115,6 +115,7 @@ def check_batch_memory(
     device: str | None = None,
     name: str = "num_envs",
     envs_per_unit: int = 1,
+    fix: str | None = None,
 ) -> None:
     """Refuse a batch that would not fit in memory, before anything is allocated.
 
@@ -126,6 +127,8 @@ def check_batch_memory(
         name: The parameter the user sets, named in the error (``num_envs``, ``trials``...).
         envs_per_unit: Envs per unit of ``name`` (e.g. contours per trial): the error's largest value of
             ``name`` that fits is ``B / envs_per_unit`` scaled down.
+        fix: What the user can change, where the batch size is not theirs to give (e.g. a search's
+            candidates): said after how many envs would fit, instead of "use at most N".
 
     Raises:
         ValueError: The estimate exceeds the limit (:func:`memory_limit`); the message names ``name``,
@@ -135,18 +138,26 @@ def check_batch_memory(
     limit, source = memory_limit()
     shape = (num_envs, envs_per_unit, num_vertices, horizon_updates)
     if needed > limit:
-        _refuse(name, shape, needed, limit, source, f"or set {MEMORY_LIMIT_ENV} to the GB a batch may use")
+        _refuse(
+            name, shape, needed, limit, source, f"or set {MEMORY_LIMIT_ENV} to the GB a batch may use", fix
+        )
     if device is not None and str(device).startswith("cuda"):
         from warpcut.sim._warp import wp
 
         free = getattr(wp.get_device(device), "free_memory", None)
         per_env = DEVICE_BYTES_PER_VERTEX * num_vertices + DEVICE_BYTES_PER_UPDATE * horizon_updates
         if free is not None and num_envs * per_env > free:
-            _refuse(name, shape, num_envs * per_env, free, f"the free memory of {device}", "")
+            _refuse(name, shape, num_envs * per_env, free, f"the free memory of {device}", "", fix)
 
 
 def _refuse(
-    name: str, shape: tuple[int, int, int, int], needed: float, limit: float, source: str, hint: str
+    name: str,
+    shape: tuple[int, int, int, int],
+    needed: float,
+    limit: float,
+    source: str,
+    hint: str,
+    fix: str | None = None,
 ) -> None:
     num_envs, envs_per_unit, num_vertices, horizon_updates = shape
     per_env = needed / max(num_envs, 1)
@@ -155,7 +166,9 @@ def _refuse(
     if envs_per_unit != 1:
         what = f"{num_envs // envs_per_unit} x {envs_per_unit} = {what}"
     advice = f"use at most {fits}" + (f" ({hint})" if hint else "")
-    if fits < 1:  # not a matter of batch size: each env is too big
+    if fix is not None:
+        advice = f"at most {fits} envs fit; {fix}" + (f" ({hint})" if hint else "")
+    elif fits < 1:  # not a matter of batch size: each env is too big
         advice = (
             f"even one is too big: its sheet has {num_vertices} vertices (resolution) and its episode "
             f"{horizon_updates} updates (the contour's length over trajectory_spacing_mm)"
