@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from warpcut.contours import Contour
-from warpcut.planning import default_pinch, pinch_candidates
+from warpcut.planning import ArmModel, default_pinch, pinch_candidates
 from warpcut.sim.config import AUTHORS_UNITS_PER_MM, PINCH_CANDIDATES, SimConfig
 from warpcut.sim.memory import check_batch_memory
 from warpcut.task import CuttingTask, SimulationDiverged, estimate_horizon
@@ -115,16 +115,18 @@ def search_fixed_pinches(
     candidates: int = PINCH_CANDIDATES,
     device: str | None = None,
     seed: int = 0,
+    arm: ArmModel = ArmModel(),
 ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """:func:`search_fixed_pinch` for several contours at once: all their candidates form one batch.
 
-    Candidates are scored noise-free, so the search is deterministic for a seed.
+    Candidates are scored noise-free, so the search is deterministic for a seed; they are feasible with the
+    cutting ``arm`` (:func:`warpcut.planning.pinch_candidates`).
 
     Raises:
         SimulationDiverged: A candidate's simulation diverged (its error is NaN, so no best could be told).
     """
     rng = np.random.default_rng(seed)
-    points = [pinch_candidates(c, config, num=candidates, rng=rng) for c in contours]
+    points = [pinch_candidates(c, config, num=candidates, rng=rng, arm=arm) for c in contours]
     owners = [c for c, p in zip(contours, points, strict=True) for _ in range(len(p))]
     check_batch_memory(  # named here: the task would name num_envs, a count nobody gave
         len(owners),
@@ -135,8 +137,9 @@ def search_fixed_pinches(
         fix="give fixed a pinch point (simulate --pinch X,Y) and it searches none, or lower sim.resolution",
     )
     task = CuttingTask(
-        config.replace(noise_std=0.0), owners, pinch_points=np.vstack(points), device=device, seed=seed
-    )
+        config.replace(noise_std=0.0), owners, pinch_points=np.vstack(points), device=device, seed=seed,
+        arm=arm,
+    )  # fmt: skip
     score = task.run(None)
     if score.diverged is not None and score.diverged.any():
         bad = sorted({owners[e].name for e in np.flatnonzero(score.diverged)})

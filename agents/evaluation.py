@@ -8,10 +8,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.baselines import AnalyticTension, search_fixed_pinches
+from agents.baselines import search_fixed_pinches
 from agents.config import EVALUATION_TRIALS
 from agents.methods import BASELINES, StepCallbacks, tensioner
 from warpcut.contours import Contour
+from warpcut.planning import ArmModel, check_pinch, default_pinch
 from warpcut.scoring import mean_ci95, paired_improvement
 from warpcut.sim.config import SimConfig
 from warpcut.sim.memory import check_batch_memory
@@ -36,12 +37,15 @@ class Method:
         segments: Per contour, the polylines cut in order, replacing the suite's ``segments`` for this
             method (e.g. the order that is best at the method's own pinch point); a None entry: the suite's.
         result: The method's outcome, run elsewhere (e.g. ``rl`` through its env): taken as is.
+        allow_infeasible_pinch: Run ``pinches`` the gripper could not hold (e.g. the analytic controller at
+            the centroid, the paper's literal choice); its rows mark them (``METHOD_pinch_feasible``).
     """
 
     name: str
     pinches: Sequence[np.ndarray | None] | None = None
     segments: Sequence[list[np.ndarray] | None] | None = None
     result: MethodResult | None = None
+    allow_infeasible_pinch: bool = False
 
 
 @dataclass
@@ -62,6 +66,9 @@ class MethodResult:
     diverged: np.ndarray | None = None
     """(num_contours, trials) bool: the trial's simulation diverged, its error is NaN (None: not
     measured; a NaN error counts as diverged all the same)."""
+    pinch_problems: list[str | None] | None = None
+    """Per contour, why its pinch point is not a feasible grasp (:func:`warpcut.planning.pinch_problems`),
+    or None: feasible, or no grasp (the list None: not judged)."""
 
     @classmethod
     def from_rollouts(cls, rollouts: Sequence[dict]) -> MethodResult:
@@ -76,6 +83,7 @@ class MethodResult:
             np.array([r["separated"] for r in rollouts]),
             np.array([r["dropped_fraction"] for r in rollouts]),
             diverged,
+            [r.get("pinch_problem") for r in rollouts],
         )
 
     def diverged_trials(self) -> np.ndarray:
@@ -85,16 +93,23 @@ class MethodResult:
 
 
 def baseline_pinches(
-    contours: Sequence[Contour], method: str, config: SimConfig, device: str | None, seed: int
+    contours: Sequence[Contour],
+    method: str,
+    config: SimConfig,
+    device: str | None,
+    seed: int,
+    arm: ArmModel = ArmModel(),
 ) -> list[np.ndarray | None]:
-    """A baseline's own pinch point per contour: none has no grasp; fixed searches (one batched random
-    search over all contours, noise-free); analytic pinches the centroid, or the feasible point nearest it."""
+    """A baseline's own pinch point per contour, feasible with the cutting ``arm``: none has no grasp; fixed
+    searches (one batched random search over all contours, noise-free); analytic pinches the centroid, or
+    the feasible point nearest it."""
     if method == "none":
         return [None] * len(contours)
     if method == "fixed":
-        return [best for best, _, _ in search_fixed_pinches(list(contours), config, device=device, seed=seed)]
+        found = search_fixed_pinches(list(contours), config, device=device, seed=seed, arm=arm)
+        return [best for best, _, _ in found]
     if method == "analytic":
-        return [AnalyticTension().pinch_point(c, config) for c in contours]
+        return [default_pinch(c, config, arm) for c in contours]
     raise ValueError(f"methods: {method!r} is not a baseline; baselines are {', '.join(BASELINES)}")
 
 
@@ -109,6 +124,8 @@ def run_method(
     on_step: StepCallback | None = None,
     segments: Sequence[list[np.ndarray] | None] | None = None,
     allow_diverged: bool = False,
+    arm: ArmModel | None = None,
+    allow_infeasible_pinch: bool = False,
 ) -> MethodResult:
     """A tensioner on every (contour, trial): one simulator batch for everything.
 
@@ -124,11 +141,15 @@ def run_method(
         segments: Per contour, the polylines cut in order (None: the default single segment).
         allow_diverged: Return trials whose simulation diverged (NaN errors, flagged in ``diverged``)
             instead of raising (the sensitivity studies, which count them).
+        arm: The cutting arm a pinch point must stay clear of (default: the paper's).
+        allow_infeasible_pinch: Run pinch points the gripper could not hold instead of refusing them; the
+            result says which (``pinch_problems``).
 
     Raises:
         ValueError: The batch (``trials`` x contours envs) would not fit in memory (the message names
             ``trials``, the estimate and the limit: :mod:`warpcut.sim.memory`), or a pinch point is not
-            finite.
+            finite, or not a feasible grasp (:class:`~warpcut.planning.InfeasiblePinch`, unless
+            ``allow_infeasible_pinch``).
         SimulationDiverged: Some trials diverged (non-finite or runaway vertex positions), unless
             ``allow_diverged``; the message counts them per contour and names the parameters to lower. No
             error is averaged over them.
@@ -154,8 +175,9 @@ def run_method(
     points = np.array([np.full(2, np.nan) if p is None else p for _, p in envs], dtype=np.float64)
     per_env_segments = None if cut is None else [s for s in cut for _ in range(trials)]
     task = CuttingTask(
-        config, [c for c, _ in envs], pinch_points=points, segments=per_env_segments, device=device, seed=seed
-    )
+        config, [c for c, _ in envs], pinch_points=points, segments=per_env_segments, device=device,
+        seed=seed, arm=arm, allow_infeasible_pinch=allow_infeasible_pinch,
+    )  # fmt: skip
     score = task.run(policy, on_step=on_step)
     shape = (len(contours), trials)
     result = MethodResult(
@@ -165,6 +187,7 @@ def run_method(
         score.separated.reshape(shape),
         score.dropped_fraction.reshape(shape),
         task.diverged().reshape(shape),
+        task.pinch_problems[::trials],
     )
     if result.diverged_trials().any() and not allow_diverged:
         reasons = [r for r in task.divergence_reasons() if r is not None]
@@ -193,6 +216,8 @@ def evaluate_suite(
     segments: Sequence[list[np.ndarray] | None] | None = None,
     progress: Callable[[str], None] = lambda _: None,
     step_callbacks: StepCallbacks | None = None,
+    arm: ArmModel | None = None,
+    allow_infeasible_pinch: bool = False,
 ) -> dict:
     """The Table I protocol: per contour the no-tension error and each method's improvement over it.
 
@@ -212,6 +237,10 @@ def evaluate_suite(
         progress: Called with a short description before each method runs.
         step_callbacks: ``step_callbacks(method, first_contour)`` gives the step callback of a batch run
             here (all contours, so ``first_contour`` is 0), e.g. a recorder's; None: none.
+        arm: The cutting arm every pinch point must stay clear of (default: the paper's).
+        allow_infeasible_pinch: Run given pinch points the gripper could not hold instead of refusing them
+            (:class:`~warpcut.planning.InfeasiblePinch`, before anything runs); a method may allow its own
+            (:attr:`Method.allow_infeasible_pinch`). Rows mark them.
 
     Raises:
         SimulationDiverged: A method's trials diverged (:func:`run_method`; a given result with NaN
@@ -221,6 +250,7 @@ def evaluate_suite(
     Returns:
         ``{"score": "path"|"separated", "rows": [{"contour", "none_error_vertices", "none_error_mm2",
         "METHOD_error_vertices", "METHOD_improvement_pct", "METHOD_ci95", "METHOD_pinch",
+        "METHOD_pinch_feasible" (null without a grasp), "METHOD_pinch_problem" (why not, or null),
         "METHOD_separated_fraction", "METHOD_dropped_fraction", ...}], "mean": {"METHOD_improvement_pct",
         "METHOD_ci95"}, "trials": int}``. Errors are under ``config.score``. The mean row averages the
         per-contour improvements; its CI is over contours, as in the paper's table.
@@ -238,9 +268,16 @@ def evaluate_suite(
     for name, value in [("segments", segments)] + [(f"{m}.segments", s.segments) for m, s in specs.items()]:
         if value is not None and len(value) != len(contours):
             raise ValueError(f"{name}: give one list of polylines (or None) per contour ({len(contours)})")
+    arm = ArmModel() if arm is None else arm
     for spec in specs.values():  # before anything runs
-        if spec.pinches is not None and len(spec.pinches) == len(contours):
+        if spec.pinches is not None and len(spec.pinches) == len(contours) and spec.result is None:
             _check_pinches(contours, spec.pinches)
+            allowed = allow_infeasible_pinch or spec.allow_infeasible_pinch
+            for k, (contour, pinch) in enumerate(zip(contours, spec.pinches, strict=True)):
+                cut = spec.segments[k] if spec.segments is not None else None
+                cut = cut if cut is not None else (None if segments is None else segments[k])
+                if pinch is not None:
+                    check_pinch(pinch, contour, config, cut, arm, allow=allowed)
     results = {}
     for method in order:
         spec = specs[method]
@@ -254,7 +291,7 @@ def evaluate_suite(
             raise ValueError(f"methods: {method!r} is not a baseline; give its result (Method.result)")
         pinches = spec.pinches
         if pinches is None:
-            pinches = baseline_pinches(contours, method, config, device, seed)
+            pinches = baseline_pinches(contours, method, config, device, seed, arm)
         elif len(pinches) != len(contours):
             raise ValueError(f"{method}.pinches: give one point per contour ({len(contours)})")
         pinches = [None if p is None else np.asarray(p, dtype=np.float64) for p in pinches]
@@ -270,8 +307,9 @@ def evaluate_suite(
         callback = step_callbacks(method, 0) if step_callbacks is not None else None
         try:
             results[method] = run_method(
-                contours, pinches, tensioner(method), trials, config, device, seed, callback, segments=cut
-            )
+                contours, pinches, tensioner(method), trials, config, device, seed, callback, segments=cut,
+                arm=arm, allow_infeasible_pinch=allow_infeasible_pinch or spec.allow_infeasible_pinch,
+            )  # fmt: skip
         except SimulationDiverged as error:
             raise SimulationDiverged(f"{method}: {error}") from None
     rows = [
@@ -297,11 +335,15 @@ def _row(name: str, k: int, results: dict[str, MethodResult], shown: list[str]) 
     for method in shown:
         result = results[method]
         pinch = result.pinches[k]
+        problem = None if result.pinch_problems is None else result.pinch_problems[k]
         improvement = paired_improvement(none.error_vertices[k], result.error_vertices[k])
         row[f"{method}_error_vertices"] = float(result.error_vertices[k].mean())
         row[f"{method}_error_mm2"] = float(result.error_mm2[k].mean())
         row[f"{method}_improvement_pct"], row[f"{method}_ci95"] = mean_ci95(improvement)
         row[f"{method}_pinch"] = None if pinch is None else [float(v) for v in pinch]
+        judged = pinch is not None and result.pinch_problems is not None
+        row[f"{method}_pinch_feasible"] = problem is None if judged else None
+        row[f"{method}_pinch_problem"] = problem
         row[f"{method}_trials_error_vertices"] = [float(e) for e in result.error_vertices[k]]
         row[f"{method}_separated_fraction"] = _mean_or_none(result.separated, k)
         row[f"{method}_dropped_fraction"] = _mean_or_none(result.dropped, k)
@@ -325,22 +367,30 @@ def compare_policies(
     device: str | None = None,
     seed: int = 0,
     step_callbacks: StepCallbacks | None = None,
+    allow_infeasible_pinch: bool = False,
 ) -> dict:
     """One contour, the baseline tensioners: the ``warpcut simulate`` report.
 
-    ``pinch`` replaces the pinch point of fixed and analytic; ``step_callbacks`` as in
-    :func:`evaluate_suite`.
+    ``pinch`` replaces the pinch point of fixed and analytic: one the gripper could not hold (on or near the
+    cut line, under the cutting arm: :func:`warpcut.planning.pinch_problems`) is refused
+    (:class:`~warpcut.planning.InfeasiblePinch`) unless ``allow_infeasible_pinch``. ``step_callbacks`` as
+    in :func:`evaluate_suite`.
 
     Returns:
         ``{"contour": name, "score": "path"|"separated", "results": {method: {"error_vertices",
         "error_mm2", "improvement_pct", "ci95_pct", "trials_error_vertices", "separated_fraction",
-        "dropped_fraction", "pinch"}}}``: means over trials; ``improvement_pct`` is the mean paired
-        improvement over no tension (0 for ``none`` itself); ``separated_fraction`` the share of trials
-        whose piece came free, ``dropped_fraction`` the mean share of the cut path dropped.
+        "dropped_fraction", "pinch", "pinch_feasible", "pinch_problem"}}}``: means over trials;
+        ``improvement_pct`` is the mean paired improvement over no tension (0 for ``none`` itself);
+        ``separated_fraction`` the share of trials whose piece came free, ``dropped_fraction`` the mean share
+        of the cut path dropped; ``pinch_feasible`` false (and ``pinch_problem`` why) for a pinch point
+        the gripper could not hold, null without a grasp.
     """
     given = None if pinch is None else [np.asarray(pinch, dtype=np.float64)]
     specs = [Method(m, pinches=given if m in ("fixed", "analytic") else None) for m in methods]
-    report = evaluate_suite([contour], specs, trials, config, device, seed, step_callbacks=step_callbacks)
+    report = evaluate_suite(
+        [contour], specs, trials, config, device, seed, step_callbacks=step_callbacks,
+        allow_infeasible_pinch=allow_infeasible_pinch,
+    )  # fmt: skip
     row = report["rows"][0]
     results = {}
     for method in methods:
@@ -353,5 +403,7 @@ def compare_policies(
             "separated_fraction": row[f"{method}_separated_fraction"],
             "dropped_fraction": row[f"{method}_dropped_fraction"],
             "pinch": row[f"{method}_pinch"],
+            "pinch_feasible": row[f"{method}_pinch_feasible"],
+            "pinch_problem": row[f"{method}_pinch_problem"],
         }
     return {"contour": contour.name, "score": report["score"], "results": results}

@@ -37,7 +37,7 @@ from agents.config import (
 )
 from warpcut.contours import Contour
 from warpcut.planning import ArmModel
-from warpcut.planning.feasibility import pinch_feasible
+from warpcut.planning.feasibility import check_pinch, pinch_feasible
 from warpcut.sim.config import SimConfig, randomize_ranges, sample_parameters
 from warpcut.task import CuttingTask, NoTensionReference
 
@@ -214,10 +214,13 @@ def _settings_of(saved: dict | None) -> dict | None:
 
 
 def _episodes(contour, point, segments, config, count: int, device, seed: int) -> CuttingTask:
-    """``count`` noisy episodes of cutting ``contour`` (``segments``) with the grasp at ``point``."""
+    """``count`` noisy episodes of cutting ``contour`` (``segments``) with the grasp at ``point``, which
+    :func:`optimize_plan` judged (a pinch point it moves stays feasible)."""
     cut = None if segments is None else [segments] * count
-    points = np.tile(point, (count, 1))
-    return CuttingTask(config, [contour] * count, pinch_points=points, segments=cut, device=device, seed=seed)
+    points, contours = np.tile(point, (count, 1)), [contour] * count
+    return CuttingTask(
+        config, contours, pinch_points=points, segments=cut, device=device, seed=seed, allow_infeasible_pinch=True
+    )
 
 
 class TapeGradient:
@@ -380,6 +383,7 @@ def optimize_plan(
     arm: ArmModel | None = None,
     log: Callable[[str], None] = lambda _: None,
     state_file: Path | None = None,
+    allow_infeasible_pinch: bool = False,
 ) -> PlanResult:
     """Optimise a plan (open or closed loop: ``es_feedback_phases``) for ``contour`` at ``pinch`` (module).
 
@@ -389,16 +393,18 @@ def optimize_plan(
         config: Simulation settings (default ``SimConfig()``), with the evaluation's noise.
         settings: The optimiser's (:class:`~agents.config.GradConfig`).
         device, seed: Warp device; seed (the episodes use ``seed + GRAD_SEED_OFFSET``).
-        arm: The cutting arm whose footprint a moved pinch point must avoid (default: the paper's).
+        arm: The cutting arm whose footprint the pinch point must avoid (default: the paper's).
         log: Called with a progress line every few iterations.
         state_file: The optimiser's state is written here (atomically) after every iteration, and an
             optimisation interrupted (Ctrl-C, a crash) continues from it when it exists (it must be of
             the same contour, pinch point and settings).
+        allow_infeasible_pinch: Optimise at a ``pinch`` the gripper could not hold instead of refusing it.
     """
     from warpcut.io import write_json
 
     settings, config, arm = settings.validated(), (config or SimConfig()).validated(), arm or ArmModel()
     pinch = np.asarray(pinch, dtype=np.float64).reshape(2)
+    check_pinch(pinch, contour, config, segments, arm, allow=allow_infeasible_pinch)  # InfeasiblePinch
     es = settings.estimator == "es"
     b = settings.es_population * settings.es_trials if es else settings.trials
 
@@ -415,7 +421,6 @@ def optimize_plan(
 
     rollout, validation = engine(pinch), checker(pinch)
     steps = rollout.num_steps
-    max_step = config.max_step_mm
     plan = np.zeros((steps, 3), dtype=np.float32)
     phases = settings.es_feedback_phases
     shape = (phases, 3, 4 if settings.es_feedback_sag else 2)  # 3 x 4: scheduled on the sag
@@ -432,11 +437,9 @@ def optimize_plan(
     if state is not None:
         first, history, elapsed = state["iteration"], state["history"], state["seconds"]
         plan, pinch = np.asarray(state["plan"], np.float32), np.asarray(state["pinch"])
-        (
-            moves.load(state["moves"]),
-            pinch_moves.load(state["pinch_moves"]),
-            gain_moves.load(state["gain_moves"]),
-        )
+        moves.load(state["moves"])
+        pinch_moves.load(state["pinch_moves"])
+        gain_moves.load(state["gain_moves"])
         rollout.load(state["estimator"])
         gains = None if state["gains"] is None else np.asarray(state["gains"], np.float32)
         error, it, best_plan, best_pinch, best_gains = state["best"]
@@ -462,7 +465,7 @@ def optimize_plan(
             log(f"  iteration {iteration}: {surrogate}error {error:.2f} vertices ({record['seconds']:.0f} s)")
         if last:
             break
-        plan = np.clip(plan + moves.step(step), -max_step, max_step).astype(np.float32)
+        plan = np.clip(plan + moves.step(step), -config.max_step_mm, config.max_step_mm).astype(np.float32)
         if gains is not None:
             gains = (gains + gain_moves.step(gains_step)).astype(np.float32)
         if settings.optimize_pinch:
@@ -504,23 +507,30 @@ def grad_result(
     log: Callable[[str], None] = lambda _: None,
     arm: ArmModel | None = None,
     on_step: StepCallback | None = None,
+    allow_infeasible_pinch: bool = False,
 ) -> tuple[MethodResult, list[PlanResult]]:
     """The ``grad`` method on a suite: a plan per contour, then every (contour, trial) played in one batch
     with the evaluation's noise (paired with the baselines'); ``(MethodResult, [PlanResult])``.
 
     ``folder``: each contour's plan is kept in ``NAME.json`` (a plan found there is used as it is) and its
     optimiser's state in ``NAME.state.json`` while it runs (an interrupted optimisation continues).
-    ``on_step``: the evaluation batch's step callback (:meth:`CuttingTask.run`), e.g. the regions plot's."""
+    ``on_step``: the evaluation batch's step callback (:meth:`CuttingTask.run`), e.g. the regions plot's.
+    ``allow_infeasible_pinch``: optimise and play at pinch points the gripper could not hold (the result's
+    ``pinch_problems`` say which) instead of refusing them."""
     from agents.evaluation import run_method
 
     n = len(contours)
     results = [
-        cached_plan(contour, pinch, cut, config, settings, device, seed, folder, log, arm, f"[{k + 1}/{n}] ")
+        cached_plan(
+            contour, pinch, cut, config, settings, device, seed, folder, log, arm, f"[{k + 1}/{n}] ",
+            allow_infeasible_pinch,
+        )
         for k, (contour, pinch, cut) in enumerate(zip(contours, pinches, segments, strict=True))
-    ]
+    ]  # fmt: skip
     method = run_method(
         contours, [np.asarray(r.pinch) for r in results], PlanResult.policy(results, trials),
-        trials, config, device, seed, on_step, segments=list(segments),
+        trials, config, device, seed, on_step, segments=list(segments), arm=arm,
+        allow_infeasible_pinch=allow_infeasible_pinch,
     )  # fmt: skip
     return method, results
 
@@ -537,6 +547,7 @@ def cached_plan(
     log: Callable[[str], None] = lambda _: None,
     arm: ArmModel | None = None,
     count: str = "",
+    allow_infeasible_pinch: bool = False,
 ) -> PlanResult:
     """:func:`optimize_plan`, kept in ``folder/NAME.json`` (a plan found there is used as it is; the
     optimiser's state is kept in ``NAME.state.json`` while it runs, and an interrupted optimisation
@@ -566,7 +577,9 @@ def cached_plan(
         f"  {count}optimising a plan for {contour.name} ({settings.iterations} iterations, "
         f"{settings.estimator} estimator)"
     )
-    result = optimize_plan(contour, pinch, segments, config, settings, device, seed, arm, log, state)
+    result = optimize_plan(
+        contour, pinch, segments, config, settings, device, seed, arm, log, state, allow_infeasible_pinch
+    )
     if done is not None:
         write_json(done, {**result.to_json(), "settings": wanted})
         state.unlink(missing_ok=True)

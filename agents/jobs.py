@@ -47,8 +47,14 @@ class TrainJob:
     """The contour: a built-in name (``warpcut contours``), a ``.json``/``.svg`` file, or the contour itself
     (``{name, closed, points}``, as a run directory stores a contour that is not built in)."""
     pinch: list[float] | None = None
-    """Pinch point ``[x, y]`` (mm, material coordinates). None: the centroid, or the feasible point nearest
-    it."""
+    """Pinch point ``[x, y]`` (mm, material coordinates); one the gripper could not hold (on or near the cut
+    line, under the cutting arm) is refused unless ``allow_infeasible_pinch``. None: the centroid, or the
+    feasible point nearest it."""
+    allow_infeasible_pinch: bool = False
+    """Train at a ``pinch`` the gripper could not hold (:func:`warpcut.planning.pinch_problems`) all the
+    same; ``summary.json`` and ``evaluation.json`` mark it (``pinch_feasible``: false, ``pinch_problem``)."""
+    arm: ArmModel = field(default_factory=ArmModel)
+    """The cutting arm's footprint, for pinch feasibility."""
     segments: list | None = None
     """The polylines (mm) the scissors cut, in order (a plan's); None: the whole contour as one segment."""
     seed: int = 0
@@ -81,6 +87,8 @@ class TrainJob:
             segments=self.segments,
             sim_config=self.sim,
             device=device,
+            arm=self.arm,
+            allow_infeasible_pinch=self.allow_infeasible_pinch,
             **{name: getattr(self.env, name) for name in ENV_FIELDS},
         )
 
@@ -94,6 +102,8 @@ class TrainJob:
         return cls(
             contour=data["contour"],
             pinch=data["pinch_point"],
+            allow_infeasible_pinch=options.allow_infeasible_pinch,
+            arm=options.arm,
             segments=data["segments"],
             seed=seed,
             eval_trials=eval_trials,
@@ -105,8 +115,9 @@ class TrainJob:
     def unused_keys(self) -> dict[str, str]:
         """The keys this job would not use, ``{key: when it applies}`` (a setting given for nothing is
         refused, not ignored: :func:`agents.cli.common.refuse_unused_settings`): the other learners'
-        sections, and the recording's colours without a recording."""
-        return {**other_learners(self.train), **_recording_keys(self)}
+        sections, the recording's colours without a recording, and ``allow_infeasible_pinch`` without a
+        ``pinch``."""
+        return {**other_learners(self.train), **_recording_keys(self), **_pinch_keys(self.pinch is None)}
 
 
 def contour_spec(spec: Any) -> Any:
@@ -205,6 +216,10 @@ class EvaluateJob:
     the rl column plays them instead of training a policy per contour."""
     allow_partial: bool = False
     """Accept checkpoint runs whose training was interrupted (their last saved policy)."""
+    allow_infeasible_pinch: bool = False
+    """Accept checkpoint runs trained at a pinch point the gripper could not hold (on or near the cut line,
+    under the cutting arm: :func:`warpcut.planning.pinch_problems`); their rows are marked
+    (``rl_pinch_feasible``: false, ``rl_pinch_problem``)."""
     analytic_pinch: str = ANALYTIC_PINCHES[0]
     """Where the analytic controller pinches: ``feasible`` or ``centroid``."""
     arm: ArmModel = field(default_factory=ArmModel)
@@ -250,12 +265,14 @@ class EvaluateJob:
         unused: dict[str, str] = {}
         if "rl" not in self.methods:
             why = "read by the rl column only (--methods ...,rl)"
-            unused |= {key: why for key in ("train", "env", "checkpoints", "allow_partial")}
+            keys = ("train", "env", "checkpoints", "allow_partial", "allow_infeasible_pinch")
+            unused |= {key: why for key in keys}
         elif self.checkpoints is not None:
             unused["train"] = "with checkpoints the rl column plays trained runs; nothing is trained"
         else:
             unused |= other_learners(self.train)
             unused["allow_partial"] = "read with checkpoints only"
+            unused |= _pinch_keys(True, "checkpoints (their pinch points)")
         if "grad" not in self.methods:
             unused["grad"] = "read by the grad column only (--methods ...,grad)"
         return {**unused, **_recording_keys(self)}
@@ -266,6 +283,14 @@ def other_learners(train: TrainConfig) -> dict[str, str]:
     from agents.algorithms import ALGORITHMS
 
     return {f"train.{name}": f"read by --algo {name} only" for name in ALGORITHMS if name != train.algo}
+
+
+def _pinch_keys(no_pinch: bool, source: str = "a pinch point (--pinch)") -> dict[str, str]:
+    """``allow_infeasible_pinch`` where no pinch point is given (``source`` says what gives one): the
+    default pinch points are feasible by construction."""
+    if no_pinch:
+        return {"allow_infeasible_pinch": f"read with {source} only; the default ones are feasible"}
+    return {}
 
 
 def _recording_keys(job: Any) -> dict[str, str]:
@@ -335,8 +360,12 @@ class OptimizeJob:
     contour: str | dict | None = None
     """The contour: a built-in name, a ``.json``/``.svg`` file, or the contour itself."""
     pinch: list[float] | None = None
-    """Pinch point ``[x, y]`` (mm, material coordinates). None: the plan's (fixed tension's best
-    candidate)."""
+    """Pinch point ``[x, y]`` (mm, material coordinates); one the gripper could not hold (on or near the cut
+    line, under the cutting ``arm``) is refused unless ``allow_infeasible_pinch``. None: the plan's (fixed
+    tension's best candidate)."""
+    allow_infeasible_pinch: bool = False
+    """Optimise at a ``pinch`` the gripper could not hold all the same; ``results.json`` marks it
+    (``pinch_feasible``: false, ``pinch_problem``)."""
     candidates: int = EVALUATION_CANDIDATES
     """Pinch candidates sampled for the plan."""
     trials: int = EVALUATION_TRIALS
@@ -370,8 +399,10 @@ class OptimizeJob:
         estimator (:func:`agents.cli.common.refuse_unused_settings`)."""
         es = [f.name for f in dataclasses.fields(GradConfig) if f.name.startswith("es_")]
         if self.grad.estimator == "es":
-            return {f"grad.{k}": "read by estimator tape only (--estimator tape)" for k in TAPE_ONLY}
-        return {f"grad.{k}": "read by estimator es only (--estimator es)" for k in es}
+            unused = {f"grad.{k}": "read by estimator tape only (--estimator tape)" for k in TAPE_ONLY}
+        else:
+            unused = {f"grad.{k}": "read by estimator es only (--estimator es)" for k in es}
+        return {**unused, **_pinch_keys(self.pinch is None)}
 
 
 TAPE_ONLY = ("trials", "window", "pinch_learning_rate")
@@ -404,6 +435,10 @@ class RobustnessJob:
     """Optimised plans of the contour (``warpcut optimize``'s ``NAME.json``, or ``warpcut evaluate``'s
     ``grad/NAME.json``), ``{label: file}``: each a method, played as it was optimised (open or closed loop)
     at its own pinch point at every value."""
+    allow_infeasible_pinch: bool = False
+    """Accept runs and plans at a pinch point the gripper could not hold on the nominal sheet (on or near the
+    cut line, under the cutting arm: :func:`warpcut.planning.pinch_problems`); the report marks them
+    (``infeasible_pinches``)."""
     values: list[float] | None = None
     """The sweep of the one study given (vertices per side, mm or mm/s^2); None: each study's own
     (:data:`agents.pipelines.robustness.STUDY_VALUES`)."""
@@ -437,7 +472,7 @@ class RobustnessJob:
             unused["grad"] = "read by the grad method only (--methods ...,grad)"
         if self.runs:
             unused["sim"] = "with --run the nominal sheet is the run's"
-        return unused
+        return {**unused, **_pinch_keys(not (self.runs or self.plans), "runs or plans (their pinch points)")}
 
 
 @dataclass
@@ -451,8 +486,12 @@ class SimulateJob:
     policy: list[str] = field(default_factory=lambda: list(BASELINES))
     """The tensioners to compare: ``none``, ``fixed``, ``analytic``."""
     pinch: list[float] | None = None
-    """Pinch point ``[x, y]`` (mm, material coordinates) of fixed and analytic. None: fixed's best point by
-    random search, analytic's feasible centroid."""
+    """Pinch point ``[x, y]`` (mm, material coordinates) of fixed and analytic; one the gripper could not
+    hold (on or near the cut line, under the cutting arm) is refused unless ``allow_infeasible_pinch``.
+    None: fixed's best point by random search, analytic's feasible centroid."""
+    allow_infeasible_pinch: bool = False
+    """Simulate a ``pinch`` the gripper could not hold (:func:`warpcut.planning.pinch_problems`) all the
+    same; the printed rows and ``--json`` mark it (``pinch_feasible``: false, ``pinch_problem``)."""
     trials: int = 1
     """Seeded trials per tensioner; they differ by their process noise (``sim.noise_std``)."""
     seed: int = 0
@@ -497,7 +536,10 @@ class SimulateJob:
         unused = {}
         if not {"fixed", "analytic"} & set(self.policy):
             runs = ",".join(self.policy)
-            unused["pinch"] = f"only fixed and analytic pinch, and policy is {runs} (add either to policy)"
+            why = f"only fixed and analytic pinch, and policy is {runs} (add either to policy)"
+            unused["pinch"] = unused["allow_infeasible_pinch"] = why
+        else:
+            unused |= _pinch_keys(self.pinch is None)
         if self.record is None:
             unused["colour_by"] = "colours a recording, and record is off (add --record [N])"
         return unused

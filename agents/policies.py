@@ -159,8 +159,10 @@ def rollout_errors(
     """Run the trained policy (deterministic: argmax action) for ``trials`` seeded episodes at once.
 
     Trials differ by their fiducials and process-noise streams. Returns per-trial errors (vertices,
-    mm^2) and the pinch point used. ``on_step(task, moves)`` is called after the reset (moves ``None``)
-    and after every step, as in :meth:`warpcut.task.CuttingTask.run` (e.g. a recorder's callback).
+    mm^2), the pinch point used and why it is not a feasible grasp (``pinch_problem``; None: it is), which
+    the run's options must allow (``allow_infeasible_pinch``, or in ``overrides``). ``on_step(task,
+    moves)`` is called after the reset (moves ``None``) and after every step, as in
+    :meth:`warpcut.task.CuttingTask.run` (e.g. a recorder's callback).
     ``paired_noise``: see :func:`policy_errors`. ``overrides``: options fields to change from the run's
     (e.g. per-env ``gravity``, or ``resolution``, for :mod:`agents.pipelines.robustness`).
     """
@@ -373,7 +375,8 @@ def policy_errors(
         raise RuntimeError(f"{name}: the episode did not end within {env.task.num_steps} steps")
     pinch = env.task.pinch_points[0].copy()
     keys = ("error_vertices", "error_mm2", "separated", "dropped_fraction")
-    return {**{k: np.asarray(final[k]) for k in keys}, "pinch": pinch}
+    problem = env.task.pinch_problems[0]
+    return {**{k: np.asarray(final[k]) for k in keys}, "pinch": pinch, "pinch_problem": problem}
 
 
 def _tensordict(groups: dict[str, torch.Tensor], batch: int):
@@ -389,7 +392,9 @@ def evaluate_run(
     device: str | None = None,
     step_callbacks: StepCallbacks | None = None,
 ) -> dict:
-    """The trained policy against no tension on its own options (paired by trial).
+    """The trained policy against no tension on its own options (paired by trial); ``pinch_feasible`` false
+    and ``pinch_problem`` say where the run's pinch point is not a grasp the gripper could make (its options
+    allowed it: ``allow_infeasible_pinch``).
 
     ``step_callbacks(method, 0)`` gives the step callback of the ``"rl"`` and ``"none"`` batches, as in
     :func:`agents.evaluation.evaluate_suite` (e.g. a recorder's).
@@ -422,5 +427,7 @@ def evaluate_run(
         "rl_improvement_pct": row["rl_improvement_pct"],
         "rl_ci95": row["rl_ci95"],
         "pinch": row["rl_pinch"],
+        "pinch_feasible": row["rl_pinch_feasible"],
+        "pinch_problem": row["rl_pinch_problem"],
         "seconds": time.perf_counter() - start,
     }

@@ -89,6 +89,7 @@ from envs.options import PatternCutOptions
 from envs.rsl import FINAL_ERROR_KEY, PatternCutRslEnv
 from envs.vector import PatternCutVecEnv
 from warpcut.io import DiskFull, read_json, write_atomic, write_json
+from warpcut.planning import check_pinch
 
 if TYPE_CHECKING:
     from agents.jobs import TrainJob
@@ -108,6 +109,7 @@ def train(
     progress: bool = True,
     validate: Callable[[torch.nn.Module], float | np.ndarray] | None = None,
     label: str | None = None,
+    marks: dict | None = None,
 ) -> dict:
     """Train a policy on ``env`` with ``cfg``'s learner; write its checkpoints and summary into ``out_dir``.
 
@@ -127,6 +129,7 @@ def train(
             policy with the lowest selection score is saved as ``best.pt`` (model selection on held-out
             episodes; :attr:`TrainConfig.selection_margin`).
         label: The progress bar's label (default: the learner's name).
+        marks: Fields the summary records as they are (e.g. whether the pinch point is feasible).
 
     Returns:
         The summary also written to ``out_dir/summary.json``.
@@ -195,6 +198,7 @@ def train(
             "status": status,
             "algo": cfg.algo,
             "iterations": runner.iterations_done,
+            "target_iterations": iterations,
             "env_steps": runner.iterations_done * steps,
             "wall_time_s": wall_time + (runner.earlier_wall_time or 0.0),
             "run_wall_time_s": wall_time,
@@ -205,18 +209,25 @@ def train(
             "error": None if ending is None or isinstance(ending, KeyboardInterrupt) else _one_line(ending),
             "resumed_from": None if checkpoint is None else str(checkpoint),
             "resume_note": note,
+            **(marks or {}),
             "validation": runner.validation,
             "history": runner.history,
-            "best": None
-            if runner.best_error is None
-            else {
-                "iterations": runner.best_iterations,
-                "validation_error": runner.best_error,
-                "validation_score": runner.best_score,
-            },
+            "best": _best(runner),
         }
         _write_summary(out_dir / "summary.json", summary, runner.checkpoint, ending)
     return summary
+
+
+def _best(runner: Runner) -> dict | None:
+    """The summary's ``best``: the iteration, validation error and score of the policy model selection
+    kept; None without validation."""
+    if runner.best_error is None:
+        return None
+    return {
+        "iterations": runner.best_iterations,
+        "validation_error": runner.best_error,
+        "validation_score": runner.best_score,
+    }
 
 
 def _log_hparams(writer, cfg: TrainConfig, runner: Runner) -> None:
@@ -641,8 +652,10 @@ def train_contour(
         check_resumed_job(resume, job)
         checkpoint, state, _ = resume_checkpoint(resume)
         check_layout(state["actor_state_dict"], checkpoint, options, "the env", RESUME_FIX)
-    pinch = [float(v) for v in options.per_env(1)[1][0]]
+    contours, points, cuts = options.per_env(1)  # an infeasible pinch point, unless allowed: refused now
+    pinch = [float(v) for v in points[0]]
     options = dataclasses.replace(options, pinch_point=pinch)
+    problem = check_pinch(points[0], contours[0], options.config(), cuts and cuts[0], options.arm, allow=True)
     env = training_env(options, cfg, job.seed)  # before anything is written: options the env refuses
     resolved = dataclasses.replace(job, contour=options.to_dict()["contour"], pinch=pinch)
     write_json(out_dir / CONFIG_FILE, to_plain(resolved))
@@ -658,9 +671,11 @@ def train_contour(
             return errors * validation_env.scene.reward_scale if options.relative_reward else errors
 
     label = label or f"{cfg.algo.upper()} {options.contours(1)[0].name}"
+    marks = {"pinch_feasible": problem is None, "pinch_problem": problem}
     summary = train(
-        env, cfg, out_dir, seed=job.seed, resume=resume, progress=progress, validate=validate, label=label
-    )
+        env, cfg, out_dir, seed=job.seed, resume=resume, progress=progress, validate=validate, label=label,
+        marks=marks,
+    )  # fmt: skip
     evaluation = evaluate_run(
         out_dir, trials=job.eval_trials, seed=job.seed + 1, device=device, step_callbacks=step_callbacks
     )
@@ -676,7 +691,8 @@ must be the run's own."""
 def check_resumed_job(resume: str | Path, job: TrainJob) -> None:
     """A ``ValueError`` naming the first setting in which ``job`` differs from the run ``resume`` (a run
     directory or one of its checkpoints) was started with (its ``config.json``), but for
-    :data:`RESUMABLE_CHANGES`; nothing for a run without a ``config.json`` of a job."""
+    :data:`RESUMABLE_CHANGES`; nothing for a run without a ``config.json`` of a job. A setting its
+    ``config.json`` lacks (one added since) counts as the default."""
     run = Path(resume) if Path(resume).is_dir() else Path(resume).parent
     path = run / CONFIG_FILE
     if not path.is_file():
@@ -691,8 +707,9 @@ def check_resumed_job(resume: str | Path, job: TrainJob) -> None:
         saved_contour = _loaded(contour_spec(saved.get("contour")))
         if saved_contour is not None and same_contour(saved_contour, _loaded(contour_spec(job.contour))):
             given["contour"] = saved.get("contour")
+    defaults = flatten(to_plain(type(job)()))
     for key in sorted(set(saved) | set(given)):
-        if key in RESUMABLE_CHANGES or saved.get(key) == given.get(key):
+        if key in RESUMABLE_CHANGES or saved.get(key, defaults.get(key)) == given.get(key):
             continue
         raise ValueError(
             f"{key}: the resumed run {run} has {saved.get(key)!r} (its {CONFIG_FILE}), this job "

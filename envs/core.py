@@ -95,8 +95,9 @@ class PatternCut:
         config = options.config()
         contours, pinch_points, segments = options.per_env(num_envs)
         self.task = CuttingTask(
-            config, contours, num_envs, pinch_points=pinch_points, segments=segments, device=options.device
-        )
+            config, contours, num_envs, pinch_points=pinch_points, segments=segments, device=options.device,
+            arm=options.arm, allow_infeasible_pinch=options.allow_infeasible_pinch,
+        )  # fmt: skip
         self.config = self.task.config
         self.area_mm2 = np.array([c.area_mm2 for c in contours])
         self.episode_steps = min(self.task.num_steps, options.max_episode_steps or self.task.num_steps)

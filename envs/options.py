@@ -15,7 +15,7 @@ import numpy as np
 
 from warpcut.contours import Contour, builtin_names, contour_from_json, load_contour
 from warpcut.fiducials import NUM_FIDUCIALS, SHAFT_RADIUS_MM
-from warpcut.planning import default_pinch
+from warpcut.planning import ArmModel, check_pinch, default_pinch
 from warpcut.sim.config import (
     RANDOMIZE_ALIASES,
     RANDOMIZE_RANGES,
@@ -180,10 +180,24 @@ class PatternCutOptions(EnvConfig):
     """Process noise per free vertex per update (mm), paper sigma."""
     device: str | None = None
     """Warp device of the simulator (``"cpu"``, ``"cuda"``); default: CUDA when available."""
+    arm: ArmModel = ArmModel()
+    """The cutting arm whose footprint the pinch point must avoid (:class:`~warpcut.planning.ArmModel`, or
+    its JSON ``{radius_mm, length_mm}``); default: the paper's, along the whole sheet."""
+    allow_infeasible_pinch: bool = False
+    """Cut at a given ``pinch_point`` the gripper could not hold (on or near the cut line, under the cutting
+    arm: :func:`warpcut.planning.pinch_problems`) instead of refusing it
+    (:class:`~warpcut.planning.InfeasiblePinch`); the task's ``pinch_problems`` and the results of a run
+    trained on it say so."""
 
     def __post_init__(self):
         owner = type(self).__name__
         # to_dict()'s output given back as keyword arguments (e.g. to gymnasium.make): its dicts read here
+        self.arm = ArmModel.from_json(self.arm, f"{type(self).__name__}.arm")
+        if not isinstance(self.allow_infeasible_pinch, bool):
+            raise ValueError(
+                f"{type(self).__name__}.allow_infeasible_pinch: must be true or false "
+                f"(got {self.allow_infeasible_pinch!r:.80})"
+            )
         if isinstance(self.sim_config, dict):
             self.sim_config = sim_config_from_dict(self.sim_config, f"{owner}.sim_config")
         check_instance(
@@ -271,11 +285,18 @@ class PatternCutOptions(EnvConfig):
         if self.pinch_point is None:
             # Once per distinct contour (envs of one contour share its object): the grid search is slow.
             by_contour = {id(c): c for c in contours}
-            found = {key: default_pinch(c, config) for key, c in by_contour.items()}
+            found = {key: default_pinch(c, config, self.arm) for key, c in by_contour.items()}
             pinch = np.array([found[id(c)] for c in contours])
         else:
             pinch = np.broadcast_to(np.asarray(self.pinch_point, dtype=np.float64), (num_envs, 2)).copy()
         segments = None if self.segments is None else segments_per_env(self.segments, num_envs)
+        if self.pinch_point is not None and not self.allow_infeasible_pinch:  # before any env is built
+            judged = set()
+            for env, contour in enumerate(contours):
+                if (id(contour), pinch[env].tobytes()) not in judged:
+                    judged.add((id(contour), pinch[env].tobytes()))
+                    cut = None if segments is None else segments[env]
+                    check_pinch(pinch[env], contour, config, cut, self.arm)
         return contours, pinch, segments
 
     def to_dict(self) -> dict[str, Any]:
@@ -293,6 +314,8 @@ class PatternCutOptions(EnvConfig):
                 )
             elif f.name == "sim_config":
                 value = dataclasses.asdict(value)
+            elif f.name == "arm":
+                value = value.to_json()
             out[f.name] = plain(value)
         return out
 

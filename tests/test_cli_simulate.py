@@ -51,7 +51,7 @@ def test_contours_lists_the_suite_and_writes_json(tmp_path):
 def test_simulate_writes_results_json(tmp_path):
     out = tmp_path / "results.json"
     code, stdout, _ = invoke(
-        ["simulate", "--contour", "fls-circle", "--policy", "none,fixed,analytic", "--pinch", "50,42"]
+        ["simulate", "--contour", "fls-circle", "--policy", "none,fixed,analytic", "--pinch", "83,83"]
         + ["--set", "sim.resolution=13", "--trials", "2", "--set", "sim.noise_std=0.01", "--device", "cpu"]
         + ["--json", str(out)]
     )
@@ -63,7 +63,7 @@ def test_simulate_writes_results_json(tmp_path):
         assert {"error_vertices", "error_mm2", "improvement_pct"} <= set(r)
     assert report["results"]["none"]["improvement_pct"] == 0.0
     assert report["results"]["none"]["error_vertices"] > 0
-    assert report["results"]["fixed"]["pinch"] == pytest.approx([50.0, 42.0])
+    assert report["results"]["fixed"]["pinch"] == pytest.approx([83.0, 83.0])
     assert "improvement" in stdout and "analytic" in stdout and "13x13" in stdout
     assert (tmp_path / "regions.png").is_file()  # plots: on by default, next to --json
 
@@ -96,12 +96,12 @@ def test_simulate_has_at_most_15_options_and_its_flags_set_keys_of_its_job():
 def test_simulate_config_set_and_print_config_round_trip(tmp_path):
     """--print-config prints the job the flags, --set and a file resolve to; given back with --config it
     resolves to itself; a file's settings run as the flags and --set do."""
-    args = ["simulate", "--contour", "circle-small", "--policy", "none,fixed", "--pinch", "60,40"]
+    args = ["simulate", "--contour", "circle-small", "--policy", "none,fixed", "--pinch", "74,31.5"]
     args += ["--trials", "2", "--seed", "3", "--set", "sim.noise_std=0.02", *SMALL, "--set", "plots=false"]
     code, printed, _ = invoke([*args, "--print-config"])
     assert code == 0, printed
     job = yaml.safe_load(printed)
-    assert job["policy"] == ["none", "fixed"] and job["pinch"] == [60.0, 40.0] and job["trials"] == 2
+    assert job["policy"] == ["none", "fixed"] and job["pinch"] == [74.0, 31.5] and job["trials"] == 2
     assert job["seed"] == 3 and job["sim"]["noise_std"] == 0.02 and job["sim"]["resolution"] == 9
     assert job["plots"] is False and job["record"] is None and job["export_mesh"] is None
     assert set(job) == set(to_plain(SimulateJob()))  # every key, each at its place
@@ -187,8 +187,9 @@ def test_the_ignored_setting_rule_reads_the_job_and_a_config_file(tmp_path, capf
     """The rule is the job's (``unused_keys``, from its own settings), checked against what is given: a file
     that sets the pinch for a policy without one is refused; a saved job, every key at its default where
     unused, runs again; the pinch or the colours apply where fixed or a recording are on."""
-    assert SimulateJob(policy=["none"]).unused_keys().keys() == {"pinch", "colour_by"}
-    assert SimulateJob(policy=["analytic"], record=1).unused_keys() == {}
+    unused = {"pinch", "allow_infeasible_pinch", "colour_by"}
+    assert SimulateJob(policy=["none"]).unused_keys().keys() == unused
+    assert SimulateJob(policy=["analytic"], record=1, pinch=[83.0, 83.0]).unused_keys() == {}
     bad = tmp_path / "bad.yaml"
     bad.write_text("contour: circle-small\npolicy: [none]\npinch: [50, 40]\n")
     assert "pinch: only fixed and analytic pinch" in refused(["simulate", "--config", str(bad)], capfd)
@@ -236,7 +237,7 @@ def test_simulate_set_may_repeat_but_not_one_key(capfd):
         (["--contour", "no-such-shape"], "unknown contour 'no-such-shape'.*fls-circle"),
         (["--contour", "fls-circle", "--policy", "none,magic"], "policy.*unknown magic"),
         (["--contour", "fls-circle", "--pinch", "50"], "--pinch.*expected X,Y"),
-        (["--contour", "fls-circle", "--pinch", "150,40", "--policy", "fixed"], "pinch_points.*off the"),
+        (["--contour", "fls-circle", "--pinch", "150,40", "--policy", "fixed"], "off the 100 x 100 mm sheet"),
         (["--contour", "fls-circle", "--trials", "0"], "--trials"),
         (["--contour", "fls-circle", "--set", "trials=0"], "trials: must be an integer >= 1"),
         (

@@ -282,8 +282,9 @@ def test_a_half_finite_pinch_row_is_rejected_and_a_nan_row_still_means_no_grasp(
     with pytest.raises(ValueError, match=r"^pinch_points: env 0's pinch point \[inf, 40\.0\]"):
         sim.reset(np.array([[np.inf, 40.0], [50.0, 50.0]]))
     task = CuttingTask(
-        SMALL, CONTOUR, num_envs=2, pinch_points=[[50.0, 40.0], [np.nan, np.nan]], device="cpu"
-    )
+        SMALL, CONTOUR, num_envs=2, pinch_points=[[50.0, 40.0], [np.nan, np.nan]], device="cpu",
+        allow_infeasible_pinch=True,
+    )  # fmt: skip
     task.reset()
     assert task.sim.grasped.tolist() == [True, False]
 

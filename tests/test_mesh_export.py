@@ -21,6 +21,7 @@ def cut_task():
         num_envs=2,
         pinch_points=np.array([[50.0, 45.0], [50.0, 45.0]]),
         device="cpu",
+        allow_infeasible_pinch=True,  # under the arm: it grasps the piece, whose mesh is exported
     )
     task.run(lambda t: np.full((2, 3), 0.3))
     return task

@@ -96,7 +96,10 @@ def test_the_cut_path_is_bit_identical_across_backends():
     config = SimConfig(resolution=13, noise_std=0.05)
     paths = []
     for backend in ("simd", "colours"):
-        task = CuttingTask(config, contour, num_envs=3, pinch_points=[60.0, 20.0], backend=backend, seed=4)
+        task = CuttingTask(
+            config, contour, num_envs=3, pinch_points=[60.0, 20.0], backend=backend, seed=4,
+            allow_infeasible_pinch=True,
+        )  # fmt: skip
         task.run(lambda t: np.tile([[0.5, -1.0, 0.2]], (3, 1)))
         paths.append(task.cut_path())
     for other in paths[1:]:

@@ -207,8 +207,10 @@ def test_many_segments_use_the_heuristic_orders_with_a_warning():
     contour = load_contour("flower-5")
     segments = segment_contour(contour)
     assert len(segments) > 6
+    config = SIM.replace(resolution=16)  # the coarsest sheet that leaves the gripper a feasible point
+    candidate = default_pinch(contour, config)[None]
     with pytest.warns(UserWarning, match="heuristic"):
-        orders, errors = search_orders(contour, SIM, segments, np.array([[50.0, 50.0]]), device="cpu")
+        orders, errors = search_orders(contour, config, segments, candidate, device="cpu")
     assert 1 < len(orders) < math.factorial(len(segments))
     assert errors.shape == (1, len(orders)) and np.isfinite(errors).all()
 

@@ -71,6 +71,8 @@ def simulated(tmp_path_factory):
             "--pinch",
             "50,45",
             "--set",
+            "allow_infeasible_pinch=true",  # under the arm: the grasp holds the piece being cut
+            "--set",
             f"sim.resolution={RESOLUTION}",
             "--trials",
             "2",
@@ -497,8 +499,9 @@ def test_vertex_strain_is_the_mean_over_live_springs():
 def test_vertex_colours_follow_the_chosen_field(tmp_path, colour_by):
     config = SimConfig(resolution=RESOLUTION)
     task = CuttingTask(
-        config, load_contour("circle-small"), device="cpu", pinch_points=np.array([50.0, 50.0])
-    )
+        config, load_contour("circle-small"), device="cpu", pinch_points=np.array([50.0, 50.0]),
+        allow_infeasible_pinch=True,
+    )  # fmt: skip
     with Recorder(tmp_path / "r.rrd", colour_by=colour_by) as recorder:
         task.run(lambda t: np.array([[0.5, 0.0, 0.0]]), on_step=recorder.step_callback("fixed"))
     columns = read_columns(tmp_path / "r.rrd")
@@ -526,8 +529,9 @@ def test_the_grasp_is_a_disc_and_the_colours_have_a_legend(tmp_path, colour_by):
 
     config = SimConfig(resolution=RESOLUTION)
     task = CuttingTask(
-        config, load_contour("circle-small"), device="cpu", pinch_points=np.array([50.0, 50.0])
-    )
+        config, load_contour("circle-small"), device="cpu", pinch_points=np.array([50.0, 50.0]),
+        allow_infeasible_pinch=True,
+    )  # fmt: skip
     with Recorder(tmp_path / "r.rrd", colour_by=colour_by, background=False) as recorder:
         task.run(lambda t: np.array([[0.5, 0.0, 0.0]]), on_step=recorder.step_callback("fixed"))
     columns = read_columns(tmp_path / "r.rrd")
@@ -558,6 +562,7 @@ def test_the_recorded_error_is_the_score(tmp_path):
         load_contour("fls-circle"),
         device="cpu",
         pinch_points=np.array([50.0, 50.0]),
+        allow_infeasible_pinch=True,
     )
     with Recorder(tmp_path / "r.rrd") as recorder:
         score = task.run(lambda t: np.array([[0.3, 0.2, 0.0]]), on_step=recorder.step_callback("fixed"))
@@ -585,6 +590,7 @@ def test_process_thread_and_inline_recordings_hold_the_same(tmp_path):
         num_envs=3,
         pinch_points=np.array([50.0, 45.0]),
         device="cpu",
+        allow_infeasible_pinch=True,
     )
     modes = ("process", "thread", False)
     for background in modes:
@@ -854,7 +860,13 @@ def test_recorded_fiducials_are_where_the_env_tracks_them_and_hidden_when_it_can
     from warpcut.fiducials import sample_fiducials
 
     scene = PatternCut(
-        PatternCutOptions(resolution=RESOLUTION, device="cpu", num_fiducials=40, pinch_point=(50.0, 45.0)),
+        PatternCutOptions(
+            resolution=RESOLUTION,
+            device="cpu",
+            num_fiducials=40,
+            pinch_point=(50.0, 45.0),
+            allow_infeasible_pinch=True,
+        ),
         num_envs=2,
     )
     world, seen = [], []

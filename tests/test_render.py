@@ -172,7 +172,8 @@ def test_the_vector_env_renders_its_first_envs(tmp_path):
 
 
 def test_the_video_recorder_writes_one_mp4_per_env_and_episode(tmp_path):
-    task = CuttingTask(SimConfig(resolution=9), load_contour("circle-small"), 3, pinch_points=[70.0, 30.0])
+    contour, config = load_contour("circle-small"), SimConfig(resolution=9)
+    task = CuttingTask(config, contour, 3, pinch_points=[70.0, 30.0], allow_infeasible_pinch=True)
     with VideoRecorder(tmp_path, envs=2) as videos:
         film = videos.step_callback("fixed")
         task.run(None, on_step=film)

@@ -26,6 +26,7 @@ from warpcut.validation import check_choice, check_flag, check_instance, check_i
 
 if TYPE_CHECKING:
     from warpcut.fiducials import Fiducials
+    from warpcut.planning.feasibility import ArmModel
 
 __all__ = [
     "CuttingTask",
@@ -156,6 +157,12 @@ class CuttingTask:
         threads: CPU threads stepping the batch (default: all cores).
         trace_path: Trace the cut path (:meth:`Simulator.trace_path`) for the path score; without it
             :meth:`score` has only the separated-material score (its path fields are NaN), a little faster.
+        arm: The cutting arm whose footprint a pinch point must avoid
+            (:class:`~warpcut.planning.ArmModel`; default: the paper's, along the whole sheet).
+        allow_infeasible_pinch: Run pinch points the gripper could not hold (on or near the cut line, under
+            the cutting arm, ...: :func:`warpcut.planning.pinch_problems`) instead of refusing them
+            (:class:`~warpcut.planning.InfeasiblePinch`, a ``ValueError`` naming the rule);
+            :attr:`pinch_problems` says which envs they are, for their results to say so.
 
     Every argument is checked first (:mod:`warpcut.validation`): a wrong type or value is a
     :class:`~warpcut.validation.ConfigError` naming ``CuttingTask.<argument>``. A batch that would not fit in
@@ -177,6 +184,8 @@ class CuttingTask:
         backend: str = "auto",
         threads: int | None = None,
         trace_path: bool = True,
+        arm: ArmModel | None = None,
+        allow_infeasible_pinch: bool = False,
     ):
         check_instance("CuttingTask.config", config, SimConfig, "a SimConfig")
         num_envs = check_integer("CuttingTask.num_envs", num_envs, 1, optional=True, note="one per contour")
@@ -215,6 +224,9 @@ class CuttingTask:
         if len(self.segments) != num_envs:
             raise ValueError(f"segments: got {len(self.segments)} lists for {num_envs} envs")
         self.pinch_points = self._pinch_array(pinch_points)
+        self.pinch_problems = self._judge_pinches(arm, allow_infeasible_pinch)
+        """Per env, why its pinch point is not a feasible grasp (one line naming the rule), or None: feasible,
+        or no grasp. Only ``allow_infeasible_pinch`` lets one through."""
         self._given_segments = segments
         self._trajectory_cache: dict[tuple, Trajectory] = {}
         self._arc_cache: dict[tuple[int, int], np.ndarray] = {}
@@ -301,6 +313,28 @@ class CuttingTask:
                 "give material coordinates on the sheet"
             )
         return points
+
+    def _judge_pinches(self, arm: ArmModel | None, allow: bool) -> list[str | None]:
+        """Each env's pinch problem (:func:`warpcut.planning.pinch_problems` with its own contour and
+        segments), judged once per distinct contour, cut (in any order: the arm sweeps the same footprint)
+        and point; an :class:`~warpcut.planning.InfeasiblePinch` for the first unless ``allow``."""
+        from warpcut.planning.feasibility import ArmModel, InfeasiblePinch, pinch_problems
+
+        arm = ArmModel() if arm is None else arm
+        groups: dict[tuple, list[int]] = {}
+        for env in np.flatnonzero(np.all(np.isfinite(self.pinch_points), axis=1)):
+            cut = frozenset(np.ascontiguousarray(p, dtype=np.float64).tobytes() for p in self.segments[env])
+            groups.setdefault((id(self.contours[env]), cut), []).append(int(env))
+        problems: list[str | None] = [None] * self.num_envs
+        for envs in groups.values():
+            points, which = np.unique(self.pinch_points[envs], axis=0, return_inverse=True)
+            found = pinch_problems(points, self.contours[envs[0]], self.config, self.segments[envs[0]], arm)
+            for env, k in zip(envs, which.reshape(-1), strict=True):
+                problems[env] = found[k]
+        first = next((env for env, problem in enumerate(problems) if problem), None)
+        if first is not None and not allow:
+            raise InfeasiblePinch(self.pinch_points[first], self.contours[first], problems[first])
+        return problems
 
     def _check_horizon(self, segments: Sequence[Sequence[np.ndarray]] | None) -> None:
         """Refuse trajectories stretched beyond :data:`MAX_TRAJECTORY_STRETCH` (a sheet that hangs like no

@@ -569,6 +569,23 @@ def refuse_unused_settings(job, overrides: tuple[str, ...], flags: dict[str, str
         refuse_unused_keys(job, [key], overrides, flags, why)
 
 
+def infeasible_mark(feasible: bool | None) -> str:
+    """What a printed result line ends with where its pinch point is not a feasible grasp (``feasible``
+    False: the results' ``pinch_feasible``, allowed by ``allow_infeasible_pinch``); "" otherwise."""
+    return "  [infeasible pinch]" if feasible is False else ""
+
+
+def echo_infeasible(problems: dict[str, str | None]) -> None:
+    """Say, for the results ``{what: why its pinch point is not a feasible grasp}`` (None: it is), that they
+    are not ones the robot could reach (one line per reason)."""
+    grouped: dict[str, list[str]] = {}
+    for what, why in problems.items():
+        if why is not None:
+            grouped.setdefault(why, []).append(what)
+    for why, whats in grouped.items():
+        click.echo(f"infeasible pinch ({', '.join(whats)}): {why}; not a result the robot could reach")
+
+
 def check_learner(job) -> None:
     """``ValueError`` naming the setting, before any work, where ``job``'s learner (``job.train``) cannot
     train in its env (``job.env``): an action type it does not play, a population that does not fit the

@@ -117,6 +117,8 @@ def command(
             step_callbacks=with_videos(common.step_callbacks(rec, cuts), vid),
         )
     click.echo(report.markdown())
+    rows = report.table["rows"]
+    common.echo_infeasible({f"{r['contour']} {m}": r.get(f"{m}_pinch_problem") for r in rows for m in job.methods})
     click.echo(f"({len(report.contours)} contours x {job.trials} trials in {report.seconds:.0f} s)")
     for method, what in (("grad", "its initial plan (hold still)"), ("rl", "its initial policy")):
         if f"{method}_initial_{'plan' if method == 'grad' else 'policy'}_contours" in report.table:

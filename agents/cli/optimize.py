@@ -88,10 +88,15 @@ def command(
 
     job = common.resolve(OptimizeJob, config_file, overrides, FLAGS).check()
     common.refuse_unused_settings(job, overrides, FLAGS)
-    contour_name = load_contour(contour_spec(job.contour)).name  # a bad name or file: now
+    contour = load_contour(contour_spec(job.contour))  # a bad name or file: now
+    contour_name = contour.name
     if print_config:
         common.print_config(job)
         return
+    if job.pinch is not None:  # an infeasible pinch point: now
+        from warpcut.planning import check_pinch
+
+        check_pinch(job.pinch, contour, job.sim.validated(), None, job.arm, allow=job.allow_infeasible_pinch)
     common.check_outputs({"--json": json_path}, [job.contour] if isinstance(job.contour, str) else [])
     out, claim = common.claim(out, f"optimize-{safe_name(contour_name)}", resume, overwrite)
     with claim:
@@ -105,7 +110,9 @@ def command(
     click.echo(f"{'method':<8} {'error (vertices)':>16} {'improvement':>12}")
     for name, row in report["evaluation"].items():
         improvement = f"{row['improvement_pct']:>+11.1f}% ±{row['ci95_pct']:.1f}"
-        click.echo(f"{name:<8} {row['error_vertices']:>16.1f} {improvement}")
+        mark = common.infeasible_mark(row["pinch_feasible"])
+        click.echo(f"{name:<8} {row['error_vertices']:>16.1f} {improvement}{mark}")
+    common.echo_infeasible({"fixed, grad": report["pinch_problem"]})
     if json_path:
         write_json(json_path, report)
     click.echo(f"wrote {out}")

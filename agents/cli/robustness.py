@@ -149,6 +149,7 @@ def command(
         reports = robustness(job, out, resume=resume, device=device, log=common.log)
     for report in reports:
         click.echo("\n".join(robustness_table(report)))
+        common.echo_infeasible(report.get("infeasible_pinches") or {})
         if report["skipped"]:
             click.echo(f"skipped (mesh too coarse): {', '.join(f'{v:g}' for v in report['skipped'])}")
     if json_path:

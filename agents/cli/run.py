@@ -129,7 +129,9 @@ def command(
         p_txt = "-" if p is None else point_text(p)
         imp = row[f"{m}_improvement_pct"]
         imp_txt = f"{imp:+.1f}% ±{row[f'{m}_ci95']:.1f}" if np.isfinite(imp) else "n/a"
-        click.echo(f"{m:<10} {row[f'{m}_error_vertices']:>16.1f} {imp_txt:>14} {p_txt:>16}")
+        mark = common.infeasible_mark(row.get(f"{m}_pinch_feasible"))
+        click.echo(f"{m:<10} {row[f'{m}_error_vertices']:>16.1f} {imp_txt:>14} {p_txt:>16}{mark}")
+    common.echo_infeasible({m: row.get(f"{m}_pinch_problem") for m in report.methods})
     if json_path:
         write_json(json_path, report.to_json())
     if cuts is not None:

@@ -77,6 +77,10 @@ def command(
     if print_config:
         common.print_config(job)
         return
+    if job.pinch is not None and {"fixed", "analytic"} & set(job.policy):  # an infeasible pinch: now
+        from warpcut.planning import check_pinch
+
+        check_pinch(job.pinch, contour, job.sim.validated(), allow=job.allow_infeasible_pinch)
     mesh_dir = None if job.export_mesh is None else Path(job.export_mesh)
     inputs = [job.contour] if isinstance(job.contour, str) else []
     common.check_outputs({"--json": json_path, "export_mesh": mesh_dir}, inputs)
@@ -97,6 +101,7 @@ def command(
         report = compare_policies(
             contour, job.policy, trials=job.trials, config=config, pinch=job.pinch, device=device,
             seed=job.seed, step_callbacks=with_videos(common.step_callbacks(rec, cuts, meshes), vid),
+            allow_infeasible_pinch=job.allow_infeasible_pinch,
         )  # fmt: skip
     elapsed = time.perf_counter() - start
     click.echo(
@@ -111,8 +116,9 @@ def command(
         pinch_txt = "-" if r["pinch"] is None else point_text(r["pinch"])
         click.echo(
             f"{name:<10} {r['error_vertices']:>16.1f} {r['error_mm2']:>13.1f} "
-            f"{r['improvement_pct']:>+11.1f}%{ci} {pinch_txt:>16}"
+            f"{r['improvement_pct']:>+11.1f}%{ci} {pinch_txt:>16}{common.infeasible_mark(r['pinch_feasible'])}"
         )
+    common.echo_infeasible({name: r["pinch_problem"] for name, r in report["results"].items()})
     if json_path:
         from warpcut.io import write_json
 

@@ -126,8 +126,9 @@ def command(
     click.echo(
         f"evaluation ({e['trials']} trials): no tension {e['none_error_vertices']:.1f} vertices, "
         f"rl {e['rl_error_vertices']:.1f} vertices, improvement {e['rl_improvement_pct']:+.1f}% "
-        f"± {e['rl_ci95']:.1f}"
+        f"± {e['rl_ci95']:.1f}{common.infeasible_mark(e['pinch_feasible'])}"
     )
+    common.echo_infeasible({"rl": e["pinch_problem"]})
     if job.plots:
         from warpcut.viz.plots import plot_learning_curve
 

@@ -17,7 +17,7 @@ from agents.jobs import OptimizeJob, contour_spec
 from agents.pipelines.common import claims_out, record_job
 from warpcut.contours import load_contour
 from warpcut.io import write_json
-from warpcut.planning import plan_cut
+from warpcut.planning import check_pinch, plan_cut
 
 RESULTS_FILE = "results.json"
 """The run directory's report (:func:`optimize_contour`'s)."""
@@ -50,14 +50,22 @@ def optimize_contour(
         log: Called with each progress line.
 
     Returns:
-        ``{"contour", "pinch", "settings" (the optimiser's), "trials", "optimized": PlanResult.to_json(),
-        "evaluation": {METHOD: {"error_vertices", "improvement_pct", "ci95_pct"}}, "seconds"}``, also written
-        to ``out/results.json``.
+        ``{"contour", "pinch", "pinch_feasible", "pinch_problem" (why the gripper could not hold it, or
+        null), "settings" (the optimiser's), "trials", "optimized": PlanResult.to_json(), "evaluation":
+        {METHOD: {"error_vertices", "improvement_pct", "ci95_pct", "pinch_feasible"}}, "seconds"}``, also
+        written to ``out/results.json``.
+
+    Raises:
+        InfeasiblePinch: ``job.pinch`` is not a grasp the gripper could make (on or near the cut line,
+            under the cutting arm: :func:`warpcut.planning.pinch_problems`), unless
+            ``job.allow_infeasible_pinch``; before any work.
     """
     job = job.check()
     out = Path(out)
     config = job.sim.validated()
     contour = load_contour(contour_spec(job.contour))
+    if job.pinch is not None:  # the arm sweeps the same footprint however the plan splits the cut
+        check_pinch(job.pinch, contour, config, None, job.arm, allow=job.allow_infeasible_pinch)
     record_job(out, job, resume)
     start = time.perf_counter()
     log(f"  planning {contour.name} ({job.candidates} candidates)")
@@ -67,12 +75,14 @@ def optimize_contour(
     )  # fmt: skip
     point = np.asarray(plan.chosen["pinch"] if job.pinch is None else job.pinch, dtype=np.float64)
     segments = plan.ordered_segments()
+    allow = job.allow_infeasible_pinch
     method, (result,) = grad_result(
-        [contour], [point], [segments], job.trials, config, job.grad, device, job.seed, out, log, job.arm
-    )
+        [contour], [point], [segments], job.trials, config, job.grad, device, job.seed, out, log, job.arm,
+        allow_infeasible_pinch=allow,
+    )  # fmt: skip
     table = evaluate_suite(
         [contour], [Method("fixed", pinches=[point]), Method("grad", result=method)], job.trials, config,
-        device, job.seed, segments=[segments],
+        device, job.seed, segments=[segments], arm=job.arm, allow_infeasible_pinch=allow,
     )  # fmt: skip
     row = table["rows"][0]
     evaluation = {
@@ -80,12 +90,15 @@ def optimize_contour(
             "error_vertices": row[f"{m}_error_vertices"],
             "improvement_pct": row.get(f"{m}_improvement_pct", 0.0),
             "ci95_pct": row.get(f"{m}_ci95", 0.0),
+            "pinch_feasible": row.get(f"{m}_pinch_feasible"),
         }
         for m in ("none", "fixed", "grad")
     }
     report = {
         "contour": contour.name,
         "pinch": [float(v) for v in point],
+        "pinch_feasible": row["fixed_pinch_feasible"],
+        "pinch_problem": row["fixed_pinch_problem"],
         "settings": dataclasses.asdict(job.grad),
         "trials": job.trials,
         "optimized": result.to_json(),

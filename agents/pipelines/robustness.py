@@ -40,7 +40,8 @@ from agents.gradient import PlanResult
 from agents.jobs import RobustnessJob, contour_spec
 from agents.methods import BASELINES, check_methods, tensioner
 from agents.pipelines.common import claims_out, record_job
-from warpcut.contours import Contour, ContourError
+from warpcut.contours import Contour, ContourError, load_contour
+from warpcut.planning import ArmModel, InfeasiblePinch, check_pinch
 from warpcut.scoring import bootstrap_ci, bootstrap_difference_ci, paired_improvement
 from warpcut.sim.config import GRAVITY_MM_S2, SimConfig
 from warpcut.task import segments_key
@@ -80,7 +81,10 @@ STUDY_UNITS = {"resolution": "vertices per side", "noise": "noise_std (mm)", "fo
 
 
 def _override(study: str, values: Sequence[float], trials: int) -> dict:
-    """The options/config fields that set a batch of every value of ``study`` x ``trials``."""
+    """The options/config fields that set a batch of every value of ``study`` x ``trials`` (a resolution
+    study's batch holds its one value: a batch holds one mesh)."""
+    if study == "resolution":
+        return {"resolution": values[0]}
     per_env = [float(v) for v in np.repeat(np.asarray(values, dtype=np.float64), trials)]
     return {STUDY_FIELDS[study]: per_env}
 
@@ -135,6 +139,7 @@ def robustness_study(
     device: str | None = None,
     seed: int = 0,
     log: Callable[[str], None] = lambda _: None,
+    allow_infeasible_pinch: bool = False,
 ) -> dict:
     """``warpcut robustness``: sweep one setting of the simulation and score every method at each value.
 
@@ -159,6 +164,7 @@ def robustness_study(
         config: The nominal simulation without a run (default ``SimConfig()``).
         grad: The ``grad`` method's optimiser settings.
         device, seed: Warp device; seed of the process noise (and of the plan).
+        allow_infeasible_pinch: Accept infeasible pinch points (:func:`_infeasible_pinches`), not refuse them.
 
     Returns: ``{"study", "values", "unit", "metric", "contour", "trials", "nominal", "pinch", "runs",
         "methods", "seconds", "skipped": [value], "diverged": {METHOD: [count]}, METHOD: {"median", "q25",
@@ -173,6 +179,7 @@ def robustness_study(
         raise ValueError(f"trials: must be a positive integer (got {trials!r})")
     runs = check_runs(runs)
     scenario = _scenario(contour, runs, config, device, seed, log)
+    infeasible = _infeasible_pinches(scenario, methods, plans, runs, allow_infeasible_pinch)
     contour, config, pinch, segments = (scenario[k] for k in ("contour", "config", "pinch", "segments"))
     # A run cut in another order than the first is measured against no tension cut in its own order.
     own_order = {
@@ -187,12 +194,8 @@ def robustness_study(
     batches = [[k] for k in range(len(values))] if study == "resolution" else [list(range(len(values)))]
     for batch in batches:
         picked = [values[k] for k in batch]
-        if study == "resolution":
-            sim = config.replace(resolution=picked[0])
-            overrides = {"resolution": picked[0]}
-        else:
-            overrides = _override(study, picked, trials)
-            sim = config.replace(**overrides)
+        overrides = _override(study, picked, trials)
+        sim = config.replace(**overrides)
         log(f"  {study} {', '.join(f'{v:g}' for v in picked)}: {', '.join(chosen)} ({trials} trials)")
         try:
             for method in chosen:
@@ -225,6 +228,7 @@ def robustness_study(
         "trials": trials,
         "nominal": _nominal(study, config),
         "pinch": [float(v) for v in pinch],
+        "infeasible_pinches": infeasible,
         "runs": {label: str(run) for label, run in runs.items()},
         "plans": {label: str(path) for label, path in (plans or {}).items()},
         "methods": chosen if study == "resolution" else chosen[1:],
@@ -241,6 +245,33 @@ def robustness_study(
     return report
 
 
+def _infeasible_pinches(
+    scenario: dict, methods: Sequence[str] | None, plans: Mapping | None, runs: Mapping, allow: bool
+) -> dict[str, str]:
+    """The report's ``infeasible_pinches``, ``{method: why}``, for the methods whose pinch point on the nominal
+    sheet the gripper could not hold (:func:`warpcut.planning.pinch_problems`): each run and plan at its
+    own, fixed and grad at the scenario's (None: not known yet, planned later); an :class:`InfeasiblePinch`
+    naming the first unless ``allow``. They are judged on the nominal sheet: a sweep keeps every pinch
+    point where it is, as the paper's Fig. 5 does, though a coarser mesh's wider grasp may reach the cut."""
+    contour, config, segments = scenario["contour"], scenario["config"], scenario["segments"]
+    arm = scenario.get("arm", ArmModel())
+    pinches = dict(scenario.get("run_pinches", {}))
+    for label, plan in check_plans(plans, contour, runs).items():
+        pinches[label] = (np.asarray(plan.pinch), segments)
+    for method in ("fixed", "grad") if scenario["pinch"] is not None else ():
+        if method in (methods or BASELINES):
+            pinches[method] = (scenario["pinch"], segments)
+    found = {}
+    for method, (point, cut) in pinches.items():
+        problem = check_pinch(point, contour, config, cut, arm, allow=True)
+        if problem is not None and not allow:
+            fix = "give runs and plans made at feasible pinch points (without --pinch)"
+            raise InfeasiblePinch(point, contour, f"{problem} ({method}'s)", fix)
+        if problem is not None:
+            found[method] = problem
+    return found
+
+
 def _methods(methods, runs, plans, scenario, grad, device, seed, out, log) -> tuple[list, dict]:
     """The methods a study runs, in order, and the plans it plays: ``plans``' and grad's (optimised at the
     scenario's pinch point and order, or read back from ``out/grad``)."""
@@ -252,7 +283,9 @@ def _methods(methods, runs, plans, scenario, grad, device, seed, out, log) -> tu
 
         folder = None if out is None else Path(out) / "grad"
         contour, config, pinch, segments = (scenario[k] for k in ("contour", "config", "pinch", "segments"))
-        played["grad"] = cached_plan(contour, pinch, segments, config, grad, device, seed, folder, log)
+        played["grad"] = cached_plan(
+            contour, pinch, segments, config, grad, device, seed, folder, log, allow_infeasible_pinch=True
+        )  # its pinch point is judged with the others' (_infeasible_pinches)
     return chosen, played
 
 
@@ -349,17 +382,16 @@ def _read_plan(path: str | Path) -> PlanResult:
 
 def _scenario(contour, runs: dict[str, Path], config, device, seed, log) -> dict:
     """The contour, nominal simulation, pinch point and segments: the first run's, or planned."""
-    from warpcut.contours import load_contour
-
     if runs:
         from agents.policies import policy_options, same_contour
 
         given = None
         if contour is not None:
             given = load_contour(contour) if not isinstance(contour, Contour) else contour
-        first, cuts = None, {}
+        first, cuts, pinches = None, {}, {}
         for label, run in runs.items():
-            options = policy_options(run, device)
+            # judged on the nominal sheet with the others (_infeasible_pinches): refused there unless allowed
+            options = dataclasses.replace(policy_options(run, device), allow_infeasible_pinch=True)
             trained = options.contours(1)[0]
             given = given or trained
             if not same_contour(given, trained):
@@ -369,12 +401,15 @@ def _scenario(contour, runs: dict[str, Path], config, device, seed, log) -> dict
                 )
             first = first or options
             cuts[label] = None if options.segments is None else [np.asarray(s) for s in options.segments]
+            pinches[label] = (np.asarray(options.per_env(1)[1][0], dtype=np.float64), cuts[label])
         return {
             "contour": first.contours(1)[0],
             "config": first.config(),
             "pinch": np.asarray(first.per_env(1)[1][0], dtype=np.float64),
             "segments": next(iter(cuts.values())),
             "run_segments": cuts,
+            "run_pinches": pinches,
+            "arm": first.arm,
         }
     from warpcut.planning import plan_cut
 
@@ -413,7 +448,7 @@ def _method_errors(
 
         rollouts = rollout_errors(
             runs[method], settings * trials, seed=seed, device=device, paired_noise=(seed, 0),
-            overrides=overrides,
+            overrides={**overrides, "allow_infeasible_pinch": True},  # judged on the nominal sheet
         )  # fmt: skip
         return np.asarray(rollouts["error_mm2"], dtype=np.float64).reshape(settings, trials)
     policy = None if method in (plans or {}) else tensioner(method)
@@ -428,7 +463,7 @@ def _method_errors(
     # run_method's layout is contour by contour, trials within: one "contour" per setting.
     result = run_method(
         [contour] * settings, [point] * settings, policy, trials, config, device, seed,
-        segments=[segments] * settings, allow_diverged=True,
+        segments=[segments] * settings, allow_diverged=True, allow_infeasible_pinch=True,  # judged nominal
     )  # fmt: skip
     return np.where(result.diverged_trials(), np.nan, np.asarray(result.error_mm2, dtype=np.float64))
 
@@ -464,13 +499,16 @@ def _diverged_more(report: dict, policy: str) -> list[bool]:
 
 
 def robustness_table(report: dict) -> list[str]:
-    """The report as text lines: one row per value, one column per method (median [q25, q75])."""
+    """The report as text lines: one row per value, one column per method (median [q25, q75]; a method at
+    a pinch point the gripper could not hold is headed "METHOD (infeasible)")."""
     methods = report["methods"]
     metric = "improvement over none, %" if report["metric"] == "improvement_pct" else "error, % of sheet"
     lines = [
         f"{report['contour']}: {report['study']} study, {report['trials']} trials; median [q25, q75] {metric}"
     ]
-    lines.append(f"{report['unit']:>20} " + " ".join(f"{m:>22}" for m in methods))
+    infeasible = report.get("infeasible_pinches") or {}
+    heads = [f"{m} (infeasible)" if m in infeasible else m for m in methods]
+    lines.append(f"{report['unit']:>20} " + " ".join(f"{m:>22}" for m in heads))
     for k, value in enumerate(report["values"]):
         cells = []
         for m in methods:
@@ -688,8 +726,16 @@ def robustness(
 
     job = check_job(job)  # before the job is recorded: bad settings leave no run behind
     out = Path(out)
-    record_job(out, job, resume)
     contour = None if job.contour is None else contour_spec(job.contour)
+    if not job.allow_infeasible_pinch and (job.runs or job.plans):  # before any work, too
+        runs = check_runs(job.runs)
+        if runs:
+            scenario = _scenario(contour, runs, job.sim, device, job.seed, log)
+        else:
+            loaded = contour if isinstance(contour, Contour) else load_contour(contour)
+            scenario = {"contour": loaded, "config": job.sim.validated(), "pinch": None, "segments": None}
+        _infeasible_pinches(scenario, job.methods, job.plans, runs, allow=False)
+    record_job(out, job, resume)
     reports = []
     for study in job.study:
         path = out / f"robustness-{study}.json"
@@ -701,7 +747,7 @@ def robustness(
         report = robustness_study(
             contour, study, out, runs=job.runs or None, plans=job.plans or None, methods=job.methods,
             values=job.values, trials=job.trials, config=job.sim, grad=job.grad, device=device, seed=job.seed,
-            log=log,
+            log=log, allow_infeasible_pinch=job.allow_infeasible_pinch,
         )  # fmt: skip
         reports.append(report)
     return reports

@@ -21,7 +21,7 @@ from agents.policies import nominal_validation_error, rollout_errors
 from envs.options import ENV_FIELDS, PatternCutOptions
 from warpcut.contours import Contour, load_contour
 from warpcut.io import write_json
-from warpcut.planning import Plan, plan_cut
+from warpcut.planning import ArmModel, Plan, plan_cut
 from warpcut.sim.config import SimConfig
 
 
@@ -111,7 +111,13 @@ def run_pipeline(
         f"{point_text(pinch)} with fixed tension: {plan.chosen['error_vertices']:.1f} vertices"
     )
     listed = _ranked_candidates(plan, settings["rl_candidates"] if job.policy == "rl" else None)
-    analytic = Method("analytic", pinches=analytic_pinches(job.analytic_pinch, [loaded], [plan]))
+    # analytic_pinch "centroid" asks for the paper's literal pinch point, feasible or not: its row says which
+    centroid = job.analytic_pinch == "centroid"
+    analytic = Method(
+        "analytic",
+        pinches=analytic_pinches(job.analytic_pinch, [loaded], [plan]),
+        allow_infeasible_pinch=centroid,
+    )
     runs: list[Path] = []
     rl_dir = None
     if job.policy == "fixed":
@@ -119,7 +125,7 @@ def run_pipeline(
         log("[2/3] --policy fixed: the plan's pinch and order")
     elif job.policy == "analytic":
         log(f"[2/3] scoring the analytic policy at {len(listed)} pinch candidate(s)")
-        chosen = _choose_by_analytic(loaded, plan, listed, config, device, job.seed)
+        chosen = _choose_by_analytic(loaded, plan, listed, config, device, job.seed, job.arm)
         best = listed[chosen]
         analytic = Method(
             "analytic", pinches=[np.asarray(best["pinch"])], segments=[plan.ordered_segments(best["order"])]
@@ -149,6 +155,7 @@ def run_pipeline(
         seed=job.seed,
         segments=[plan.ordered_segments()],
         step_callbacks=step_callbacks,
+        arm=job.arm,
     )
     report = RunReport(
         loaded, config, plan, job.policy, methods, table, listed, chosen, job.budget, job.analytic_pinch,
@@ -182,7 +189,13 @@ def _candidate_text(candidate: dict) -> str:
 
 
 def _choose_by_analytic(
-    contour: Contour, plan: Plan, listed: list[dict], config: SimConfig, device: str | None, seed: int
+    contour: Contour,
+    plan: Plan,
+    listed: list[dict],
+    config: SimConfig,
+    device: str | None,
+    seed: int,
+    arm: ArmModel,
 ) -> int:
     """Score the analytic policy at every candidate (noise-free, one batch); the index of the best."""
     scores = run_method(
@@ -194,6 +207,7 @@ def _choose_by_analytic(
         device,
         seed,
         segments=[plan.ordered_segments(c["order"]) for c in listed],
+        arm=arm,
     ).error_vertices[:, 0]
     for c, e in zip(listed, scores, strict=True):
         c["analytic_error_vertices"] = float(e)
@@ -216,7 +230,10 @@ def _train_candidates(
     each candidate's validation error in ``listed``. Returns the winner's run directory, its index (the
     first, i.e. the better fixed rank, among ties) and every run directory."""
     options = PatternCutOptions(
-        contour=contour, sim_config=job.sim, **{name: getattr(job.env, name) for name in ENV_FIELDS}
+        contour=contour,
+        sim_config=job.sim,
+        arm=job.arm,
+        **{name: getattr(job.env, name) for name in ENV_FIELDS},
     )
     runs = []
     article = "an" if job.train.algo[0] in "aeiou" else "a"

@@ -3,6 +3,7 @@ contour the no-tension error and each method's paired improvement with its 95% C
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import time
 from collections.abc import Callable, Sequence
@@ -26,7 +27,7 @@ from agents.policies import check_policy_run, is_run, rollout_errors
 from envs.options import ENV_FIELDS, PatternCutOptions
 from warpcut.contours import Contour, resolve_contours
 from warpcut.io import read_json, safe_name, write_json
-from warpcut.planning import Plan, plan_cut
+from warpcut.planning import InfeasiblePinch, Plan, check_pinch, plan_cut
 from warpcut.sim.config import SimConfig
 
 
@@ -54,17 +55,26 @@ class TableReport:
         }
 
     def markdown(self) -> str:
-        """The table as Markdown: per contour the no-tension error and each method's improvement ± CI."""
-        shown = [m for m in self.methods if m != "none"]
+        """The table as Markdown: per contour the no-tension error and each method's improvement ± CI (a
+        cell at a pinch point the gripper could not hold says so)."""
+        shown, rows = [m for m in self.methods if m != "none"], self.table["rows"]
         head = "| contour | no tension (vertices) | " + " | ".join(f"{m} (%)" for m in shown) + " |"
         lines = [head, "|---|---|" + "---|" * len(shown)]
-        for row in self.table["rows"]:
-            cells = [f"{row[f'{m}_improvement_pct']:+.1f} ± {row[f'{m}_ci95']:.1f}" for m in shown]
+        for row in rows:
+            cells = [
+                f"{row[f'{m}_improvement_pct']:+.1f} ± {row[f'{m}_ci95']:.1f}"
+                + (" (infeasible pinch)" if row.get(f"{m}_pinch_feasible") is False else "")
+                for m in shown
+            ]
             lines.append(
                 f"| {row['contour']} | {row['none_error_vertices']:.1f} | " + " | ".join(cells) + " |"
             )
         mean = self.table["mean"]
-        cells = [f"{mean[f'{m}_improvement_pct']:+.1f} ± {mean[f'{m}_ci95']:.1f}" for m in shown]
+        cells = [
+            f"{mean[f'{m}_improvement_pct']:+.1f} ± {mean[f'{m}_ci95']:.1f}"
+            + (" (infeasible pinches in it)" if any(r.get(f"{m}_pinch_feasible") is False for r in rows) else "")
+            for m in shown
+        ]
         lines.append("| **mean** | | " + " | ".join(cells) + " |")
         return "\n".join(lines)
 
@@ -126,6 +136,7 @@ def evaluate_table(
             spec.pinches = [p.chosen["pinch"] for p in plans]
         elif spec.name == "analytic":
             spec.pinches = analytic_pinches(job.analytic_pinch, loaded, plans)
+            spec.allow_infeasible_pinch = job.analytic_pinch == "centroid"  # the paper's, feasible or not
         elif spec.name == "rl":
             spec.result, runs, kept = _rl_result(
                 job, named, plans, out, device, resume, log, step_callbacks, stages
@@ -148,6 +159,7 @@ def evaluate_table(
         segments=None if plans is None else [p.ordered_segments() for p in plans],
         progress=lambda what: (log(f"  running {what}"), stages("evaluating", next(running, 0), batches)),
         step_callbacks=step_callbacks,
+        arm=job.arm,
     )
     stages("evaluating", batches, batches)
     log(f"  evaluated {len(methods)} method(s) x {len(loaded)} contour(s) x {trials} trials")
@@ -244,7 +256,12 @@ def _rl_result(
     planned pinch and segments when planned) rolled out for ``job.trials``, paired with the baselines'
     noise."""
     trials, seed, checkpoints = job.trials, job.seed, job.checkpoints
-    options = PatternCutOptions(sim_config=job.sim, **{name: getattr(job.env, name) for name in ENV_FIELDS})
+    env = {name: getattr(job.env, name) for name in ENV_FIELDS}
+    options = PatternCutOptions(sim_config=job.sim, arm=job.arm, **env)
+    # checkpoints at infeasible pinch points were refused before any work (_check_checkpoints) unless allowed
+    allowed = {}
+    if checkpoints is not None and job.allow_infeasible_pinch:
+        allowed = {"allow_infeasible_pinch": True}
     rollouts, runs, iterations, started = [], [], [], time.perf_counter()
     for k, (spec, contour) in enumerate(named):
         if checkpoints is not None:
@@ -267,9 +284,10 @@ def _rl_result(
         # Trial t sees the noise of the baselines' trial t of this contour (env k * trials + t there).
         rollouts.append(
             rollout_errors(
-                run, trials, seed=seed + 1, device=device, on_step=callback, paired_noise=(seed, k * trials)
+                run, trials, seed=seed + 1, device=device, on_step=callback, paired_noise=(seed, k * trials),
+                overrides=allowed,
             )
-        )
+        )  # fmt: skip
         stages("training rl" if checkpoints is None else "rolling out rl", k + 1, len(named))
     what = "trained" if checkpoints is None else "rolled out"
     log(f"  rl: {what} {len(named)} policy(ies) in {time.perf_counter() - started:.0f} s")
@@ -279,7 +297,8 @@ def _rl_result(
 def _check_checkpoints(checkpoints: Path, contours: list[Contour], job: EvaluateJob) -> None:
     """Refuse ``checkpoints`` unless it holds, for every contour, a finished run (or any, with
     ``job.allow_partial``) trained on that contour, with the job's observations and actions and the same
-    simulation settings (:func:`agents.policies.check_policy_run`)."""
+    simulation settings (:func:`agents.policies.check_policy_run`), at a pinch point the gripper could hold
+    with the job's arm (or any, with ``job.allow_infeasible_pinch``)."""
     env = {name: getattr(job.env, name) for name in ENV_FIELDS}
     for contour in contours:
         run = checkpoints / safe_name(contour.name)
@@ -289,4 +308,10 @@ def _check_checkpoints(checkpoints: Path, contours: list[Contour], job: Evaluate
                 "(expected CHECKPOINTS/NAME/options.json from 'warpcut train --out')"
             )
         requested = PatternCutOptions(contour=contour, sim_config=job.sim, **env)
-        check_policy_run(run, requested, allow_partial=job.allow_partial)
+        options = check_policy_run(run, requested, allow_partial=job.allow_partial)
+        if not job.allow_infeasible_pinch:
+            _, pinch, cuts = dataclasses.replace(options, allow_infeasible_pinch=True).per_env(1)
+            problem = check_pinch(pinch[0], contour, job.sim, cuts and cuts[0], job.arm, allow=True)
+            if problem is not None:
+                fix = f"train {contour.name}'s run at a feasible pinch point (warpcut train without --pinch)"
+                raise InfeasiblePinch(pinch[0], contour, f"{problem} (the run {run})", fix)

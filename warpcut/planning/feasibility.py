@@ -19,10 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from warpcut.contours import Contour
+from warpcut.contours import Contour, ring
 from warpcut.planning.segmentation import Segment
 from warpcut.sim.config import ARM_LENGTH_MM, ARM_RADIUS_MM, RESOLUTION_RANGE, SheetGrid, SimConfig
-from warpcut.task import default_segments
 
 CORNER_MARGIN_MM = 15.0
 """Pinch points stay this far from a corner clip (mm): the clip and the gripper would collide."""
@@ -61,6 +60,31 @@ class ArmModel:
                 need = ">= 0 mm (inf: all the way)" if allow_inf else "finite and >= 0 mm"
                 raise ValueError(f"arm.{name}: must be {need} (got {value!r})")
             object.__setattr__(self, name, float(value))
+
+    def to_json(self) -> dict:
+        """``{"radius_mm", "length_mm"}`` as JSON holds them (an infinite length as null)."""
+        length = None if math.isinf(self.length_mm) else self.length_mm
+        return {"radius_mm": self.radius_mm, "length_mm": length}
+
+    @classmethod
+    def from_json(cls, data: ArmModel | dict | None, where: str = "arm") -> ArmModel:
+        """The arm :meth:`to_json` wrote (a null length: all the way), an ``ArmModel`` as it is, or None: the
+        paper's.
+
+        Raises:
+            ValueError: naming ``where`` for anything else.
+        """
+        if data is None or isinstance(data, ArmModel):
+            return data or cls()
+        if not isinstance(data, dict) or set(data) - {"radius_mm", "length_mm"}:
+            raise ValueError(
+                f"{where}: give {{radius_mm, length_mm}} (mm; length null: all the way), got {data!r:.80}"
+            )
+        length = data.get("length_mm", ARM_LENGTH_MM)
+        try:
+            return cls(data.get("radius_mm", ARM_RADIUS_MM), math.inf if length is None else length)
+        except ValueError as error:
+            raise ValueError(f"{where}.{str(error).removeprefix('arm.')}") from None
 
 
 def under_arm(points: np.ndarray, path: ScissorPath, arm: ArmModel = ArmModel()) -> np.ndarray:
@@ -120,8 +144,8 @@ def pinch_rules(
     :data:`CORNER_MARGIN_MM` from a corner), ``fixture`` (more than a grasp radius from every fixture
     vertex), ``contour`` (the gripped disc never reaches the scissors' cut: at least grasp radius + cut
     radius from the contour) and ``arm`` (not :func:`under_arm` while the scissors follow ``segments``;
-    default: the whole contour, :func:`warpcut.task.default_segments`, which the arm sweeps the same way
-    however it is split).
+    default: the whole contour, which the arm sweeps the same way however it is split or wherever it
+    starts).
     """
     points = material_points("points", points)
     w, h = config.width_mm, config.height_mm
@@ -134,7 +158,7 @@ def pinch_rules(
     rules["fixture"] = _min_distance(points, grid.material[grid.fixture_mask(config.fixture)]) > edge
     line = shapely.LinearRing(contour.points) if contour.closed else shapely.LineString(contour.points)
     rules["contour"] = shapely.distance(shapely.points(points), line) >= edge + config.cut_radius
-    path = segments if segments is not None else default_segments(contour)
+    path = segments if segments is not None else ring(np.asarray(contour.points), contour.closed)
     rules["arm"] = ~under_arm(points, path, arm)
     return rules
 
@@ -158,6 +182,103 @@ def pinch_feasible(
     """
     rules = pinch_rules(points, contour, config, segments, arm)
     return np.logical_and.reduce(list(rules.values()))
+
+
+ALLOW_INFEASIBLE = (
+    "allow_infeasible_pinch=True (CLI: --set allow_infeasible_pinch=true) runs it anyway, its results marked "
+    "infeasible"
+)
+"""How to run an infeasible pinch point all the same, as the refusal says it."""
+
+
+class InfeasiblePinch(ValueError):
+    """A pinch point the gripper cannot hold (:func:`pinch_problems`), refused: the message names the rule it
+    breaks and the fix, in one line.
+
+    Attributes:
+        point: The pinch point (mm).
+        problem: The rule it breaks, in words (:func:`pinch_problems`).
+    """
+
+    def __init__(self, point: np.ndarray, contour: Contour, problem: str, fix: str | None = None):
+        self.point = np.asarray(point, dtype=np.float64)
+        self.problem = problem
+        x, y = (float(v) for v in self.point)
+        fix = fix or (
+            "omit it (--pinch) for the default pinch point, feasible by construction, or choose a point "
+            "clear of the cut and of the arm ('warpcut plan' lists feasible candidates)"
+        )
+        super().__init__(
+            f"pinch point ({x:.1f}, {y:.1f}) mm is not a feasible grasp for {contour.name}: {problem}; "
+            f"{fix}; {ALLOW_INFEASIBLE}"
+        )
+
+
+def pinch_problems(
+    points: np.ndarray,
+    contour: Contour,
+    config: SimConfig,
+    segments: ScissorPath | None = None,
+    arm: ArmModel = ArmModel(),
+) -> list[str | None]:
+    """Why the gripper cannot hold the sheet at each material point (M, 2) (mm): one line naming every rule
+    of :func:`pinch_rules` it breaks, with the figures that decide it, or None where it is feasible
+    (:func:`pinch_feasible`)."""
+    points = material_points("points", points)
+    rules = pinch_rules(points, contour, config, segments, arm)
+    w, h, grasp, cut = config.width_mm, config.height_mm, config.grasp_radius, config.cut_radius
+    line = shapely.LinearRing(contour.points) if contour.closed else shapely.LineString(contour.points)
+    distance = shapely.distance(shapely.points(points), line)
+    reach = "to the sheet's edge" if math.isinf(arm.length_mm) else f"for {arm.length_mm:g} mm"
+    problems: list[str | None] = []
+    for k, (x, y) in enumerate(points):
+        broken = []
+        if not rules["edges"][k]:
+            on_sheet = 0.0 <= x <= w and 0.0 <= y <= h
+            broken.append(
+                f"closer to the sheet's edge than the grasp radius ({grasp:.1f} mm)"
+                if on_sheet
+                else f"lies off the {w:g} x {h:g} mm sheet"
+            )
+        if not rules["corners"][k]:
+            broken.append(f"within {CORNER_MARGIN_MM:g} mm of a corner clip")
+        if not rules["fixture"][k]:
+            broken.append(f"on the fixture (within the grasp radius, {grasp:.1f} mm, of a held vertex)")
+        if not rules["contour"][k]:
+            where = "on the cut line" if distance[k] < cut else "too near the cut line"
+            broken.append(
+                f"{where} ({distance[k]:.1f} mm from the contour, nearer than the grasp radius plus the cut "
+                f"radius, {grasp:.1f} + {cut:.1f} mm: the scissors would cut into the gripped disc)"
+            )
+        if not rules["arm"][k]:
+            broken.append(
+                f"under the cutting arm (its footprint, {arm.radius_mm:g} mm wide either side, reaches from "
+                f"the scissor tip toward +x {reach} and sweeps over it during the cut)"
+            )
+        problems.append("; ".join(broken) or None)
+    return problems
+
+
+def check_pinch(
+    point: np.ndarray,
+    contour: Contour,
+    config: SimConfig,
+    segments: ScissorPath | None = None,
+    arm: ArmModel = ArmModel(),
+    *,
+    allow: bool = False,
+    fix: str | None = None,
+) -> str | None:
+    """Why ``point`` (2,) is not a feasible pinch point (:func:`pinch_problems`), or None where it is.
+
+    Raises:
+        InfeasiblePinch: an infeasible ``point`` unless ``allow``: the rule it breaks, ``fix`` (default:
+            omit the point, or choose a feasible one) and how to allow it.
+    """
+    problem = pinch_problems(point, contour, config, segments, arm)[0]
+    if problem is not None and not allow:
+        raise InfeasiblePinch(point, contour, problem, fix)
+    return problem
 
 
 def nearest_feasible(
@@ -221,14 +342,15 @@ def no_pinch_error(
             f"{contour.name!r}: with {spacing:.3g} mm between vertices, the grasp radius "
             f"({config.grasp_radius:.3g} mm) and the cut radius ({config.cut_radius:.3g} mm) leave no point "
             "clear of the sheet's edges, corners, fixture and the contour, nor under the cutting arm; use "
-            f"resolution {hi} or finer (--resolution {hi}), or give a pinch point explicitly (--pinch)"
+            f"resolution {hi} or finer (--resolution {hi}), or pinch an infeasible point of your choosing "
+            "(--pinch X,Y --set allow_infeasible_pinch=true)"
         )
     return ValueError(
         f"contour {contour.name!r}: no feasible pinch point on the sheet: no point is clear of its "
         f"edges, corners, fixture and the contour, nor under the cutting arm (arm.radius_mm "
-        f"{arm.radius_mm:g}); give a pinch point explicitly (simulate/train --pinch), use a thinner arm "
-        "(--arm-radius) or a shorter footprint (--arm-length), or move the contour to leave the gripper "
-        "room"
+        f"{arm.radius_mm:g}); use a thinner arm (--arm-radius) or a shorter footprint (--arm-length), move "
+        "the contour to leave the gripper room, or pinch an infeasible point of your choosing (--pinch X,Y "
+        "--set allow_infeasible_pinch=true)"
     )
 
 

@@ -86,6 +86,7 @@ def search_orders(
     device: str | None = None,
     seed: int = 0,
     limit: int = ORDER_LIMIT,
+    arm: ArmModel = ArmModel(),
 ) -> tuple[list[tuple[int, ...]], np.ndarray]:
     """The paper's ``exhaustive_search``: cut ``segments`` in every order from every candidate pinch point.
 
@@ -95,7 +96,8 @@ def search_orders(
     of :func:`~warpcut.planning.segmentation.segment_orders`, with a warning.
 
     Args:
-        candidates: (C, 2) pinch points (mm).
+        candidates: (C, 2) pinch points (mm), feasible with the cutting ``arm``
+            (:class:`~warpcut.planning.feasibility.InfeasiblePinch` otherwise).
 
     Returns:
         ``(orders, errors)``: the O orders tried and the (C, O) errors in vertices.
@@ -122,6 +124,7 @@ def search_orders(
         segments=polylines,
         device=device,
         seed=seed,
+        arm=arm,
     )
     return orders, task.run(None).error_vertices.reshape(num_c, num_o)
 
@@ -316,7 +319,7 @@ def plan_cut(
     segments = segment_contour(contour, tolerance_mm=tolerance_mm)
     rng = np.random.default_rng(seed)
     points = pinch_candidates(contour, config, segments, num_candidates, rng, arm)
-    orders, errors = search_orders(contour, config, segments, points, device=device, seed=seed)
+    orders, errors = search_orders(contour, config, segments, points, device=device, seed=seed, arm=arm)
     if not np.all(np.isfinite(errors)):  # diverged simulations: no candidate may be chosen by a NaN
         raise divergence_error([contour], ~np.isfinite(errors.reshape(1, -1)), config)
     best = np.argmin(errors, axis=1)  # each candidate's best order: the first among ties
