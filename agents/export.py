@@ -25,6 +25,7 @@ from agents.checkpoints import policy_checkpoint
 from agents.policies import is_run, load_options, load_policy, policy_runs
 from agents.training import make_run_dir
 from warpcut.io import write_atomic
+from warpcut.planning import check_pinch
 
 ONNX_OPSET = 18
 """ONNX opset of ``policy.onnx`` (rsl-rl's choice)."""
@@ -34,15 +35,64 @@ def export_run(source: str | Path, out_dir: str | Path | None = None) -> list[di
     """Export every policy ``source`` holds (:func:`policy_runs`): one policy into ``out_dir`` (default
     ``exported/`` beside its checkpoint), an evaluate directory's into ``out_dir/NAME`` (default
     ``SOURCE/exported/NAME``). Returns per policy ``{"policy": what it is, "torchscript": path, "onnx":
-    path}``."""
+    path, "unfinished": what :func:`unfinished_note` says, or None}``."""
     runs = policy_runs(source)
     exported = []
     for run, what in runs:
         target = out_dir
         if len(runs) > 1:
             target = Path(out_dir if out_dir is not None else Path(source) / "exported") / run.name
-        exported.append({"policy": what, **export_policy(run, target)})
+        exported.append({"policy": what, **export_policy(run, target), "unfinished": unfinished_note(run)})
     return exported
+
+
+def training_status(source: str | Path) -> dict | None:
+    """How far the training of the run whose policy ``source`` (a run directory or checkpoint) exports got:
+    ``{"status", "iterations", "target_iterations", "checkpoint"}``, ``status`` being its
+    ``summary.json``'s (``completed``, ``interrupted``, ``failed``) or ``unfinished`` where it has none
+    (killed, or still training), ``iterations`` those trained (its newest checkpoint's, without a summary),
+    ``target_iterations`` those it was to train (None where not recorded) and ``checkpoint`` the one
+    exported; None for a checkpoint outside a run directory."""
+    from agents.checkpoints import latest_checkpoint, read_checkpoint
+    from warpcut.io import read_json
+
+    checkpoint = policy_checkpoint(source)
+    run = checkpoint.parent
+    if not is_run(run):
+        return None
+    summary = read_json(run / "summary.json") if (run / "summary.json").is_file() else None
+    summary = summary if isinstance(summary, dict) else {}
+    iterations = summary.get("iterations")
+    if iterations is None:
+        state = read_checkpoint(latest_checkpoint(run))
+        iterations = (state.get("infos") or {}).get("iterations_done", state["iter"] + 1)
+    target = summary.get("target_iterations")
+    if target is None and (run / "config.json").is_file():
+        config = read_json(run / "config.json")
+        target = ((config.get("train") or {}) if isinstance(config, dict) else {}).get("iterations")
+    return {
+        "status": summary.get("status") or "unfinished",
+        "iterations": iterations,
+        "target_iterations": target,
+        "checkpoint": checkpoint.name,
+    }
+
+
+def unfinished_note(source: str | Path) -> str | None:
+    """One line saying that the run whose policy ``source`` exports did not finish its training (see
+    :func:`training_status`) and which checkpoint was exported; None for a finished run."""
+    status = training_status(source)
+    if status is None or status["status"] == "completed":
+        return None
+    run = policy_checkpoint(source).parent
+    how = {"unfinished": "no summary.json: killed, or still training"}.get(status["status"], status["status"])
+    of = "" if status["target_iterations"] is None else f" of {status['target_iterations']}"
+    name = status["checkpoint"]
+    which = {"latest.pt": "its latest checkpoint", "best.pt": "its best checkpoint so far"}.get(name)
+    return (
+        f"{run} is unfinished ({how}; trained {status['iterations']}{of} iterations); exported "
+        f"{which or 'the checkpoint'} ({name})"
+    )
 
 
 def policy_metadata(source: str | Path) -> dict[str, str]:
@@ -50,8 +100,10 @@ def policy_metadata(source: str | Path) -> dict[str, str]:
     structured): ``warpcut.observations`` (the name of each input entry, :mod:`envs.observations`),
     ``warpcut.actions`` (the meaning of each action: discrete choices, or continuous axes in units of
     ``max_step_mm``), ``warpcut.options`` (the run's :class:`~envs.options.PatternCutOptions` as JSON: its
-    fields are ``gymnasium.make("warpcut/PatternCut-v0", **options)``'s keyword arguments) and
-    ``warpcut.checkpoint``; only the last for a run of another env."""
+    fields are ``gymnasium.make("warpcut/PatternCut-v0", **options)``'s keyword arguments),
+    ``warpcut.pinch_feasible`` (``true``, or ``false`` with ``warpcut.pinch_problem``: the run's pinch point
+    is not a grasp the gripper could make), ``warpcut.training`` (:func:`training_status`: an unfinished
+    run's policy says so) and ``warpcut.checkpoint``; only the last for a run of another env."""
     import json
 
     from envs.core import DISCRETE_MOVES
@@ -73,10 +125,15 @@ def policy_metadata(source: str | Path) -> dict[str, str]:
         actions = [f"grasp d{axis} / max_step_mm, in [-1, 1]" for axis in "xyz"[:axes]]
     names = observation_names(options.num_fiducials, options.contour_features)
     scenario = dataclasses.replace(options, device=None).to_dict()
+    contours, pinch, cuts = dataclasses.replace(options, allow_infeasible_pinch=True).per_env(1)
+    problem = check_pinch(pinch[0], contours[0], options.config(), cuts and cuts[0], options.arm, allow=True)
     return {
         "warpcut.observations": json.dumps(names),
         "warpcut.actions": json.dumps(actions),
         "warpcut.options": json.dumps(scenario),
+        "warpcut.pinch_feasible": json.dumps(problem is None),
+        **({} if problem is None else {"warpcut.pinch_problem": problem}),
+        "warpcut.training": json.dumps(training_status(checkpoint)),
         "warpcut.checkpoint": str(checkpoint),
     }
 
@@ -90,7 +147,8 @@ def export_policy(source: str | Path, out_dir: str | Path | None = None) -> dict
         out_dir: Where to write; defaults to ``exported/`` beside the checkpoint.
 
     Returns:
-        Paths of the files, under the keys "torchscript" and "onnx".
+        Paths of the files, under the keys "torchscript" and "onnx", and "pinch_problem": why the run's
+        pinch point is not a grasp the gripper could make (its training allowed it), or None.
     """
     actor = load_policy(source)
     metadata = policy_metadata(source)
@@ -127,7 +185,8 @@ def export_policy(source: str | Path, out_dir: str | Path | None = None) -> dict
         os.replace(tmp_path, onnx_path)
     finally:
         tmp_path.unlink(missing_ok=True)
-    return {"torchscript": torchscript_path, "onnx": onnx_path}
+    problem = metadata.get("warpcut.pinch_problem")
+    return {"torchscript": torchscript_path, "onnx": onnx_path, "pinch_problem": problem}
 
 
 @contextlib.contextmanager

@@ -113,6 +113,40 @@ def test_the_default_trainings_policy_runs_on_the_default_env(trained):
     assert steps > 0 and np.isfinite(info["error_vertices"])
 
 
+def test_a_finished_run_exports_without_a_note_and_says_so_in_the_metadata(trained):
+    output = invoke(["export", str(trained), "--out", str(trained / "again")])
+    assert "unfinished" not in output and "note:" not in output
+    meta = onnx_ir.load(str(trained / "again" / "policy.onnx")).metadata_props
+    training = {"status": "completed", "iterations": 2, "target_iterations": 2, "checkpoint": "best.pt"}
+    assert json.loads(meta["warpcut.training"]) == training
+
+
+@pytest.mark.parametrize(
+    ("summary", "how"),
+    [
+        ("interrupted", "(interrupted; trained 1 of 2 iterations)"),
+        (None, "(no summary.json: killed, or still training; trained 2 of 2 iterations)"),
+    ],
+)
+def test_an_unfinished_run_exports_with_a_note_and_says_so_in_the_metadata(trained, tmp_path, summary, how):
+    """A run whose training was interrupted (its summary says so) or killed (no summary) is exported, its
+    output and metadata saying it is unfinished and which checkpoint was exported."""
+    run = tmp_path / "run"
+    shutil.copytree(trained, run, ignore=shutil.ignore_patterns("exported", "again"))
+    if summary is None:
+        (run / "summary.json").unlink()
+    else:
+        data = json.loads((run / "summary.json").read_text())
+        (run / "summary.json").write_text(json.dumps({**data, "status": summary, "iterations": 1}))
+    output = invoke(["export", str(run), "--out", str(tmp_path / "out")])
+    notes = [line for line in output.splitlines() if line.startswith("note:")]
+    assert notes == [f"note: {run} is unfinished {how}; exported its best checkpoint so far (best.pt)"]
+    meta = onnx_ir.load(str(tmp_path / "out" / "policy.onnx")).metadata_props
+    training = json.loads(meta["warpcut.training"])
+    assert training["status"] == (summary or "unfinished") and training["checkpoint"] == "best.pt"
+    assert training["target_iterations"] == 2
+
+
 def test_a_checkpoint_describes_its_own_policy(trained, tmp_path):
     """A checkpoint alone (no run directory beside it) rebuilds and exports its policy: it holds the actor's
     config, its observation groups and shapes and its actions."""

@@ -252,6 +252,18 @@ def test_robustness_refuses_a_run_at_an_infeasible_pinch_unless_allowed(infeasib
     assert "rl (infeasible)" in stdout and "infeasible pinch (rl)" in stdout
 
 
+def test_export_records_an_infeasible_pinch_in_the_metadata(infeasible_run, tmp_path):
+    import onnx_ir
+
+    run, _ = infeasible_run
+    code, stdout, stderr = invoke(["export", str(run), "--out", str(tmp_path / "exported")])
+    assert code == 0, stderr
+    assert "infeasible pinch (policy): under the cutting arm" in stdout
+    metadata = onnx_ir.load(str(tmp_path / "exported" / "policy.onnx")).metadata_props
+    assert metadata["warpcut.pinch_feasible"] == "false"
+    assert metadata["warpcut.pinch_problem"].startswith("under the cutting arm")
+
+
 def test_optimize_refuses_an_infeasible_pinch_unless_allowed(tmp_path, capfd):
     args = ["optimize", "--contour", "fls-circle", "--trials", "1", "--set", "candidates=2", *SHEET]
     args += ["--iterations", "1", "--set", "grad.trials=1", "--set", "grad.validation_trials=0"]

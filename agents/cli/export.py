@@ -25,7 +25,8 @@ def command(run_dir: Path, out: Path | None) -> None:
 
     RUN_DIR is a run directory of 'warpcut train' (its validated best.pt, else its newest checkpoint), of
     'warpcut run' (the chosen candidate's policy) or of 'warpcut evaluate' (every contour's policy), or a
-    .pt checkpoint."""
+    .pt checkpoint. A run whose training did not finish (interrupted, failed or killed) is exported all the
+    same, with a note saying so, also in the metadata (warpcut.training)."""
     from agents.export import export_run
 
     common.check_outputs({"--out": out})
@@ -33,3 +34,6 @@ def command(run_dir: Path, out: Path | None) -> None:
         click.echo(f"exported {exported['policy']}")
         for kind in ("torchscript", "onnx"):
             click.echo(f"  {kind}: {exported[kind]}")
+        if exported["unfinished"]:
+            click.echo(f"note: {exported['unfinished']}")
+        common.echo_infeasible({"policy": exported["pinch_problem"]})
