@@ -97,6 +97,13 @@ def _instead(path: Path) -> str:
     return f"use another checkpoint (e.g. {fallback.name}, the newest readable one), or retrain"
 
 
+def saved_nothing(path: str | Path) -> bool:
+    """Whether ``path`` is a run directory that holds no checkpoint yet (stopped before its first one, e.g.
+    killed): resuming it starts it from the beginning, with its own settings."""
+    path = Path(path)
+    return path.is_dir() and not (path / LATEST_CHECKPOINT).exists() and not model_checkpoints(path)
+
+
 def resume_checkpoint(path: str | Path) -> tuple[Path, dict, str | None]:
     """The checkpoint to continue ``path`` from, its contents, and a note when it is not the run's
     ``latest.pt``.

@@ -24,7 +24,7 @@ import torch
 from agents.checkpoints import policy_checkpoint
 from agents.policies import is_run, load_options, load_policy, policy_runs
 from agents.training import make_run_dir
-from warpcut.io import write_atomic
+from warpcut.io import note_written, write_atomic
 from warpcut.planning import check_pinch
 
 ONNX_OPSET = 18
@@ -169,6 +169,7 @@ def export_policy(source: str | Path, out_dir: str | Path | None = None) -> dict
     example = torch.zeros(2, onnx_model.input_size)
     onnx_path = out_dir / "policy.onnx"
     tmp_path = out_dir / f".{onnx_path.name}.tmp"
+    note_written(onnx_path)  # in a run directory, a file of its run
     try:
         with _quiet_onnx_exporter():
             program = torch.onnx.export(

@@ -72,6 +72,7 @@ from agents.checkpoints import (
     layout_mismatch,
     read_checkpoint,
     resume_checkpoint,
+    saved_nothing,
 )
 from agents.config import TrainConfig
 from agents.config_io import flatten, to_plain
@@ -88,7 +89,7 @@ from agents.progress import training_progress
 from envs.options import PatternCutOptions
 from envs.rsl import FINAL_ERROR_KEY, PatternCutRslEnv
 from envs.vector import PatternCutVecEnv
-from warpcut.io import DiskFull, read_json, write_atomic, write_json
+from warpcut.io import WriteFailed, claim_run_dir, note_written, read_json, write_atomic, write_json
 from warpcut.planning import check_pinch
 
 if TYPE_CHECKING:
@@ -289,16 +290,17 @@ def _write(path: Path, data: bytes | dict, intact: str, resumable: bool = True) 
     until the new one is whole).
 
     Raises:
-        ValueError: The disk is full (``OSError`` ENOSPC, its cause): the message names ``path``, what is
-            ``intact`` (e.g. "the previous checkpoint model_4.pt is intact") and the run directory to resume
-            from (``resumable``) or that the run must start again.
+        ValueError: The OS refused the write (a full disk, a quota, a file-size limit, a read-only or
+            unwritable folder, an I/O error; the ``OSError`` is its cause): the message names ``path``, why,
+            what is ``intact`` (e.g. "the previous checkpoint model_4.pt is intact") and the run directory to
+            resume from (``resumable``) or that the run must start again.
     """
     try:
         write_atomic(path, data) if isinstance(data, bytes) else write_json(path, data)
-    except DiskFull as exc:
+    except WriteFailed as exc:
         then = f"resume from {path.parent}" if resumable else "start again"
         raise ValueError(
-            f"{path}: not written, the disk is full; {intact}: free space, then {then}"
+            f"{path}: not written, {exc.reason}; {intact}: {exc.fix}, then {then}"
         ) from exc.__cause__
 
 
@@ -416,6 +418,8 @@ class Runner(OnPolicyRunner):
         self.checkpoint = path
         _write(path.with_name(LATEST_CHECKPOINT), data, f"{path.name} (the newest checkpoint) is intact")
         self.logger.save_model(str(path), self.current_learning_iteration)
+        for events in path.parent.glob("events.out.tfevents.*"):  # rsl-rl's TensorBoard writer's files
+            note_written(events)
 
     def validate(self, validate: Callable[[torch.nn.Module], float | np.ndarray]) -> float:
         """Score the deterministic policy with ``validate``; save ``best.pt`` if its selection score (see
@@ -645,11 +649,26 @@ def train_contour(
         ValueError: A setting out of range (named), ``resume`` holds no readable checkpoint, or the job is
             not the resumed run's.
     """
+    with claim_run_dir(out_dir, command="train", resume=resume is not None):
+        return _train_contour(job, Path(out_dir), resume, device, progress, step_callbacks, label)
+
+
+def _train_contour(
+    job: TrainJob,
+    out_dir: Path,
+    resume: str | Path | None,
+    device: str | None,
+    progress: bool,
+    step_callbacks: StepCallbacks | None,
+    label: str | None,
+) -> dict:
     options = job.options(device)
     cfg = job.train.check(options.action_type == "discrete")
-    out_dir = make_run_dir(out_dir)
     if resume is not None:  # before anything is written: a resume with other settings changes nothing
         check_resumed_job(resume, job)
+    if resume is not None and saved_nothing(resume):
+        resume = None  # stopped before its first checkpoint: it starts again, with its own settings
+    if resume is not None:
         checkpoint, state, _ = resume_checkpoint(resume)
         check_layout(state["actor_state_dict"], checkpoint, options, "the env", RESUME_FIX)
     contours, points, cuts = options.per_env(1)  # an infeasible pinch point, unless allowed: refused now

@@ -164,7 +164,7 @@ def test_evaluate_writes_the_comparison_plot_and_recording(tmp_path):
     code, stdout = invoke([*args, "--out", str(tmp_path / "bare"), "--set", "plots=false"])
     assert code == 0, stdout
     written = sorted(p.name for p in (tmp_path / "bare").iterdir())
-    assert written == [".warpcut.lock", "config.json", "plans.json", "results.json", "results.md"]
+    assert written == [".warpcut-run.json", "config.json", "plans.json", "results.json", "results.md"]
 
 
 def test_recording_does_not_change_the_results(tmp_path):

@@ -2,6 +2,7 @@
 contour names, outputs that would overwrite inputs, recordings cut short, and SIGTERM/SIGHUP."""
 
 import dataclasses
+import errno
 import json
 import os
 import re
@@ -24,7 +25,7 @@ from agents.es.config import EsConfig
 from agents.jobs import EvaluateJob, RunJob, TrainJob
 from agents.pipelines import evaluate_table, run_pipeline
 from agents.pipelines.common import TrainingInterrupted
-from warpcut.io import LOCK_FILE, claim_run_dir, safe_name, write_json
+from warpcut.io import RUN_MARKER, claim_run_dir, read_run_marker, safe_name, write_json
 from warpcut.sim.config import SimConfig
 from warpcut.viz.process import RecordingError, place_file
 
@@ -96,22 +97,76 @@ def test_an_existing_run_is_refused_unless_resumed_or_overwritten(tmp_path):
     assert invoke(args)[0] == 0
     before = (out / "results.json").read_bytes()
     code, output = invoke(args)
-    assert code == 2 and "already holds a run" in output and "--resume" in output and "--overwrite" in output
-    assert (out / "results.json").read_bytes() == before
-    (out / "stale.txt").write_text("from the earlier run")
+    assert code == 2 and "holds a warpcut evaluate run" in output and "--resume" in output
+    assert "--overwrite" in output and (out / "results.json").read_bytes() == before
+    (out / "notes.txt").write_text("the user's, written into the run directory")
+    (out / "results.json").with_name(".results.json.abc.tmp").write_text("a write the run never finished")
     code, output = invoke([*args, "--overwrite"])
     assert code == 0, output
-    assert not (out / "stale.txt").exists() and (out / "results.json").is_file()
+    assert "--overwrite: deleted" in output and "kept what warpcut did not write: notes.txt" in output
+    assert (out / "notes.txt").is_file() and (out / "results.json").is_file()
+    assert not list(out.glob(".results.json.*.tmp"))
     code, output = invoke([*args, "--resume", "--overwrite"])
     assert code == 2 and "give one" in output
-
-    mine = tmp_path / "mine"  # a directory warpcut did not write: --overwrite does not empty it
-    mine.mkdir()
-    (mine / "thesis.tex").write_text("years of work")
-    code, output = invoke([*args[:-1], str(mine), "--overwrite"])
-    assert code == 2 and "does not look like one" in output and (mine / "thesis.tex").is_file()
     code, output = invoke(["evaluate", "--resume", "--contours", "circle-small"])
     assert code == 2 and "--out" in output
+
+
+@pytest.mark.parametrize("option", ["--overwrite", "--resume"])
+def test_a_folder_warpcut_did_not_mark_is_never_deleted_or_written_in(tmp_path, option):
+    """A folder is a run only if warpcut marked it: a file named like a run's (config.json, results.json)
+    in a user's project proves nothing, and neither --overwrite nor --resume touches the project."""
+    project = tmp_path / "project"
+    (project / "src").mkdir(parents=True)
+    files = {
+        "src/main.py": "print(1)",
+        "notes.txt": "years of work",
+        "config.json": "{}",
+        "results.json": "[]",
+    }
+    for name, text in files.items():
+        (project / name).write_text(text)
+    for args in (
+        ["evaluate", "--contours", "circle-small", "--methods", "none", "--trials", "1"],
+        ["train", "--contour", "circle-small", "--iterations", "1", "--no-progress"],
+        ["run", "--contour", "circle-small", "--policy", "fixed", "--set", "trials=1"],
+    ):
+        if args[0] == "train" and option == "--resume":
+            given = [*args, "--resume", str(project)]
+        else:
+            given = [*args, "--out", str(project), option]
+        code, output = invoke(given)
+        assert code == 2 and "holds files warpcut did not write" in output, (given, output)
+        assert len(output.strip().splitlines()) == 1
+        assert {
+            p.relative_to(project).as_posix(): p.read_text() for p in project.rglob("*") if p.is_file()
+        } == files
+    for root in ("/", str(tmp_path)):  # never "a run", never offered --overwrite
+        code, output = invoke(["evaluate", "--contours", "circle-small", "--methods", "none", "--out", root])
+        assert code == 2 and "--overwrite" not in output and "a run" not in output
+
+
+def test_a_run_resumes_only_as_the_command_that_made_it(tmp_path):
+    run = tmp_path / "run"
+    code, output = invoke(["train", "--contour", "circle-small", "--iterations", "1", "--no-progress",
+                           "--set", "train.num_envs=64", "--set", "eval_trials=1",
+                           "--out", str(run)])  # fmt: skip
+    assert code == 0, output
+    marker = read_run_marker(run)
+    assert marker["command"] == "train" and "summary.json" in marker["files"] and "pid" not in marker
+    listing = sorted(p.relative_to(run).as_posix() for p in run.rglob("*") if p.is_file())
+    assert set(listing) - set(marker["files"]) == {RUN_MARKER}  # every file the run wrote is listed
+    assert marker["argv"][:2] == ["warpcut", "train"]
+    assert invoke(["export", str(run)])[0] == 0  # export writes beside the run: its files are the run's
+    assert {"exported/policy.pt", "exported/policy.onnx"} <= set(read_run_marker(run)["files"])
+    before = {p: p.stat().st_mtime_ns for p in run.iterdir()}
+    for command in (
+        ["evaluate", "--contours", "circle-small", "--methods", "none", "--trials", "1"],
+        ["run", "--contour", "circle-small", "--policy", "fixed", "--set", "trials=1"],
+    ):
+        code, output = invoke([*command, "--out", str(run), "--resume"])
+        assert code == 2 and f"holds a warpcut train run, not a warpcut {command[0]} run" in output, output
+    assert {p: p.stat().st_mtime_ns for p in run.iterdir()} == before
 
 
 def test_bad_inputs_are_refused_before_any_work_and_leave_no_run_behind(tmp_path, monkeypatch):
@@ -202,7 +257,7 @@ def test_bad_inputs_are_refused_before_any_work_and_leave_no_run_behind(tmp_path
     assert not (out / "config.json").exists()  # so the same --out takes the corrected command
     run = tmp_path / "train"
     code, output = invoke(["train", "--contour", "circle-small", "--pinch", "500,500", "--out", str(run)])
-    assert code != 0 and "lies off the 100 x 100 mm sheet" in output
+    assert code != 0 and "off the 100 x 100 mm sheet" in output
     assert not (run / "options.json").exists()  # the env refused the options before the run was written
 
 
@@ -212,7 +267,7 @@ def test_a_run_directory_is_locked_while_a_process_writes_it(tmp_path):
         [sys.executable, "-c", textwrap.dedent(f"""
             import sys, time
             from warpcut.io import claim_run_dir
-            with claim_run_dir({str(out)!r}):
+            with claim_run_dir({str(out)!r}, command="evaluate"):
                 print("held", flush=True)
                 time.sleep(60)
         """)],
@@ -226,10 +281,17 @@ def test_a_run_directory_is_locked_while_a_process_writes_it(tmp_path):
     finally:
         holder.kill()
         holder.wait()
-    with claim_run_dir(out, resume=True) as claimed:  # the lock died with its process
-        assert (claimed / LOCK_FILE).is_file()
-        with claim_run_dir(out):  # a claim inside this process's own claim passes
+    with claim_run_dir(out, command=None, resume=True) as claimed:  # the lock died with its process
+        with claim_run_dir(out, command=None):  # a claim inside this process's own claim passes
             pass
+    assert sorted(p.name for p in claimed.iterdir()) == []  # no lock file, no marker: nothing was written
+    refused = tmp_path / "refused"
+    (refused / "mine.txt").parent.mkdir()
+    (refused / "mine.txt").write_text("")
+    with pytest.raises(ValueError, match="holds files warpcut did not write"):
+        with claim_run_dir(refused, command="train"):
+            pass
+    assert [p.name for p in refused.iterdir()] == ["mine.txt"]  # no lock or marker left behind
 
 
 def test_an_output_that_is_an_input_is_refused(tmp_path):
@@ -340,7 +402,7 @@ def test_evaluate_resumes_after_an_interruption_keeping_finished_policies(tmp_pa
     with pytest.raises(TrainingInterrupted) as stopped:
         evaluate_table(job, out)
     assert stopped.value.run_dir == out / "policies" / "wave-1"
-    with pytest.raises(ValueError, match="already holds a run"):
+    with pytest.raises(ValueError, match="holds a warpcut evaluate run"):
         evaluate_table(job, out)
     with pytest.raises(ValueError, match=r"trials: 1 then, 2 now.*--config .*config.json"):
         evaluate_table(dataclasses.replace(job, trials=2), out, resume=True)
@@ -462,7 +524,7 @@ def test_train_refuses_an_existing_run_and_stops_on_sigterm_with_a_checkpoint(tm
     assert summary["status"] == "interrupted" and (run / "latest.pt").is_file()
 
     code, output = invoke([*args, "--iterations", "2"])
-    assert code == 2 and "already holds a run" in output
+    assert code == 2 and "holds a warpcut train run" in output
     code, output = invoke(["train", "--resume", str(run), "--set", "train.es.sigma=0.5"])
     assert code == 2 and "train.es.sigma" in output and "keeps its settings" in output
     code, output = invoke(["train", "--resume", str(run), "--iterations", str(summary["iterations"] + 1),
@@ -471,18 +533,31 @@ def test_train_refuses_an_existing_run_and_stops_on_sigterm_with_a_checkpoint(tm
     assert json.loads((run / "summary.json").read_text())["status"] == "completed"
 
 
-def test_a_failed_write_never_replaces_a_good_file(tmp_path, monkeypatch):
-    import errno
-
-    from warpcut.io import DiskFull, write_atomic
+@pytest.mark.parametrize(
+    "code, reason",
+    [
+        (errno.ENOSPC, "the disk is full"),
+        (errno.EDQUOT, "the disk quota is exceeded"),
+        (errno.EFBIG, "ulimit -f"),
+        (errno.EROFS, "read-only"),
+        (errno.EACCES, "permission denied"),
+        (errno.EIO, "an I/O error"),
+    ],
+)
+def test_a_failed_write_never_replaces_a_good_file(tmp_path, monkeypatch, code, reason):
+    """Every OS error on write (not only a full disk) is one line naming the file and why, and the file it
+    would have replaced stays as it was, with no temporary file beside it."""
+    from warpcut.io import WriteFailed, write_atomic
 
     path = write_json(tmp_path / "results.json", {"good": True})
 
-    def no_space(fd):
-        raise OSError(errno.ENOSPC, "No space left on device")
+    def refused(fd):
+        raise OSError(code, os.strerror(code))
 
-    monkeypatch.setattr(os, "fsync", no_space)
-    with pytest.raises(DiskFull, match=r"results.json: not written, the disk is full; its previous version"):
+    monkeypatch.setattr(os, "fsync", refused)
+    with pytest.raises(
+        WriteFailed, match=rf"results.json: not written, .*{re.escape(reason)}.*; its previous version"
+    ):
         write_json(path, {"good": False})
     monkeypatch.undo()
     assert json.loads(path.read_text()) == {"good": True}
@@ -490,11 +565,149 @@ def test_a_failed_write_never_replaces_a_good_file(tmp_path, monkeypatch):
     (tmp_path / "x.json").mkdir()
     with pytest.raises(ValueError, match="x.json: is a directory, not a file"):
         write_atomic(tmp_path / "x.json", b"{}")
+
+
+def test_a_directory_as_the_json_output_is_one_line(tmp_path):
+    (tmp_path / "x.json").mkdir()
     code, output = invoke(["simulate", "--contour", "circle-small", "--json", str(tmp_path / "x.json")])
     assert code == 2 and "is a directory" in output and len(output.strip().splitlines()) == 1
+
+
+def _limited(limit_bytes: int):
+    """A ``preexec_fn`` that caps the size of any file the process writes (``ulimit -f``): a larger write
+    fails with EFBIG (Python ignores SIGXFSZ)."""
+
+    def limit():
+        import resource
+
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
+
+    return limit
+
+
+def test_a_file_size_limit_is_one_line_and_the_run_resumes(tmp_path):
+    """``ulimit -f`` below a checkpoint's size: training stops with one line naming the file and the
+    limit, keeps what it wrote whole, and resumes (without the limit) to the end; ``evaluate --json``
+    past the limit is one line too."""
+    run = tmp_path / "run"
+    args = [sys.executable, "-m", "warpcut", "train", "--contour", "circle-small", "--iterations", "2",
+            "--no-progress", "--set", "train.num_envs=64", "--set", "eval_trials=1", "--set", "plots=false",
+            "--out", str(run)]  # fmt: skip
+    done = subprocess.run(args, capture_output=True, text=True, timeout=300, preexec_fn=_limited(20_000))
+    assert done.returncode == 2, done.stderr
+    error = done.stderr.strip().splitlines()
+    assert len(error) == 1 and "Traceback" not in done.stderr, done.stderr
+    assert "not written, the file is larger than this process may write (ulimit -f)" in error[0]
+    assert f"resume from {run}" in error[0] or "start again" in error[0]
+    assert not list(run.glob(".*.tmp"))
+    for path in run.glob("*.json"):
+        json.loads(path.read_text())  # what was written is whole
+    again = subprocess.run([*args[:3], "train", "--resume", str(run), "--no-progress"],
+                           capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert again.returncode == 0, again.stderr
+    assert json.loads((run / "summary.json").read_text())["status"] == "completed"
+
+    out = tmp_path / "table.json"
+    done = subprocess.run(
+        [sys.executable, "-m", "warpcut", "evaluate", "--contours", "circle-small", "--methods", "none",
+         "--trials", "1", "--set", "plots=false", "--out", str(tmp_path / "table"), "--json", str(out)],
+        capture_output=True, text=True, timeout=300, preexec_fn=_limited(600),
+    )  # fmt: skip
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1 and "ulimit -f" in done.stderr
 
 
 @pytest.mark.parametrize("pinch", ["nan,50", "50,inf", "-inf,-inf"])
 def test_a_non_finite_pinch_is_refused(pinch):
     code, output = invoke(["simulate", "--contour", "circle-small", "--pinch", pinch])
     assert code == 2 and "--pinch" in output and "finite" in output
+
+
+@pytest.mark.parametrize("when", ["before its first checkpoint", "after its first checkpoint"])
+def test_a_run_killed_before_its_summary_resumes_with_its_own_settings(tmp_path, when):
+    """``kill -9`` (no handler runs, no summary.json): ``train --resume RUN`` with no other option trains
+    the run's own number of iterations, not the learner's default."""
+    run = tmp_path / "run"
+    kill = "os.kill(os.getpid(), signal.SIGKILL)"
+    patch = (
+        f"agents.training.train = lambda *a, **k: {kill}"
+        if when == "before its first checkpoint"
+        else "save = agents.training.Runner.save\n"
+        f"agents.training.Runner.save = lambda self, *a, **k: (save(self, *a, **k), {kill})"
+    )
+    script = (
+        "import os, signal, sys\nimport agents.training\n"
+        f"{patch}\n"
+        "from agents.cli import main\n"
+        "sys.argv = ['warpcut', 'train', '--contour', 'circle-small', '--iterations', '3', '--no-progress',"
+        " '--set', 'train.num_envs=64', '--set', 'eval_trials=1', '--set', 'plots=false',"
+        f" '--out', {str(run)!r}]\n"
+        "main()\n"
+    )
+    killed = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert killed.returncode == -signal.SIGKILL, killed.stderr
+    assert not (run / "summary.json").exists() and (run / "config.json").is_file()
+    code, output = invoke(["train", "--resume", str(run), "--no-progress"])
+    assert code == 0, output
+    assert ("saved no checkpoint" in output) == (when == "before its first checkpoint")
+    assert json.loads((run / "summary.json").read_text())["iterations"] == 3
+
+
+@pytest.mark.parametrize(
+    "args, job",
+    [
+        (["simulate", "--contour", "circle-small", "--policy", "none"], "SimulateJob(policy=['none'])"),
+        (["run", "--policy", "fixed"], "RunJob(policy='fixed')"),
+        (["evaluate", "--methods", "none,fixed"], "EvaluateJob(methods=['none', 'fixed'])"),
+        (["optimize", "--contour", "circle-small", "--estimator", "tape"], "OptimizeJob()"),
+        (["train", "--contour", "circle-small"], "TrainJob()"),
+        (["robustness", "--contour", "circle-small", "--methods", "none,fixed"], "RobustnessJob()"),
+    ],
+)
+def test_every_setting_an_invocation_would_ignore_is_refused(args, job):
+    """The rule is general, not a list of cases: each key the job says it would not use
+    (``unused_keys``), given on the command line at any value (its default too), is refused on one line
+    that names it, before any work."""
+    from agents import jobs
+    from agents.config_io import flatten
+
+    job = eval(job, vars(jobs))
+    plain = flatten(to_plain(job))
+    unused = job.unused_keys()
+    assert unused or args[0] == "robustness", args  # each command has something it can ignore
+    checked = 0
+    for key in unused:
+        for leaf in [k for k in plain if k == key or k.startswith(f"{key}.")][:4]:
+            code, output = invoke([*args, "--set", f"{leaf}={json.dumps(plain[leaf])}", "--print-config"])
+            assert code == 2 and f"{leaf}: " in output and "drop it" in output, (leaf, output)
+            assert len(output.strip().splitlines()) == 1
+            checked += 1
+    assert checked >= len(unused)
+
+
+def test_an_unwritable_working_folder_is_named_before_any_work(monkeypatch):
+    """The default outputs go under the working folder: where it cannot be written (here /proc, where no
+    file can be made) the command says so on one line before simulating, not after."""
+    monkeypatch.chdir("/proc")
+    for args in (
+        ["simulate", "--contour", "circle-small", "--trials", "1"],
+        ["simulate", "--contour", "circle-small", "--trials", "1", "--record", "1", "--set", "plots=false"],
+        ["evaluate", "--contours", "circle-small", "--methods", "none", "--trials", "1"],
+    ):
+        code, output = invoke(args)
+        assert code == 2 and "the working folder /proc" in output, (args, output)
+        assert len(output.strip().splitlines()) == 1 and "error (vertices)" not in output
+
+
+def test_a_batch_the_user_never_sized_is_named_as_what_it_is(monkeypatch, tmp_path):
+    """A batch a pipeline makes itself (the planner's candidates x orders) that does not fit in memory is
+    named as what it is, with the setting that shrinks it, not as num_envs, a count nobody gave."""
+    monkeypatch.setenv("WARPCUT_MEMORY_LIMIT_GB", "0.003")
+    for args in (
+        ["plan", "--contour", "fls-circle"],
+        ["evaluate", "--contours", "circle-small", "--methods", "none,fixed", "--out", str(tmp_path / "e")],
+    ):
+        code, output = invoke(args)
+        error = output.strip().splitlines()[-1]  # after evaluate's progress lines
+        assert code == 2 and "the planner's batch (pinch candidates x segment orders)" in error, output
+        assert "num_envs" not in error and "--candidates" in error

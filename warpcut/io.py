@@ -4,30 +4,29 @@ never leave their directory, and run directories that one process at a time owns
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import errno
 import fcntl
+import glob
 import hashlib
 import json
 import math
 import os
 import re
-import shutil
+import sys
 import tempfile
+import time
+import uuid
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-LOCK_FILE = ".warpcut.lock"
-"""The lock file in a run directory that the process writing it holds (:func:`claim_run_dir`)."""
-
-_RUN_FILES = ("results.json", "summary.json", "options.json", "scenario.json", "config.json", "plan.json")
-"""Files by which :func:`claim_run_dir` recognises a run directory warpcut wrote before run directories
-had a lock file."""
+RUN_MARKER = ".warpcut-run.json"
+"""The file by which warpcut marks a run directory as its own (:func:`claim_run_dir`): the command that
+claimed it, the run's id, when, and every file the run wrote there (the only files ``--overwrite``
+deletes)."""
 
 _SAFE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
-
-_HELD: set[Path] = set()
-"""The run directories this process has claimed (a claim inside a claim of the same directory passes)."""
 
 
 def plain_file_mode() -> int:
@@ -37,25 +36,58 @@ def plain_file_mode() -> int:
     return 0o666 & ~umask
 
 
-class DiskFull(ValueError):
-    """A write failed for lack of space (``ENOSPC``, ``EDQUOT``); the file it would replace is intact."""
+WRITE_ERRORS = {
+    errno.ENOSPC: ("the disk is full", "free space"),
+    errno.EDQUOT: ("the disk quota is exceeded", "free space within the quota"),
+    errno.EFBIG: ("the file is larger than this process may write (ulimit -f)", "raise the limit"),
+    errno.EROFS: ("the file system is read-only", "make it writable, or write elsewhere"),
+    errno.EACCES: ("permission denied", "make the folder writable, or write elsewhere"),
+    errno.EPERM: ("permission denied", "make the folder writable, or write elsewhere"),
+    errno.EIO: ("an I/O error (a failing disk or a lost network mount?)", "check the disk"),
+    errno.ENOENT: ("a folder on its path does not exist and cannot be made", "create it, or write elsewhere"),
+    errno.ENOTDIR: ("a part of its path is a file, not a folder", "write elsewhere"),
+}
+"""The reason and the fix that :class:`WriteFailed` gives for an ``OSError`` on write, by its errno; any
+other errno is named as the OS words it."""
+
+
+class WriteFailed(ValueError):
+    """A write failed in the OS (a full disk, a quota, a file-size limit, a read-only or unwritable folder,
+    an I/O error); the file it would have replaced is intact. The ``OSError`` is its cause.
+
+    Attributes:
+        path: The file not written.
+        reason: What went wrong, in words ("the disk is full").
+        fix: What to do before writing again ("free space").
+    """
+
+    def __init__(self, path: Path, error: OSError):
+        self.path = Path(path)
+        self.reason, self.fix = WRITE_ERRORS.get(
+            error.errno, (error.strerror or type(error).__name__, "fix that")
+        )
+        super().__init__(f"{path}: not written, {self.reason}; its previous version (if any) is intact")
 
 
 def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
     """Write ``data`` to a temporary file beside ``path``, fsync it, then rename it over ``path``: a write
-    that fails (a full disk, a signal) leaves the file at ``path`` as it was and no temporary file.
+    that fails (a full disk, a file-size limit, a read-only folder, a signal) leaves the file at ``path`` as
+    it was and no temporary file. A file written inside a run directory that warpcut claimed is listed in
+    its marker (:func:`note_written`).
 
     Raises:
-        ValueError: ``path`` is a directory; :class:`DiskFull` (a ``ValueError``; the ``OSError`` is its
-            cause) when the disk is full. The message names the file.
+        ValueError: ``path`` is a directory; :class:`WriteFailed` (a ``ValueError``; the ``OSError`` is its
+            cause) when the OS refuses the write. The message names the file and why.
     """
     path = Path(path)
     if path.is_dir():
         raise ValueError(f"{path}: is a directory, not a file; choose another path")
-    path.parent.mkdir(parents=True, exist_ok=True)
     raw = data.encode() if isinstance(data, str) else data
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    tmp = None
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        note_written(path)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
         os.fchmod(fd, plain_file_mode())
         with os.fdopen(fd, "wb") as f:
             f.write(raw)
@@ -63,11 +95,11 @@ def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
             os.fsync(f.fileno())
         os.replace(tmp, path)
     except BaseException as exc:
-        Path(tmp).unlink(missing_ok=True)
-        if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT):
-            raise DiskFull(
-                f"{path}: not written, the disk is full; its previous version (if any) is intact"
-            ) from exc
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                Path(tmp).unlink(missing_ok=True)
+        if isinstance(exc, OSError):
+            raise WriteFailed(path, exc) from exc
         raise
     return path
 
@@ -102,70 +134,250 @@ def safe_name(name: str) -> str:
     return f"{slug}-{hashlib.sha1(name.encode()).hexdigest()[:8]}"
 
 
+@dataclasses.dataclass
+class _Claim:
+    """A run directory this process holds: its marker's contents and the open directory it locks."""
+
+    path: Path
+    marker: dict
+    fd: int
+    deleted: list[str] = dataclasses.field(default_factory=list)
+    kept: list[str] = dataclasses.field(default_factory=list)
+
+
+_HELD: dict[Path, _Claim] = {}
+"""The run directories this process holds, by resolved path (a claim inside one of them passes)."""
+
+
+def _marker_path(path: Path) -> Path:
+    return path / RUN_MARKER
+
+
+def read_run_marker(path: str | os.PathLike) -> dict | None:
+    """The marker of the run directory ``path`` (:data:`RUN_MARKER`), or None where warpcut never marked it
+    (no marker, or a file there that is not one)."""
+    try:
+        marker = json.loads(_marker_path(Path(path)).read_text())
+    except (OSError, ValueError):
+        return None
+    if not (isinstance(marker, dict) and marker.get("format") == "warpcut-run"):
+        return None
+    files = marker.get("files")
+    marker["files"] = [f for f in files if isinstance(f, str)] if isinstance(files, list) else []
+    return marker
+
+
+def _write_marker(claim: _Claim) -> None:
+    claim.marker["files"] = sorted(set(claim.marker["files"]))
+    write_atomic(_marker_path(claim.path), json.dumps(claim.marker, indent=2) + "\n")
+
+
+def _holder(path: Path) -> _Claim | None:
+    """The claim of this process that ``path`` lies in, if any."""
+    path = Path(os.path.abspath(path))
+    for parent in (path, *path.parents):
+        key = parent.resolve() if parent.exists() else parent
+        if key in _HELD:
+            return _HELD[key]
+    return None
+
+
+def note_written(path: str | os.PathLike) -> None:
+    """List ``path`` in the marker of the run directory it lies in, as a file warpcut wrote there (before
+    it is written: a run killed mid-write still names it). A path in no run directory this process holds
+    is listed in the marker of the nearest enclosing run directory that no other process holds (e.g.
+    ``warpcut export`` writing beside a finished run); outside any run directory, nothing is done."""
+    path = Path(os.path.abspath(path))
+    if path.name == RUN_MARKER:
+        return
+    claim = _holder(path)
+    if claim is not None:
+        relative = os.path.relpath(path.resolve(), claim.path.resolve())
+        if relative not in claim.marker["files"]:
+            claim.marker["files"].append(relative)
+            _write_marker(claim)
+        return
+    for parent in path.parents:
+        if _marker_path(parent).is_file() and read_run_marker(parent) is not None:
+            with contextlib.suppress(ValueError), claim_run_dir(parent, command=None, resume=True):
+                note_written(path)
+            return
+
+
+def _lock(path: Path) -> int:
+    """An open descriptor of the directory ``path`` holding its exclusive lock; a ``ValueError`` names the
+    process that holds it already."""
+    fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError as exc:
+        os.close(fd)
+        if exc.errno not in (errno.EAGAIN, errno.EACCES, errno.EWOULDBLOCK):
+            raise ValueError(f"{path}: cannot be locked ({exc.strerror}); choose another --out") from None
+        marker = read_run_marker(path) or {}
+        holder = f"warpcut process {marker['pid']}" if marker.get("pid") else "another warpcut process"
+        raise ValueError(
+            f"{path}: in use by {holder}; wait for it to finish, or choose another --out"
+        ) from None
+    return fd
+
+
+def _delete_written(path: Path, files: list[str]) -> tuple[list[str], list[str]]:
+    """Delete what a run wrote in ``path``: the files its marker lists (and their temporary files), then the
+    folders that held them where they are left empty. Returns what was deleted and what was kept (the
+    entries of ``path`` warpcut did not write)."""
+    root = os.path.abspath(path)
+    deleted, folders = [], set()
+    for name in files:
+        file = Path(os.path.normpath(os.path.join(root, name)))
+        if os.path.commonpath([root, file]) != root or file == Path(root):
+            continue  # a marker edited to point outside its run: never followed
+        for entry in [file, *file.parent.glob(f".{glob.escape(file.name)}.*"),
+                      *file.parent.glob(f".{glob.escape(file.stem)}.*.mp4")]:  # fmt: skip
+            if entry.is_file() or entry.is_symlink():
+                entry.unlink()
+                deleted.append(os.path.relpath(entry, root))
+        folders.update(p for p in file.parents if os.path.commonpath([root, p]) == root and p != Path(root))
+    for folder in sorted(folders, key=lambda p: len(p.parts), reverse=True):
+        with contextlib.suppress(OSError):
+            folder.rmdir()  # only where it is empty: a file the user put there keeps its folder
+    kept = sorted(p.name for p in Path(root).iterdir() if p.name != RUN_MARKER)
+    return deleted, kept
+
+
+def _check_run_dir(
+    path: Path, command: str | None, resume: bool, overwrite: bool
+) -> tuple[dict | None, list]:
+    """The marker and the entries of the folder ``path``, after the checks of :func:`claim_run_dir`."""
+    marker = read_run_marker(path)
+    contents = [p.name for p in path.iterdir() if p.name != RUN_MARKER]
+    if marker is None and contents:
+        raise ValueError(
+            f"{path}: holds files warpcut did not write ({len(contents)} entries, and no {RUN_MARKER}); "
+            + ("warpcut never deletes them, so " if overwrite else "")
+            + ("there is no run to resume; " if resume else "")
+            + "choose a new or empty folder for --out"
+        )
+    what = f"a warpcut {marker.get('command')} run" if marker and marker.get("command") else "a warpcut run"
+    if marker is not None and contents and not (resume or overwrite):
+        raise ValueError(
+            f"{path}: holds {what} ({marker.get('id', '?')}); pass --resume to continue it, --overwrite "
+            "to delete what it wrote and start again, or choose another --out"
+        )
+    if resume and marker is not None and command and marker.get("command") not in (command, None):
+        raise ValueError(
+            f"{path}: holds {what}, not a warpcut {command} run; resume it with warpcut "
+            f"{marker.get('command')}, or choose another --out"
+        )
+    return marker, contents
+
+
+def check_run_dir(path: str | os.PathLike, *, command: str | None, resume: bool = False) -> None:
+    """Refuse, as :func:`claim_run_dir` would, to read a run from ``path`` (e.g. its settings, to resume it)
+    that warpcut did not mark, or that another command made; nothing is written."""
+    path = Path(path)
+    if path.is_dir():
+        _check_run_dir(path, command, resume, overwrite=False)
+
+
 @contextlib.contextmanager
 def claim_run_dir(
-    path: str | os.PathLike, *, resume: bool = False, overwrite: bool = False
+    path: str | os.PathLike,
+    *,
+    command: str | None,
+    resume: bool = False,
+    overwrite: bool = False,
+    argv: list[str] | None = None,
 ) -> Iterator[Path]:
-    """Own the run directory ``path`` while the block runs: create it, and hold an exclusive lock on its
-    :data:`LOCK_FILE` so that a second process fails at once instead of mixing two runs' files.
+    """Own the run directory ``path`` while the block runs: create it, mark it as warpcut's
+    (:data:`RUN_MARKER`: ``command``, a run id, when, and every file the run writes there) and hold an
+    exclusive lock on it, so that a second process fails at once instead of mixing two runs' files.
 
-    An existing directory with files in it is refused unless ``resume`` (continue the run in it) or
-    ``overwrite`` (delete its contents first; only in a directory warpcut wrote) is given; the error says
-    which option does what. Claiming a directory this process holds already passes at once (a command
-    claims its run directory, then the pipeline it runs claims it again).
+    Only a new or empty folder starts a run. A folder warpcut did not mark is never written or deleted in.
+    A marked one with a run in it is refused unless ``resume`` (continue it: only a run of the same
+    ``command``; None: any) or ``overwrite`` (delete the files the run wrote, keep everything else, and start
+    again; :attr:`deleted` of the yielded path's claim says what went) is given. A claim inside a directory
+    this process holds passes at once (a command claims its run directory, then the pipeline it runs claims
+    it again). When the block ends with nothing written, the marker goes, and the folder too if the claim
+    made it.
 
     Raises:
-        ValueError: ``path`` is a file, is not empty (and neither option given), or another process holds
-            its lock; both options given.
+        ValueError: one line naming the folder, why, and the fix.
     """
     path = Path(path)
     if resume and overwrite:
         raise ValueError("--resume and --overwrite: give one (continue the run, or replace it)")
-    key = path.resolve()
-    if key in _HELD:  # claimed already by this process (e.g. by the command around a pipeline)
+    if _holder(path) is not None:  # claimed already by this process (e.g. by the command around a pipeline)
         yield path
         return
-
     if path.exists() and not path.is_dir():
         raise ValueError(f"{path}: is a file, not a run directory; choose another --out")
-    path.mkdir(parents=True, exist_ok=True)
-    claimed_before = (path / LOCK_FILE).exists() or any((path / f).exists() for f in _RUN_FILES)
-    with open(path / LOCK_FILE, "a+") as lock:
+    made = not path.exists()
+    if made:
         try:
-            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            path.mkdir(parents=True)
         except OSError as exc:
-            if exc.errno not in (errno.EAGAIN, errno.EACCES):
-                raise
-            lock.seek(0)
-            holder = lock.read().strip() or "another process"
+            reason, fix = WRITE_ERRORS.get(exc.errno, (exc.strerror, "fix that"))
             raise ValueError(
-                f"{path}: in use by {holder}; wait for it to finish, or choose another --out"
+                f"{path}: cannot create the folder, {reason}; {fix}, or choose another --out"
             ) from None
-        contents = [p for p in path.iterdir() if p.name != LOCK_FILE]
-        if contents and not (resume or overwrite):
-            raise ValueError(
-                f"{path}: already holds a run ({len(contents)} entries); pass --resume to continue it, "
-                "--overwrite to replace it, or choose another --out"
-            )
-        if overwrite and contents and not claimed_before:
-            raise ValueError(
-                f"{path}: --overwrite deletes a run directory's contents, and this does not look like one "
-                f"(none of {', '.join(_RUN_FILES)}); empty or remove it yourself, or choose another --out"
-            )
-        if overwrite:
-            for entry in contents:
-                shutil.rmtree(entry) if entry.is_dir() and not entry.is_symlink() else entry.unlink()
-        lock.seek(0)
-        lock.truncate()
-        lock.write(f"warpcut process {os.getpid()}\n")
-        lock.flush()
-        _HELD.add(key)
+    try:
+        fd = _lock(path)
+    except BaseException:
+        if made:
+            with contextlib.suppress(OSError):
+                path.rmdir()
+        raise
+    claim, deleted, kept = None, [], []
+    try:
+        marker, contents = _check_run_dir(path, command, resume, overwrite)
+        if overwrite and marker is not None:
+            deleted, kept = _delete_written(path, marker["files"])
+        if resume and marker is not None and contents:
+            marker.update(pid=os.getpid())
+        else:
+            marker = {
+                "format": "warpcut-run",
+                "command": command,
+                "id": f"{time.strftime('%Y%m%d-%H%M%S')}-{uuid.uuid4().hex[:8]}",
+                "argv": ["warpcut", *sys.argv[1:]] if argv is None else list(argv),
+                "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                "pid": os.getpid(),
+                "files": [],
+            }
+        claim = _Claim(path, marker, fd, deleted, kept)
+        _write_marker(claim)
+    except BaseException:
+        os.close(fd)
+        if made:
+            with contextlib.suppress(OSError):
+                path.rmdir()
+        raise
+    key = path.resolve()
+    _HELD[key] = claim
+    try:
+        yield path
+    finally:
+        del _HELD[key]
         try:
-            yield path
+            if not claim.marker["files"] and not [p for p in path.iterdir() if p.name != RUN_MARKER]:
+                _marker_path(path).unlink(missing_ok=True)  # nothing written: no run left behind
+                if made:
+                    path.rmdir()
+            else:
+                claim.marker.pop("pid", None)
+                _write_marker(claim)
+        except (OSError, ValueError):
+            pass  # the marker stays as it was: it still lists every file written
         finally:
-            _HELD.discard(key)
-            lock.seek(0)
-            lock.truncate()
+            os.close(fd)
+
+
+def overwritten(path: str | os.PathLike) -> tuple[list[str], list[str]]:
+    """What ``--overwrite`` did when this process claimed the run directory ``path``: the files it deleted
+    (those the earlier run wrote) and the entries it kept (those warpcut did not write)."""
+    claim = _holder(Path(path))
+    return (claim.deleted, claim.kept) if claim is not None else ([], [])
 
 
 def read_json(path: str | os.PathLike) -> Any:

@@ -17,6 +17,9 @@ import click
 from warpcut.sim.config import ARM_LENGTH_MM, RESOLUTION_RANGE, SimConfig
 from warpcut.viz.process import RecordingError
 
+COMMAND_LINE: list[str] = []
+"""The command line of the command running (what a run directory's marker records)."""
+
 
 class CleanErrors(click.Group):
     """Turn usage errors, the library's ValueErrors and files that cannot be read or written (an OSError
@@ -26,6 +29,8 @@ class CleanErrors(click.Group):
 
     def main(self, *args, **kwargs):
         kwargs["standalone_mode"] = False
+        given = args[0] if args else kwargs.get("args")
+        COMMAND_LINE[:] = ["warpcut", *(sys.argv[1:] if given is None else given)]
         handlers = _stop_on_signals()
         try:
             result = super().main(*args, **kwargs)
@@ -209,11 +214,16 @@ def out_option(default: str):
     )
 
 
+overwrite_option = click.option(
+    "--overwrite",
+    is_flag=True,
+    help="Delete what an earlier warpcut run wrote in --out (nothing else) and start again.",
+)
+
+
 def run_dir_options(command):
     """``--resume`` and ``--overwrite`` for a command that writes a run directory (``--out``)."""
-    command = click.option(
-        "--overwrite", is_flag=True, help="Replace the run directory's contents (an earlier run's)."
-    )(command)
+    command = overwrite_option(command)
     return click.option(
         "--resume",
         is_flag=True,
@@ -222,12 +232,11 @@ def run_dir_options(command):
     )(command)
 
 
-def claim(out: Path | None, prefix: str, resume: bool, overwrite: bool):
+def claim(out: Path | None, prefix: str, resume: bool, overwrite: bool, command: str):
     """``(run directory, its claim)``: ``out`` (or a fresh ``logs/PREFIX-...``) and a context that holds it
-    (:func:`warpcut.io.claim_run_dir`: locked; refused if it holds another run, unless resuming or
-    overwriting)."""
-    from warpcut.io import claim_run_dir
-
+    (:func:`warpcut.io.claim_run_dir` for ``command``: marked and locked; refused if it holds files warpcut
+    did not write, or another run unless resuming one of ``command`` or overwriting), saying what
+    ``--overwrite`` deleted and kept."""
     if resume and out is None:
         raise click.BadParameter("give the run directory to continue with --out", param_hint="--resume")
     if resume and not (out.is_dir() and any(out.iterdir())):
@@ -236,7 +245,20 @@ def claim(out: Path | None, prefix: str, resume: bool, overwrite: bool):
         )
     out = run_dir(out, prefix)
     check_outputs({"--out": out})
-    return out, claim_run_dir(out, resume=resume, overwrite=overwrite)
+    return out, _claimed(out, command, resume, overwrite)
+
+
+@contextlib.contextmanager
+def _claimed(out: Path, command: str, resume: bool, overwrite: bool):
+    from warpcut.io import claim_run_dir, overwritten
+
+    with claim_run_dir(out, command=command, resume=resume, overwrite=overwrite, argv=COMMAND_LINE or None):
+        deleted, kept = overwritten(out)
+        if deleted:
+            shown = f"; kept what warpcut did not write: {', '.join(kept[:5])}" if kept else ""
+            more = f", ... ({len(kept)} entries)" if len(kept) > 5 else ""
+            click.echo(f"--overwrite: deleted {len(deleted)} files of the earlier run in {out}{shown}{more}")
+        yield out
 
 
 def check_outputs(outputs: dict[str, Path | None], inputs: list[str] = ()) -> None:
@@ -273,7 +295,8 @@ def _unwritable(path: Path) -> str | None:
     try:
         fd, probe = tempfile.mkstemp(dir=existing, prefix=".warpcut-probe-")
     except OSError as exc:
-        return f"{existing}: {exc.strerror or exc}"
+        where = f"the working folder {existing.resolve()}" if existing == Path(".") else existing
+        return f"{where}: {exc.strerror or exc}"
     os.close(fd)
     os.unlink(probe)
     return None
@@ -513,6 +536,19 @@ def record_flag(what: str):
         help=f"Write recording.rrd ({what}) of the first N envs (default 1) of each method; view it with "
         "'warpcut replay' (colours: --set colour_by=strain|height).",
     )
+
+
+def resumed_job(job_class, out: Path | None, resume: bool, command: str):
+    """With ``--resume``, the job the run in ``out`` was started with (its ``config.json``): the base of the
+    settings, so that a resumed run keeps its own and only what is given again changes (and is then
+    checked against the run's); None when not resuming, or when the run saved no settings yet."""
+    from agents.training import CONFIG_FILE
+    from warpcut.io import check_run_dir
+
+    if not resume or out is None or not out.is_dir():
+        return None
+    check_run_dir(out, command=command, resume=True)  # a run of this command, before its settings are read
+    return saved_job(job_class, out / CONFIG_FILE) if (out / CONFIG_FILE).is_file() else None
 
 
 def saved_job(job_class, path: Path):

@@ -87,8 +87,10 @@ def command(
     from warpcut.contours import resolve_contours
     from warpcut.io import safe_name, write_json
 
-    job = common.resolve(EvaluateJob, config_file, overrides, FLAGS)
-    common.refuse_unused_settings(job, overrides, FLAGS)
+    base = common.resumed_job(EvaluateJob, out, resume, "evaluate")
+    job = common.resolve(EvaluateJob, config_file, overrides, FLAGS, base)
+    if base is None:  # a resumed run's config.json holds every setting it was started with
+        common.refuse_unused_settings(job, overrides, FLAGS)
     job = job.check()
     if "rl" in job.methods and job.checkpoints is None:
         common.check_learner(job)
@@ -99,7 +101,7 @@ def command(
     record = _first_contour_envs("record", job.record, job.trials, "recording")
     video = _first_contour_envs("video", job.video, job.trials, "filming")
     common.check_outputs({"--json": json_path}, list(job.contours))
-    out, claim = common.claim(out, "evaluate", resume, overwrite)
+    out, claim = common.claim(out, "evaluate", resume, overwrite, "evaluate")
     cuts = common.final_cuts(not job.plots)
     with (
         claim,

@@ -55,7 +55,7 @@ FLAGS = {
     help="Continue the run in --out (interrupted, or to finish it): a finished plan is kept, an interrupted "
     "optimisation continues from its state; the settings must be the run's (its config.json).",
 )
-@click.option("--overwrite", is_flag=True, help="Replace the run directory's contents (an earlier run's).")
+@common.overwrite_option
 @common.json_option
 @common.config_options
 def command(
@@ -86,8 +86,10 @@ def command(
     from warpcut.contours import load_contour
     from warpcut.io import safe_name, write_json
 
-    job = common.resolve(OptimizeJob, config_file, overrides, FLAGS).check()
-    common.refuse_unused_settings(job, overrides, FLAGS)
+    base = common.resumed_job(OptimizeJob, out, resume, "optimize")
+    job = common.resolve(OptimizeJob, config_file, overrides, FLAGS, base).check()
+    if base is None:  # a resumed run's config.json holds every setting it was started with
+        common.refuse_unused_settings(job, overrides, FLAGS)
     contour = load_contour(contour_spec(job.contour))  # a bad name or file: now
     contour_name = contour.name
     if print_config:
@@ -98,7 +100,7 @@ def command(
 
         check_pinch(job.pinch, contour, job.sim.validated(), None, job.arm, allow=job.allow_infeasible_pinch)
     common.check_outputs({"--json": json_path}, [job.contour] if isinstance(job.contour, str) else [])
-    out, claim = common.claim(out, f"optimize-{safe_name(contour_name)}", resume, overwrite)
+    out, claim = common.claim(out, f"optimize-{safe_name(contour_name)}", resume, overwrite, "optimize")
     with claim:
         report = optimize_contour(job, out, resume=resume, device=device, log=common.log)
     optimized = report["optimized"]

@@ -104,7 +104,7 @@ def _listed(ctx: click.Context, param: click.Parameter, value: str | None) -> li
     help="Continue the run in --out (interrupted, or to finish it): the studies it finished are read back, "
     "grad's plan is kept or continues from its state; the settings must be the run's (its config.json).",
 )
-@click.option("--overwrite", is_flag=True, help="Replace the run directory's contents (an earlier run's).")
+@common.overwrite_option
 @common.json_option
 @common.config_options
 def command(
@@ -136,15 +136,17 @@ def command(
     from warpcut.contours import load_contour
     from warpcut.io import safe_name, write_json
 
-    job = common.resolve(RobustnessJob, config_file, overrides, FLAGS)
-    common.refuse_unused_settings(job, overrides, FLAGS)
+    base = common.resumed_job(RobustnessJob, out, resume, "robustness")
+    job = common.resolve(RobustnessJob, config_file, overrides, FLAGS, base)
+    if base is None:  # a resumed run's config.json holds every setting it was started with
+        common.refuse_unused_settings(job, overrides, FLAGS)
     job = check_job(job)
     name = "run" if job.contour is None else load_contour(contour_spec(job.contour)).name  # a bad one: now
     if print_config:
         common.print_config(job)
         return
     common.check_outputs({"--json": json_path}, [job.contour] if isinstance(job.contour, str) else [])
-    out, claim = common.claim(out, f"robustness-{safe_name(name)}", resume, overwrite)
+    out, claim = common.claim(out, f"robustness-{safe_name(name)}", resume, overwrite, "robustness")
     with claim:
         reports = robustness(job, out, resume=resume, device=device, log=common.log)
     for report in reports:

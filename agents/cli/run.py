@@ -96,9 +96,11 @@ def command(
     from warpcut.contours import load_contour
     from warpcut.io import safe_name, write_json
 
-    job = common.resolve(RunJob, config_file, overrides, FLAGS)
+    base = common.resumed_job(RunJob, out, resume, "run")
+    job = common.resolve(RunJob, config_file, overrides, FLAGS, base)
     job.settings()
-    common.refuse_unused_settings(job, overrides, FLAGS)
+    if base is None:  # a resumed run's config.json holds every setting it was started with
+        common.refuse_unused_settings(job, overrides, FLAGS)
     contour_name = load_contour(contour_spec(job.contour)).name
     if job.policy == "rl":
         common.check_learner(job)
@@ -107,7 +109,7 @@ def command(
         return
     inputs = [job.contour] if isinstance(job.contour, str) else []
     common.check_outputs({"--json": json_path}, inputs)
-    out, claim = common.claim(out, f"run-{safe_name(contour_name)}", resume, overwrite)
+    out, claim = common.claim(out, f"run-{safe_name(contour_name)}", resume, overwrite, "run")
     cuts = common.final_cuts(not job.plots)
     with claim, common.recorder(out, job.record, job.colour_by) as rec:
         report = run_pipeline(

@@ -83,12 +83,14 @@ def command(
         check_pinch(job.pinch, contour, job.sim.validated(), allow=job.allow_infeasible_pinch)
     mesh_dir = None if job.export_mesh is None else Path(job.export_mesh)
     inputs = [job.contour] if isinstance(job.contour, str) else []
-    common.check_outputs({"--json": json_path, "export_mesh": mesh_dir}, inputs)
+    out = json_path.parent if json_path else common.run_dir(None, "simulate")
+    writes_out = job.plots or job.record is not None or job.video is not None  # the figures, .rrd, .mp4
+    outputs = {"--json": json_path, "export_mesh": mesh_dir, "the output folder (--json's)": out if writes_out else None}
+    common.check_outputs(outputs, inputs)  # before the simulation: a folder it could not write
     if job.record is not None:
         from warpcut.viz.process import start_recorder_process
 
         start_recorder_process()  # its start-up overlaps the simulation's
-    out = json_path.parent if json_path else common.run_dir(None, "simulate")
     cuts = common.final_cuts(not job.plots)
     meshes = None
     if mesh_dir is not None:

@@ -52,11 +52,7 @@ FLAGS = {
     help="Run directory (or checkpoint) to continue, with the run's own settings (its config.json); only "
     "--iterations, to train longer, may change.",
 )
-@click.option(
-    "--overwrite",
-    is_flag=True,
-    help="Replace what an earlier run of warpcut wrote in --out instead of refusing.",
-)
+@common.overwrite_option
 @common.record_flag("of the final evaluation, in the run directory")
 @click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
 @common.config_options
@@ -82,13 +78,15 @@ def command(
     Everything but the flags is set with --config FILE and --set KEY=VALUE (the env's observations, actions
     and reward: env.*; the physics and noise: sim.*; the learner: train.*); --print-config shows them all.
     """
+    from agents.checkpoints import saved_nothing
     from agents.jobs import TrainJob
     from agents.training import CONFIG_FILE, check_resumed_job, train_contour
-    from warpcut.io import safe_name
+    from warpcut.io import check_run_dir, safe_name
 
     base, run = None, None
     if resume is not None:
         run = resume if resume.is_dir() else resume.parent
+        check_run_dir(run, command="train", resume=True)  # before its settings are read
         base = common.saved_job(TrainJob, run / CONFIG_FILE)
     job = common.resolve(TrainJob, config_file, overrides, FLAGS, base)
     if run is not None:
@@ -102,10 +100,12 @@ def command(
         common.print_config(job)
         return
     out = out or (run if run is not None else common.run_dir(None, f"train-{safe_name(contour_name)}"))
-    out, claim = common.claim(out, "train", resume is not None, overwrite)
-    click.echo(f"training {contour_name} with {job.train.algo} into {out} ({device})")
+    out, claim = common.claim(out, "train", resume is not None, overwrite, "train")
     try:
         with claim, common.recorder(out, job.record, job.colour_by) as rec, videos(out, job.video) as vid:
+            click.echo(f"training {contour_name} with {job.train.algo} into {out} ({device})")
+            if run is not None and saved_nothing(run):
+                click.echo(f"{run} saved no checkpoint before it stopped: training it from the start")
             result = train_contour(
                 job,
                 out,

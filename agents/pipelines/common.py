@@ -86,21 +86,28 @@ def finished_run(run_dir: str | Path) -> bool:
     return read_json(summary).get("status") == "completed"
 
 
-def claims_out(pipeline: Callable) -> Callable:
-    """Run ``pipeline`` with its run directory ``out`` claimed (:func:`warpcut.io.claim_run_dir` with its
-    ``resume`` and ``overwrite`` arguments): locked against a second process, and refused if it holds
-    another run."""
-    signature = inspect.signature(pipeline)
+def claims_out(command: str) -> Callable[[Callable], Callable]:
+    """Run the pipeline it decorates with its run directory ``out`` claimed for ``command``
+    (:func:`warpcut.io.claim_run_dir` with its ``resume`` and ``overwrite`` arguments): marked as a run of
+    ``command``, locked against a second process, and refused if it holds another run or files warpcut
+    did not write."""
 
-    @functools.wraps(pipeline)
-    def claimed(*args, **kwargs):
-        bound = signature.bind(*args, **kwargs)
-        bound.apply_defaults()
-        given = bound.arguments
-        with claim_run_dir(given["out"], resume=given["resume"], overwrite=given["overwrite"]):
-            return pipeline(*args, **kwargs)
+    def decorate(pipeline: Callable) -> Callable:
+        signature = inspect.signature(pipeline)
 
-    return claimed
+        @functools.wraps(pipeline)
+        def claimed(*args, **kwargs):
+            bound = signature.bind(*args, **kwargs)
+            bound.apply_defaults()
+            given = bound.arguments
+            with claim_run_dir(
+                given["out"], command=command, resume=given["resume"], overwrite=given["overwrite"]
+            ):
+                return pipeline(*args, **kwargs)
+
+        return claimed
+
+    return decorate
 
 
 def record_job(out: Path, job: Any, resume: bool) -> None:

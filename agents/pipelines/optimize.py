@@ -23,7 +23,7 @@ RESULTS_FILE = "results.json"
 """The run directory's report (:func:`optimize_contour`'s)."""
 
 
-@claims_out
+@claims_out("optimize")
 def optimize_contour(
     job: OptimizeJob,
     out: str | Path,

@@ -695,7 +695,7 @@ def check_job(job: RobustnessJob) -> RobustnessJob:
     return dataclasses.replace(job, study=studies)
 
 
-@claims_out
+@claims_out("robustness")
 def robustness(
     job: RobustnessJob,
     out: str | Path,

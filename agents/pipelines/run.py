@@ -63,7 +63,7 @@ class RunReport:
         }
 
 
-@claims_out
+@claims_out("run")
 def run_pipeline(
     job: RunJob,
     out: str | Path,

@@ -79,7 +79,7 @@ class TableReport:
         return "\n".join(lines)
 
 
-@claims_out
+@claims_out("evaluate")
 def evaluate_table(
     job: EvaluateJob,
     out: str | Path,

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from warpcut.io import DiskFull, safe_name, write_atomic
+from warpcut.io import WriteFailed, safe_name, write_atomic
 from warpcut.viz.colours import COLOUR_FIELDS, STRAIN_FULL_SCALE, ramp_rgba, vertex_strain
 
 MESH_FORMATS = ("glb", "obj", "ply")
@@ -95,8 +95,10 @@ def export_mesh(task, path: str | os.PathLike, env: int = 0, colour_by: str | No
     data = sheet_mesh(task, env, colour_by).export(file_type=kind)
     try:
         return write_atomic(path, data)
-    except DiskFull as exc:
-        raise ValueError(f"{exc}: free space, then export again") from exc.__cause__
+    except WriteFailed as exc:
+        raise ValueError(
+            f"{exc.path}: not written, {exc.reason}; {exc.fix}, then export again"
+        ) from exc.__cause__
 
 
 class MeshExports:

@@ -25,7 +25,7 @@ from matplotlib.patches import Patch, Rectangle
 from matplotlib.ticker import MaxNLocator
 
 from warpcut.contours import Contour, ring
-from warpcut.io import DiskFull, safe_name, write_atomic
+from warpcut.io import WriteFailed, safe_name, write_atomic
 from warpcut.planning import Plan, pinch_feasible
 from warpcut.scoring import BOOTSTRAP_RESAMPLES, Score, bootstrap_ci, paired_improvement
 from warpcut.sim.config import SheetGrid, SimConfig
@@ -66,10 +66,11 @@ def save_figure(fig: Figure, out_dir: str | os.PathLike, name: str) -> list[Path
         fig.savefig(buffer, format=fmt, dpi=150, bbox_inches="tight")
         try:
             paths.append(write_atomic(path, buffer.getvalue()))
-        except DiskFull as exc:
-            raise ValueError(f"{exc}: free space, then plot again (or skip the plots with --no-plots)") from (
-                exc.__cause__
-            )
+        except WriteFailed as exc:
+            raise ValueError(
+                f"{exc.path}: not written, {exc.reason}; {exc.fix}, then plot again (or skip the plots: "
+                "--set plots=false)"
+            ) from exc.__cause__
     return paths
 
 

@@ -59,7 +59,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from warpcut.fiducials import SHAFT_RADIUS_MM
-from warpcut.io import plain_file_mode
+from warpcut.io import note_written, plain_file_mode
 from warpcut.viz.colours import COLOUR_FIELDS
 from warpcut.viz.frames import EnvSetup, Frame, TaskSetup
 from warpcut.viz.process import default_background
@@ -127,6 +127,8 @@ class Recorder:
         self.path = Path(path)
         self.envs, self.every, self.colour_by, self.background = envs, every, colour_by, background
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        for written in (self.path, self.path.with_suffix(".partial.rrd")):  # a run directory's files
+            note_written(written)
         fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=f".{self.path.name}.", suffix=".tmp")
         os.fchmod(fd, plain_file_mode())
         os.close(fd)

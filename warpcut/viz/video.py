@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from warpcut.io import plain_file_mode, safe_name
+from warpcut.io import note_written, plain_file_mode, safe_name
 from warpcut.viz.render import RENDER_COLOURS, TaskRenderer, check_render_settings, step_fps
 
 if TYPE_CHECKING:
@@ -156,6 +156,7 @@ class _Writer:
 
         self.path = path
         path.parent.mkdir(parents=True, exist_ok=True)
+        note_written(path)  # a run directory's file
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".mp4")
         os.fchmod(fd, plain_file_mode())
         os.close(fd)
