@@ -32,6 +32,7 @@ from warpcut.planning.feasibility import (
 )
 from warpcut.planning.segmentation import ORDER_LIMIT, Segment, segment_contour, segment_orders
 from warpcut.sim.config import PINCH_CANDIDATES, SEGMENT_TOLERANCE_MM, SimConfig
+from warpcut.sim.memory import batch_named
 from warpcut.task import CuttingTask, divergence_error
 
 
@@ -319,7 +320,11 @@ def plan_cut(
     segments = segment_contour(contour, tolerance_mm=tolerance_mm)
     rng = np.random.default_rng(seed)
     points = pinch_candidates(contour, config, segments, num_candidates, rng, arm)
-    orders, errors = search_orders(contour, config, segments, points, device=device, seed=seed, arm=arm)
+    with batch_named(
+        "the planner's batch (pinch candidates x segment orders)",
+        "plan fewer pinch candidates (the candidates setting; plan: --candidates) or lower the resolution",
+    ):
+        orders, errors = search_orders(contour, config, segments, points, device=device, seed=seed, arm=arm)
     if not np.all(np.isfinite(errors)):  # diverged simulations: no candidate may be chosen by a NaN
         raise divergence_error([contour], ~np.isfinite(errors.reshape(1, -1)), config)
     best = np.argmin(errors, axis=1)  # each candidate's best order: the first among ties

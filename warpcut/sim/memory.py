@@ -15,8 +15,11 @@ to allow swapping, or to keep a shared machine free).
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import math
 import os
+from collections.abc import Iterator
 
 MEMORY_LIMIT_ENV = "WARPCUT_MEMORY_LIMIT_GB"
 """Environment variable: the host memory (GB, 10^9 bytes) a batch may use, replacing the measured one."""
@@ -108,6 +111,22 @@ def _cgroup_room() -> float | None:
         return None
 
 
+_NAMED: contextvars.ContextVar[tuple[str, str] | None] = contextvars.ContextVar("batch", default=None)
+"""What the batches made inside :func:`batch_named` are, to the user, and how to make them smaller."""
+
+
+@contextlib.contextmanager
+def batch_named(name: str, fix: str) -> Iterator[None]:
+    """Inside the block, a batch too big for memory is named ``name`` (what it is to the user, e.g. "the
+    planner's batch (pinch candidates x segment orders)") with ``fix`` (the setting that makes it smaller)
+    instead of ``num_envs``, a count the user never gave: for the batches a pipeline makes itself."""
+    token = _NAMED.set((name, fix))
+    try:
+        yield
+    finally:
+        _NAMED.reset(token)
+
+
 def check_batch_memory(
     num_envs: int,
     num_vertices: int,
@@ -134,6 +153,8 @@ def check_batch_memory(
         ValueError: The estimate exceeds the limit (:func:`memory_limit`); the message names ``name``,
             the estimate, the limit and the largest value that fits.
     """
+    if name == "num_envs" and fix is None and _NAMED.get() is not None:
+        name, fix = _NAMED.get()
     needed = batch_bytes(num_envs, num_vertices, horizon_updates)
     limit, source = memory_limit()
     shape = (num_envs, envs_per_unit, num_vertices, horizon_updates)
