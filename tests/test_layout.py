@@ -246,3 +246,58 @@ def test_scripts_regenerate_the_docs_and_experiments_are_indexed():
     index = (ROOT / "experiments" / "README.md").read_text()
     unindexed = [p.name for p in sorted((ROOT / "experiments").glob("*.py")) if f"`{p.name}`" not in index]
     assert not unindexed, f"experiments without a line in experiments/README.md: {unindexed}"
+
+
+PROMISES = {
+    "A command writes one run directory": [
+        "test_safety.py::test_a_run_resumes_only_as_the_command_that_made_it",
+    ],
+    "warpcut never writes in, resumes or deletes from": [
+        "test_safety.py::test_a_folder_warpcut_did_not_mark_is_never_deleted_or_written_in",
+    ],
+    "`--resume` continues only a run of the same command": [
+        "test_safety.py::test_a_run_resumes_only_as_the_command_that_made_it",
+        "test_safety.py::test_a_run_killed_before_its_summary_resumes_with_its_own_settings",
+        "test_safety.py::test_evaluate_resumes_after_an_interruption_keeping_finished_policies",
+    ],
+    "`--overwrite` deletes only the files the run wrote": [
+        "test_safety.py::test_an_existing_run_is_refused_unless_resumed_or_overwritten",
+    ],
+    "A second process on the same directory": [
+        "test_safety.py::test_a_run_directory_is_locked_while_a_process_writes_it",
+    ],
+    "Every file is written atomically": [
+        "test_safety.py::test_a_failed_write_never_replaces_a_good_file",
+        "test_safety.py::test_a_file_size_limit_is_one_line_and_the_run_resumes",
+        "test_checkpoints.py::test_a_full_disk_while_saving_keeps_the_last_good_checkpoint",
+    ],
+    "Ctrl-C, SIGTERM and SIGHUP save a checkpoint": [
+        "test_safety.py::test_sigterm_and_sighup_save_the_training_and_say_how_to_resume",
+    ],
+    "Bad input is refused on one line naming it": [
+        "test_safety.py::test_bad_inputs_are_refused_before_any_work_and_leave_no_run_behind",
+        "test_validation.py::test_every_config_field_refuses_a_wrong_value_by_name",
+        "test_safety.py::test_every_setting_an_invocation_would_ignore_is_refused",
+        "test_safety.py::test_an_unwritable_working_folder_is_named_before_any_work",
+        "test_pinch_feasibility.py::test_simulate_refuses_an_infeasible_pinch_in_one_line",
+        "test_pinch_feasibility.py::test_train_refuses_an_infeasible_pinch_before_any_work",
+    ],
+    "`docs/usage.md` has the details": [],
+}
+"""Each sentence of the README's "Files and safety" (by its start) and the tests that back it."""
+
+
+def test_each_promise_of_the_readme_on_files_and_safety_has_its_test():
+    """Every sentence of the README's "Files and safety" paragraph is listed in :data:`PROMISES` with the
+    tests that check it, and each of those tests exists: a new promise needs its test."""
+    readme = (ROOT / "README.md").read_text()
+    start = readme.index("**Files and safety.**") + len("**Files and safety.**")
+    paragraph = " ".join(readme[start:].split("\n\n")[0].split())
+    sentences = [s.strip() for s in re.split(r"(?<=\.)\s+", paragraph) if s.strip()]
+    unbacked = [s for s in sentences if not any(s.startswith(p) for p in PROMISES)]
+    assert unbacked == [], "a promise without a test: add it to PROMISES with the tests that check it"
+    for promise, tests in PROMISES.items():
+        assert any(s.startswith(promise) for s in sentences), f"PROMISES names a sentence gone: {promise}"
+        for test in tests:
+            file, name = test.split("::")
+            assert re.search(rf"^def {name}\(", (ROOT / "tests" / file).read_text(), re.M), test
