@@ -24,7 +24,7 @@ import torch
 from agents.checkpoints import policy_checkpoint
 from agents.policies import is_run, load_options, load_policy, policy_runs
 from agents.training import make_run_dir
-from warpcut.io import note_written, write_atomic
+from warpcut.io import claim_run_dir, enclosing_run, note_written, write_atomic, written_by_warpcut
 from warpcut.planning import check_pinch
 
 ONNX_OPSET = 18
@@ -36,6 +36,13 @@ def export_run(source: str | Path, out_dir: str | Path | None = None) -> list[di
     ``exported/`` beside its checkpoint), an evaluate directory's into ``out_dir/NAME`` (default
     ``SOURCE/exported/NAME``). Returns per policy ``{"policy": what it is, "torchscript": path, "onnx":
     path, "unfinished": what :func:`unfinished_note` says, or None}``."""
+    if out_dir is not None and enclosing_run(out_dir) is None:  # a folder of its own: marked as warpcut's
+        with claim_run_dir(out_dir, command="export", resume=True):
+            return _export_runs(source, out_dir)
+    return _export_runs(source, out_dir)
+
+
+def _export_runs(source: str | Path, out_dir: str | Path | None) -> list[dict]:
     runs = policy_runs(source)
     exported = []
     for run, what in runs:
@@ -156,6 +163,11 @@ def export_policy(source: str | Path, out_dir: str | Path | None = None) -> dict
     for name in ("policy.pt", "policy.onnx"):
         if (out_dir / name).is_dir():
             raise ValueError(f"{out_dir / name}: is a directory; remove it, or choose another --out")
+        if (out_dir / name).exists() and not written_by_warpcut(out_dir / name):
+            raise ValueError(
+                f"{out_dir / name}: exists, and warpcut did not write it, so never replaces it: move it, "
+                "or choose another --out"
+            )
 
     buffer = io.BytesIO()
     with warnings.catch_warnings():

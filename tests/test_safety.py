@@ -711,3 +711,47 @@ def test_a_batch_the_user_never_sized_is_named_as_what_it_is(monkeypatch, tmp_pa
         error = output.strip().splitlines()[-1]  # after evaluate's progress lines
         assert code == 2 and "the planner's batch (pinch candidates x segment orders)" in error, output
         assert "num_envs" not in error and "--candidates" in error
+
+
+def test_export_never_replaces_a_file_warpcut_did_not_write(tmp_path):
+    """``warpcut export`` writes into a folder it marks (or the run's own): a user's folder, or a user's
+    ``policy.onnx`` placed in a run, is never overwritten; exporting again into its own folder is."""
+    run = tmp_path / "run"
+    code, output = invoke(["train", "--contour", "circle-small", "--iterations", "1", "--no-progress",
+                           "--set", "train.num_envs=64", "--set", "eval_trials=1", "--set", "plots=false",
+                           "--out", str(run)])  # fmt: skip
+    assert code == 0, output
+    mine = tmp_path / "deploy"
+    mine.mkdir()
+    (mine / "policy.onnx").write_bytes(b"the user's own model")
+    code, output = invoke(["export", str(run), "--out", str(mine)])
+    assert code == 2 and "holds files warpcut did not write" in output
+    assert (mine / "policy.onnx").read_bytes() == b"the user's own model"
+    (run / "exported").mkdir()
+    (run / "exported" / "policy.onnx").write_bytes(b"put here by hand")
+    code, output = invoke(["export", str(run)])
+    assert code == 2 and "warpcut did not write it" in output
+    assert (run / "exported" / "policy.onnx").read_bytes() == b"put here by hand"
+    fresh = tmp_path / "fresh"
+    for _ in range(2):  # its own folder: marked, and exported into again
+        code, output = invoke(["export", str(run), "--out", str(fresh)])
+        assert code == 0, output
+    assert {"policy.pt", "policy.onnx"} <= set(read_run_marker(fresh)["files"])
+
+
+def test_overwrite_never_follows_a_link_out_of_the_run(tmp_path):
+    """A folder of a run replaced by a link to the user's files: ``--overwrite`` deletes the link's
+    listed files only inside the run, never through the link."""
+    out = tmp_path / "run"
+    with claim_run_dir(out, command="evaluate"):
+        write_json(out / "sub" / "results.json", {"run": True})
+    outside = tmp_path / "project"
+    outside.mkdir()
+    (outside / "results.json").write_text("the user's")
+    import shutil
+
+    shutil.rmtree(out / "sub")
+    (out / "sub").symlink_to(outside)
+    with claim_run_dir(out, command="evaluate", overwrite=True):
+        pass
+    assert (outside / "results.json").read_text() == "the user's"

@@ -182,6 +182,29 @@ def _holder(path: Path) -> _Claim | None:
     return None
 
 
+def enclosing_run(path: str | os.PathLike) -> Path | None:
+    """The run directory that ``path`` lies in (one this process holds, or the nearest marked folder at
+    or above it), or None."""
+    path = Path(os.path.abspath(path))
+    claim = _holder(path)
+    if claim is not None:
+        return claim.path
+    for parent in (path, *path.parents):
+        if _marker_path(parent).is_file() and read_run_marker(parent) is not None:
+            return parent
+    return None
+
+
+def written_by_warpcut(path: str | os.PathLike) -> bool:
+    """Whether the file ``path`` is one a warpcut run wrote (listed in the marker of its run directory)."""
+    run = enclosing_run(path)
+    if run is None:
+        return False
+    claim = _holder(Path(path))
+    files = claim.marker["files"] if claim is not None else (read_run_marker(run) or {}).get("files", [])
+    return os.path.relpath(Path(path).resolve(), Path(run).resolve()) in files
+
+
 def note_written(path: str | os.PathLike) -> None:
     """List ``path`` in the marker of the run directory it lies in, as a file warpcut wrote there (before
     it is written: a run killed mid-write still names it). A path in no run directory this process holds
@@ -197,11 +220,10 @@ def note_written(path: str | os.PathLike) -> None:
             claim.marker["files"].append(relative)
             _write_marker(claim)
         return
-    for parent in path.parents:
-        if _marker_path(parent).is_file() and read_run_marker(parent) is not None:
-            with contextlib.suppress(ValueError), claim_run_dir(parent, command=None, resume=True):
-                note_written(path)
-            return
+    run = enclosing_run(path.parent)
+    if run is not None:
+        with contextlib.suppress(ValueError), claim_run_dir(run, command=None, resume=True):
+            note_written(path)
 
 
 def _lock(path: Path) -> int:
@@ -230,8 +252,9 @@ def _delete_written(path: Path, files: list[str]) -> tuple[list[str], list[str]]
     deleted, folders = [], set()
     for name in files:
         file = Path(os.path.normpath(os.path.join(root, name)))
-        if os.path.commonpath([root, file]) != root or file == Path(root):
-            continue  # a marker edited to point outside its run: never followed
+        real = os.path.realpath(root)
+        if os.path.commonpath([real, os.path.realpath(file.parent)]) != real or file == Path(root):
+            continue  # a path leading out of the run (an edited marker, a folder made a link): not followed
         for entry in [file, *file.parent.glob(f".{glob.escape(file.name)}.*"),
                       *file.parent.glob(f".{glob.escape(file.stem)}.*.mp4")]:  # fmt: skip
             if entry.is_file() or entry.is_symlink():
