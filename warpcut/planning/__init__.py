@@ -1,6 +1,7 @@
 """Cut planning: segments the cutting arm can cut (:mod:`~warpcut.planning.segmentation`), where the
 gripper may pinch the sheet (:mod:`~warpcut.planning.feasibility`), and the search for the best pinch point
-and cutting order (:mod:`~warpcut.planning.search`, :func:`plan_cut`).
+and cutting order (:mod:`~warpcut.planning.search`, :func:`plan_cut`), and seeded random contours it can plan
+(:mod:`~warpcut.planning.generate`, :func:`generate_contours`).
 """
 
 from warpcut.planning.feasibility import (
@@ -16,6 +17,7 @@ from warpcut.planning.feasibility import (
     pinch_rules,
     under_arm,
 )
+from warpcut.planning.generate import KINDS, SPLITS, generate_contours
 from warpcut.planning.search import Plan, pinch_candidates, plan_cut, search_orders
 from warpcut.planning.segmentation import ORDER_LIMIT, Segment, is_monotone, segment_contour, segment_orders
 
@@ -24,11 +26,14 @@ __all__ = [
     "ORDER_LIMIT",
     "ArmModel",
     "InfeasiblePinch",
+    "KINDS",
     "Plan",
+    "SPLITS",
     "ScissorPath",
     "Segment",
     "check_pinch",
     "default_pinch",
+    "generate_contours",
     "is_monotone",
     "nearest_feasible",
     "pinch_candidates",

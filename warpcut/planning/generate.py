@@ -1,0 +1,214 @@
+"""Seeded random contours that the simulator resolves and the planner can plan: a source of shapes beyond
+the built-in suite, with separate streams for training, validation and test.
+
+Four kinds, drawn on the sheet at random sizes, places and turns (:data:`KINDS`):
+
+- ``blob``: a closed curve whose radius is a few random harmonics about a centre;
+- ``polygon``: a convex polygon of 3 to 7 corners, rounded (the grid is ~4 mm, the scissors' cut wider);
+- ``notched``: a blob or polygon with a rounded notch bitten into its side (a concave shape);
+- ``open``: a smooth curve that enters through one edge of the sheet and leaves through another (or the
+  same one), as the built-in open contours do.
+
+Contour ``i`` of split ``s`` under ``seed`` is drawn from its own random stream, seeded by
+``(seed, s, i)``: the same triple gives the same contour on any machine, contours of different splits never
+share a stream, and asking for more contours of a split keeps the first ones. A draw the simulator would not
+resolve (:func:`~warpcut.contours.check_resolution`) or the planner could not plan (no segments within
+:data:`~warpcut.planning.segmentation.ORDER_LIMIT`, or no feasible pinch point) is drawn again from the same
+stream, so every contour returned is usable as it is.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+import shapely
+from shapely.geometry import LineString, Point, Polygon
+
+from warpcut.contours import BUILTIN_SPACING_MM, Contour, ContourError, check_resolution, validate
+from warpcut.contours.polyline import arc_lengths, resample_polyline
+from warpcut.planning.feasibility import default_pinch
+from warpcut.planning.segmentation import ORDER_LIMIT, segment_contour
+from warpcut.sim.config import SimConfig
+
+SPLITS = ("train", "validation", "test")
+"""The streams of generated contours, never mixed: each draws from seeds of its own."""
+
+KINDS = ("blob", "polygon", "notched", "open")
+"""The kinds of generated contour, drawn in turn (contour ``i`` is of kind ``KINDS[i % 4]``)."""
+
+MARGIN_MM = 10.0
+"""Closed shapes keep at least this far from the sheet's edges (the built-in ones keep >= 8 mm)."""
+
+MAX_DRAWS = 200
+"""Draws tried per contour before giving up (a sheet or grid on which almost nothing is plannable)."""
+
+_DENSE = 2048
+
+
+def generate_contours(
+    count: int,
+    split: str = "train",
+    seed: int = 0,
+    config: SimConfig | None = None,
+    kinds: Sequence[str] = KINDS,
+) -> list[Contour]:
+    """``count`` random contours of ``split``, each resolvable on ``config``'s grid and plannable.
+
+    Args:
+        count: How many, >= 0.
+        split: ``train``, ``validation`` or ``test`` (:data:`SPLITS`).
+        seed: The generator's seed, an integer >= 0.
+        config: The physics whose sheet, grid and grasp the contours must suit (default: ``SimConfig()``).
+        kinds: The kinds to draw, in turn (:data:`KINDS`).
+
+    Returns:
+        The contours, named ``gen-SPLIT-SEED-INDEX-KIND`` (e.g. ``gen-test-0-0003-open``).
+
+    Raises:
+        ValueError: an argument out of range (named), or a contour not drawn in :data:`MAX_DRAWS` tries.
+    """
+    if split not in SPLITS:
+        raise ValueError(f"split: one of {', '.join(SPLITS)} (got {split!r})")
+    for name, value in (("count", count), ("seed", seed)):
+        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
+            raise ValueError(f"{name}: an integer >= 0 (got {value!r})")
+    kinds = list(kinds)
+    unknown = [k for k in kinds if k not in KINDS]
+    if not kinds or unknown:
+        raise ValueError(f"kinds: a non-empty list of {', '.join(KINDS)} (got {kinds!r})")
+    config = SimConfig() if config is None else config
+    return [_contour(i, split, int(seed), config, kinds[i % len(kinds)]) for i in range(int(count))]
+
+
+def _contour(index: int, split: str, seed: int, config: SimConfig, kind: str) -> Contour:
+    rng = np.random.default_rng([seed, SPLITS.index(split), index])
+    width, height = config.width_mm, config.height_mm
+    name = f"gen-{split}-{seed}-{index:04d}-{kind}"
+    for _ in range(MAX_DRAWS):
+        try:
+            closed, dense = _DRAW[kind](rng, width, height)
+            length = arc_lengths(dense, closed)[-1]
+            points = resample_polyline(dense, length / math.ceil(length / BUILTIN_SPACING_MM), closed)
+            if closed:  # start where scissors coming from +x meet the shape first, as the built-ins do
+                points = np.roll(points, -int(np.argmax(points[:, 0])), axis=0)
+            contour = validate(name, closed, points, (width, height))
+            check_resolution(contour, config.spacing_mm)
+            if len(segment_contour(contour)) > ORDER_LIMIT:
+                continue
+            default_pinch(contour, config)  # a feasible pinch point exists
+            return contour
+        except (ContourError, ValueError):
+            continue
+    raise ValueError(
+        f"{name}: no resolvable, plannable contour in {MAX_DRAWS} draws on a {width:g} x {height:g} mm "
+        "sheet at this resolution; use a finer resolution or a larger sheet"
+    )
+
+
+def _place(rng: np.random.Generator, shape: Polygon, width: float, height: float) -> Polygon | None:
+    """``shape`` (about the origin) turned at random and moved to a random place at least
+    :data:`MARGIN_MM` from the edges; None where it does not fit."""
+    shape = shapely.affinity.rotate(shape, float(rng.uniform(0, 360)), origin=(0, 0))
+    x0, y0, x1, y1 = shape.bounds
+    room_x, room_y = width - 2 * MARGIN_MM - (x1 - x0), height - 2 * MARGIN_MM - (y1 - y0)
+    if room_x < 0 or room_y < 0:
+        return None
+    dx = MARGIN_MM - x0 + float(rng.uniform(0, room_x))
+    dy = MARGIN_MM - y0 + float(rng.uniform(0, room_y))
+    return shapely.affinity.translate(shape, dx, dy)
+
+
+def _outline(region) -> np.ndarray | None:
+    """The exterior of ``region`` if it is one simple polygon without holes, else None."""
+    if not isinstance(region, Polygon) or region.is_empty or region.interiors or not region.is_valid:
+        return None
+    return np.asarray(region.exterior.coords)[:-1]
+
+
+def _rounded(region, radius: float):
+    """Opening then closing by ``radius`` (mm): no tip or inner corner sharper than the grid resolves."""
+    opened = region.buffer(-radius, quad_segs=16).buffer(radius, quad_segs=16)
+    return opened.buffer(radius, quad_segs=16).buffer(-radius, quad_segs=16)
+
+
+def _blob_shape(rng: np.random.Generator, scale: float) -> Polygon:
+    r0 = scale * float(rng.uniform(14, 34))
+    terms = [(k, float(rng.uniform(0, 0.12)) * r0, float(rng.uniform(0, 2 * np.pi))) for k in range(2, 6)]
+    t = np.linspace(0, 2 * np.pi, _DENSE, endpoint=False)
+    r = r0 + sum(a * np.cos(k * t + phase) for k, a, phase in terms)
+    aspect = float(rng.uniform(0.6, 1.0))
+    return Polygon(np.stack([r * np.cos(t), aspect * r * np.sin(t)], axis=1))
+
+
+def _polygon_shape(rng: np.random.Generator, scale: float) -> Polygon:
+    corners = int(rng.integers(3, 8))
+    angles = np.sort(rng.uniform(0, 2 * np.pi, corners))
+    radius = scale * float(rng.uniform(18, 38))
+    aspect = float(rng.uniform(0.55, 1.0))
+    hull = shapely.convex_hull(
+        shapely.MultiPoint(np.stack([radius * np.cos(angles), aspect * radius * np.sin(angles)], axis=1))
+    )
+    return _rounded(hull, float(rng.uniform(3, 6))) if isinstance(hull, Polygon) else Polygon()
+
+
+def _blob(rng: np.random.Generator, width: float, height: float) -> tuple[bool, np.ndarray]:
+    return True, _closed(rng, _blob_shape(rng, min(width, height) / 100), width, height)
+
+
+def _polygon(rng: np.random.Generator, width: float, height: float) -> tuple[bool, np.ndarray]:
+    return True, _closed(rng, _polygon_shape(rng, min(width, height) / 100), width, height)
+
+
+def _notched(rng: np.random.Generator, width: float, height: float) -> tuple[bool, np.ndarray]:
+    scale = min(width, height) / 100
+    body = _blob_shape(rng, scale) if rng.random() < 0.5 else _polygon_shape(rng, scale)
+    if body.is_empty:
+        raise ContourError("no body")
+    x0, y0, x1, y1 = body.bounds
+    size = min(x1 - x0, y1 - y0)
+    angle = float(rng.uniform(0, 2 * np.pi))
+    edge = shapely.ops.nearest_points(body.exterior, Point(np.cos(angle) * 1e3, np.sin(angle) * 1e3))[0]
+    depth = float(rng.uniform(0.2, 0.4)) * size
+    notch = Point(edge.x, edge.y).buffer(depth, quad_segs=16)
+    return True, _closed(rng, _rounded(body - notch, float(rng.uniform(3, 5))), width, height)
+
+
+def _closed(rng: np.random.Generator, shape, width: float, height: float) -> np.ndarray:
+    outline = _outline(shape)
+    placed = None if outline is None else _place(rng, Polygon(outline), width, height)
+    points = None if placed is None else _outline(placed)
+    if points is None:
+        raise ContourError("does not fit")
+    return points
+
+
+def _open(rng: np.random.Generator, width: float, height: float) -> tuple[bool, np.ndarray]:
+    """A cubic Bezier from a point on one edge to a point on another (or the same, far enough along),
+    bending through the sheet."""
+
+    def on_edge(side: int) -> np.ndarray:
+        u = float(rng.uniform(0.15, 0.85))
+        return np.array([(u * width, 0.0), (width, u * height), (u * width, height), (0.0, u * height)][side])
+
+    first = int(rng.integers(4))
+    second = int(rng.integers(4))
+    p0, p3 = on_edge(first), on_edge(second)
+    if np.linalg.norm(p3 - p0) < 0.3 * min(width, height):
+        raise ContourError("ends too close")
+    inward = {0: (0, 1), 1: (-1, 0), 2: (0, -1), 3: (1, 0)}
+    depth = float(rng.uniform(0.2, 0.5)) * min(width, height)
+    p1 = p0 + depth * np.array(inward[first]) + rng.uniform(-15, 15, 2)
+    p2 = p3 + depth * np.array(inward[second]) + rng.uniform(-15, 15, 2)
+    t = np.linspace(0, 1, _DENSE)[:, None]
+    curve = (1 - t) ** 3 * p0 + 3 * (1 - t) ** 2 * t * p1 + 3 * (1 - t) * t**2 * p2 + t**3 * p3
+    on_sheet = (curve >= 0).all() and (curve <= [width, height]).all()
+    middle = curve[_DENSE // 20 : -_DENSE // 20]  # clear of the edges but where it enters and leaves
+    clear = (middle > 1.0).all() and (middle < [width - 1.0, height - 1.0]).all()
+    if not (on_sheet and clear) or not LineString(curve).is_simple:
+        raise ContourError("leaves the sheet or crosses itself")
+    return False, curve
+
+
+_DRAW = {"blob": _blob, "polygon": _polygon, "notched": _notched, "open": _open}
