@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from click.testing import CliRunner
+from cli_runner import invoke, refused
 
 from agents.cli import main
 from agents.cli.simulate import FLAGS
@@ -19,22 +19,6 @@ from agents.jobs import SimulateJob
 
 SMALL = ["--set", "sim.resolution=9"]
 """A 9 x 9 sheet."""
-
-
-def invoke(args):
-    """Run the CLI in-process and return (exit code, stdout, stderr)."""
-    result = CliRunner().invoke(main, args, standalone_mode=True, catch_exceptions=False)
-    return result.exit_code, result.stdout, result.stderr
-
-
-def refused(args, capfd) -> str:
-    """The one line ``error: ...`` that ``args`` exits with, status 2."""
-    with pytest.raises(SystemExit) as exit_info:
-        main.main(args=args, prog_name="warpcut")
-    assert exit_info.value.code == 2
-    err = [line for line in capfd.readouterr().err.strip().splitlines() if not line.startswith("Warp CUDA")]
-    assert len(err) == 1 and err[0].startswith("error: "), err
-    return err[0]
 
 
 def test_contours_lists_the_suite_and_writes_json(tmp_path):

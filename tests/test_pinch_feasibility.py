@@ -8,9 +8,8 @@ import json
 import gymnasium as gym
 import numpy as np
 import pytest
-from click.testing import CliRunner
+from cli_runner import invoke, refused
 
-from agents.cli import main
 from agents.evaluation import Method, compare_policies, evaluate_suite
 from agents.jobs import OptimizeJob
 from agents.pipelines import optimize_contour
@@ -37,22 +36,6 @@ TINY_TRAINING = [
     *("--num-envs", "8", "--set", "train.es.population=4", "--iterations", "1", "--set", "eval_trials=1"),
     *("--set", "train.validation_trials=0", "--set", "plots=false", "--no-progress"),
 ]
-
-
-def invoke(args):
-    """Run the CLI in-process: (exit code, stdout, stderr)."""
-    result = CliRunner().invoke(main, args, standalone_mode=True, catch_exceptions=False)
-    return result.exit_code, result.stdout, result.stderr
-
-
-def refused(args, capfd) -> str:
-    """The one line ``error: ...`` that ``args`` exits with, status 2 (no traceback)."""
-    with pytest.raises(SystemExit) as exit_info:
-        main.main(args=args, prog_name="warpcut")
-    assert exit_info.value.code == 2
-    err = [line for line in capfd.readouterr().err.strip().splitlines() if not line.startswith("Warp CUDA")]
-    assert len(err) == 1 and err[0].startswith("error: "), err
-    return err[0]
 
 
 def assert_names_the_rule(message: str, rule: str) -> None:
@@ -246,9 +229,7 @@ def test_robustness_refuses_a_run_at_an_infeasible_pinch_unless_allowed(infeasib
     code, stdout, stderr = invoke([*args, *ALLOW, "--out", str(out)])
     assert code == 0, stderr
     report = json.loads((out / "robustness-noise.json").read_text())
-    assert report["infeasible_pinches"]["rl"].startswith(
-        "under the cutting"
-    )
+    assert report["infeasible_pinches"]["rl"].startswith("under the cutting")
     assert "rl (infeasible)" in stdout and "infeasible pinch (rl)" in stdout
 
 
