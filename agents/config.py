@@ -11,20 +11,37 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from dataclasses import dataclass, field
 
-from agents.algorithms import DEFAULT_ALGORITHM, algorithm, default_iterations
+from agents.algorithms import ALGORITHMS, DEFAULT_ALGORITHM, algorithm, default_iterations
 from agents.apg.config import ApgConfig
 from agents.es.config import EsConfig
 from agents.ppo.config import PpoConfig
 from warpcut.sim.config import PINCH_CANDIDATES, RANDOMIZE_ALIASES, randomize_ranges
-from warpcut.validation import is_integer, is_number
+from warpcut.validation import (
+    check_choice,
+    check_flag,
+    check_instance,
+    check_integer,
+    check_number,
+    fail,
+    is_integer,
+    is_number,
+)
 
 EVALUATION_TRIALS = 10
 """Seeded trials per method of an evaluation (the paper's Table I: 10)."""
 
 VALIDATION_TRIALS = 16
 """Held-out episodes scoring a policy during training (model selection, ``best.pt``)."""
+
+ACTIVATIONS = tuple("elu selu relu crelu lrelu tanh sigmoid softplus gelu swish mish identity".split())
+"""The hidden activations of the MLPs (``TrainConfig.activation``): rsl-rl's names."""
+
+TORCH_DEVICE = re.compile(r"cpu|cuda(:\d+)?|mps")
+"""The torch devices a policy may train on (``TrainConfig.torch_device``): ``cpu``, ``cuda``, ``cuda:N``,
+``mps``."""
 
 OBS_GROUPS = {"actor": ["policy"], "critic": ["policy"]}
 """The observation groups of warpcut's env (:mod:`envs.rsl`) that feed the actor and the critic."""
@@ -71,6 +88,27 @@ class TrainConfig:
     """es's settings (``algo = "es"``)."""
     apg: ApgConfig = field(default_factory=ApgConfig)
     """APG's settings (``algo = "apg"``)."""
+
+    def __post_init__(self) -> None:
+        """Each field on its own, as it is given (a file and ``--set`` set one key at a time); what depends on
+        several (the learner in its env, the population in the batch) is :meth:`check`'s."""
+        where = "TrainConfig."
+        check_choice(where + "algo", self.algo, tuple(ALGORITHMS))
+        for name in ("num_envs", "iterations"):
+            check_integer(where + name, getattr(self, name), 1, optional=True, note="the learner's")
+        check_integer(where + "validation_trials", self.validation_trials, 0, note="0: no validation")
+        for name in ("validation_interval", "save_interval"):
+            check_integer(where + name, getattr(self, name), 1)
+        check_number(where + "selection_margin", self.selection_margin, 0, note="standard errors")
+        dims = self.actor_hidden_dims
+        if not (isinstance(dims, list | tuple) and dims and all(is_integer(d) and d >= 1 for d in dims)):
+            fail(where + "actor_hidden_dims", "a non-empty list of layer widths, integers >= 1", dims)
+        check_choice(where + "activation", self.activation, ACTIVATIONS)
+        check_flag(where + "obs_normalization", self.obs_normalization)
+        if not (isinstance(self.torch_device, str) and TORCH_DEVICE.fullmatch(self.torch_device)):
+            fail(where + "torch_device", "a torch device: cpu, cuda, cuda:N or mps", self.torch_device)
+        for name, kind in (("ppo", PpoConfig), ("es", EsConfig), ("apg", ApgConfig)):
+            check_instance(where + name, getattr(self, name), kind, f"a {kind.__name__}")
 
     def check(self, discrete: bool | None = None) -> TrainConfig:
         """Itself, or ``ValueError`` naming the first field out of range (``discrete``: whether the env's
@@ -210,6 +248,10 @@ EVALUATION_CANDIDATES = PINCH_CANDIDATES
 """Pinch candidates per plan in :func:`evaluate_table` (the paper's 30)."""
 
 
+GRAD_ESTIMATORS = ("tape", "es")
+"""How the plan optimiser may estimate its gradient (``GradConfig.estimator``): "tape" or "es"."""
+
+
 @dataclass(frozen=True)
 class GradConfig:
     """Gradient-based tensioning (:mod:`agents.gradient`): Adam on an open-loop plan of grasp moves (and
@@ -273,6 +315,32 @@ class GradConfig:
     pinch_learning_rate: float = 1.0
     """Adam's step for the pinch point (mm)."""
 
+    def __post_init__(self) -> None:
+        """What each field is, on its own, as it is given (a file and ``--set`` set one key at a time); the
+        ranges and what depends on several fields are :meth:`validated`'s."""
+        where = "GradConfig."
+        if self.estimator not in GRAD_ESTIMATORS:
+            fail(where + "estimator", f"must be one of {', '.join(GRAD_ESTIMATORS)}", self.estimator)
+        for name in ("iterations", "trials", "es_population", "es_trials", "es_feedback_phases"):
+            check_integer(where + name, getattr(self, name))
+        check_integer(where + "validation_trials", self.validation_trials, 0, note="0: none")
+        check_integer(where + "window", self.window, 1, optional=True, note="the whole episode")
+        for name in ("es_feedback_only", "es_feedback_sag", "optimize_pinch"):
+            check_flag(where + name, getattr(self, name))
+        for name in ("learning_rate", "pinch_learning_rate", "es_sigma_mm"):
+            value = getattr(self, name)
+            if not (is_number(value) and 0 < value < math.inf):
+                fail(where + name, "must be a positive number of mm", value)
+        if not isinstance(self.es_randomize, str):
+            fail(
+                where + "es_randomize",
+                "comma-separated names of randomised parameters, or ''",
+                self.es_randomize,
+            )
+        ranges = self.es_randomize_ranges
+        if ranges is not None and not isinstance(ranges, dict):
+            fail(where + "es_randomize_ranges", "a mapping {name: [low, high]}, or None", ranges)
+
     def validated(self) -> GradConfig:
         """Itself, or ``ValueError`` naming the field and the fix."""
         if self.estimator not in GRAD_ESTIMATORS:
@@ -312,9 +380,7 @@ class GradConfig:
                 f"least 1 (got {self.validation_trials!r})"
             )
         if not is_integer(self.validation_trials) or self.validation_trials < 0:
-            raise ValueError(
-                f"train.validation_trials: must be an integer >= 0 (got {self.validation_trials!r})"
-            )
+            raise ValueError(f"validation_trials: must be an integer >= 0 (got {self.validation_trials!r})")
         if self.window is not None and (not is_integer(self.window) or self.window < 1):
             raise ValueError(f"window: must be a positive number of steps or None (got {self.window!r})")
         for name in ("learning_rate", "pinch_learning_rate", "es_sigma_mm"):
@@ -336,8 +402,7 @@ GRAD_CONFIGS = {
 """The optimiser's defaults per estimator (library and command line). es: 40 steps of 0.1 mm, on fls-circle
 and kidney +74.6% and +55.3% against +75.3% and +48.9% with 20 steps of 0.3 mm (docs/results.md)."""
 
-GRAD_ESTIMATORS = tuple(GRAD_CONFIGS)
-"""How the plan optimiser may estimate its gradient (``GradConfig.estimator``): "tape" or "es"."""
+assert tuple(GRAD_CONFIGS) == GRAD_ESTIMATORS
 
 
 def grad_config(estimator: str = "tape", **overrides) -> GradConfig:

@@ -33,8 +33,90 @@ from agents.methods import BASELINES, SELECTORS, TABLE_METHODS, check_methods
 from envs.options import ENV_FIELDS, EnvConfig, PatternCutOptions
 from warpcut.planning.feasibility import ArmModel
 from warpcut.sim.config import SimConfig
-from warpcut.validation import ConfigError
+from warpcut.validation import (
+    ConfigError,
+    check_choice,
+    check_flag,
+    check_instance,
+    check_integer,
+    check_text,
+    fail,
+    is_integer,
+    is_number,
+)
 from warpcut.viz.colours import COLOUR_FIELDS
+
+
+def _counted(where: str, value: Any, optional: bool = False, note: str = "the budget's") -> None:
+    """A count (trials, candidates): an integer >= 1 (None where ``optional``)."""
+    if optional and value is None:
+        return
+    if not (is_integer(value) and value >= 1):
+        fail(where, "must be an integer >= 1" + (f", or null for {note}" if optional else ""), value)
+
+
+def _names(where: str, value: Any, what: str) -> None:
+    """A list of names (methods, studies, contours): never one string, which would be read letter by
+    letter."""
+    if not (isinstance(value, list | tuple) and all(isinstance(v, str) for v in value)):
+        fail(where, f"a list of {what}", value)
+
+
+def _paths(where: str, value: Any) -> None:
+    if not (
+        isinstance(value, dict) and all(isinstance(k, str) and isinstance(v, str) for k, v in value.items())
+    ):
+        fail(where, "a mapping {label: path}", value)
+
+
+def _point(where: str, value: Any) -> None:
+    if value is None:
+        return
+    ok = isinstance(value, list | tuple) and len(value) == 2 and all(is_number(v) for v in value)
+    if not (ok and all(math.isfinite(float(v)) for v in value)):
+        fail(where, "[x, y], finite numbers in mm, or None", value)
+
+
+_FIELD_CHECKS = {
+    "contour": lambda w, v: check_instance(
+        w, v, (str, dict, type(None)), "a built-in name, a contour file, or a contour {name, closed, points}"
+    ),
+    "pinch": _point,
+    "allow_infeasible_pinch": check_flag,
+    "allow_partial": check_flag,
+    "plan": check_flag,
+    "plots": check_flag,
+    "arm": lambda w, v: check_instance(w, v, ArmModel, "an ArmModel (length_mm, width_mm, ...)"),
+    "segments": lambda w, v: check_instance(w, v, (list, tuple, type(None)), "a list of polylines, or None"),
+    "seed": lambda w, v: check_integer(w, v, 0),
+    "eval_trials": _counted,
+    "sim": lambda w, v: check_instance(w, v, SimConfig, "a SimConfig (the sim section)"),
+    "env": lambda w, v: check_instance(w, v, EnvConfig, "an EnvConfig (the env section)"),
+    "train": lambda w, v: check_instance(w, v, TrainConfig, "a TrainConfig (the train section)"),
+    "grad": lambda w, v: check_instance(w, v, GradConfig, "a GradConfig (the grad section)"),
+    "record": lambda w, v: check_integer(w, v, 1, optional=True, note="no recording"),
+    "video": lambda w, v: check_integer(w, v, 1, optional=True, note="no video"),
+    "colour_by": lambda w, v: v in COLOUR_FIELDS or fail(w, f"choose one of {', '.join(COLOUR_FIELDS)}", v),
+    "export_mesh": lambda w, v: check_text(w, v, optional=True, note="no meshes"),
+    "checkpoints": lambda w, v: check_text(w, v, optional=True, note="train a policy per contour"),
+    "analytic_pinch": lambda w, v: check_choice(w, v, ANALYTIC_PINCHES),
+    "methods": lambda w, v: _names(w, v, "method names"),
+    "study": lambda w, v: _names(w, v, "studies"),
+    "contours": lambda w, v: _names(w, v, "contour names or files"),
+    "runs": _paths,
+    "plans": _paths,
+}
+"""How each job's field is checked as it is given, by its name (the same name means the same in every job);
+the fields a job reads its own way are its ``__post_init__``'s."""
+
+
+def _check_fields(job: Any) -> None:
+    """``ConfigError`` naming ``Job.field`` for the first field that is not what it takes (each on its own:
+    a file and ``--set`` set one key at a time; what depends on several fields is the job's ``check``)."""
+    for f in dataclasses.fields(job):
+        check = _FIELD_CHECKS.get(f.name)
+        if check is not None:
+            check(f"{type(job).__name__}.{f.name}", getattr(job, f.name))
 
 
 @dataclass
@@ -76,6 +158,9 @@ class TrainJob:
     """Write an MP4 of the final evaluation's first N envs; None: no video."""
     plots: bool = True
     """Write ``learning_curve.png/svg``."""
+
+    def __post_init__(self) -> None:
+        _check_fields(self)
 
     def options(self, device: str | None = None) -> PatternCutOptions:
         """The env's options for this job (the contour loaded where it is given inline)."""
@@ -172,6 +257,15 @@ class RunJob:
     plots: bool = True
     """Write the plots (regions, improvements, the pinch-candidate map, learning curves)."""
 
+    def __post_init__(self) -> None:
+        _check_fields(self)
+        if self.budget not in BUDGETS:
+            fail("RunJob.budget", f"choose one of {', '.join(BUDGETS)}", self.budget)
+        if self.policy not in SELECTORS:
+            fail("RunJob.policy", f"choose one of {', '.join(SELECTORS)}", self.policy)
+        for name in ("candidates", "rl_candidates", "trials"):
+            _counted(f"RunJob.{name}", getattr(self, name), optional=True)
+
     def settings(self) -> dict:
         """The budget's ``candidates``, ``rl_candidates`` and ``trials``, with this job's where given."""
         if self.budget not in BUDGETS:
@@ -242,6 +336,11 @@ class EvaluateJob:
     """Write MP4 videos of the first contour's first N envs of each method; None: none."""
     plots: bool = True
     """Write the plots (regions, improvements, learning curves)."""
+
+    def __post_init__(self) -> None:
+        _check_fields(self)
+        for name in ("trials", "candidates"):
+            _counted(f"EvaluateJob.{name}", getattr(self, name))
 
     def check(self) -> EvaluateJob:
         """Itself, or ``ValueError`` naming a field out of range."""
@@ -382,6 +481,11 @@ class OptimizeJob:
     """The optimiser: its estimator, steps, episodes (``grad.iterations`` and ``grad.learning_rate``: the
     estimator's own unless given)."""
 
+    def __post_init__(self) -> None:
+        _check_fields(self)
+        for name in ("candidates", "trials"):
+            _counted(f"OptimizeJob.{name}", getattr(self, name))
+
     def check(self) -> OptimizeJob:
         """Itself (its ``grad`` ranges in their one spelling), or ``ValueError`` naming a field out of
         range."""
@@ -453,6 +557,14 @@ class RobustnessJob:
     plots: bool = True
     """Write ``robustness.png/svg`` (the paper's Fig. 5, a panel per study)."""
 
+    def __post_init__(self) -> None:
+        _check_fields(self)
+        _counted("RobustnessJob.trials", self.trials)
+        values = self.values
+        ok = values is None or isinstance(values, list | tuple) and all(is_number(v) for v in values)
+        if not (ok and (values is None or all(math.isfinite(float(v)) for v in values))):
+            fail("RobustnessJob.values", "a list of finite numbers (the study's units), or None", values)
+
     def check(self) -> RobustnessJob:
         """Itself (its ``grad`` ranges in their one spelling), or ``ValueError`` naming a field out of range;
         the studies, their values, runs and plans are the pipeline's to check
@@ -511,6 +623,11 @@ class SimulateJob:
     strain colours); None: no meshes."""
     plots: bool = True
     """Write ``regions.png/svg`` (each tensioner's cut region) where the recording goes."""
+
+    def __post_init__(self) -> None:
+        _check_fields(self)
+        _names("SimulateJob.policy", self.policy, "tensioners")
+        _counted("SimulateJob.trials", self.trials)
 
     def check(self) -> SimulateJob:
         """Itself, or ``ValueError`` naming a field out of range."""

@@ -36,6 +36,8 @@ contours from ``first_contour`` on (None: none), e.g. a recorder's."""
 
 def check_methods(names: Sequence[str], field: str, allowed: tuple[str, ...] = tuple(METHODS)) -> list[str]:
     """``names`` as a list, if non-empty and each is in ``allowed``; else ``ValueError`` naming ``field``."""
+    if isinstance(names, str):  # one name, not a list: read letter by letter it would name none
+        raise ValueError(f"{field}: give a list of names, e.g. [{names}] (got {names!r})")
     unknown = [n for n in names if n not in allowed]
     if not names or unknown:
         raise ValueError(

@@ -332,3 +332,65 @@ def test_the_memory_limit_names_what_simulate_controls(monkeypatch):
         r"fixed's pinch search \(one env per candidate pinch point\): \d+ envs would need", message
     )
     assert "give fixed a pinch point (simulate --pinch X,Y)" in message and "num_envs" not in message
+
+
+def test_agent_configs_and_jobs_check_each_field_as_they_are_made():
+    """The learners' configs, the optimiser's and every job refuse a field of the wrong kind at
+    construction, in one line naming ``Class.field``; GradConfig's own checks name its own keys."""
+    from agents.config import GradConfig, TrainConfig
+    from agents.es.config import EsConfig
+    from agents.jobs import EvaluateJob, OptimizeJob, RobustnessJob, RunJob, SimulateJob, TrainJob
+
+    for make, message in [
+        (lambda: TrainConfig(num_envs=True), "TrainConfig.num_envs: an integer >= 1"),
+        (lambda: TrainConfig(iterations=1.5), "TrainConfig.iterations: an integer >= 1"),
+        (lambda: TrainConfig(activation="nope"), "TrainConfig.activation: one of 'elu'"),
+        (lambda: TrainConfig(algo="x"), "TrainConfig.algo: one of 'es', 'ppo', 'apg'"),
+        (lambda: TrainConfig(actor_hidden_dims=[]), "TrainConfig.actor_hidden_dims: a non-empty list"),
+        (lambda: TrainConfig(torch_device="gpu"), "TrainConfig.torch_device: a torch device"),
+        (lambda: TrainConfig(obs_normalization="no"), "TrainConfig.obs_normalization: True or False"),
+        (lambda: EsConfig(sigma=-1.0), "train.es.sigma: must be a finite number > 0"),
+        (lambda: TrainJob(seed=True), "TrainJob.seed: an integer >= 0"),
+        (lambda: TrainJob(contour=5), "TrainJob.contour: a built-in name"),
+        (lambda: TrainJob(train="es"), "TrainJob.train: a TrainConfig"),
+        (lambda: TrainJob(eval_trials=0), "TrainJob.eval_trials: must be an integer >= 1"),
+        (lambda: GradConfig(iterations=2.0), "GradConfig.iterations: an integer (got 2.0)"),
+        (lambda: OptimizeJob(grad=GradConfig(window=2.5)), "GradConfig.window: an integer >= 1"),
+        (lambda: GradConfig(optimize_pinch="yes"), "GradConfig.optimize_pinch: True or False"),
+        (lambda: RunJob(candidates=2.0), "RunJob.candidates: must be an integer >= 1"),
+        (lambda: RunJob(trials=math.nan), "RunJob.trials: must be an integer >= 1"),
+        (lambda: RunJob(policy="x"), "RunJob.policy: choose one of fixed, analytic, rl"),
+        (lambda: EvaluateJob(methods="none"), "EvaluateJob.methods: a list of method names"),
+        (lambda: EvaluateJob(sim={}), "EvaluateJob.sim: a SimConfig"),
+        (lambda: RobustnessJob(values=[math.nan]), "RobustnessJob.values: a list of finite numbers"),
+        (lambda: SimulateJob(trials=0), "SimulateJob.trials: must be an integer >= 1"),
+    ]:
+        with pytest.raises(ValueError) as error:
+            make()
+        assert str(error.value).startswith(message), str(error.value)
+    grad = GradConfig()
+    object.__setattr__(grad, "validation_trials", -1)  # past the constructor: validated() names its own key
+    with pytest.raises(ValueError, match=r"^validation_trials: must be an integer >= 0"):
+        grad.validated()
+
+
+def test_cli_refuses_bad_train_settings_before_claiming_the_run(tmp_path, monkeypatch):
+    """Settings that used to fail deep inside training (torch, rsl-rl, the final evaluation) are refused
+    before the run directory is made, in one line naming the key as typed."""
+    from tests.cli_runner import invoke
+
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "c1"
+    for setting, message in [
+        ("train.actor_hidden_dims=[]", "--set: train.actor_hidden_dims: a non-empty list"),
+        ("train.torch_device=gpu", "--set: train.torch_device: a torch device"),
+        ("train.activation=nope", "--set: train.activation: one of"),
+        ("eval_trials=0", "--set: eval_trials: must be an integer >= 1"),
+        ("train.obs_normalization='no'", "--set: train.obs_normalization: expected true or false"),
+    ]:
+        code, stdout, stderr = invoke(
+            ["train", "--contour", "circle-small", "--set", setting, "--out", str(out)]
+        )
+        assert code == 2 and message in stderr and len(stderr.strip().splitlines()) == 1, stderr
+        assert not stdout
+    assert not out.exists() and not list(tmp_path.iterdir())

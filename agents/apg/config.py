@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from warpcut.validation import ConfigError, check_flag, shown
+
 
 @dataclass
 class ApgConfig:
@@ -25,16 +27,19 @@ class ApgConfig:
     new weights); otherwise revert it and halve the step size (a kept step grows it by 1.5, up to
     ``learning_rate``)."""
 
+    def __post_init__(self) -> None:  # each field as it is given (a file's or --set's key at a time)
+        self.check()
+
     def check(self) -> None:
         """``ValueError`` naming the first field out of range."""
         for name in ("learning_rate", "max_grad_norm"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | float) or not (0 < value < math.inf):
-                raise ValueError(f"train.apg.{name}: must be a finite number > 0 (got {value!r})")
+                raise ConfigError(f"train.apg.{name}", f"must be a finite number > 0 (got {shown(value)})")
         window = self.window
         if window is not None and (isinstance(window, bool) or not isinstance(window, int) or window < 1):
-            raise ValueError(
-                f"train.apg.window: must be an integer >= 1 or null, the whole episode (got {window!r})"
+            raise ConfigError(
+                "train.apg.window",
+                f"must be an integer >= 1 or null, the whole episode (got {shown(window)})",
             )
-        if not isinstance(self.accept, bool):
-            raise ValueError(f"train.apg.accept: must be true or false (got {self.accept!r})")
+        check_flag("train.apg.accept", self.accept)

@@ -630,6 +630,14 @@ def check_learner(job) -> None:
     from agents.config import APG_FIXED_SHEET
 
     job.train.check(job.env.action_type == "discrete")
+    device = job.train.torch_device
+    if device.startswith(("cuda", "mps")):
+        import torch
+
+        backend = torch.cuda if device.startswith("cuda") else torch.backends.mps
+        index = int(device.partition(":")[2] or 0)
+        if not backend.is_available() or (backend is torch.cuda and index >= torch.cuda.device_count()):
+            raise ValueError(f"train.torch_device: {device} is not available here; use cpu (the default)")
     if job.train.feedback and not job.env.contour_features:
         raise ValueError(
             "feedback: the policy observes no tracking error (env.contour_features=false); observe the "

@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from warpcut.validation import ConfigError, check_flag, shown
+
 ENV_STEPS = 150 * 256 * 32
 """es's env steps per run where no iterations are given: as many as PPO's default run simulates (150
 iterations x 256 envs x 32 steps = 1,228,800). An es iteration plays whole cuts, 41 to 380 steps on the
@@ -53,6 +55,9 @@ class EsConfig:
     it needs the contour features in the observation). Without it es learns the MLP alone: give it a larger
     ``sigma`` and ``learning_rate`` then (0.05 and 0.01 worked)."""
 
+    def __post_init__(self) -> None:  # each field as it is given (a file's or --set's key at a time)
+        self.check()
+
     def check(self, num_envs: int | None = None) -> None:
         """``ValueError`` naming the first field out of range (``num_envs``: the batch the population must
         divide)."""
@@ -63,8 +68,9 @@ class EsConfig:
             or population < 2
             or population % 2
         ):
-            raise ValueError(
-                f"train.es.population: must be an even integer >= 2, antithetic pairs (got {population!r})"
+            raise ConfigError(
+                "train.es.population",
+                f"must be an even integer >= 2, antithetic pairs (got {shown(population)})",
             )
         if num_envs is not None and num_envs % population:
             fits = max((p for p in range(2, min(num_envs, 64) + 1, 2) if num_envs % p == 0), default=None)
@@ -77,7 +83,8 @@ class EsConfig:
         for name in ("sigma", "feedback_sigma", "learning_rate", "feedback_learning_rate"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | float) or not (0 < value < math.inf):
-                raise ValueError(f"train.es.{name}: must be a finite number > 0 (got {value!r})")
+                raise ConfigError(f"train.es.{name}", f"must be a finite number > 0 (got {shown(value)})")
+        check_flag("train.es.feedback", self.feedback)
 
     def rsl_rl(self) -> dict:
         """rsl-rl's ``algorithm`` section (``class_name`` and the arguments of

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from warpcut.validation import is_number
+from warpcut.validation import ConfigError, check_flag, is_integer, is_number, shown
 
 
 @dataclass
@@ -55,20 +55,34 @@ class PpoConfig:
     """Give the actor the linear feedback path on the tracking error (:class:`agents.models.FeedbackMLP`),
     as es's. Off: with it PPO did no better on the suite."""
 
+    def __post_init__(self) -> None:  # each field as it is given (a file's or --set's key at a time)
+        self.check()
+
     def check(self) -> None:
         """``ValueError`` naming the first field out of range."""
         for name in ("num_steps_per_env", "num_learning_epochs", "num_mini_batches"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"train.ppo.{name}: must be an integer >= 1 (got {value!r})")
+                raise ConfigError(f"train.ppo.{name}", f"must be an integer >= 1 (got {shown(value)})")
         if self.schedule not in ("adaptive", "fixed"):
-            raise ValueError(f"train.ppo.schedule: choose adaptive or fixed (got {self.schedule!r})")
+            raise ConfigError("train.ppo.schedule", f"choose adaptive or fixed (got {shown(self.schedule)})")
         if not (is_number(self.stay_prior) and 0 <= self.stay_prior < 1):
-            raise ValueError(f"train.ppo.stay_prior: must be in [0, 1) (got {self.stay_prior!r})")
+            raise ConfigError("train.ppo.stay_prior", f"must be in [0, 1) (got {shown(self.stay_prior)})")
+        for name in ("entropy_coef", "gamma", "lam", "value_loss_coef"):
+            value = getattr(self, name)
+            if not (is_number(value) and 0 <= value < float("inf")):
+                raise ConfigError(f"train.ppo.{name}", f"must be a finite number >= 0 (got {shown(value)})")
+        dims = self.critic_hidden_dims
+        if not (isinstance(dims, list | tuple) and dims and all(is_integer(d) and d >= 1 for d in dims)):
+            raise ConfigError(
+                "train.ppo.critic_hidden_dims",
+                f"must be a non-empty list of layer widths >= 1 (got {shown(dims)})",
+            )
+        check_flag("train.ppo.feedback", self.feedback)
         for name in ("learning_rate", "desired_kl", "clip_param", "max_grad_norm", "init_noise_std"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | float) or not 0 < value < float("inf"):
-                raise ValueError(f"train.ppo.{name}: must be a finite number > 0 (got {value!r})")
+                raise ConfigError(f"train.ppo.{name}", f"must be a finite number > 0 (got {shown(value)})")
 
     def rsl_rl(self, discrete: bool, num_action_choices: int | None) -> dict:
         """rsl-rl's ``algorithm`` section, the actor's ``distribution_cfg`` and the ``critic`` section's
