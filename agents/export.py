@@ -37,7 +37,7 @@ def export_run(source: str | Path, out_dir: str | Path | None = None) -> list[di
     ``SOURCE/exported/NAME``). Returns per policy ``{"policy": what it is, "torchscript": path, "onnx":
     path, "unfinished": what :func:`unfinished_note` says, or None}``."""
     if out_dir is not None and enclosing_run(out_dir) is None:  # a folder of its own: marked as warpcut's
-        with claim_run_dir(out_dir, command="export", resume=True):
+        with claim_run_dir(out_dir, command="export", reuse=True):
             return _export_runs(source, out_dir)
     return _export_runs(source, out_dir)
 

@@ -81,8 +81,9 @@ def load_policy(source: str | Path) -> MLPModel:
 
 def policy_runs(source: str | Path) -> list[tuple[Path, str]]:
     """The policies a directory holds, as ``(run directory or checkpoint, what it is)``: a checkpoint file;
-    a ``warpcut train`` run; a ``warpcut run`` directory (the policy of the candidate it chose); an
-    ``evaluate`` directory (each contour's policy in ``policies/``).
+    a ``warpcut train`` run; a ``warpcut run`` directory (the policy of the candidate it chose; stopped
+    before it chose, each candidate's with a checkpoint); an ``evaluate`` directory (each contour's policy in
+    ``policies/``).
 
     Raises:
         FileNotFoundError: ``source`` does not exist.
@@ -102,6 +103,9 @@ def policy_runs(source: str | Path) -> list[tuple[Path, str]]:
     policies = sorted(d for d in (source / "policies").glob("*") if is_run(d))
     if policies:
         return [(d, f"evaluate {source}: {d.name}'s policy") for d in policies]
+    candidates = sorted(d for d in (source / "rl").glob("candidate-*") if is_run(d) and any(d.glob("*.pt")))
+    if candidates:  # a run stopped before it chose a candidate: each candidate's policy so far
+        return [(d, f"run {source} (unfinished, no candidate chosen): {d.name}'s policy") for d in candidates]
     raise ValueError(
         f"{source}: holds no trained policy; give a run directory of 'warpcut train', 'warpcut run "
         "--policy rl' or 'warpcut evaluate' with rl, or a .pt checkpoint"

@@ -755,3 +755,77 @@ def test_overwrite_never_follows_a_link_out_of_the_run(tmp_path):
     with claim_run_dir(out, command="evaluate", overwrite=True):
         pass
     assert (outside / "results.json").read_text() == "the user's"
+
+
+def test_implicit_outputs_go_only_into_a_folder_warpcut_marks(tmp_path):
+    """simulate's figures, recording and meshes have names the user did not choose: they go into a new or
+    empty folder (marked), or one of simulate's own, never among a user's files (a user's recording.rrd or
+    mesh is never replaced); --json names its own file, and a second simulate into its folder works."""
+    user = tmp_path / "results"
+    user.mkdir()
+    (user / "recording.rrd").write_text("the user's recording")
+    args = ["simulate", "--contour", "circle-small", "--policy", "none", "--trials", "1"]
+    code, output = invoke([*args, "--json", str(user / "x.json"), "--record", "1"])
+    assert code == 2 and "holds files warpcut did not write" in output and "--json's folder" in output
+    code, output = invoke([*args, "--set", f"export_mesh={user}", "--set", "plots=false"])
+    assert code == 2 and "holds files warpcut did not write" in output and "export_mesh" in output
+    assert (user / "recording.rrd").read_text() == "the user's recording" and not (user / "x.json").exists()
+    fresh = tmp_path / "sim"
+    for _ in range(2):
+        code, output = invoke([*args, "--json", str(fresh / "x.json"), "--set", "plots=false", "--record", "1"])
+        assert code == 0, output
+    assert {"x.json", "recording.rrd"} <= set(read_run_marker(fresh)["files"])
+
+
+def test_a_run_never_replaces_a_file_its_marker_does_not_list(tmp_path):
+    """A marked folder with files the marker does not list (put there by hand, or a marker that lost its
+    list): --overwrite keeps them and the run stops before replacing one, in one line."""
+    out = tmp_path / "run"
+    with claim_run_dir(out, command="train"):
+        write_json(out / "summary.json", {"run": True})
+    marker = read_run_marker(out)
+    (out / RUN_MARKER).write_text(json.dumps({**marker, "files": "not a list"}))
+    code, output = invoke(["train", "--contour", "circle-small", "--iterations", "1", "--no-progress",
+                           "--set", "train.num_envs=64", "--out", str(out), "--overwrite"])  # fmt: skip
+    assert code == 2 and "summary.json: exists, and warpcut did not write it" in output, output
+    assert json.loads((out / "summary.json").read_text()) == {"run": True}
+
+
+def test_a_resume_stays_in_its_run_and_says_what_it_cannot_continue(tmp_path):
+    run, other = tmp_path / "a", tmp_path / "b"
+    with claim_run_dir(run, command="train"):
+        write_json(run / "config.json", {})
+    code, output = invoke(["train", "--resume", str(run), "--out", str(other)])
+    assert code == 2 and "a resumed run continues in its own directory" in output and not other.exists()
+    bare = tmp_path / "killed"  # a run killed before it saved its settings: only its marker
+    with claim_run_dir(bare, command="train", argv=["warpcut", "train", "--contour", "wave-1"]):
+        write_json(bare / "options.json", {})
+    (bare / "options.json").unlink()
+    code, output = invoke(["train", "--resume", str(bare)])
+    assert code == 2 and "stopped before it saved its settings" in output
+    assert "warpcut train --contour wave-1" in output
+    with claim_run_dir(tmp_path / "outer", command="run"):  # a policy inside another command's run
+        write_json(tmp_path / "outer" / "rl" / "candidate-0" / "config.json", {})
+    code, output = invoke(["train", "--resume", str(tmp_path / "outer" / "rl" / "candidate-0")])
+    assert code == 2 and "is part of the warpcut run run in" in output and "--resume" in output
+
+
+def test_print_config_refuses_the_options_it_would_ignore():
+    code, output = invoke(["evaluate", "--print-config", "--json", "x.json", "--device", "cpu"])
+    assert code == 2 and "--device, --json: --print-config prints the settings and exits" in output
+    code, output = invoke(["run", "--print-config", "--set", "trials=3"])
+    assert code == 0 and "trials: 3" in output
+
+
+def test_export_of_a_run_stopped_before_it_chose_a_candidate(tmp_path):
+    """A ``warpcut run`` stopped while its candidates trained (no results.json): export finds each
+    candidate's policy so far and says the run is unfinished."""
+    from agents.training import train_contour
+
+    out = tmp_path / "run"
+    with claim_run_dir(out, command="run"):
+        train_contour(TrainJob(contour="circle-small", sim=SMALL, train=TINY, eval_trials=1),
+                      out / "rl" / "candidate-0", progress=False)  # fmt: skip
+    code, output = invoke(["export", str(out)])
+    assert code == 0 and "unfinished, no candidate chosen" in output, output
+    assert (out / "rl" / "candidate-0" / "exported" / "policy.onnx").is_file()

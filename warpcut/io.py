@@ -7,7 +7,6 @@ import contextlib
 import dataclasses
 import errno
 import fcntl
-import glob
 import hashlib
 import json
 import math
@@ -143,6 +142,11 @@ class _Claim:
     fd: int
     deleted: list[str] = dataclasses.field(default_factory=list)
     kept: list[str] = dataclasses.field(default_factory=list)
+    listed: set[str] = dataclasses.field(default_factory=set)
+    """The marker's files, as a set (a run may write many thousands)."""
+
+    def __post_init__(self) -> None:
+        self.listed = set(self.marker["files"])
 
 
 _HELD: dict[Path, _Claim] = {}
@@ -168,7 +172,7 @@ def read_run_marker(path: str | os.PathLike) -> dict | None:
 
 
 def _write_marker(claim: _Claim) -> None:
-    claim.marker["files"] = sorted(set(claim.marker["files"]))
+    claim.marker["files"] = sorted(claim.listed)
     write_atomic(_marker_path(claim.path), json.dumps(claim.marker, indent=2) + "\n")
 
 
@@ -205,25 +209,39 @@ def written_by_warpcut(path: str | os.PathLike) -> bool:
     return os.path.relpath(Path(path).resolve(), Path(run).resolve()) in files
 
 
-def note_written(path: str | os.PathLike) -> None:
+def note_written(path: str | os.PathLike, *, written: bool = False) -> None:
     """List ``path`` in the marker of the run directory it lies in, as a file warpcut wrote there (before
     it is written: a run killed mid-write still names it). A path in no run directory this process holds
-    is listed in the marker of the nearest enclosing run directory that no other process holds (e.g.
-    ``warpcut export`` writing beside a finished run); outside any run directory, nothing is done."""
+    is listed in the marker of the nearest enclosing run directory, claimed for the moment (e.g. ``warpcut
+    export`` writing beside a finished run); outside any run directory, nothing is done. ``written``: the
+    file exists already because this run wrote it through a library that names its own files (rsl-rl's
+    TensorBoard events), so it is listed, not refused.
+
+    Raises:
+        ValueError: ``path`` exists in a run directory and the run did not write it (a file put there by
+            hand): warpcut never replaces it. Or the enclosing run directory is in use by another process.
+    """
     path = Path(os.path.abspath(path))
     if path.name == RUN_MARKER:
         return
     claim = _holder(path)
-    if claim is not None:
-        relative = os.path.relpath(path.resolve(), claim.path.resolve())
-        if relative not in claim.marker["files"]:
-            claim.marker["files"].append(relative)
-            _write_marker(claim)
+    if claim is None:
+        run = enclosing_run(path.parent)
+        if run is not None:
+            with claim_run_dir(run, command=None, resume=True):
+                note_written(path, written=written)
         return
-    run = enclosing_run(path.parent)
-    if run is not None:
-        with contextlib.suppress(ValueError), claim_run_dir(run, command=None, resume=True):
-            note_written(path)
+    relative = os.path.relpath(path.resolve(), claim.path.resolve())
+    if relative in claim.listed:
+        return
+    if (path.exists() or path.is_symlink()) and not written:
+        raise ValueError(
+            f"{path}: exists, and warpcut did not write it (it is not in {claim.path / RUN_MARKER}), so it "
+            "never replaces it: move it, or choose another output folder"
+        )
+    claim.listed.add(relative)
+    claim.marker["files"].append(relative)
+    _write_marker(claim)
 
 
 def _lock(path: Path) -> int:
@@ -248,19 +266,38 @@ def _delete_written(path: Path, files: list[str]) -> tuple[list[str], list[str]]
     """Delete what a run wrote in ``path``: the files its marker lists (and their temporary files), then the
     folders that held them where they are left empty. Returns what was deleted and what was kept (the
     entries of ``path`` warpcut did not write)."""
-    root = os.path.abspath(path)
-    deleted, folders = [], set()
+    root, real = os.path.abspath(path), os.path.realpath(path)
+    by_folder: dict[str, list[str]] = {}
     for name in files:
-        file = Path(os.path.normpath(os.path.join(root, name)))
-        real = os.path.realpath(root)
-        if os.path.commonpath([real, os.path.realpath(file.parent)]) != real or file == Path(root):
+        file = os.path.normpath(os.path.join(root, name))
+        folder = os.path.dirname(file)
+        if file == root or os.path.commonpath([real, os.path.realpath(folder)]) != real:
             continue  # a path leading out of the run (an edited marker, a folder made a link): not followed
-        for entry in [file, *file.parent.glob(f".{glob.escape(file.name)}.*"),
-                      *file.parent.glob(f".{glob.escape(file.stem)}.*.mp4")]:  # fmt: skip
-            if entry.is_file() or entry.is_symlink():
-                entry.unlink()
+        by_folder.setdefault(folder, []).append(os.path.basename(file))
+    deleted, folders = [], set()
+    for folder, names in by_folder.items():
+        try:
+            present = os.listdir(folder)  # once per folder: a marker may list many thousands of files
+        except OSError:
+            continue
+        hidden = [e for e in present if e.startswith(".")]
+        wanted = set(names)
+        for name in names:  # the temporary files of its writers: .NAME.*, .STEM.*.mp4
+            stem = os.path.splitext(name)[0]
+            wanted.update(
+                e
+                for e in hidden
+                if e.startswith(f".{name}.") or e.startswith(f".{stem}.") and e.endswith(".mp4")
+            )
+        for name in sorted(wanted.intersection(present)):
+            entry = os.path.join(folder, name)
+            if os.path.islink(entry) or os.path.isfile(entry):
+                os.unlink(entry)
                 deleted.append(os.path.relpath(entry, root))
-        folders.update(p for p in file.parents if os.path.commonpath([root, p]) == root and p != Path(root))
+        parent = Path(folder)
+        while str(parent) != root and os.path.commonpath([root, str(parent)]) == root:
+            folders.add(parent)
+            parent = parent.parent
     for folder in sorted(folders, key=lambda p: len(p.parts), reverse=True):
         with contextlib.suppress(OSError):
             folder.rmdir()  # only where it is empty: a file the user put there keeps its folder
@@ -269,20 +306,34 @@ def _delete_written(path: Path, files: list[str]) -> tuple[list[str], list[str]]
 
 
 def _check_run_dir(
-    path: Path, command: str | None, resume: bool, overwrite: bool
+    path: Path, command: str | None, resume: bool, overwrite: bool, option: str = "--out", reuse: bool = False
 ) -> tuple[dict | None, list]:
     """The marker and the entries of the folder ``path``, after the checks of :func:`claim_run_dir`."""
     marker = read_run_marker(path)
     contents = [p.name for p in path.iterdir() if p.name != RUN_MARKER]
     if marker is None and contents:
+        outer = enclosing_run(path.parent)
+        if outer is not None:
+            command_of = (read_run_marker(outer) or {}).get("command") or "COMMAND"
+            raise ValueError(
+                f"{path}: is part of the warpcut {command_of} run in {outer}, not a run of its own; "
+                f"continue that one (warpcut {command_of} ... --out {outer} --resume), or choose another "
+                "--out"
+            )
+        damaged = _marker_path(path).exists()
+        why = f"its {RUN_MARKER} is damaged" if damaged else f"no {RUN_MARKER}"
         raise ValueError(
-            f"{path}: holds files warpcut did not write ({len(contents)} entries, and no {RUN_MARKER}); "
+            f"{path}: holds files warpcut did not write ({len(contents)} entries, {why}); "
             + ("warpcut never deletes them, so " if overwrite else "")
             + ("there is no run to resume; " if resume else "")
-            + "choose a new or empty folder for --out"
+            + f"choose a new or empty folder for {option}"
         )
     what = f"a warpcut {marker.get('command')} run" if marker and marker.get("command") else "a warpcut run"
-    if marker is not None and contents and not (resume or overwrite):
+    if reuse and marker is not None and marker.get("command") not in (command, None):
+        raise ValueError(
+            f"{path}: holds {what}; choose a new or empty folder for {option} (or one of warpcut {command}'s)"
+        )
+    if marker is not None and contents and not (resume or overwrite or reuse):
         raise ValueError(
             f"{path}: holds {what} ({marker.get('id', '?')}); pass --resume to continue it, --overwrite "
             "to delete what it wrote and start again, or choose another --out"
@@ -311,6 +362,8 @@ def claim_run_dir(
     resume: bool = False,
     overwrite: bool = False,
     argv: list[str] | None = None,
+    option: str = "--out",
+    reuse: bool = False,
 ) -> Iterator[Path]:
     """Own the run directory ``path`` while the block runs: create it, mark it as warpcut's
     (:data:`RUN_MARKER`: ``command``, a run id, when, and every file the run writes there) and hold an
@@ -319,7 +372,9 @@ def claim_run_dir(
     Only a new or empty folder starts a run. A folder warpcut did not mark is never written or deleted in.
     A marked one with a run in it is refused unless ``resume`` (continue it: only a run of the same
     ``command``; None: any) or ``overwrite`` (delete the files the run wrote, keep everything else, and start
-    again; :attr:`deleted` of the yielded path's claim says what went) is given. A claim inside a directory
+    again; :func:`overwritten` says what went) is given; ``reuse`` writes into a folder of ``command``'s
+    again without asking (an output folder, not a run: ``warpcut export``'s, ``simulate``'s). ``option``
+    is the option the folder came from, for the messages. A claim inside a directory
     this process holds passes at once (a command claims its run directory, then the pipeline it runs claims
     it again). When the block ends with nothing written, the marker goes, and the folder too if the claim
     made it.
@@ -353,10 +408,10 @@ def claim_run_dir(
         raise
     claim, deleted, kept = None, [], []
     try:
-        marker, contents = _check_run_dir(path, command, resume, overwrite)
+        marker, contents = _check_run_dir(path, command, resume, overwrite, option, reuse)
         if overwrite and marker is not None:
             deleted, kept = _delete_written(path, marker["files"])
-        if resume and marker is not None and contents:
+        if (resume or reuse) and marker is not None and contents:
             marker.update(pid=os.getpid())
         else:
             marker = {

@@ -510,10 +510,27 @@ def resolve(job_class, config_file: str | None, overrides: tuple[str, ...], flag
     return with_dependent_defaults(job, explicit)
 
 
+NOT_SETTINGS = ("out", "json_path", "overwrite", "no_progress", "device")
+"""The options that say where and how a command runs, not what: ``--print-config`` would ignore them."""
+
+
 def print_config(job) -> None:
-    """``--print-config``: the resolved job as YAML on stdout."""
+    """``--print-config``: the resolved job as YAML on stdout; an option that only says where or how the
+    command would run (:data:`NOT_SETTINGS`) is refused with it, as a setting the invocation ignores."""
     from agents.config_io import to_yaml
 
+    ctx = click.get_current_context()
+    ignored = [
+        p.opts[0]
+        for p in ctx.command.params
+        if p.name in NOT_SETTINGS
+        and ctx.get_parameter_source(p.name) == click.core.ParameterSource.COMMANDLINE
+    ]
+    if ignored:
+        raise click.UsageError(
+            f"{', '.join(ignored)}: --print-config prints the settings and exits, running and writing "
+            f"nothing; drop {'them' if len(ignored) > 1 else 'it'}"
+        )
     click.echo(to_yaml(job), nl=False)
 
 
@@ -557,6 +574,16 @@ def saved_job(job_class, path: Path):
     from warpcut.io import read_json
 
     if not path.is_file():
+        from warpcut.io import read_run_marker
+
+        marker = read_run_marker(path.parent)
+        if marker is not None:  # killed before it saved its settings: nothing to continue
+            line = " ".join(marker.get("argv") or []) or "its command"
+            raise click.BadParameter(
+                f"{path.parent}: the run stopped before it saved its settings ({path.name}); start it "
+                f"again, without --resume: {line}",
+                param_hint="--resume",
+            )
         raise click.BadParameter(
             f"{path.parent}: no {path.name}: not a run this command wrote; give its run directory",
             param_hint="--resume",

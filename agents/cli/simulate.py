@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import time
 from pathlib import Path
 
@@ -70,6 +71,7 @@ def command(
     from agents.evaluation import compare_policies
     from agents.jobs import SimulateJob, contour_spec
     from warpcut.contours import load_contour
+    from warpcut.io import claim_run_dir
 
     job = common.resolve(SimulateJob, config_file, overrides, FLAGS).check()
     common.refuse_unused_settings(job, overrides, FLAGS)
@@ -85,50 +87,60 @@ def command(
     inputs = [job.contour] if isinstance(job.contour, str) else []
     out = json_path.parent if json_path else common.run_dir(None, "simulate")
     writes_out = job.plots or job.record is not None or job.video is not None  # the figures, .rrd, .mp4
-    outputs = {"--json": json_path, "export_mesh": mesh_dir, "the output folder (--json's)": out if writes_out else None}
+    out_option = "--json's folder" if json_path else "the output folder"
+    outputs = {"--json": json_path, "export_mesh": mesh_dir, out_option: out if writes_out else None}
     common.check_outputs(outputs, inputs)  # before the simulation: a folder it could not write
-    if job.record is not None:
-        from warpcut.viz.process import start_recorder_process
+    with contextlib.ExitStack() as claims:  # the folders of its implicit outputs: warpcut's own, or new
+        if writes_out:
+            claims.enter_context(claim_run_dir(out, command="simulate", reuse=True, option=out_option))
+        if mesh_dir is not None:
+            claims.enter_context(
+                claim_run_dir(mesh_dir, command="simulate", reuse=True, option="export_mesh")
+            )
+        if job.record is not None:
+            from warpcut.viz.process import start_recorder_process
 
-        start_recorder_process()  # its start-up overlaps the simulation's
-    cuts = common.final_cuts(not job.plots)
-    meshes = None
-    if mesh_dir is not None:
-        from warpcut.viz.mesh_export import MeshExports
+            start_recorder_process()  # its start-up overlaps the simulation's
+        cuts = common.final_cuts(not job.plots)
+        meshes = None
+        if mesh_dir is not None:
+            from warpcut.viz.mesh_export import MeshExports
 
-        meshes = MeshExports(mesh_dir)
-    config = job.sim.validated()
-    start = time.perf_counter()
-    with common.recorder(out, job.record, job.colour_by) as rec, videos(out, job.video) as vid:
-        report = compare_policies(
-            contour, job.policy, trials=job.trials, config=config, pinch=job.pinch, device=device,
-            seed=job.seed, step_callbacks=with_videos(common.step_callbacks(rec, cuts, meshes), vid),
-            allow_infeasible_pinch=job.allow_infeasible_pinch,
-        )  # fmt: skip
-    elapsed = time.perf_counter() - start
-    click.echo(
-        f"contour {contour.name} ({'closed' if contour.closed else 'open'}, {contour.length:.1f} mm), "
-        f"{job.trials} trial(s), {config.nx}x{config.ny} on {device}, {elapsed:.1f} s"
-    )
-    click.echo(
-        f"{'policy':<10} {'error (vertices)':>16} {'error (mm^2)':>13} {'improvement':>12} {'pinch (mm)':>16}"
-    )
-    for name, r in report["results"].items():
-        ci = f" ±{r['ci95_pct']:.1f}" if job.trials > 1 else ""
-        pinch_txt = "-" if r["pinch"] is None else point_text(r["pinch"])
+            meshes = MeshExports(mesh_dir)
+        config = job.sim.validated()
+        start = time.perf_counter()
+        with common.recorder(out, job.record, job.colour_by) as rec, videos(out, job.video) as vid:
+            report = compare_policies(
+                contour, job.policy, trials=job.trials, config=config, pinch=job.pinch, device=device,
+                seed=job.seed, step_callbacks=with_videos(common.step_callbacks(rec, cuts, meshes), vid),
+                allow_infeasible_pinch=job.allow_infeasible_pinch,
+            )  # fmt: skip
+        elapsed = time.perf_counter() - start
         click.echo(
-            f"{name:<10} {r['error_vertices']:>16.1f} {r['error_mm2']:>13.1f} "
-            f"{r['improvement_pct']:>+11.1f}%{ci} {pinch_txt:>16}{common.infeasible_mark(r['pinch_feasible'])}"
+            f"contour {contour.name} ({'closed' if contour.closed else 'open'}, {contour.length:.1f} mm), "
+            f"{job.trials} trial(s), {config.nx}x{config.ny} on {device}, {elapsed:.1f} s"
         )
-    common.echo_infeasible({name: r["pinch_problem"] for name, r in report["results"].items()})
-    if json_path:
-        from warpcut.io import write_json
+        click.echo(
+            f"{'policy':<10} {'error (vertices)':>16} {'error (mm^2)':>13} {'improvement':>12} "
+            f"{'pinch (mm)':>16}"
+        )
+        for name, r in report["results"].items():
+            ci = f" ±{r['ci95_pct']:.1f}" if job.trials > 1 else ""
+            pinch_txt = "-" if r["pinch"] is None else point_text(r["pinch"])
+            click.echo(
+                f"{name:<10} {r['error_vertices']:>16.1f} {r['error_mm2']:>13.1f} "
+                f"{r['improvement_pct']:>+11.1f}%{ci} {pinch_txt:>16}"
+                f"{common.infeasible_mark(r['pinch_feasible'])}"
+            )
+        common.echo_infeasible({name: r["pinch_problem"] for name, r in report["results"].items()})
+        if json_path:
+            from warpcut.io import write_json
 
-        write_json(json_path, report)
-        click.echo(f"wrote {json_path}")
-    if cuts is not None:
-        from warpcut.viz.plots import plot_regions
+            write_json(json_path, report)
+            click.echo(f"wrote {json_path}")
+        if cuts is not None:
+            from warpcut.viz.plots import plot_regions
 
-        common.echo_written(plot_regions(cuts.of(contour.name), out))
-    common.echo_written(meshes.written if meshes is not None else [])
-    common.echo_recording(rec)
+            common.echo_written(plot_regions(cuts.of(contour.name), out))
+        common.echo_written(meshes.written if meshes is not None else [])
+        common.echo_recording(rec)

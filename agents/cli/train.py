@@ -86,6 +86,11 @@ def command(
     base, run = None, None
     if resume is not None:
         run = resume if resume.is_dir() else resume.parent
+        if out is not None and out.resolve() != run.resolve():
+            raise click.BadParameter(
+                f"a resumed run continues in its own directory ({run}), never in another; drop --out {out}",
+                param_hint="--out",
+            )
         check_run_dir(run, command="train", resume=True)  # before its settings are read
         base = common.saved_job(TrainJob, run / CONFIG_FILE)
     job = common.resolve(TrainJob, config_file, overrides, FLAGS, base)
