@@ -254,14 +254,19 @@ PROMISES = {
     ],
     "warpcut never writes in, resumes or deletes from": [
         "test_safety.py::test_a_folder_warpcut_did_not_mark_is_never_deleted_or_written_in",
+        "test_safety.py::test_a_run_never_replaces_a_file_its_marker_does_not_list",
+        "test_safety.py::test_implicit_outputs_go_only_into_a_folder_warpcut_marks",
+        "test_safety.py::test_export_never_replaces_a_file_warpcut_did_not_write",
     ],
     "`--resume` continues only a run of the same command": [
         "test_safety.py::test_a_run_resumes_only_as_the_command_that_made_it",
         "test_safety.py::test_a_run_killed_before_its_summary_resumes_with_its_own_settings",
         "test_safety.py::test_evaluate_resumes_after_an_interruption_keeping_finished_policies",
+        "test_safety.py::test_a_resume_stays_in_its_run_and_says_what_it_cannot_continue",
     ],
     "`--overwrite` deletes only the files the run wrote": [
         "test_safety.py::test_an_existing_run_is_refused_unless_resumed_or_overwritten",
+        "test_safety.py::test_overwrite_never_follows_a_link_out_of_the_run",
     ],
     "A second process on the same directory": [
         "test_safety.py::test_a_run_directory_is_locked_while_a_process_writes_it",
