@@ -39,6 +39,7 @@ from warpcut.contours import Contour
 from warpcut.planning import ArmModel
 from warpcut.planning.feasibility import check_pinch, pinch_feasible
 from warpcut.sim.config import SimConfig, randomize_ranges, sample_parameters
+from warpcut.sim.memory import batch_named
 from warpcut.task import CuttingTask, NoTensionReference
 
 if TYPE_CHECKING:
@@ -408,15 +409,26 @@ def optimize_plan(
     es = settings.estimator == "es"
     b = settings.es_population * settings.es_trials if es else settings.trials
 
+    if es:
+        batch = (
+            f"es's batch (grad.es_population x grad.es_trials = "
+            f"{settings.es_population} x {settings.es_trials})",
+            "lower grad.es_population (even) or grad.es_trials to at most {fits} envs in all",
+        )
+    else:
+        batch = ("grad.trials", "set grad.trials to at most {fits}")
+
     def engine(point: np.ndarray) -> TapeGradient | SmoothedGradient:
-        task = _episodes(contour, point, segments, config, b, device, seed + GRAD_SEED_OFFSET)
+        with batch_named(*batch):
+            task = _episodes(contour, point, segments, config, b, device, seed + GRAD_SEED_OFFSET)
         if es:
             return SmoothedGradient(task, settings, config.max_step_mm, seed)
         return TapeGradient(task, settings, seed + GRAD_SEED_OFFSET)
 
     def checker(point: np.ndarray) -> HeldOut | None:
         v, held_out = settings.validation_trials, seed + GRAD_SEED_OFFSET + 1
-        task = _episodes(contour, point, segments, config, v, device, held_out) if v else None
+        with batch_named("grad.validation_trials", "set grad.validation_trials to at most {fits} (0: none)"):
+            task = _episodes(contour, point, segments, config, v, device, held_out) if v else None
         return None if task is None else HeldOut(task, settings, held_out)
 
     rollout, validation = engine(pinch), checker(pinch)

@@ -91,6 +91,7 @@ from envs.rsl import FINAL_ERROR_KEY, PatternCutRslEnv
 from envs.vector import PatternCutVecEnv
 from warpcut.io import WriteFailed, claim_run_dir, note_written, read_json, write_atomic, write_json
 from warpcut.planning import check_pinch
+from warpcut.sim.memory import batch_named
 
 if TYPE_CHECKING:
     from agents.jobs import TrainJob
@@ -440,12 +441,12 @@ class Runner(OnPolicyRunner):
             previous = self.best_error, self.best_score, self.best_iterations
             self.best_error, self.best_score, self.best_iterations = error, score, self.iterations_done
             if self.logger.log_dir is not None:
+                best = Path(self.logger.log_dir) / BEST_CHECKPOINT
+                intact = "none was saved before"
+                if best.is_file():
+                    intact = f"the previous {BEST_CHECKPOINT} is intact"
                 try:
-                    _write(
-                        Path(self.logger.log_dir) / BEST_CHECKPOINT,
-                        self._state_bytes(),
-                        f"the previous {BEST_CHECKPOINT} is intact",
-                    )
+                    _write(best, self._state_bytes(), intact)
                 except ValueError:  # a full disk: the summary keeps naming the best.pt on disk
                     self.best_error, self.best_score, self.best_iterations = previous
                     raise
@@ -681,7 +682,9 @@ def _train_contour(
     write_json(out_dir / OPTIONS_FILE, dataclasses.replace(options, device=None).to_dict())
     validate = None
     if cfg.validation_trials > 0:
-        validation_env = PatternCutVecEnv(cfg.validation_trials, options)
+        fix = "set train.validation_trials to at most {fits} (0: none)"
+        with batch_named("train.validation_trials", fix):
+            validation_env = PatternCutVecEnv(cfg.validation_trials, options)
 
         def validate(actor: torch.nn.Module) -> np.ndarray:
             """Validation errors (vertices), one per episode; weighed by the reward's scale with
@@ -744,9 +747,21 @@ def _loaded(spec):
     return spec if isinstance(spec, Contour) else load_contour(spec)
 
 
-def training_env(options: PatternCutOptions, cfg: TrainConfig, seed: int = 0) -> PatternCutRslEnv:
-    """The rsl-rl env a learner trains in: ``cfg``'s batch of envs of ``options``, seeded with ``seed``."""
-    env = PatternCutVecEnv(cfg.batch_size, options, autoreset_mode="same_step")  # rsl-rl resets inside step
+TRAIN_BATCH_FIX = "set train.num_envs (train: --num-envs) to at most {fits}"
+"""What shrinks a training batch too big for memory, as :func:`warpcut.sim.memory.batch_named` says it."""
+
+
+def training_env(
+    options: PatternCutOptions,
+    cfg: TrainConfig,
+    seed: int = 0,
+    batch: tuple[str, str | None] = ("train.num_envs", TRAIN_BATCH_FIX),
+) -> PatternCutRslEnv:
+    """The rsl-rl env a learner trains in: ``cfg``'s batch of envs of ``options``, seeded with ``seed``;
+    ``batch``: the batch's name and fix where it does not fit in memory (:func:`warpcut.sim.memory.
+    batch_named`)."""
+    with batch_named(*batch):  # rsl-rl resets inside step
+        env = PatternCutVecEnv(cfg.batch_size, options, autoreset_mode="same_step")
     return PatternCutRslEnv(env, torch_device=cfg.torch_device, seed=seed)
 
 
@@ -777,7 +792,7 @@ def benchmark_training(
         raise ValueError(f"episodes: the steady state needs at least 1 whole episode (got {episodes!r})")
     options = PatternCutOptions(contour="fls-circle", device=device, action_type=entry(algo).action_type)
     cfg = TrainConfig(algo=algo, num_envs=num_envs, save_interval=10**6, validation_trials=0)
-    env = training_env(options, cfg)
+    env = training_env(options, cfg, batch=("--train-envs", "give --train-envs batches of at most {fits}"))
     per_iteration = cfg.ppo.num_steps_per_env if algo == "ppo" else env.max_episode_length
     steady_iterations = -(-episodes * env.max_episode_length // per_iteration)
     cfg = dataclasses.replace(cfg, iterations=1 + steady_iterations)

@@ -212,30 +212,38 @@ def run_bench(
     ups, ups_paper = {}, {}
     for b in batch_sizes:
         progress(f"updates/s at B={b}")
-        ups[str(b)] = updates_per_second(SimConfig(), b, device, repeats)
-        ups_paper[str(b)] = updates_per_second(PAPER_SWEEPS, b, device, repeats)
+        with _named("--batch-sizes", b):
+            ups[str(b)] = updates_per_second(SimConfig(), b, device, repeats)
+            ups_paper[str(b)] = updates_per_second(PAPER_SWEEPS, b, device, repeats)
     result["updates_per_s"] = ups
     result["updates_per_s_paper_sweeps"] = ups_paper
     b = max(batch_sizes)
     progress(f"updates/s at B={b} without process noise")
-    result["updates_per_s_noise_free"] = {str(b): updates_per_second(NOISE_FREE, b, device, repeats)}
+    with _named("--batch-sizes", b):
+        result["updates_per_s_noise_free"] = {str(b): updates_per_second(NOISE_FREE, b, device, repeats)}
     if probe.capture:
         # What the graphs save: the same updates launched one by one, at the largest batch.
         b = max(batch_sizes)
         progress(f"updates/s at B={b} without graph capture")
-        result["updates_per_s_no_capture"] = {
-            str(b): updates_per_second(SimConfig(), b, device, repeats, capture=False)
-        }
+        with _named("--batch-sizes", b):
+            result["updates_per_s_no_capture"] = {
+                str(b): updates_per_second(SimConfig(), b, device, repeats, capture=False)
+            }
     progress(f"fls-circle rollouts at B={rollout_envs}")
     result["rollout_envs"] = rollout_envs
-    result["rollouts_per_s"] = rollouts_per_second(rollout_envs, device, repeats)
-    result["rollouts_per_s_paper_sweeps"] = rollouts_per_second(rollout_envs, device, repeats, PAPER_SWEEPS)
+    with _named("--rollout-envs"):
+        result["rollouts_per_s"] = rollouts_per_second(rollout_envs, device, repeats)
+        result["rollouts_per_s_paper_sweeps"] = rollouts_per_second(
+            rollout_envs, device, repeats, PAPER_SWEEPS
+        )
     result["sim_env_steps_per_s"] = {}
     for b in env_step_envs:
         progress(f"tensioned env steps at B={b}")
-        result["sim_env_steps_per_s"][str(b)] = env_steps_per_second(b, device, repeats)
+        with _named("--train-envs", b):
+            result["sim_env_steps_per_s"][str(b)] = env_steps_per_second(b, device, repeats)
     progress(f"path-scoring overhead at B={rollout_envs}")
-    result["scoring_overhead_pct"] = scoring_overhead_pct(rollout_envs, device, repeats)
+    with _named("--rollout-envs"):
+        result["scoring_overhead_pct"] = scoring_overhead_pct(rollout_envs, device, repeats)
     progress("NumPy reference")
     result["numpy_updates_per_s"] = numpy_updates_per_second(repeats)
     best = max(ups.values())
@@ -246,8 +254,17 @@ def run_bench(
     for b in map(str, env_step_envs):
         names = " and ".join(training)
         progress(f"{names} training at B={b}, alternating with the simulator ({repeats} x)")
-        result.update(_training_against_simulator(result, int(b), device, repeats, training))
+        with _named("--train-envs", b):
+            result.update(_training_against_simulator(result, int(b), device, repeats, training))
     return result
+
+
+def _named(option: str, size: int | str | None = None):
+    """A measurement's batch, named by the option that sizes it where it does not fit in memory."""
+    from warpcut.sim.memory import batch_named
+
+    name = option if size is None else f"{option} (B={size})"
+    return batch_named(name, f"give {option} of at most {{fits}}")
 
 
 def _training_against_simulator(

@@ -285,6 +285,7 @@ def check_outputs(outputs: dict[str, Path | None], inputs: list[str] = ()) -> No
 def _unwritable(path: Path) -> str | None:
     """Why ``path`` (a file or directory to write, and the directories it needs) cannot be written, or
     None: a temporary file is made and removed in the deepest directory of it that exists."""
+    import errno
     import tempfile
 
     existing = path if path.is_dir() else path.parent
@@ -295,8 +296,13 @@ def _unwritable(path: Path) -> str | None:
     try:
         fd, probe = tempfile.mkstemp(dir=existing, prefix=".warpcut-probe-")
     except OSError as exc:
+        from warpcut.limits import write_cause
+
         where = f"the working folder {existing.resolve()}" if existing == Path(".") else existing
-        return f"{where}: {exc.strerror or exc}"
+        reason = write_cause(exc) or exc.strerror or str(exc)
+        if exc.errno == errno.ENOENT:  # the folder is there: a file system that makes no files (/proc, /sys)
+            reason = "files cannot be created there"
+        return f"{where}: {reason}"
     os.close(fd)
     os.unlink(probe)
     return None

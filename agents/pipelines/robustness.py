@@ -44,6 +44,7 @@ from warpcut.contours import Contour, ContourError, load_contour
 from warpcut.planning import ArmModel, InfeasiblePinch, check_pinch
 from warpcut.scoring import bootstrap_ci, bootstrap_difference_ci, paired_improvement
 from warpcut.sim.config import GRAVITY_MM_S2, SimConfig
+from warpcut.sim.memory import batch_named
 from warpcut.task import segments_key
 from warpcut.validation import ConfigError
 
@@ -418,7 +419,11 @@ def _scenario(contour, runs: dict[str, Path], config, device, seed, log) -> dict
     contour = load_contour(contour) if not isinstance(contour, Contour) else contour
     config = (config or SimConfig()).validated()
     log(f"  planning {contour.name}")
-    plan = plan_cut(contour, config.replace(noise_std=0.0), seed=seed, device=device)
+    with batch_named(  # the planner's own advice names a candidates setting this job lacks
+        "the planner's batch (pinch candidates x segment orders)",
+        "lower sim.resolution, or give a trained run (--run LABEL=DIR) whose pinch point and order are used",
+    ):
+        plan = plan_cut(contour, config.replace(noise_std=0.0), seed=seed, device=device)
     return {
         "contour": contour,
         "config": config,

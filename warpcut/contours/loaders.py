@@ -45,6 +45,9 @@ from warpcut.io import safe_name
 
 SVG_CHORD_MM = 0.5
 """Longest segment an SVG curve is flattened into (mm)."""
+MAX_FILE_BYTES = 64 * 2**20
+"""Largest contour file read (64 MiB): a contour sampled every 0.1 mm along 10 m, as JSON, is ~2.5 MB; a
+larger file is refused before it is read (a 4 GB one would take seconds and gigabytes of memory)."""
 
 
 def load_contour(
@@ -65,6 +68,8 @@ def load_contour(
     path = Path(key)
     suffix = path.suffix.lower()
     kind = file_kind(path)
+    if kind == "file" and suffix in (".json", ".svg"):
+        _check_file_size(path)
     if kind == "file" and suffix == ".json":
         return _load_json(path, sheet_size)
     if kind == "file" and suffix == ".svg":
@@ -106,9 +111,27 @@ def file_kind(path: Path) -> str | None:
     return next((name for test, name in kinds.items() if test(mode)), "not a file")
 
 
+def _check_file_size(path: Path) -> None:
+    """Refuse a contour file larger than :data:`MAX_FILE_BYTES`, before reading it."""
+    try:
+        size = path.stat().st_size
+    except OSError:
+        return  # said when it is read
+    if size > MAX_FILE_BYTES:
+        raise ContourError(
+            f"contour file {str(path)!r}: {size / 2**20:,.0f} MiB, larger than the "
+            f"{MAX_FILE_BYTES // 2**20} MiB a contour file may be (not read); give the contour sampled more "
+            "coarsely"
+        )
+
+
 def _load_json(path: Path, sheet_size: tuple[float, float]) -> Contour:
     try:
-        data = json.loads(path.read_text())
+        with open(path, "rb") as f:  # at most the limit: a file that grew since it was checked is refused
+            raw = f.read(MAX_FILE_BYTES + 1)
+        if len(raw) > MAX_FILE_BYTES:
+            _check_file_size(path)
+        data = json.loads(raw.decode("utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:  # recursion: too deep
         raise ContourError(f"contour file {str(path)!r}: cannot read it as JSON ({exc})") from None
     return contour_from_json(data, f"contour file {str(path)!r}", sheet_size, default_name=path.stem)

@@ -323,6 +323,7 @@ def plan_cut(
     with batch_named(
         "the planner's batch (pinch candidates x segment orders)",
         "plan fewer pinch candidates (the candidates setting; plan: --candidates) or lower the resolution",
+        default=True,  # a caller without a candidates setting names its own fix
     ):
         orders, errors = search_orders(contour, config, segments, points, device=device, seed=seed, arm=arm)
     if not np.all(np.isfinite(errors)):  # diverged simulations: no candidate may be chosen by a NaN

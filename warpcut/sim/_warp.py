@@ -28,6 +28,8 @@ import sys
 import numpy as np
 import warp as wp
 
+from warpcut.limits import write_cause as _write_cause
+
 
 def _cuda_driver_loadable() -> bool:
     for name in ("libcuda.so", "libcuda.so.1") if sys.platform.startswith("linux") else ():
@@ -103,8 +105,10 @@ def init() -> None:
     try:
         _init_quietly() if quiet else wp.init()
     except OSError as error:
-        if error.errno in _UNWRITABLE or isinstance(error, PermissionError):
-            raise _unwritable_cache(error) from None
+        if _write_cause(error) is not None:
+            raise _cache_write_failed(error) from None
+        if error.errno in (*_UNWRITABLE, errno.ENOENT) or isinstance(error, PermissionError):
+            raise _unwritable_cache(error) from None  # ENOENT: a folder under /proc or /sys
         raise
     _initialised = True
 
@@ -128,12 +132,22 @@ def load_module(module: wp.Module, device: str) -> None:
     try:
         wp.load_module(module, device=wp.get_device(device))
     except OSError as error:
+        if _write_cause(error) is not None:  # not a corrupt cache: one it could not write
+            raise _cache_write_failed(error) from error
         if error.errno in _UNWRITABLE or isinstance(error, PermissionError):
             raise _unwritable_cache(error) from error
         raise _corrupt_cache(module, device, error) from error
     except Exception as error:  # Warp raises bare Exceptions, JSONDecodeError...
         raise _corrupt_cache(module, device, error) from error
     _loaded.add(key)
+
+
+def _cache_write_failed(error: OSError) -> KernelCacheError:
+    """Writing the kernel cache failed for a limit of the OS (a file-size limit, a full disk)."""
+    return KernelCacheError(
+        f"Warp kernels: could not write the kernel cache, {_cache_text()} "
+        f"({error.strerror or type(error).__name__}): {_write_cause(error)}"
+    )
 
 
 def _corrupt_cache(module: wp.Module, device: str, error: Exception) -> KernelCacheError:

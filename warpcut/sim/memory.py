@@ -116,10 +116,16 @@ _NAMED: contextvars.ContextVar[tuple[str, str] | None] = contextvars.ContextVar(
 
 
 @contextlib.contextmanager
-def batch_named(name: str, fix: str) -> Iterator[None]:
+def batch_named(name: str, fix: str | None = None, *, default: bool = False) -> Iterator[None]:
     """Inside the block, a batch too big for memory is named ``name`` (what it is to the user, e.g. "the
-    planner's batch (pinch candidates x segment orders)") with ``fix`` (the setting that makes it smaller)
-    instead of ``num_envs``, a count the user never gave: for the batches a pipeline makes itself."""
+    planner's batch (pinch candidates x segment orders)", or the setting that sizes it, e.g.
+    "train.num_envs") instead of ``num_envs``, a count the user never gave: for the batches a pipeline makes
+    itself. ``fix`` is what the user can change (``{fits}`` in it: the envs that fit); None: "use at most
+    N". With ``default`` the name holds only where no caller named the batch already (a library's own name,
+    which a command that knows its own settings replaces)."""
+    if default and _NAMED.get() is not None:
+        yield
+        return
     token = _NAMED.set((name, fix))
     try:
         yield
@@ -186,15 +192,21 @@ def _refuse(
     what = f"{num_envs} envs"
     if envs_per_unit != 1:
         what = f"{num_envs // envs_per_unit} x {envs_per_unit} = {what}"
-    advice = f"use at most {fits}" + (f" ({hint})" if hint else "")
-    if fix is not None:
-        advice = f"at most {fits} envs fit; {fix}" + (f" ({hint})" if hint else "")
+    tail = f" ({hint})" if hint else ""
+    if fix is not None and "{fits}" in fix and fits < 1:
+        fix = None  # not a matter of batch size: said below
+    if fix is not None and "{fits}" in fix:
+        advice = fix.replace("{fits}", str(fits)) + tail
+    elif fix is not None:
+        advice = f"at most {fits} envs fit; {fix}" + tail
     elif fits < 1:  # not a matter of batch size: each env is too big
         advice = (
             f"even one is too big: its sheet has {num_vertices} vertices (resolution) and its episode "
             f"{horizon_updates} updates (the contour's length over trajectory_spacing_mm)"
             + (f"; {hint}" if hint else "")
         )
+    else:
+        advice = f"use at most {fits}" + tail
     raise ValueError(
         f"{name}: {what} would need about {needed / _GB:.3g} GB ({per_env / 1e3:.0f} kB per env), more "
         f"than the {limit / _GB:.3g} GB allowed ({source}); {advice}"

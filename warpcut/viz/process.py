@@ -81,8 +81,39 @@ def place_file(tmp: str | os.PathLike, path: str | os.PathLike, keep: bool) -> N
         where = f"what was written is in {partial}; {path} still holds the earlier recording"
     else:
         os.replace(tmp, path)
-        where = "the file holds what was written"
-    raise RecordingError(f"{path}: the recording was cut short (disk full?); {where}")
+        where = "the file holds what was written, truncated there (rerun reads it up to the cut)"
+    raise RecordingError(f"{path}: the recording was cut short, {_cut_short_cause(path)}; {where}")
+
+
+def _cut_short_cause(path: str | os.PathLike) -> str:
+    """Why a recording's file (now at ``path``, or beside it) was cut short: rerun's writer sees the OS
+    error, not this process, so it is told from what is left: a file as large as the file-size limit
+    (``ulimit -f``), a full disk."""
+    import shutil
+
+    from warpcut.limits import file_size_cause, file_size_limit
+
+    limit = file_size_limit()
+    sizes = [p.stat().st_size for p in (Path(path), Path(path).with_suffix(".partial.rrd")) if p.is_file()]
+    if limit is not None and any(size >= limit for size in sizes):
+        return f"the file reached the largest file this process may write: {file_size_cause()}"
+    try:
+        free = shutil.disk_usage(Path(path).parent).free
+    except OSError:
+        free = None
+    if free is not None and free < (1 << 20):
+        return f"the disk holding it is full ({free} bytes free): free space and record again"
+    return "its writer stopped early (a refused write, a killed process: WARPCUT_VERBOSE=1 shows rerun's log)"
+
+
+def _child_environment() -> dict[str, str]:
+    """The recorder process's environment: rerun's own log (a write it could not make, in several lines of
+    ERROR and WARN) silenced unless ``WARPCUT_VERBOSE`` or ``RUST_LOG`` is set, since the
+    :class:`RecordingError` names the cause in one line."""
+    env = dict(os.environ)
+    if not env.get("WARPCUT_VERBOSE"):
+        env.setdefault("RUST_LOG", "off")
+    return env
 
 
 def default_background() -> str | bool:
@@ -169,6 +200,7 @@ class RecorderProcess:
                 stdin=subprocess.DEVNULL,
                 stdout=subprocess.DEVNULL,
                 close_fds=True,
+                env=_child_environment(),
                 **kwargs,
             )
         except BaseException:

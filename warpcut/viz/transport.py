@@ -232,7 +232,10 @@ class ProcessSink:
         kind, *details = pickle.loads(message[1])
         if kind == "failed" and self._failure is None:
             name, text, trace = details
-            self._fail(f"the recorder process failed: {name}: {text}", trace)
+            if name == RecordingError.__name__ and text.startswith(f"{self.path}: "):  # its own words
+                self._fail(text.removeprefix(f"{self.path}: "), trace)
+            else:
+                self._fail(f"the recorder process failed: {name}: {text}", trace)
         elif kind == "closed":
             (self.process_cpu_s,) = details
         return kind == "closed"
