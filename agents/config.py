@@ -93,7 +93,8 @@ class TrainConfig:
         """Each field on its own, as it is given (a file and ``--set`` set one key at a time); what depends on
         several (the learner in its env, the population in the batch) is :meth:`check`'s."""
         where = "TrainConfig."
-        check_choice(where + "algo", self.algo, tuple(ALGORITHMS))
+        if self.algo not in ALGORITHMS:
+            fail(where + "algo", f"choose one of {', '.join(ALGORITHMS)}", self.algo)
         for name in ("num_envs", "iterations"):
             check_integer(where + name, getattr(self, name), 1, optional=True, note="the learner's")
         check_integer(where + "validation_trials", self.validation_trials, 0, note="0: no validation")
