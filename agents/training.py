@@ -89,7 +89,16 @@ from agents.progress import training_progress
 from envs.options import PatternCutOptions
 from envs.rsl import FINAL_ERROR_KEY, PatternCutRslEnv
 from envs.vector import PatternCutVecEnv
-from warpcut.io import WriteFailed, claim_run_dir, note_written, read_json, write_atomic, write_json
+from warpcut.io import (
+    WriteFailed,
+    claim_run_dir,
+    enclosing_run,
+    note_written,
+    read_json,
+    read_run_marker,
+    write_atomic,
+    write_json,
+)
 from warpcut.planning import check_pinch
 from warpcut.sim.memory import batch_named
 
@@ -299,7 +308,11 @@ def _write(path: Path, data: bytes | dict, intact: str, resumable: bool = True) 
     try:
         write_atomic(path, data) if isinstance(data, bytes) else write_json(path, data)
     except WriteFailed as exc:
-        then = f"resume from {path.parent}" if resumable else "start again"
+        root = enclosing_run(path) or path.parent
+        then = "start again" if not resumable else f"resume from {path.parent}"
+        if resumable and Path(root).resolve() != path.parent.resolve():  # a policy of a run's: resume the run
+            command = (read_run_marker(root) or {}).get("command") or "COMMAND"
+            then = f"resume the run: warpcut {command} ... --out {root} --resume"
         raise ValueError(
             f"{path}: not written, {exc.reason}; {intact}: {exc.fix}, then {then}"
         ) from exc.__cause__
@@ -420,7 +433,7 @@ class Runner(OnPolicyRunner):
         _write(path.with_name(LATEST_CHECKPOINT), data, f"{path.name} (the newest checkpoint) is intact")
         self.logger.save_model(str(path), self.current_learning_iteration)
         for events in path.parent.glob("events.out.tfevents.*"):  # rsl-rl's TensorBoard writer's files
-            note_written(events)
+            note_written(events, written=True)
 
     def validate(self, validate: Callable[[torch.nn.Module], float | np.ndarray]) -> float:
         """Score the deterministic policy with ``validate``; save ``best.pt`` if its selection score (see
@@ -763,49 +776,3 @@ def training_env(
     with batch_named(*batch):  # rsl-rl resets inside step
         env = PatternCutVecEnv(cfg.batch_size, options, autoreset_mode="same_step")
     return PatternCutRslEnv(env, torch_device=cfg.torch_device, seed=seed)
-
-
-BENCH_EPISODES = 3
-"""Whole episodes the steady-state window of :func:`benchmark_training` covers."""
-
-
-def benchmark_training(
-    device: str | None = None, num_envs: int = 256, episodes: int = BENCH_EPISODES, algo: str = "ppo"
-) -> dict[str, float]:
-    """A learner's throughput training ``fls-circle`` on ``num_envs`` envs (PPO's recipe for ``ppo``: discrete
-    moves), in steady state: the env steps of the iterations after the first (start-up, kernel loading and
-    the first iteration's allocations excluded; no validation runs) over their time, as many iterations as
-    cover ``episodes`` whole episodes. The steps that end an episode (scoring, resets) cost several times a
-    step; a median over iterations would leave them out.
-
-    - ``train_steps_per_s``: env steps per second of those iterations, collection + update;
-    - ``train_collection_steps_per_s``: of their collection alone (policy forward passes, env steps,
-      storage);
-
-    and ``train_overall_steps_per_s``, the whole call's steps over its wall time (what a short run sees).
-    """
-    import tempfile
-
-    from agents.algorithms import algorithm as entry
-
-    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
-        raise ValueError(f"episodes: the steady state needs at least 1 whole episode (got {episodes!r})")
-    options = PatternCutOptions(contour="fls-circle", device=device, action_type=entry(algo).action_type)
-    cfg = TrainConfig(algo=algo, num_envs=num_envs, save_interval=10**6, validation_trials=0)
-    env = training_env(options, cfg, batch=("--train-envs", "give --train-envs batches of at most {fits}"))
-    per_iteration = cfg.ppo.num_steps_per_env if algo == "ppo" else env.max_episode_length
-    steady_iterations = -(-episodes * env.max_episode_length // per_iteration)
-    cfg = dataclasses.replace(cfg, iterations=1 + steady_iterations)
-    with tempfile.TemporaryDirectory() as out:
-        summary = train(env, cfg, out, progress=False)
-    steady = summary["history"][1:]
-    steps = len(steady) * num_envs * per_iteration
-
-    def rate(key: str) -> float:
-        return steps / sum(num_envs * per_iteration / m[key] for m in steady)
-
-    return {
-        "train_steps_per_s": rate("iteration_steps_per_s"),
-        "train_collection_steps_per_s": rate("collection_steps_per_s"),
-        "train_overall_steps_per_s": float(summary["steps_per_s"]),
-    }

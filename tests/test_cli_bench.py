@@ -52,7 +52,7 @@ def assert_documented_json(result: dict, batches: set[str]) -> None:
 
 def test_bench_reports_the_default_learners_and_ppos_training_beside_the_simulator(tmp_path, monkeypatch):
     """The command's printout and JSON, with the training runs and the start-up times stubbed (fast)."""
-    import agents.training
+    import agents.benchmarks
 
     calls = []
 
@@ -65,7 +65,7 @@ def test_bench_reports_the_default_learners_and_ppos_training_beside_the_simulat
             "train_overall_steps_per_s": rate,
         }
 
-    monkeypatch.setattr(agents.training, "benchmark_training", training)
+    monkeypatch.setattr(agents.benchmarks, "benchmark_training", training)
     monkeypatch.setattr(bench, "start_times", lambda device: {"cold_start_s": 2.0, "warm_start_s": 1.0})
     monkeypatch.setattr(bench, "env_steps_per_second", lambda num_envs, device, repeats: 1000.0)
     out = tmp_path / "bench.json"
@@ -149,7 +149,7 @@ def test_bench_compares_each_run_with_the_simulator_around_it(monkeypatch):
 
 @pytest.mark.parametrize("episodes", [0, 1.5, True])
 def test_bench_training_names_a_bad_window(episodes):
-    from agents.training import benchmark_training
+    from agents.benchmarks import benchmark_training
 
     with pytest.raises(ValueError, match="episodes: the steady state needs at least 1 whole episode"):
         benchmark_training(num_envs=2, episodes=episodes)

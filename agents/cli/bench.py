@@ -42,7 +42,7 @@ def command(
     batches, each also as a share of the simulator's own rate."""
     import functools
 
-    from agents.training import benchmark_training
+    from agents.benchmarks import benchmark_training
 
     common.check_outputs({"--json": json_path})
     train_envs_sizes = _sizes(train_envs, "--train-envs")
