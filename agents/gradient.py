@@ -214,14 +214,33 @@ def _settings_of(saved: dict | None) -> dict | None:
     return {**dataclasses.asdict(GradConfig()), **saved}
 
 
-def _episodes(contour, point, segments, config, count: int, device, seed: int) -> CuttingTask:
+_VALIDATION = ("grad.validation_trials", "set grad.validation_trials to at most {fits} (0: none)")
+"""The held-out batch as a refusal too big for memory names it, and its fix."""
+
+
+def _batch(settings: GradConfig) -> tuple[int, tuple[str, str]]:
+    """The optimiser's batch: its envs, and its name and fix where it does not fit in memory
+    (:func:`warpcut.sim.memory.batch_named`): es's population x trials, or the tape's trials."""
+    if settings.estimator != "es":
+        return settings.trials, ("grad.trials", "set grad.trials to at most {fits}")
+    population, trials = settings.es_population, settings.es_trials
+    return population * trials, (
+        f"es's batch (grad.es_population x grad.es_trials = {population} x {trials})",
+        "lower grad.es_population (even) or grad.es_trials to at most {fits} envs in all",
+    )
+
+
+def _episodes(contour, point, segments, config, count: int, device, seed: int, batch) -> CuttingTask:
     """``count`` noisy episodes of cutting ``contour`` (``segments``) with the grasp at ``point``, which
-    :func:`optimize_plan` judged (a pinch point it moves stays feasible)."""
+    :func:`optimize_plan` judged (a pinch point it moves stays feasible); ``batch``: the batch's name and fix
+    where it does not fit in memory (:func:`warpcut.sim.memory.batch_named`)."""
     cut = None if segments is None else [segments] * count
     points, contours = np.tile(point, (count, 1)), [contour] * count
-    return CuttingTask(
-        config, contours, pinch_points=points, segments=cut, device=device, seed=seed, allow_infeasible_pinch=True
-    )
+    with batch_named(*batch):
+        return CuttingTask(
+            config, contours, pinch_points=points, segments=cut, device=device, seed=seed,
+            allow_infeasible_pinch=True,
+        )  # fmt: skip
 
 
 class TapeGradient:
@@ -407,28 +426,17 @@ def optimize_plan(
     pinch = np.asarray(pinch, dtype=np.float64).reshape(2)
     check_pinch(pinch, contour, config, segments, arm, allow=allow_infeasible_pinch)  # InfeasiblePinch
     es = settings.estimator == "es"
-    b = settings.es_population * settings.es_trials if es else settings.trials
-
-    if es:
-        batch = (
-            f"es's batch (grad.es_population x grad.es_trials = "
-            f"{settings.es_population} x {settings.es_trials})",
-            "lower grad.es_population (even) or grad.es_trials to at most {fits} envs in all",
-        )
-    else:
-        batch = ("grad.trials", "set grad.trials to at most {fits}")
+    b, batch = _batch(settings)
 
     def engine(point: np.ndarray) -> TapeGradient | SmoothedGradient:
-        with batch_named(*batch):
-            task = _episodes(contour, point, segments, config, b, device, seed + GRAD_SEED_OFFSET)
+        task = _episodes(contour, point, segments, config, b, device, seed + GRAD_SEED_OFFSET, batch)
         if es:
             return SmoothedGradient(task, settings, config.max_step_mm, seed)
         return TapeGradient(task, settings, seed + GRAD_SEED_OFFSET)
 
     def checker(point: np.ndarray) -> HeldOut | None:
         v, held_out = settings.validation_trials, seed + GRAD_SEED_OFFSET + 1
-        with batch_named("grad.validation_trials", "set grad.validation_trials to at most {fits} (0: none)"):
-            task = _episodes(contour, point, segments, config, v, device, held_out) if v else None
+        task = _episodes(contour, point, segments, config, v, device, held_out, _VALIDATION) if v else None
         return None if task is None else HeldOut(task, settings, held_out)
 
     rollout, validation = engine(pinch), checker(pinch)
