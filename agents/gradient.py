@@ -37,7 +37,7 @@ from agents.config import (
 )
 from warpcut.contours import Contour
 from warpcut.planning import ArmModel
-from warpcut.planning.feasibility import check_pinch, pinch_feasible
+from warpcut.planning.feasibility import check_pinch, pinch_feasible, pinch_problems
 from warpcut.sim.config import SimConfig, randomize_ranges, sample_parameters
 from warpcut.sim.memory import batch_named
 from warpcut.task import CuttingTask, NoTensionReference
@@ -601,7 +601,9 @@ def cached_plan(
         contour, pinch, segments, config, settings, device, seed, arm, log, state, allow_infeasible_pinch
     )
     if done is not None:
-        write_json(done, {**result.to_json(), "settings": wanted})
+        problem = pinch_problems(np.asarray(result.pinch)[None], contour, config, None, arm or ArmModel())[0]
+        marked = {"pinch_feasible": problem is None, "pinch_problem": problem}  # the file says it, too
+        write_json(done, {**result.to_json(), **marked, "settings": wanted})
         state.unlink(missing_ok=True)
     return result
 

@@ -124,6 +124,16 @@ class PatternCut:
         self._fiducial_reader: tuple[tuple, Callable[[], tuple[np.ndarray, np.ndarray]]] | None = None
         """The fiducials' cells and a ``Simulator.interpolator`` of them (:meth:`_fiducial_cells`)."""
 
+    def pinch_info(self) -> dict[str, np.ndarray]:
+        """Whether each env's pinch point is a grasp the gripper could make: ``pinch_feasible`` (B,) bool,
+        and where one is not (allowed by ``allow_infeasible_pinch``), ``pinch_problem`` (B,) the rule it
+        breaks ("" where feasible). In the reset infos and with each episode's score."""
+        problems = self.task.pinch_problems
+        info = {"pinch_feasible": np.array([p is None for p in problems])}
+        if not info["pinch_feasible"].all():
+            info["pinch_problem"] = np.array([p or "" for p in problems], dtype=object)
+        return info
+
     @property
     def step_index(self) -> int:
         """Steps taken in the current episode."""
@@ -207,7 +217,7 @@ class PatternCut:
             score = self.task.score()  # NaN for the diverged envs
             relative = score.error_mm2 / self.area_mm2
             rewards -= np.where(diverged, 0.0, relative)
-            info.update(_score_info(score), relative_error=relative)
+            info.update(_score_info(score), relative_error=relative, **self.pinch_info())
         if self._reward_scale is not None:
             rewards *= self._reward_scale
         return self.observe(), rewards, terminated, truncated, info

@@ -107,14 +107,14 @@ class PatternCutEnv(gym.Env):
         obs = self.scene.reset(self.np_random, seed is not None or self.options.resample_fiducials)
         if self._window is not None:
             self._show()
-        return obs[0], {}
+        return obs[0], _first(self.scene.pinch_info())  # the pinch point's feasibility
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Move the grasp by ``action`` and advance the scissors one step (:mod:`envs.core`). A simulation
         that diverges ends the episode: ``terminated``, ``info["diverged"]`` True, a NaN score and a zero
         observation and reward."""
         obs, rewards, terminated, truncated, info = self.scene.step(np.asarray(action)[None])
-        scalars = {k: np.asarray(v)[0].item() for k, v in info.items()}  # bools stay bools, counts ints
+        scalars = _first(info)
         if self._window is not None:
             self._show()
         return obs[0], float(rewards[0]), terminated, truncated, scalars
@@ -148,3 +148,10 @@ class PatternCutEnv(gym.Env):
 
     def _show(self) -> None:
         self._window.show(self._frame(), self.metadata["render_fps"])
+
+
+def _first(info: dict) -> dict:
+    """The first env's entry of each of a batch's infos, as Python values (bools stay bools, counts ints,
+    texts str)."""
+    first = {k: np.asarray(v)[0] for k, v in info.items()}
+    return {k: v.item() if isinstance(v, np.generic) else v for k, v in first.items()}

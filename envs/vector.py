@@ -166,7 +166,8 @@ class PatternCutVecEnv(VectorEnv):
         self._started, self._over = True, False
         self._ended[:] = False
         self._obs = self._reset_scene(seed is not None or self.options.resample_fiducials)
-        return self._obs, {}
+        info = self.scene.pinch_info()  # each env's pinch point's feasibility, Gymnasium's masks beside
+        return self._obs, info | {f"_{k}": np.ones(self.num_envs, dtype=bool) for k in info}
 
     def step(
         self, actions: np.ndarray

@@ -79,7 +79,8 @@ def test_vector_env_shapes_dtypes_and_discrete_moves(device):
         and obs.dtype == np.float32
         and obs in vec.observation_space
     )
-    assert info == {} and vec.single_action_space == gym.spaces.Discrete(7)
+    assert info["pinch_feasible"].all() and info["_pinch_feasible"].all() and "pinch_problem" not in info
+    assert vec.single_action_space == gym.spaces.Discrete(7)
     obs, rewards, terminated, truncated, info = vec.step(np.array([1, 2, 3, 6]))
     assert (
         obs.shape == (4, OBS_DIM + CONTOUR_FEATURES)
@@ -269,6 +270,7 @@ def test_sparse_reward_is_zero_until_the_last_step_then_minus_the_relative_error
     assert rewards[-1] == pytest.approx(-info["error_mm2"] / task.contours[0].area_mm2)
     assert set(info) == {
         "error_vertices",
+        "pinch_feasible",
         "error_mm2",
         "path_error_vertices",
         "path_error_mm2",

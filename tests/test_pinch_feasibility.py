@@ -101,6 +101,13 @@ def test_envs_refuse_an_infeasible_pinch_unless_allowed():
         allow_infeasible_pinch=True,
     )
     assert env.unwrapped.scene.task.pinch_problems[0].startswith("under the cutting arm")
+    _, info = env.reset(seed=0)  # the env's infos say so: at reset and with the episode's score
+    assert info["pinch_feasible"] is False and info["pinch_problem"].startswith("under the cutting arm")
+    done = False
+    while not done:
+        _, _, terminated, truncated, info = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+        done = terminated or truncated
+    assert info["pinch_feasible"] is False and "error_vertices" in info
     options = PatternCutOptions(pinch_point=CENTROID, allow_infeasible_pinch=True, arm=ArmModel(3.0, 15.0))
     again = PatternCutOptions.from_dict(json.loads(json.dumps(options.to_dict())))
     assert again.allow_infeasible_pinch and again.arm == ArmModel(3.0, 15.0)
@@ -257,6 +264,8 @@ def test_optimize_refuses_an_infeasible_pinch_unless_allowed(tmp_path, capfd):
     assert report["pinch_feasible"] is False and report["pinch_problem"].startswith("under the cutting arm")
     assert report["evaluation"]["fixed"]["pinch_feasible"] is False
     assert "[infeasible pinch]" in next(line for line in stdout.splitlines() if line.startswith("fixed"))
+    plan = json.loads((out / "fls-circle.json").read_text())  # the optimised plan's own file
+    assert plan["pinch_feasible"] is False and plan["pinch_problem"].startswith("under the cutting arm")
 
 
 def test_run_marks_the_analytic_centroid_where_it_is_infeasible(tmp_path):
