@@ -394,3 +394,28 @@ def test_cli_refuses_bad_train_settings_before_claiming_the_run(tmp_path, monkey
         assert code == 2 and message in stderr and len(stderr.strip().splitlines()) == 1, stderr
         assert not stdout
     assert not out.exists() and not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize(
+    "kwargs, field",
+    [
+        ({"allow_infeasible_pinch": "no"}, "CuttingTask.allow_infeasible_pinch"),
+        ({"allow_infeasible_pinch": 1}, "CuttingTask.allow_infeasible_pinch"),
+        ({"arm": "x"}, "CuttingTask.arm"),
+        ({"segments": [[[1, 2]]]}, "CuttingTask.segments[0]"),
+        ({"segments": "abc"}, "CuttingTask.segments"),
+        ({"segments": [[np.array([[0.0, 0.0], [np.nan, 1.0]])]]}, "CuttingTask.segments[0]"),
+        ({"pinch_points": "36,60"}, "CuttingTask.pinch_points"),
+        ({"pinch_points": np.array([True, False])}, "CuttingTask.pinch_points"),
+        ({"pinch_points": np.zeros((3, 2))}, "CuttingTask.pinch_points"),
+        ({"device": "gpu"}, "CuttingTask.device"),
+    ],
+)
+def test_the_task_names_a_bad_grasp_cut_or_device(kwargs, field):
+    """The task's grasp, cut and device arguments: one line naming ``CuttingTask.FIELD``, never a NumPy
+    conversion error from inside (a text as coordinates, bools as numbers, a ragged or NaN polyline)."""
+    from warpcut import load_contour
+
+    with pytest.raises(ValueError, match=re.escape(field) + ": ") as error:
+        CuttingTask(SimConfig(resolution=13), load_contour("circle-small"), num_envs=1, **kwargs)
+    assert "\n" not in str(error.value)

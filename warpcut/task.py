@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import shapely
@@ -209,8 +209,17 @@ class CuttingTask:
         check_choice("CuttingTask.backend", backend, BACKENDS)
         check_integer("CuttingTask.threads", threads, 1, optional=True, note="one per core")
         check_flag("CuttingTask.trace_path", trace_path)
+        check_flag("CuttingTask.allow_infeasible_pinch", allow_infeasible_pinch)
+        if arm is not None:
+            from warpcut.planning.feasibility import ArmModel
+
+            check_instance("CuttingTask.arm", arm, ArmModel, "an ArmModel, or None for the default arm")
+        segments = _checked_segments(segments)
         config = config.validated()
-        device = resolve_device(device)
+        try:
+            device = resolve_device(device)
+        except ValueError as exc:
+            raise ValueError(f"CuttingTask.{exc}") from None
         estimate = estimate_horizon(contours, segments, config)
         check_batch_memory(num_envs, config.nx * config.ny, estimate, device=device)
         self.sim = Simulator(config, num_envs, device=device, seed=seed, backend=backend, threads=threads)
@@ -222,7 +231,7 @@ class CuttingTask:
             [list(s) for s in segments] if segments is not None else [default_segments(c) for c in contours]
         )
         if len(self.segments) != num_envs:
-            raise ValueError(f"segments: got {len(self.segments)} lists for {num_envs} envs")
+            raise ValueError(f"CuttingTask.segments: got {len(self.segments)} lists for {num_envs} envs")
         self.pinch_points = self._pinch_array(pinch_points)
         self.pinch_problems = self._judge_pinches(arm, allow_infeasible_pinch)
         """Per env, why its pinch point is not a feasible grasp (one line naming the rule), or None: feasible,
@@ -293,7 +302,10 @@ class CuttingTask:
     def _pinch_array(self, pinch_points: np.ndarray | None) -> np.ndarray:
         if pinch_points is None:
             return np.full((self.num_envs, 2), np.nan)
-        points = np.asarray(pinch_points, dtype=np.float64)
+        raw = np.asarray(pinch_points) if not isinstance(pinch_points, str) else None
+        if raw is None or raw.dtype.kind not in "iuf":  # a text, bools, objects: not coordinates
+            fail("CuttingTask.pinch_points", "numbers: (x, y) in mm, or one (x, y) per env", pinch_points)
+        points = raw.astype(np.float64)
         if points.shape == (2,):
             if not np.all(np.isfinite(points)):
                 raise ValueError(
@@ -302,7 +314,9 @@ class CuttingTask:
                 )
             points = np.broadcast_to(points, (self.num_envs, 2)).copy()
         if points.shape != (self.num_envs, 2):
-            raise ValueError(f"pinch_points: expected (2,) or ({self.num_envs}, 2), got {points.shape}")
+            raise ValueError(
+                f"CuttingTask.pinch_points: expected (2,) or ({self.num_envs}, 2), got {points.shape}"
+            )
         check_pinch_points(points)
         w, h = self.config.width_mm, self.config.height_mm
         given = np.all(np.isfinite(points), axis=1)
@@ -578,3 +592,27 @@ def divergence_error(
         f"simulation diverged in {', '.join(counts)}{why}; their errors are not numbers: lower noise_std "
         f"(now {noise:g} mm per update), gravity ({gravity:g} mm/s^2) or dt ({dt:g} s), or raise sweeps"
     )
+
+
+def _checked_segments(segments: Any) -> list[list[np.ndarray]] | None:
+    """``CuttingTask``'s ``segments`` as float arrays: per env a non-empty list of polylines, each (K >= 2,
+    2) finite numbers (mm); :class:`~warpcut.validation.ConfigError` naming the first that is not."""
+    if segments is None:
+        return None
+    what = "per env, a list of polylines, each (K >= 2, 2) finite x, y in mm"
+    if isinstance(segments, str | bytes) or not isinstance(segments, Sequence | np.ndarray):
+        fail("CuttingTask.segments", what, segments)
+    checked = []
+    for env, listed in enumerate(segments):
+        listable = isinstance(listed, Sequence | np.ndarray) and not isinstance(listed, str | bytes)
+        if not (listable and len(listed)):
+            fail(f"CuttingTask.segments[{env}]", what, listed)
+        polylines = []
+        for polyline in listed:
+            raw = None if isinstance(polyline, str | bytes) else np.asarray(polyline)
+            good = raw is not None and raw.dtype.kind in "iuf" and raw.ndim == 2 and raw.shape[1:] == (2,)
+            if not (good and len(raw) >= 2 and np.all(np.isfinite(raw))):
+                fail(f"CuttingTask.segments[{env}]", what, polyline)
+            polylines.append(raw.astype(np.float64))
+        checked.append(polylines)
+    return checked
