@@ -6,6 +6,7 @@ randomisation), whose defaults are the default learner's."""
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -130,11 +131,16 @@ class EnvConfig:
                 isinstance(k, str)
                 and isinstance(v, list | tuple | np.ndarray)
                 and len(v) == 2
-                and all(is_number(x) for x in v)
+                and all(is_number(x) and math.isfinite(float(x)) for x in v)
+                and float(v[0]) <= float(v[1])
                 for k, v in ranges.items()
             )
         ):
-            fail(f"{owner}.randomize_ranges", "{parameter: [low, high]} of numbers, or None", ranges)
+            fail(
+                f"{owner}.randomize_ranges",
+                "{parameter: [low, high]} of finite numbers, low <= high, or None",
+                ranges,
+            )
 
 
 ENV_FIELDS = tuple(f.name for f in dataclasses.fields(EnvConfig))
@@ -226,6 +232,12 @@ class PatternCutOptions(EnvConfig):
                 "a list of polylines [[x_mm, y_mm], ...], or one such list per env, or None",
                 self.segments,
             )
+        if self.segments is not None:  # the polylines' shapes and values, now (their count per env later)
+            try:
+                segments_per_env(self.segments, len(self.segments))
+            except ValueError as exc:
+                if "paths for" not in str(exc):
+                    raise ValueError(f"{owner}.{exc}") from None
         for name in SIM_OVERRIDES:
             if getattr(self, name) is not None:
                 setattr(self, name, check_sim_field(f"{owner}.{name}", name, getattr(self, name)))
@@ -431,8 +443,9 @@ def segments_per_env(segments: Sequence, num_envs: int) -> list[list[np.ndarray]
             polylines = [np.asarray(p, dtype=np.float64) for p in value]
         except (TypeError, ValueError) as error:
             raise ValueError(f"segments{where}: {usage} ({error})") from None
-        if not polylines or any(p.ndim != 2 or p.shape[1] != 2 or len(p) < 2 for p in polylines):
-            raise ValueError(f"segments{where}: {usage}")
+        bad = [p.ndim != 2 or p.shape[1] != 2 or len(p) < 2 or not np.isfinite(p).all() for p in polylines]
+        if not polylines or any(bad):
+            raise ValueError(f"segments{where}: {usage} (finite numbers)")
         return polylines
 
     try:  # one path for every env: segments[i][j] is a point [x, y]

@@ -419,3 +419,21 @@ def test_the_task_names_a_bad_grasp_cut_or_device(kwargs, field):
     with pytest.raises(ValueError, match=re.escape(field) + ": ") as error:
         CuttingTask(SimConfig(resolution=13), load_contour("circle-small"), num_envs=1, **kwargs)
     assert "\n" not in str(error.value)
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"randomize": ("gravity",), "randomize_ranges": {"gravity": [float("nan"), 1.0]}},
+        {"randomize": ("gravity",), "randomize_ranges": {"gravity": [2.0, 1.0]}},
+        {"segments": [[1, 2]]},
+        {"segments": [[[0.0, 0.0], [float("nan"), 1.0]]]},
+    ],
+)
+def test_the_env_options_name_bad_ranges_and_cuts_when_made(kwargs):
+    """Ranges and cut polylines are checked when the options are made, naming the class and field, not
+    later inside gym.make."""
+    from envs.options import PatternCutOptions
+
+    with pytest.raises(ValueError, match=r"PatternCutOptions\.(randomize_ranges|segments): "):
+        PatternCutOptions(**kwargs)
