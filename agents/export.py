@@ -130,7 +130,7 @@ def policy_metadata(source: str | Path) -> dict[str, str]:
         actions = [f"{k}: {name} (grasp move of max_step_mm)" for k, name in enumerate(actions)]
     else:
         actions = [f"grasp d{axis} / max_step_mm, in [-1, 1]" for axis in "xyz"[:axes]]
-    names = observation_names(options.num_fiducials, options.contour_features)
+    names = observation_names(options.num_fiducials, options.contour_features, options.lookahead)
     scenario = dataclasses.replace(options, device=None).to_dict()
     contours, pinch, cuts = dataclasses.replace(options, allow_infeasible_pinch=True).per_env(1)
     problem = check_pinch(pinch[0], contours[0], options.config(), cuts and cuts[0], options.arm, allow=True)

@@ -188,7 +188,7 @@ def nominal_validation_error(
     return float(np.nanmean(rollouts["error_vertices"]))
 
 
-LAYOUT_FIELDS = ("num_fiducials", "contour_features", "action_type", "allow_z")
+LAYOUT_FIELDS = ("num_fiducials", "contour_features", "lookahead", "action_type", "allow_z")
 """The :class:`~envs.options.PatternCutOptions` fields that set what a policy observes and how its actions
 act (:func:`check_policy_run` compares them)."""
 
@@ -201,7 +201,7 @@ def options_layout(options: PatternCutOptions) -> tuple[int, int]:
     :func:`agents.checkpoints.policy_layout` reads them from a policy: the observation's size
     (:func:`envs.observations.observation_bounds`) and the action choices (discrete: stay and +-1 mm per
     axis) or axes (continuous)."""
-    low, _ = observation_bounds(options.num_fiducials, options.contour_features)
+    low, _ = observation_bounds(options.num_fiducials, options.contour_features, options.lookahead)
     axes = 3 if options.allow_z else 2
     return int(low.size), 1 + 2 * axes if options.action_type == "discrete" else axes
 

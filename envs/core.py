@@ -59,8 +59,14 @@ from warpcut.sim.config import sample_parameters
 from warpcut.task import CuttingTask, NoTensionReference
 from warpcut.validation import check_instance, check_integer
 
-from .observations import Fiducials, normalise_positions, observation_bounds, sample_fiducials
-from .options import PatternCutOptions
+from .observations import (
+    LOOKAHEAD_STEPS,
+    Fiducials,
+    normalise_positions,
+    observation_bounds,
+    sample_fiducials,
+)
+from .options import NO_TENSION_FLOOR, PatternCutOptions
 
 DISCRETE_MOVES = np.array(
     [[0, 0, 0], [1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.float32
@@ -103,7 +109,7 @@ class PatternCut:
         self.episode_steps = min(self.task.num_steps, options.max_episode_steps or self.task.num_steps)
         self.fiducials = Fiducials(self.task.grid, options.shaft_radius_mm)
         self.task.fiducials = self.fiducials  # what a recording of the task shows
-        low, high = observation_bounds(options.num_fiducials, options.contour_features)
+        low, high = observation_bounds(options.num_fiducials, options.contour_features, options.lookahead)
         self.observation_space = gym.spaces.Box(low, high, dtype=np.float32)
         num_axes = 3 if options.allow_z else 2
         if options.action_type == "discrete":
@@ -167,6 +173,9 @@ class PatternCut:
             self.episode_steps = min(steps, self.options.max_episode_steps or steps)
         if self.options.relative_reward:
             self._reward_scale = self._no_tension.scale(self.task, self.options.config())
+        elif self.options.reward_reference == "no_tension":
+            own, _ = self._no_tension.errors(self.task, self.options.config())
+            self._reward_scale = self.area_mm2 / np.maximum(own, NO_TENSION_FLOOR * self.area_mm2)
         self.task.reset(seed=seed)
         self._running_path_error = np.zeros(self.num_envs)
         self.diverged = np.zeros(self.num_envs, dtype=bool)
@@ -268,20 +277,42 @@ class PatternCut:
         u = self.task.update_index
         tip = self.task.tip_positions(max(u - 1, 0))  # where the scissors are now
         fiducials = self.fiducials.track_cells(*self._fiducial_cells(), tip)
+        if self.options.lookahead:  # the env's own progress: the batch's clock means nothing across contours
+            time = np.minimum(self.task.update_index / self.task.trajectory_updates, 1.0)[:, None]
+        else:
+            time = np.full((self.num_envs, 1), self.step_index / self.task.num_steps)
         parts = [
-            np.full((self.num_envs, 1), self.step_index / self.task.num_steps),
+            time,
             self.task.sim.displacements() / self.config.max_displacement_mm,
             normalise_positions(fiducials, self.config).reshape(self.num_envs, -1),
         ]
         if self.options.contour_features:
             tracking = np.nan_to_num(self.tracking_error(), nan=0.0) / self.config.max_displacement_mm
             parts += [normalise_positions(tip[:, :3], self.config), tip[:, 3:4], tracking]
+        if self.options.lookahead:
+            parts += self._lookahead(tip)
         obs = np.concatenate(parts, axis=1).astype(np.float32)
         obs[self.diverged] = 0.0  # a diverged env's state means nothing (and may be NaN)
         # NaN to 0 and the rest clipped to the bounds (infinities to them): np.nan_to_num then np.clip, the
         # same values with two passes fewer (the envs observe every step).
         np.copyto(obs, 0.0, where=np.isnan(obs))
         return np.clip(obs, self.observation_space.low, self.observation_space.high, out=obs)
+
+    def _lookahead(self, tip: np.ndarray) -> list[np.ndarray]:
+        """The look-ahead block of the observation (``lookahead``; :mod:`envs.observations`): the grasp from
+        the tip, and per look-ahead point the planned tip's move, the tracking error there and whether it
+        cuts."""
+        config, task = self.config, self.task
+        count = self.options.lookahead
+        stride = LOOKAHEAD_STEPS * config.updates_per_step
+        tips, targets = task.lookahead(stride * np.arange(1, count + 1))
+        half = max(config.width_mm, config.height_mm) / 2
+        grasp = np.nan_to_num(task.pinch_points, nan=0.0) + self.task.sim.displacements()[:, :2]
+        pinch = (grasp - tip[:, :2]) / half
+        moves = (tips[..., :2] - tip[:, None, :2]) / half
+        errors = np.nan_to_num(targets - tips[..., :3], nan=0.0) / config.max_displacement_mm
+        points = np.concatenate([moves, errors, tips[..., 3:4]], axis=2).reshape(self.num_envs, -1)
+        return [pinch, points]
 
 
 def _score_info(score) -> dict[str, np.ndarray]:

@@ -41,6 +41,13 @@ ContourSpec = str | os.PathLike | Contour
 SIM_OVERRIDES = ("fixture", "resolution", "damping", "dt", "gravity", "elasticity", "noise_std")
 """The :class:`PatternCutOptions` fields that override ``sim_config``'s."""
 
+REWARD_REFERENCES = ("area", "no_tension")
+"""What a reward is relative to (:attr:`EnvConfig.reward_reference`)."""
+
+NO_TENSION_FLOOR = 0.01
+"""``reward_reference = "no_tension"`` divides by at least this share of the contour's area: a contour that
+no tension already cuts almost exactly would otherwise weigh without bound."""
+
 ACTION_TYPES = ("discrete", "continuous")
 """How a policy acts: ``discrete`` (stay or a 1 mm move along one axis) or ``continuous`` (a move of up to
 1 mm
@@ -68,6 +75,11 @@ class EnvConfig:
     """Add the scissor tip, its cutting flag and the tracking error (the vector from the tip to the contour
     point it is about to cut, as it lies on the moved sheet) to the observation (the paper: fiducials
     only)."""
+    lookahead: int = 0
+    """Look-ahead points observed along the planned trajectory (:mod:`envs.observations`): what lies ahead
+    of the scissors, the env's own progress and the grasp from the tip; needs ``contour_features``. 0: none
+    (a policy for one contour learns its contour by heart); a policy for many contours needs them
+    (``warpcut train --generated``)."""
     action_type: str = "continuous"
     """``"continuous"`` (moves of up to ``max_step_mm`` per axis) or ``"discrete"`` (the paper's: stay, or
     a 1 mm move along one axis)."""
@@ -82,6 +94,13 @@ class EnvConfig:
     :mod:`envs.core`): with domain randomisation, each sheet counts by its relative improvement, as the
     evaluation counts it; validation scales each episode's error alike. Without randomisation every scale
     is 1."""
+    reward_reference: str = "area"
+    """What every env's reward is relative to: ``"area"``, the contour's intended area (the reward of the
+    module :mod:`envs.core`); or ``"no_tension"``, the env's own no-tension error (noise-free, on its own
+    sheet, for its contour and segments): the final reward is then ``-error / no-tension error``, minus
+    Table I's improvement, so that across many contours each counts by its improvement, however large or
+    hard it is (a generalist's training; the dense reward is scaled alike). ``"no_tension"`` implies what
+    ``relative_reward`` does: leave that false."""
     max_episode_steps: int | None = None
     """Truncate episodes after this many steps; default: the whole cut."""
     randomize: Sequence[str] = ()
@@ -111,6 +130,14 @@ class EnvConfig:
         for name in _FLAGS:
             setattr(self, name, check_flag(f"{owner}.{name}", getattr(self, name)))
         self.num_fiducials = check_integer(f"{owner}.num_fiducials", self.num_fiducials, 0)
+        self.lookahead = check_integer(f"{owner}.lookahead", self.lookahead, 0)
+        check_choice(f"{owner}.reward_reference", self.reward_reference, REWARD_REFERENCES)
+        if self.reward_reference == "no_tension" and self.relative_reward:
+            raise ConfigError(
+                f"{owner}.relative_reward", "implied by reward_reference=no_tension; set it false"
+            )
+        if self.lookahead and not self.contour_features:
+            raise ConfigError(f"{owner}.lookahead", "needs contour_features=true (the tip it looks ahead of)")
         check_number(f"{owner}.shaft_radius_mm", self.shaft_radius_mm, 0, unit="mm")
         self.shaft_radius_mm = plain(self.shaft_radius_mm)
         check_choice(f"{owner}.action_type", self.action_type, ACTION_TYPES)

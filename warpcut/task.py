@@ -254,7 +254,10 @@ class CuttingTask:
         """Build each env's trajectory on its settled sheet, and the per-update tips and targets."""
         num_envs = self.num_envs
         self.trajectories = self._build_trajectories()
-        self.horizon_updates = max(len(t.tip) for t in self.trajectories)
+        self.trajectory_updates = np.array([len(t.tip) for t in self.trajectories])
+        """(B,) updates of each env's own trajectory (the batch runs for the longest:
+        :attr:`horizon_updates`)."""
+        self.horizon_updates = int(self.trajectory_updates.max())
         self._check_horizon(self._given_segments)
         self._tips = np.zeros((num_envs, self.horizon_updates, 4), dtype=np.float32)
         self._targets = np.full((num_envs, self.horizon_updates, 2), np.nan)
@@ -449,6 +452,22 @@ class CuttingTask:
         world = interpolate_corners(corners, weights[:, t : t + 1])[:, 0]
         return np.where(active[:, None], world, np.nan)
 
+    def lookahead(self, offsets: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
+        """What lies ahead of the scissors, ``offsets`` (K,) updates after the next one (ints >= 0):
+        ``(tips, targets)``, the planned tips (B, K, 4) (:meth:`tip_positions` of those updates: x, y, z,
+        cutting) and the world positions (B, K, 3) of the material points they mean to cut, as the sheet
+        lies now (:meth:`target_world` of those updates; NaN where the tip travels or is done)."""
+        u = self.update_index + np.asarray(offsets, dtype=np.int64)
+        t = np.minimum(u, self.horizon_updates - 1)
+        tips = self._tips[:, t].copy()
+        tips[:, u >= self.horizon_updates, 3] = 0.0
+        active = self._target_finite[:, t] & (u < self.horizon_updates)[None, :]
+        vertices, weights = self._target_cells
+        b, k = self.num_envs, len(t)
+        corners = self.sim.gather(vertices[:, t].reshape(b, k * 4)).reshape(b, k, 4, 4)[..., :3]
+        world = interpolate_corners(corners, weights[:, t])
+        return tips, np.where(active[..., None], world, np.nan)
+
     def tracking_error(self) -> np.ndarray:
         """(B, 3) ``target_world() - tip`` (mm) for the next update: where the contour point about to be cut
         lies from the scissor tip (what the analytic controller opposes); NaN while travelling or done."""
@@ -543,6 +562,16 @@ class NoTensionReference:
         """(B,) the ``nominal`` sheet's no-tension error over that of each env's own sheet in ``task`` (as
         its parameters stand), clipped to ``[1 / RELATIVE_REWARD_MAX_SCALE, RELATIVE_REWARD_MAX_SCALE]``.
         Errors not met before are cut in one batch."""
+        own_error, base_error = self.errors(task, nominal)
+        scale = base_error / np.maximum(own_error, 1e-9)
+        return np.clip(
+            np.nan_to_num(scale, nan=1.0), 1.0 / RELATIVE_REWARD_MAX_SCALE, RELATIVE_REWARD_MAX_SCALE
+        )
+
+    def errors(self, task: CuttingTask, nominal: SimConfig) -> tuple[np.ndarray, np.ndarray]:
+        """(B,) each env's no-tension error (mm^2, noise-free) on its own sheet in ``task`` (as its
+        parameters stand) and on the ``nominal`` sheet, for its contour and segments. Errors not met before
+        are cut in one batch."""
         from warpcut.sim.settling import SETTLE_PARAMETERS
 
         b = task.num_envs
@@ -570,10 +599,7 @@ class NoTensionReference:
             self._errors.update({k: float(err) for k, err in zip(missing, errors, strict=True)})
         own_error = np.array([self._errors[key(own[e], e)] for e in range(b)])
         base_error = np.array([self._errors[key(base[e], e)] for e in range(b)])
-        scale = base_error / np.maximum(own_error, 1e-9)
-        return np.clip(
-            np.nan_to_num(scale, nan=1.0), 1.0 / RELATIVE_REWARD_MAX_SCALE, RELATIVE_REWARD_MAX_SCALE
-        )
+        return own_error, base_error
 
 
 def divergence_error(
