@@ -182,7 +182,8 @@ def policy_checkpoint(path: str | Path) -> Path:
 
 def policy_layout(actor_state: dict) -> tuple[int, int]:
     """``(observations, outputs)`` of an actor's state dict: the inputs of its MLP's first layer and the
-    outputs of its last (discrete: actions times choices; continuous: the actions)."""
+    outputs of its last (discrete: actions times choices; continuous: the actions), or of its feedback path
+    where it has one (:class:`agents.models.FeedbackMLP`)."""
     layers = sorted(
         (int(match[1]), value)
         for key, value in actor_state.items()
@@ -190,6 +191,9 @@ def policy_layout(actor_state: dict) -> tuple[int, int]:
     )
     if not layers:
         raise ValueError("actor state: no MLP layers (mlp.K.weight); not an rsl-rl MLP actor")
+    feedback = actor_state.get("mlp.feedback.weight")
+    if feedback is not None:  # its gains act on the moves (the last layer may also give scheduled gains)
+        return int(layers[0][1].shape[1]), int(feedback.shape[0])
     return int(layers[0][1].shape[1]), int(layers[-1][1].shape[0])
 
 
@@ -217,3 +221,25 @@ def layout_mismatch(saved: dict, expected: dict, source: str) -> str | None:
             shapes = f"{tuple(saved[key].shape)}, {source}'s {tuple(value.shape)}"
             return f"policy network differs from {source}'s ({key}: {shapes})"
     return None
+
+
+def start_from(runner, source: str | Path) -> None:
+    """Load the policy of ``source`` (a run directory or checkpoint) into ``runner``'s fresh actor: its
+    weights and observation normaliser (es then skips its warm-up: the normaliser has learnt already).
+
+    Raises:
+        ValueError: not es, or the policy does not observe and act as the env does (the message names the
+            checkpoint).
+    """
+    if runner.algo != "es":
+        raise ValueError(f"init: fine-tuning starts es from a generalist; train.algo is {runner.algo}")
+    checkpoint = policy_checkpoint(source)
+    state = read_checkpoint(checkpoint)["actor_state_dict"]
+    actor = runner.alg.actor
+    mismatch = layout_mismatch(state, actor.state_dict(), "the env's policy")
+    if mismatch:
+        raise ValueError(
+            f"init: {checkpoint}: {mismatch}; train with the generalist's env settings (leave env.* unset)"
+        )
+    actor.load_state_dict(state)
+    runner.alg._warm_up = False

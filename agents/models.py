@@ -24,20 +24,34 @@ __all__ = ["FeedbackMLP", "FeedbackMLPModel", "feedback_inputs"]
 class FeedbackMLP(torch.nn.Module):
     """``body(x) + feedback(x[..., start : start + size])``: an MLP (``body``, rsl-rl's) plus a bias-free
     linear map of ``size`` of its inputs to its last linear layer's outputs (reshaped as the body's output),
-    zero-initialised."""
+    zero-initialised.
 
-    def __init__(self, body: torch.nn.Sequential, start: int, size: int) -> None:
+    With ``scheduled`` the gains also depend on the observation (gain scheduling): the body's last layer
+    grows to ``A * (1 + size)`` outputs, the first ``A`` the move as before and the rest a matrix ``G(x)``
+    (A x size) added to the static gains, ``move = body(x)[:A] + (K + G(x)) e`` with ``e`` the ``size``
+    inputs at ``start``. A policy for many contours needs it: the gains that suit a contour depend on its
+    shape ahead and on where the grasp is (continuous moves only)."""
+
+    def __init__(self, body: torch.nn.Sequential, start: int, size: int, scheduled: bool = False) -> None:
         super().__init__()
-        out = [m for m in body.modules() if isinstance(m, torch.nn.Linear)][-1].out_features
+        last = [m for m in body.modules() if isinstance(m, torch.nn.Linear)][-1]
+        out = last.out_features
+        self.start, self.size, self.scheduled, self.actions = int(start), int(size), bool(scheduled), out
+        if self.scheduled:  # the last layer also gives the scheduled gains G(x)
+            index = next(i for i, m in enumerate(body) if m is last)
+            body[index] = torch.nn.Linear(last.in_features, out * (1 + self.size))
         self.body = body
-        self.start, self.size = int(start), int(size)
         self.feedback = torch.nn.Linear(self.size, out, bias=False)
         with torch.no_grad():
             self.feedback.weight.zero_()
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         out = self.body(x)  # for discrete moves shaped (..., actions, choices) by the MLP's last module
-        return out + self.feedback(x[..., self.start : self.start + self.size]).reshape(out.shape)
+        error = x[..., self.start : self.start + self.size]
+        if self.scheduled:
+            gains = out[..., self.actions :].unflatten(-1, (self.actions, self.size))
+            out = out[..., : self.actions] + (gains @ error.unsqueeze(-1)).squeeze(-1)
+        return out + self.feedback(error).reshape(out.shape)
 
 
 class FeedbackMLPModel(MLPModel):
@@ -46,6 +60,7 @@ class FeedbackMLPModel(MLPModel):
     Args:
         feedback_inputs: ``(start, size)``: where in the model's concatenated observation the tracking
             error lies (:func:`feedback_inputs`); the rest as :class:`~rsl_rl.models.MLPModel`'s.
+        scheduled: Schedule the gains on the observation (:class:`FeedbackMLP`).
     """
 
     def __init__(
@@ -56,6 +71,7 @@ class FeedbackMLPModel(MLPModel):
         output_dim: int,
         *args,
         feedback_inputs: tuple[int, int] | list[int],
+        scheduled: bool = False,
         **kwargs,
     ) -> None:
         super().__init__(obs, obs_groups, obs_set, output_dim, *args, **kwargs)
@@ -64,7 +80,7 @@ class FeedbackMLPModel(MLPModel):
             raise ValueError(
                 f"feedback_inputs: ({start}, {size}) is not a slice of the {self.obs_dim} observations"
             )
-        self.mlp = FeedbackMLP(self.mlp, start, size)
+        self.mlp = FeedbackMLP(self.mlp, start, size, scheduled)
 
 
 def feedback_inputs(env) -> tuple[int, int]:

@@ -281,7 +281,11 @@ class ES:
         if self.feedback_layer is not None:  # FeedbackMLP's path, each policy with its own gains
             weight, _ = next(linear)
             mlp = self.actor.mlp
-            h = h + torch.bmm(x[..., mlp.start : mlp.start + mlp.size], weight.transpose(1, 2))
+            error = x[..., mlp.start : mlp.start + mlp.size]
+            if mlp.scheduled:  # gains scheduled on the observation: the body's outputs past the move
+                gains = h[..., mlp.actions :].unflatten(-1, (mlp.actions, mlp.size))
+                h = h[..., : mlp.actions] + (gains @ error.unsqueeze(-1)).squeeze(-1)
+            h = h + torch.bmm(error, weight.transpose(1, 2))
         out = h.reshape(b, -1)
         if self.actor.distribution is not None:
             out = self.actor.distribution.deterministic_output(out)

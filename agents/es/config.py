@@ -55,6 +55,11 @@ class EsConfig:
     it needs the contour features in the observation). Without it es learns the MLP alone: give it a larger
     ``sigma`` and ``learning_rate`` then (0.05 and 0.01 worked)."""
 
+    scheduled: bool = False
+    """Schedule the feedback gains on the observation (:class:`agents.models.FeedbackMLP`): the MLP also
+    outputs a gain matrix added to the static one. What a policy for many contours needs (``warpcut
+    generalist``); a policy for one contour does without."""
+
     def __post_init__(self) -> None:  # each field as it is given (a file's or --set's key at a time)
         self.check()
 
@@ -85,6 +90,11 @@ class EsConfig:
             if isinstance(value, bool) or not isinstance(value, int | float) or not (0 < value < math.inf):
                 raise ConfigError(f"train.es.{name}", f"must be a finite number > 0 (got {shown(value)})")
         check_flag("train.es.feedback", self.feedback)
+        check_flag("train.es.scheduled", self.scheduled)
+        if self.scheduled and not self.feedback:
+            raise ConfigError(
+                "train.es.scheduled", "schedules the feedback gains: needs train.es.feedback=true"
+            )
 
     def rsl_rl(self) -> dict:
         """rsl-rl's ``algorithm`` section (``class_name`` and the arguments of
