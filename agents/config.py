@@ -177,6 +177,8 @@ class TrainConfig:
                     "feedback: the actor's feedback path needs the tracking error in the observation"
                 )
             actor.update(class_name="agents.models:FeedbackMLPModel", feedback_inputs=list(feedback_inputs))
+            if self.algo == "es" and self.es.scheduled:
+                actor["scheduled"] = True
         if self.algo == "ppo":
             ppo = self.ppo.rsl_rl(discrete, num_action_choices)
             algorithm_cfg, distribution = ppo["algorithm"], ppo["distribution"]
@@ -247,6 +249,21 @@ ANALYTIC_PINCHES = ("feasible", "centroid")
 
 EVALUATION_CANDIDATES = PINCH_CANDIDATES
 """Pinch candidates per plan in :func:`evaluate_table` (the paper's 30)."""
+
+GENERALIST_CONTOURS = 48
+"""Generated training contours of a generalist (``warpcut generalist --generated``)."""
+
+GENERALIST_VALIDATION_CONTOURS = 16
+"""Generated held-out contours that choose a generalist's policy (model selection)."""
+
+GENERALIST_ITERATIONS = 150
+"""es iterations of a generalist's training where none are given."""
+
+GENERALIST_POPULATION = 32
+"""es's perturbed policies a generalist iteration: each cuts every training contour."""
+
+GENERALIST_LOOKAHEAD = 8
+"""Look-ahead points a generalist observes (``env.lookahead``; :mod:`envs.observations`)."""
 
 
 GRAD_ESTIMATORS = ("tape", "es")
@@ -419,3 +436,11 @@ GRAD_CONFIG = GRAD_CONFIGS["tape"]
 
 GRAD_SEED_OFFSET = 4241
 """The gradient optimiser's episodes use seed ``seed + GRAD_SEED_OFFSET``: never the evaluation's noise."""
+
+
+def generalist_train_config() -> TrainConfig:
+    """A generalist's learner (``warpcut generalist``): es with :data:`GENERALIST_POPULATION` perturbed
+    policies, each cutting every training contour, its gains scheduled on the look-ahead, larger steps on
+    the MLP than one contour's es (the MLP carries the contour's shape here), validated every 5 iterations."""
+    es = EsConfig(population=GENERALIST_POPULATION, sigma=0.01, learning_rate=0.003, scheduled=True)
+    return TrainConfig(iterations=GENERALIST_ITERATIONS, validation_interval=5, save_interval=5, es=es)

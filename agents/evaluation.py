@@ -368,8 +368,10 @@ def compare_policies(
     seed: int = 0,
     step_callbacks: StepCallbacks | None = None,
     allow_infeasible_pinch: bool = False,
+    results: dict[str, MethodResult] | None = None,
 ) -> dict:
-    """One contour, the baseline tensioners: the ``warpcut simulate`` report.
+    """One contour, the baseline tensioners (and methods run elsewhere, ``results``: e.g. the generalist's,
+    :func:`agents.generalist.generalist_result`): the ``warpcut simulate`` report.
 
     ``pinch`` replaces the pinch point of fixed and analytic: one the gripper could not hold (on or near the
     cut line, under the cutting arm: :func:`warpcut.planning.pinch_problems`) is refused
@@ -387,6 +389,8 @@ def compare_policies(
     """
     given = None if pinch is None else [np.asarray(pinch, dtype=np.float64)]
     specs = [Method(m, pinches=given if m in ("fixed", "analytic") else None) for m in methods]
+    for spec in specs:
+        spec.result = (results or {}).get(spec.name)
     report = evaluate_suite(
         [contour], specs, trials, config, device, seed, step_callbacks=step_callbacks,
         allow_infeasible_pinch=allow_infeasible_pinch,

@@ -24,12 +24,16 @@ from agents.config import (
     DEFAULT_SELECTOR,
     EVALUATION_CANDIDATES,
     EVALUATION_TRIALS,
+    GENERALIST_CONTOURS,
+    GENERALIST_LOOKAHEAD,
+    GENERALIST_VALIDATION_CONTOURS,
     GRAD_CONFIG,
     GRAD_CONFIGS,
     GradConfig,
     TrainConfig,
+    generalist_train_config,
 )
-from agents.methods import BASELINES, SELECTORS, TABLE_METHODS, check_methods
+from agents.methods import BASELINES, SELECTORS, SIMULATED, TABLE_METHODS, check_methods
 from envs.options import ENV_FIELDS, EnvConfig, PatternCutOptions
 from warpcut.planning.feasibility import ArmModel
 from warpcut.sim.config import SimConfig
@@ -98,6 +102,8 @@ _FIELD_CHECKS = {
     "video": lambda w, v: check_integer(w, v, 1, optional=True, note="no video"),
     "colour_by": lambda w, v: v in COLOUR_FIELDS or fail(w, f"choose one of {', '.join(COLOUR_FIELDS)}", v),
     "export_mesh": lambda w, v: check_text(w, v, optional=True, note="no meshes"),
+    "generalist": lambda w, v: check_text(w, v),
+    "init": lambda w, v: check_text(w, v, optional=True, note="a fresh policy"),
     "checkpoints": lambda w, v: check_text(w, v, optional=True, note="train a policy per contour"),
     "analytic_pinch": lambda w, v: check_choice(w, v, ANALYTIC_PINCHES),
     "methods": lambda w, v: _names(w, v, "method names"),
@@ -150,6 +156,10 @@ class TrainJob:
     """What the policy observes, how it acts and is rewarded."""
     train: TrainConfig = field(default_factory=TrainConfig)
     """The learner and its settings."""
+    init: str | None = None
+    """Start from a generalist's policy instead of "hold still" (fine-tuning; es only): ``generalist`` (the
+    one warpcut ships) or a run directory of ``warpcut generalist``. The env then observes as the generalist
+    does (its look-ahead), unless ``env.*`` says otherwise. None: a fresh policy."""
     record: int | None = None
     """Write ``recording.rrd`` of the final evaluation's first N envs (rerun); None: no recording."""
     colour_by: str = "strain"
@@ -167,7 +177,7 @@ class TrainJob:
         if self.contour is None:
             raise ValueError("contour: give the contour to train on (--contour), or --resume a run")
         return PatternCutOptions(
-            contour=contour_spec(self.contour),
+            contour=contour_spec(self.contour, self.sim),
             pinch_point=self.pinch,
             segments=self.segments,
             sim_config=self.sim,
@@ -205,14 +215,34 @@ class TrainJob:
         return {**other_learners(self.train), **_recording_keys(self), **_pinch_keys(self.pinch is None)}
 
 
-def contour_spec(spec: Any) -> Any:
+def job_contour(spec: Any, config: SimConfig | None = None):
+    """A job's ``contour`` loaded (:func:`contour_spec`, then a name or file read)."""
+    from warpcut.contours import Contour, load_contour
+
+    loaded = contour_spec(spec, config)
+    return loaded if isinstance(loaded, Contour) else load_contour(loaded)
+
+
+def contour_spec(spec: Any, config: SimConfig | None = None) -> Any:
     """A job's ``contour`` as :class:`~envs.options.PatternCutOptions` takes it: a name or file as is, an
-    inline contour ``{name, closed, points}`` loaded."""
+    inline contour ``{name, closed, points}`` loaded, a generated contour's name
+    (:data:`warpcut.planning.generate.GENERATED_SPEC`) drawn on ``config``'s sheet (default: the default
+    sheet)."""
     if isinstance(spec, dict):
         from warpcut.contours import contour_from_json
 
         sheet = spec.get("sheet_size")
         return contour_from_json(spec, "contour", tuple(float(v) for v in sheet) if sheet else (100.0, 100.0))
+    if isinstance(spec, str) and spec.startswith("gen-"):
+        from warpcut.planning.generate import generated
+
+        drawn = generated(spec, config)
+        if drawn is not None:
+            if len(drawn) != 1:
+                raise ValueError(
+                    f"contour: {spec!r} names {len(drawn)} contours; give one (gen-SPLIT-SEED-INDEX-KIND)"
+                )
+            return drawn[0]
     return spec
 
 
@@ -229,8 +259,11 @@ class RunJob:
     """``fast`` (8 candidates, a policy for the best one, 10 trials: about a minute on 2 CPU cores) or
     ``paper`` (the paper's 30 candidates, a policy for each)."""
     policy: str = DEFAULT_SELECTOR
-    """The tensioner that chooses the pinch candidate: ``rl``, or ``fixed`` / ``analytic`` for a quick plan
-    without training."""
+    """The tensioner that chooses the pinch candidate: ``rl``; ``generalist`` (one policy for every contour,
+    no training: seconds); or ``fixed`` / ``analytic`` for a quick plan."""
+    generalist: str = "generalist"
+    """The generalist ``policy: generalist`` plays: ``generalist`` (the one warpcut ships) or a run
+    directory of ``warpcut generalist``."""
     candidates: int | None = None
     """Pinch candidates sampled for the plan (None: the budget's)."""
     rl_candidates: int | None = None
@@ -286,6 +319,8 @@ class RunJob:
             unused = {key: why for key in ("train", "env", "rl_candidates")}
         else:
             unused = other_learners(self.train)
+        if self.policy != "generalist":
+            unused["generalist"] = "read by --policy generalist only"
         return {**unused, **_recording_keys(self)}
 
 
@@ -297,7 +332,7 @@ class EvaluateJob:
     contours: list[str] = field(default_factory=lambda: ["all"])
     """Built-in names or contour files; ``all``: the built-in suite."""
     methods: list[str] = field(default_factory=lambda: list(TABLE_METHODS))
-    """The methods (``none``, ``fixed``, ``analytic``, ``rl``, ``grad``)."""
+    """The methods (``none``, ``fixed``, ``analytic``, ``rl``, ``generalist``, ``grad``)."""
     trials: int = EVALUATION_TRIALS
     """Seeded trials per contour and method (the paper's 10)."""
     candidates: int = EVALUATION_CANDIDATES
@@ -328,6 +363,9 @@ class EvaluateJob:
     """The rl column's learner (a policy per contour)."""
     grad: GradConfig = GRAD_CONFIG
     """The grad column's optimiser (an open-loop plan per contour)."""
+    generalist: str = "generalist"
+    """The generalist column's policy: ``generalist`` (the one warpcut ships) or a run directory of
+    ``warpcut generalist``."""
     record: int | None = None
     """Write ``recording.rrd`` of the first contour's first N envs of each method; None: none."""
     colour_by: str = "strain"
@@ -374,6 +412,8 @@ class EvaluateJob:
             unused |= _pinch_keys(True, "checkpoints (their pinch points)")
         if "grad" not in self.methods:
             unused["grad"] = "read by the grad column only (--methods ...,grad)"
+        if "generalist" not in self.methods:
+            unused["generalist"] = "read by the generalist column only (--methods ...,generalist)"
         return {**unused, **_recording_keys(self)}
 
 
@@ -408,13 +448,18 @@ def with_dependent_defaults(job: Any, explicit: set[str]) -> Any:
     keys given by a file, ``--set`` or a flag):
 
     - the env's action type is the learner's (``agents.algorithms``): PPO trains discrete moves;
-    - the gradient optimiser's steps and step size are its estimator's (:data:`agents.config.GRAD_CONFIGS`).
+    - the gradient optimiser's steps and step size are its estimator's (:data:`agents.config.GRAD_CONFIGS`);
+    - a policy started from a generalist (``init``) observes and acts as the generalist does.
     """
     from agents.algorithms import algorithm
 
     if hasattr(job, "train") and hasattr(job, "env") and "env.action_type" not in explicit:
         actions = algorithm(job.train.algo).action_type
         job = dataclasses.replace(job, env=dataclasses.replace(job.env, action_type=actions))
+    if getattr(job, "init", None) is not None:  # fine-tuning observes and acts as the generalist does
+        from agents.generalist import fine_tuning_defaults
+
+        job = fine_tuning_defaults(job, explicit)
     if hasattr(job, "grad") and job.grad.estimator in GRAD_CONFIGS:
         own = GRAD_CONFIGS[job.grad.estimator]
         given = {key.split(".")[1] for key in explicit if key.startswith("grad.") and key.count(".") >= 1}
@@ -529,8 +574,11 @@ class RobustnessJob:
     """The studies to run, in order: ``resolution`` (vertices per side), ``noise`` (process noise, mm),
     ``force`` (gravity, mm/s^2), or ``all``."""
     methods: list[str] = field(default_factory=lambda: list(BASELINES))
-    """The methods besides the runs' and plans': the baselines and ``grad``; ``none`` always runs, the
-    others are measured against it."""
+    """The methods besides the runs' and plans': the baselines, ``generalist`` and ``grad``; ``none`` always
+    runs, the others are measured against it."""
+    generalist: str = "generalist"
+    """The ``generalist`` method's policy: ``generalist`` (the one warpcut ships) or a run directory of
+    ``warpcut generalist``."""
     runs: dict[str, str] = field(default_factory=dict)
     """Trained policies' runs of the contour (``warpcut train`` or ``run``), ``{label: run directory}``:
     each a method. The first sets the pinch point, the cut order and the nominal sheet (then ``sim`` is
@@ -582,6 +630,8 @@ class RobustnessJob:
         unused = {}
         if "grad" not in self.methods:
             unused["grad"] = "read by the grad method only (--methods ...,grad)"
+        if "generalist" not in self.methods:
+            unused["generalist"] = "read by the generalist method only (--methods ...,generalist)"
         if self.runs:
             unused["sim"] = "with --run the nominal sheet is the run's"
         return {**unused, **_pinch_keys(not (self.runs or self.plans), "runs or plans (their pinch points)")}
@@ -596,11 +646,16 @@ class SimulateJob:
     """The contour: a built-in name (``warpcut contours``), a ``.json``/``.svg`` file, or the contour
     itself."""
     policy: list[str] = field(default_factory=lambda: list(BASELINES))
-    """The tensioners to compare: ``none``, ``fixed``, ``analytic``."""
+    """The tensioners to compare: ``none``, ``fixed``, ``analytic``, ``generalist`` (one policy for every
+    contour, no training)."""
+    generalist: str = "generalist"
+    """The generalist ``policy`` plays: ``generalist`` (the one warpcut ships) or a run directory of
+    ``warpcut generalist``."""
     pinch: list[float] | None = None
-    """Pinch point ``[x, y]`` (mm, material coordinates) of fixed and analytic; one the gripper could not
-    hold (on or near the cut line, under the cutting arm) is refused unless ``allow_infeasible_pinch``.
-    None: fixed's best point by random search, analytic's feasible centroid."""
+    """Pinch point ``[x, y]`` (mm, material coordinates) of fixed, analytic and the generalist; one the
+    gripper could not hold (on or near the cut line, under the cutting arm) is refused unless
+    ``allow_infeasible_pinch``. None: fixed's best point by random search, analytic's and the generalist's
+    feasible centroid."""
     allow_infeasible_pinch: bool = False
     """Simulate a ``pinch`` the gripper could not hold (:func:`warpcut.planning.pinch_problems`) all the
     same; the printed rows and ``--json`` mark it (``pinch_feasible``: false, ``pinch_problem``)."""
@@ -633,7 +688,7 @@ class SimulateJob:
         """Itself, or ``ValueError`` naming a field out of range."""
         if self.contour is None:
             raise ValueError("contour: give the contour to cut (--contour)")
-        check_methods(self.policy, "policy", BASELINES)
+        check_methods(self.policy, "policy", SIMULATED)
         _count("trials", self.trials)
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise ValueError(f"seed: must be an integer >= 0 (got {self.seed!r})")
@@ -651,12 +706,81 @@ class SimulateJob:
         """The keys this job would not use, ``{key: when it applies}``: a setting given for nothing is
         refused, not ignored (:func:`agents.cli.common.refuse_unused_settings`)."""
         unused = {}
-        if not {"fixed", "analytic"} & set(self.policy):
+        if not {"fixed", "analytic", "generalist"} & set(self.policy):
             runs = ",".join(self.policy)
-            why = f"only fixed and analytic pinch, and policy is {runs} (add either to policy)"
+            why = f"only fixed, analytic and generalist pinch, and policy is {runs} (add one to policy)"
             unused["pinch"] = unused["allow_infeasible_pinch"] = why
         else:
             unused |= _pinch_keys(self.pinch is None)
+        if "generalist" not in self.policy:
+            unused["generalist"] = "read by --policy ...,generalist only"
         if self.record is None:
             unused["colour_by"] = "colours a recording, and record is off (add --record [N])"
         return unused
+
+
+@dataclass
+class GeneralistJob:
+    """``warpcut generalist``: one tensioning policy for every contour, trained over many contours at once
+    (:func:`agents.pipelines.generalist.train_generalist`). A run directory's ``config.json`` is this job."""
+
+    generated: int = GENERALIST_CONTOURS
+    """Generated training contours (the ``train`` split of :func:`warpcut.planning.generate_contours`,
+    seeded ``seed``)."""
+    contours: list[str] = field(default_factory=list)
+    """Built-in contours (names or files; ``all``: the suite) to train on as well; by default none, so the
+    suite stays out of training and measures the generalist zero-shot."""
+    validation_contours: int = GENERALIST_VALIDATION_CONTOURS
+    """Generated ``validation`` contours that model selection scores the policy on (held out)."""
+    candidates: int = EVALUATION_CANDIDATES
+    """Pinch candidates the planner searches per contour (as ``warpcut evaluate`` plans)."""
+    seed: int = 0
+    """Seed of the generated contours and of the training."""
+    arm: ArmModel = field(default_factory=ArmModel)
+    """The cutting arm's footprint, for pinch feasibility."""
+    sim: SimConfig = field(default_factory=SimConfig)
+    """The physics and the protocol."""
+    env: EnvConfig = field(
+        default_factory=lambda: EnvConfig(lookahead=GENERALIST_LOOKAHEAD, reward_reference="no_tension")
+    )
+    """What the policy observes (the look-ahead) and how it is rewarded (relative to no tension)."""
+    train: TrainConfig = field(default_factory=generalist_train_config)
+    """The learner: es, its population each cutting every contour; ``num_envs`` follows (population x
+    contours)."""
+
+    def __post_init__(self) -> None:
+        _check_fields(self)
+        check_integer("GeneralistJob.generated", self.generated, 0)
+        check_integer("GeneralistJob.validation_contours", self.validation_contours, 1)
+        _counted("GeneralistJob.candidates", self.candidates)
+
+    def check(self) -> GeneralistJob:
+        """Itself, or ``ValueError`` naming what cannot train."""
+        if self.generated == 0 and not self.contours:
+            raise ValueError("generated: give training contours (generated > 0, or contours)")
+        if self.train.algo != "es":
+            raise ValueError(
+                f"train.algo: a generalist trains with es (each perturbed policy cuts every contour), not "
+                f"{self.train.algo}"
+            )
+        if not self.env.lookahead:
+            raise ValueError(
+                "env.lookahead: a generalist must see what lies ahead of the scissors; give 1 or more "
+                f"(default {GENERALIST_LOOKAHEAD})"
+            )
+        return self
+
+    def training_config(self, count: int) -> TrainConfig:
+        """The learner's settings for ``count`` training contours: ``num_envs`` = population x contours."""
+        population = self.train.es.population
+        num_envs = population * count
+        if self.train.num_envs is not None and self.train.num_envs != num_envs:
+            raise ValueError(
+                f"train.num_envs: a generalist cuts every contour with each of es's {population} policies: "
+                f"{num_envs} envs for {count} contours; leave it unset"
+            )
+        return dataclasses.replace(self.train, num_envs=num_envs).check(False)
+
+    def unused_keys(self) -> dict[str, str]:
+        """Keys this job would not use: the other learners' sections."""
+        return other_learners(self.train)

@@ -14,6 +14,8 @@ METHODS = {
     "fixed": "pinch at the planned (or best searched) point and hold still",
     "analytic": "pinch at the (feasible) centroid and move against the tracking error",
     "rl": "a policy trained for the contour by the learner (es by default; agents.training)",
+    "generalist": "one policy for every contour, played zero-shot with no training: the shipped one, or "
+    "another that 'warpcut generalist' trained (agents.pipelines.generalist)",
     "grad": "an open-loop plan of grasp moves optimised by Adam through the differentiable simulator, at "
     "fixed's pinch point (agents.gradient)",
 }
@@ -26,7 +28,10 @@ TABLE_METHODS = ("none", "fixed", "analytic", "rl")
 BASELINES = ("none", "fixed", "analytic")
 """The methods that need no training (:mod:`agents.baselines`, :func:`tensioner`)."""
 
-SELECTORS = ("fixed", "analytic", "rl")
+SIMULATED = (*BASELINES, "generalist")
+"""The tensioners ``warpcut simulate`` runs: the baselines and the generalist (none needs training)."""
+
+SELECTORS = ("fixed", "analytic", "rl", "generalist")
 """The methods that can choose a plan's pinch candidate (``warpcut run --policy``)."""
 
 StepCallbacks = Callable[[str, int], "StepCallback | None"]

@@ -73,6 +73,7 @@ from agents.checkpoints import (
     read_checkpoint,
     resume_checkpoint,
     saved_nothing,
+    start_from,
 )
 from agents.config import TrainConfig
 from agents.config_io import flatten, to_plain
@@ -121,6 +122,7 @@ def train(
     validate: Callable[[torch.nn.Module], float | np.ndarray] | None = None,
     label: str | None = None,
     marks: dict | None = None,
+    init: str | Path | None = None,
 ) -> dict:
     """Train a policy on ``env`` with ``cfg``'s learner; write its checkpoints and summary into ``out_dir``.
 
@@ -141,6 +143,7 @@ def train(
             episodes; :attr:`TrainConfig.selection_margin`).
         label: The progress bar's label (default: the learner's name).
         marks: Fields the summary records as they are (e.g. whether the pinch point is feasible).
+        init: A run or checkpoint whose policy the training starts from (fine-tuning; es; not on resume).
 
     Returns:
         The summary also written to ``out_dir/summary.json``.
@@ -155,11 +158,9 @@ def train(
     iterations = cfg.total_iterations(episode_steps)
     out_dir = make_run_dir(out_dir)
     seed_everything(seed)
-    feedback = None
-    if cfg.feedback:
-        from agents.models import feedback_inputs
+    from agents.models import feedback_inputs
 
-        feedback = feedback_inputs(env)
+    feedback = feedback_inputs(env) if cfg.feedback else None
     rsl_cfg = cfg.to_rsl_rl(getattr(env, "num_action_choices", None), feedback, episode_steps)
     runner_class = resolve_callable(algorithm(cfg.algo).runner)
     runner: Runner = runner_class(env, rsl_cfg, out_dir, cfg.torch_device)
@@ -174,7 +175,8 @@ def train(
             print(f"warning: {note}", file=sys.stderr)
         runner.load_checkpoint(checkpoint, state)
         runner.checkpoint = checkpoint if checkpoint.parent.resolve() == out_dir.resolve() else None
-
+    elif init is not None:  # fine-tuning: es from another policy
+        start_from(runner, init)
     start_iterations, status, steps = runner.iterations_done, "failed", runner.steps_per_iteration
     runner.started = time.monotonic()
     try:
@@ -678,6 +680,8 @@ def _train_contour(
 ) -> dict:
     options = job.options(device)
     cfg = job.train.check(options.action_type == "discrete")
+    if job.init is not None and cfg.algo != "es":
+        raise ValueError(f"init: fine-tuning starts es from a generalist; train.algo is {cfg.algo}")
     if resume is not None:  # before anything is written: a resume with other settings changes nothing
         check_resumed_job(resume, job)
     if resume is not None and saved_nothing(resume):
@@ -707,9 +711,15 @@ def _train_contour(
 
     label = label or f"{cfg.algo.upper()} {options.contours(1)[0].name}"
     marks = {"pinch_feasible": problem is None, "pinch_problem": problem}
+    init = None
+    if job.init is not None:
+        from agents.generalist import generalist_dir
+
+        init = generalist_dir(job.init)
+        marks["init"] = job.init
     summary = train(
         env, cfg, out_dir, seed=job.seed, resume=resume, progress=progress, validate=validate, label=label,
-        marks=marks,
+        marks=marks, init=init,
     )  # fmt: skip
     evaluation = evaluate_run(
         out_dir, trials=job.eval_trials, seed=job.seed + 1, device=device, step_callbacks=step_callbacks

@@ -69,7 +69,7 @@ def test_simulate_has_at_most_15_options_and_its_flags_set_keys_of_its_job():
     names = {p.opts[0] for p in command.params}
     assert names == {
         *("--contour", "--policy", "--pinch", "--trials", "--seed", "--device", "--json", "--record"),
-        *("--video", "--config", "--set", "--print-config"),
+        *("--video", "--generalist", "--config", "--set", "--print-config"),
     }
     keys = set(to_plain(SimulateJob()))
     assert set(FLAGS.values()) <= keys
@@ -155,9 +155,9 @@ def test_simulate_export_mesh_and_plots_are_keys(tmp_path):
     [
         (
             ["--policy", "none", "--pinch", "50,40"],
-            r"pinch: only fixed and analytic pinch, and policy is none",
+            r"pinch: only fixed, analytic and generalist pinch, and policy is none",
         ),
-        (["--policy", "none", "--set", "pinch=[50,40]"], r"pinch: only fixed and analytic pinch"),
+        (["--policy", "none", "--set", "pinch=[50,40]"], r"pinch: only fixed, analytic and generalist pinch"),
         (["--set", "colour_by=height"], r"colour_by: colours a recording, and record is off \(add --record"),
         (["--set", "record=null", "--set", "colour_by=height"], "colour_by: colours a recording"),
     ],
@@ -171,12 +171,16 @@ def test_the_ignored_setting_rule_reads_the_job_and_a_config_file(tmp_path, capf
     """The rule is the job's (``unused_keys``, from its own settings), checked against what is given: a file
     that sets the pinch for a policy without one is refused; a saved job, every key at its default where
     unused, runs again; the pinch or the colours apply where fixed or a recording are on."""
-    unused = {"pinch", "allow_infeasible_pinch", "colour_by"}
+    unused = {"pinch", "allow_infeasible_pinch", "colour_by", "generalist"}
     assert SimulateJob(policy=["none"]).unused_keys().keys() == unused
-    assert SimulateJob(policy=["analytic"], record=1, pinch=[83.0, 83.0]).unused_keys() == {}
+    assert SimulateJob(policy=["analytic"], record=1, pinch=[83.0, 83.0]).unused_keys().keys() == {
+        "generalist"
+    }
     bad = tmp_path / "bad.yaml"
     bad.write_text("contour: circle-small\npolicy: [none]\npinch: [50, 40]\n")
-    assert "pinch: only fixed and analytic pinch" in refused(["simulate", "--config", str(bad)], capfd)
+    assert "pinch: only fixed, analytic and generalist pinch" in refused(
+        ["simulate", "--config", str(bad)], capfd
+    )
     saved = tmp_path / "saved.yaml"
     code, printed, _ = invoke(
         ["simulate", "--contour", "circle-small", "--policy", "none", *SMALL, "--print-config"]

@@ -153,7 +153,7 @@ def test_studies_and_their_values_are_checked():
     for wrong, message in [
         (dict(study=[]), "study: choose from"),
         (dict(study=["noise", "force"], values=[0.0]), "values: give the values of one study"),
-        (dict(study=["noise"], methods=["rl"]), "methods: unknown rl; choose from none,fixed,analytic,grad"),
+        (dict(study=["noise"], methods=["rl"]), "methods: unknown rl; choose from none,fixed,analytic,gener"),
         (dict(study=["noise"], trials=0), "trials: must be an integer >= 1"),
         (dict(study=["noise"], contour=None), r"contour: give the contour \(--contour\), or trained runs"),
         (dict(study=["noise"], plans={"fixed": "x.json"}), "plans: label 'fixed' must be a plain name"),

@@ -772,7 +772,8 @@ def test_implicit_outputs_go_only_into_a_folder_warpcut_marks(tmp_path):
     assert (user / "recording.rrd").read_text() == "the user's recording" and not (user / "x.json").exists()
     fresh = tmp_path / "sim"
     for _ in range(2):
-        code, output = invoke([*args, "--json", str(fresh / "x.json"), "--set", "plots=false", "--record", "1"])
+        json_args = ["--json", str(fresh / "x.json"), "--set", "plots=false", "--record", "1"]
+        code, output = invoke([*args, *json_args])
         assert code == 0, output
     assert {"x.json", "recording.rrd"} <= set(read_run_marker(fresh)["files"])
 

@@ -17,6 +17,7 @@ from agents.cli import (
     contours,
     evaluate,
     export,
+    generalist,
     optimize,
     plan,
     replay,
@@ -52,5 +53,18 @@ def main() -> None:
     """Simulate, plan and learn tensioning for surgical pattern cutting."""
 
 
-for _module in (run, contours, simulate, train, optimize, robustness, export, evaluate, replay, plan, bench):
+for _module in (
+    run,
+    contours,
+    simulate,
+    train,
+    generalist,
+    optimize,
+    robustness,
+    export,
+    evaluate,
+    replay,
+    plan,
+    bench,
+):
     main.add_command(_module.command)

@@ -199,6 +199,15 @@ arm_length_option = click.option(
 )
 
 
+generalist_option = click.option(
+    "--generalist",
+    "generalist_source",
+    default=None,
+    metavar="DIR",
+    help="The generalist to play (a run directory of 'warpcut generalist'); default: the one warpcut ships.",
+)
+
+
 json_option = click.option(
     "--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write results here."
 )

@@ -19,6 +19,7 @@ FLAGS = {
     "checkpoints": "checkpoints",
     "trials": "trials",
     "seed": "seed",
+    "generalist_source": "generalist",
 }
 """Each flag's key in the job (:class:`agents.jobs.EvaluateJob`)."""
 
@@ -36,8 +37,9 @@ FLAGS = {
     default=",".join(TABLE_METHODS),
     show_default=True,
     callback=lambda ctx, param, value: [v.strip() for v in value.split(",") if v.strip()],
-    help=f"Comma-separated, of {','.join(METHODS)} (rl: a policy trained per contour; grad: an open-loop "
-    "plan optimised through the differentiable simulator, per contour).",
+    help=f"Comma-separated, of {','.join(METHODS)} (rl: a policy trained per contour; generalist: one "
+    "policy for every contour, zero-shot; grad: an open-loop plan optimised through the differentiable "
+    "simulator, per contour).",
 )
 @click.option(
     "--algo",
@@ -53,6 +55,7 @@ FLAGS = {
     help="Directory of trained runs, one per contour (CHECKPOINTS/NAME, as 'warpcut train' writes); "
     "without it the rl column trains a policy per contour.",
 )
+@common.generalist_option
 @common.count_option("trials", EVALUATION_TRIALS, "Trials per contour and method.")
 @common.seed_option
 @common.device_option
@@ -65,6 +68,7 @@ def command(
     methods: list[str],
     algo: str,
     checkpoints: str | None,
+    generalist_source: str | None,
     trials: int,
     seed: int,
     device: str | None,
@@ -84,8 +88,8 @@ def command(
     from agents.jobs import EvaluateJob
     from agents.pipelines import evaluate_table
     from agents.progress import stage_bars
-    from warpcut.contours import resolve_contours
     from warpcut.io import safe_name, write_json
+    from warpcut.planning.generate import resolve_specs
 
     base = common.resumed_job(EvaluateJob, out, resume, "evaluate")
     job = common.resolve(EvaluateJob, config_file, overrides, FLAGS, base)
@@ -94,7 +98,7 @@ def command(
     job = job.check()
     if "rl" in job.methods and job.checkpoints is None:
         common.check_learner(job)
-    resolve_contours(job.contours)  # a bad name or file: now
+    resolve_specs(job.contours, job.sim.validated())  # a bad name or file: now
     if print_config:
         common.print_config(job)
         return
@@ -120,7 +124,9 @@ def command(
         )
     click.echo(report.markdown())
     rows = report.table["rows"]
-    common.echo_infeasible({f"{r['contour']} {m}": r.get(f"{m}_pinch_problem") for r in rows for m in job.methods})
+    common.echo_infeasible(
+        {f"{r['contour']} {m}": r.get(f"{m}_pinch_problem") for r in rows for m in job.methods}
+    )
     click.echo(f"({len(report.contours)} contours x {job.trials} trials in {report.seconds:.0f} s)")
     for method, what in (("grad", "its initial plan (hold still)"), ("rl", "its initial policy")):
         if f"{method}_initial_{'plan' if method == 'grad' else 'policy'}_contours" in report.table:

@@ -70,9 +70,10 @@ def _listed(ctx: click.Context, param: click.Parameter, value: str | None) -> li
     default=",".join(BASELINES),
     show_default=True,
     callback=_listed,
-    help="The methods besides the runs and plans: none, fixed, analytic, and grad (a plan optimised through "
-    "the simulator on the nominal sheet, then played unchanged at every value; its optimiser: grad.*); none "
-    "always runs, the others are measured against it.",
+    help="The methods besides the runs and plans: none, fixed, analytic, generalist (one policy for every "
+    "contour, zero-shot; another than the shipped one: --set generalist=DIR), and grad (a plan optimised "
+    "through the simulator on the nominal sheet, then played unchanged at every value; its optimiser: "
+    "grad.*); none always runs, the others are measured against it.",
 )
 @click.option(
     "--run",

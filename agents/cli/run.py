@@ -18,6 +18,7 @@ FLAGS = {
     "algo": "train.algo",
     "seed": "seed",
     "record_envs": "record",
+    "generalist_source": "generalist",
 }
 """Each flag's key in the job (:class:`agents.jobs.RunJob`)."""
 
@@ -51,8 +52,10 @@ FLAGS = {
     show_default=True,
     type=click.Choice(SELECTORS),
     help="The tensioner that picks the pinch candidate: rl (a policy trained per candidate, the one that "
-    "validates best wins); fixed or analytic for a quick plan without training.",
+    "validates best wins); generalist (one policy for every contour, no training: seconds); fixed or "
+    "analytic for a quick plan.",
 )
+@common.generalist_option
 @click.option(
     "--algo",
     type=click.Choice(list(ALGORITHMS)),
@@ -71,6 +74,7 @@ def command(
     contour: str,
     budget: str,
     run_policy: str,
+    generalist_source: str | None,
     algo: str,
     seed: int,
     device: str | None,
@@ -84,16 +88,16 @@ def command(
     print_config: bool,
 ) -> None:
     """The main job: plan the cut, pick the pinch candidate with a tensioner (rl: a policy trained per
-    candidate), and compare none, fixed, analytic and rl tensioning.
+    candidate; generalist: one policy for every contour, no training), and compare it with none, fixed and
+    analytic tensioning.
 
     Everything but the flags is set with --config FILE and --set KEY=VALUE (e.g. candidates, trials,
     sim.noise_std, env.randomize, train.iterations); --print-config shows them all.
     """
     import numpy as np
 
-    from agents.jobs import RunJob, contour_spec
+    from agents.jobs import RunJob, job_contour
     from agents.pipelines import run_pipeline
-    from warpcut.contours import load_contour
     from warpcut.io import safe_name, write_json
 
     base = common.resumed_job(RunJob, out, resume, "run")
@@ -101,7 +105,7 @@ def command(
     job.settings()
     if base is None:  # a resumed run's config.json holds every setting it was started with
         common.refuse_unused_settings(job, overrides, FLAGS)
-    contour_name = load_contour(contour_spec(job.contour)).name
+    contour_name = job_contour(job.contour, job.sim).name
     if job.policy == "rl":
         common.check_learner(job)
     if print_config:

@@ -16,6 +16,7 @@ from agents.methods import BASELINES, point_text
 FLAGS = {
     "contour": "contour",
     "policy": "policy",
+    "generalist_source": "generalist",
     "pinch": "pinch",
     "trials": "trials",
     "seed": "seed",
@@ -32,8 +33,10 @@ FLAGS = {
     default=",".join(BASELINES),
     show_default=True,
     callback=lambda ctx, param, value: [v.strip() for v in value.split(",") if v.strip()],
-    help="Comma-separated tensioners.",
+    help="Comma-separated tensioners, of none,fixed,analytic,generalist (generalist: one policy for every "
+    "contour, no training).",
 )
+@common.generalist_option
 @click.option(
     "--pinch",
     default=None,
@@ -51,6 +54,7 @@ FLAGS = {
 def command(
     contour: str | None,
     policy: list[str],
+    generalist_source: str | None,
     pinch: list[float] | None,
     trials: int | None,
     seed: int,
@@ -62,24 +66,27 @@ def command(
     overrides: tuple[str, ...],
     print_config: bool,
 ) -> None:
-    """Cut a contour with each baseline tensioner and compare their errors.
+    """Cut a contour with each tensioner that needs no training and compare their errors.
 
     Everything but the flags is set with --config FILE and --set KEY=VALUE (the physics and the protocol:
     sim.noise_std, sim.score, sim.resolution, sim.fixture; colour_by, export_mesh=DIR, plots=false);
     --print-config shows them all.
     """
     from agents.evaluation import compare_policies
-    from agents.jobs import SimulateJob, contour_spec
-    from warpcut.contours import load_contour
+    from agents.jobs import SimulateJob, job_contour
     from warpcut.io import claim_run_dir
 
     job = common.resolve(SimulateJob, config_file, overrides, FLAGS).check()
     common.refuse_unused_settings(job, overrides, FLAGS)
-    contour = load_contour(contour_spec(job.contour))  # a bad name or file: now
+    contour = job_contour(job.contour, job.sim)  # a bad name or file: now
     if print_config:
         common.print_config(job)
         return
-    if job.pinch is not None and {"fixed", "analytic"} & set(job.policy):  # an infeasible pinch: now
+    if "generalist" in job.policy:  # a generalist to play: now
+        from agents.generalist import generalist_settings
+
+        generalist_settings(job.generalist)
+    if job.pinch is not None and {"fixed", "analytic", "generalist"} & set(job.policy):  # infeasible: now
         from warpcut.planning import check_pinch
 
         check_pinch(job.pinch, contour, job.sim.validated(), allow=job.allow_infeasible_pinch)
@@ -110,10 +117,14 @@ def command(
         config = job.sim.validated()
         start = time.perf_counter()
         with common.recorder(out, job.record, job.colour_by) as rec, videos(out, job.video) as vid:
+            callbacks = with_videos(common.step_callbacks(rec, cuts, meshes), vid)
+            given = {}
+            if "generalist" in job.policy:
+                given["generalist"] = _generalist(job, contour, config, device, callbacks)
             report = compare_policies(
                 contour, job.policy, trials=job.trials, config=config, pinch=job.pinch, device=device,
-                seed=job.seed, step_callbacks=with_videos(common.step_callbacks(rec, cuts, meshes), vid),
-                allow_infeasible_pinch=job.allow_infeasible_pinch,
+                seed=job.seed, step_callbacks=callbacks, allow_infeasible_pinch=job.allow_infeasible_pinch,
+                results=given,
             )  # fmt: skip
         elapsed = time.perf_counter() - start
         click.echo(
@@ -144,3 +155,20 @@ def command(
             common.echo_written(plot_regions(cuts.of(contour.name), out))
         common.echo_written(meshes.written if meshes is not None else [])
         common.echo_recording(rec)
+
+
+def _generalist(job, contour, config, device, callbacks):
+    """The generalist's trials (zero-shot) at ``job.pinch`` or the feasible centroid, paired with the
+    baselines' (:func:`agents.generalist.generalist_result`)."""
+    import numpy as np
+
+    from agents.generalist import generalist_result
+    from warpcut.planning import default_pinch
+
+    point = (
+        np.asarray(job.pinch, dtype=np.float64) if job.pinch is not None else default_pinch(contour, config)
+    )
+    return generalist_result(
+        job.generalist, [contour], [point], None, job.trials, config, device, job.seed,
+        on_step=callbacks and callbacks("generalist", 0), allow_infeasible_pinch=job.allow_infeasible_pinch,
+    )  # fmt: skip

@@ -76,7 +76,8 @@ def command(
     """Train a tensioning policy for one contour (the default learner, es, or --algo ppo|apg).
 
     Everything but the flags is set with --config FILE and --set KEY=VALUE (the env's observations, actions
-    and reward: env.*; the physics and noise: sim.*; the learner: train.*); --print-config shows them all.
+    and reward: env.*; the physics and noise: sim.*; the learner: train.*; fine-tuning from a generalist:
+    init=generalist, or init=DIR of 'warpcut generalist'); --print-config shows them all.
     """
     from agents.checkpoints import saved_nothing
     from agents.jobs import TrainJob

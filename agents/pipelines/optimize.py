@@ -13,9 +13,8 @@ import numpy as np
 
 from agents.evaluation import Method, evaluate_suite
 from agents.gradient import grad_result
-from agents.jobs import OptimizeJob, contour_spec
+from agents.jobs import OptimizeJob, job_contour
 from agents.pipelines.common import claims_out, record_job
-from warpcut.contours import load_contour
 from warpcut.io import write_json
 from warpcut.planning import check_pinch, plan_cut
 
@@ -63,7 +62,7 @@ def optimize_contour(
     job = job.check()
     out = Path(out)
     config = job.sim.validated()
-    contour = load_contour(contour_spec(job.contour))
+    contour = job_contour(job.contour, job.sim)
     if job.pinch is not None:  # the arm sweeps the same footprint however the plan splits the cut
         check_pinch(job.pinch, contour, config, None, job.arm, allow=job.allow_infeasible_pinch)
     record_job(out, job, resume)

@@ -61,7 +61,7 @@ as 10 x 10 leaves no room for the default grasp beside most contours; 256 and 12
 (mm; ten values, the paper's count, 0 to nine times the default 0.03 in its steps: the paper's largest sigma
 was 0.21 mm), and gravity (mm/s^2; 0 to twice the nominal 521 in quarters)."""
 
-STUDY_METHODS = (*BASELINES, "grad")
+STUDY_METHODS = (*BASELINES, "generalist", "grad")
 """The methods a study can run besides trained policies: the baselines, and ``grad``, an open-loop plan
 optimised through the simulator on the nominal sheet (:func:`agents.gradient.optimize_plan`) and played
 unchanged at every value."""
@@ -141,6 +141,7 @@ def robustness_study(
     seed: int = 0,
     log: Callable[[str], None] = lambda _: None,
     allow_infeasible_pinch: bool = False,
+    generalist: str | None = None,
 ) -> dict:
     """``warpcut robustness``: sweep one setting of the simulation and score every method at each value.
 
@@ -166,6 +167,7 @@ def robustness_study(
         grad: The ``grad`` method's optimiser settings.
         device, seed: Warp device; seed of the process noise (and of the plan).
         allow_infeasible_pinch: Accept infeasible pinch points (:func:`_infeasible_pinches`), not refuse them.
+        generalist: The ``generalist`` method's (None: the shipped one), at fixed's pinch point and order.
 
     Returns: ``{"study", "values", "unit", "metric", "contour", "trials", "nominal", "pinch", "runs",
         "methods", "seconds", "skipped": [value], "diverged": {METHOD: [count]}, METHOD: {"median", "q25",
@@ -182,8 +184,7 @@ def robustness_study(
     scenario = _scenario(contour, runs, config, device, seed, log)
     infeasible = _infeasible_pinches(scenario, methods, plans, runs, allow_infeasible_pinch)
     contour, config, pinch, segments = (scenario[k] for k in ("contour", "config", "pinch", "segments"))
-    # A run cut in another order than the first is measured against no tension cut in its own order.
-    own_order = {
+    own_order = {  # a run cut in another order than the first: against no tension cut in its own order
         label: cut
         for label, cut in scenario.get("run_segments", {}).items()
         if segments_key(cut) != segments_key(segments)
@@ -202,7 +203,7 @@ def robustness_study(
             for method in chosen:
                 errors[method][batch] = _method_errors(
                     method, contour, pinch, segments, sim, overrides, len(picked), trials, runs, device, seed,
-                    played,
+                    played, generalist,
                 )  # fmt: skip
             done: dict = {}
             for label, cut in own_order.items():
@@ -249,11 +250,12 @@ def robustness_study(
 def _infeasible_pinches(
     scenario: dict, methods: Sequence[str] | None, plans: Mapping | None, runs: Mapping, allow: bool
 ) -> dict[str, str]:
-    """The report's ``infeasible_pinches``, ``{method: why}``, for the methods whose pinch point on the nominal
-    sheet the gripper could not hold (:func:`warpcut.planning.pinch_problems`): each run and plan at its
-    own, fixed and grad at the scenario's (None: not known yet, planned later); an :class:`InfeasiblePinch`
-    naming the first unless ``allow``. They are judged on the nominal sheet: a sweep keeps every pinch
-    point where it is, as the paper's Fig. 5 does, though a coarser mesh's wider grasp may reach the cut."""
+    """The report's ``infeasible_pinches``, ``{method: why}``, for the methods whose pinch point on the
+    nominal sheet the gripper could not hold (:func:`warpcut.planning.pinch_problems`): each run and plan
+    at its own, fixed and grad at the scenario's (None: not known yet, planned later); an
+    :class:`InfeasiblePinch` naming the first unless ``allow``. They are judged on the nominal sheet: a
+    sweep keeps every pinch point where it is, as the paper's Fig. 5 does, though a coarser mesh's wider
+    grasp may reach the cut."""
     contour, config, segments = scenario["contour"], scenario["config"], scenario["segments"]
     arm = scenario.get("arm", ArmModel())
     pinches = dict(scenario.get("run_pinches", {}))
@@ -445,9 +447,19 @@ def _method_errors(
     device: str | None,
     seed: int,
     plans: Mapping[str, PlanResult] | None = None,
+    generalist: str | None = None,
 ) -> np.ndarray:
     """(settings, trials) errors (mm^2) of ``method``: one batch, env ``s * trials + k`` = setting ``s``,
     trial ``k``, with the same noise streams in every method's batch; NaN where the trial diverged."""
+    if method == "generalist":
+        from agents.generalist import generalist_result
+
+        result = generalist_result(
+            generalist, [contour] * settings, [pinch] * settings, [segments] * settings, trials, config,
+            device, seed, allow_infeasible_pinch=True,  # judged on the nominal sheet
+        )  # fmt: skip
+        errors = np.asarray(result.error_mm2, dtype=np.float64)
+        return np.where(np.isfinite(errors), errors, np.nan)
     if method in runs:
         from agents.policies import rollout_errors
 
@@ -740,6 +752,10 @@ def robustness(
             loaded = contour if isinstance(contour, Contour) else load_contour(contour)
             scenario = {"contour": loaded, "config": job.sim.validated(), "pinch": None, "segments": None}
         _infeasible_pinches(scenario, job.methods, job.plans, runs, allow=False)
+    if "generalist" in job.methods:  # before any work: a generalist to play
+        from agents.generalist import generalist_settings
+
+        generalist_settings(job.generalist)
     record_job(out, job, resume)
     reports = []
     for study in job.study:
@@ -752,7 +768,7 @@ def robustness(
         report = robustness_study(
             contour, study, out, runs=job.runs or None, plans=job.plans or None, methods=job.methods,
             values=job.values, trials=job.trials, config=job.sim, grad=job.grad, device=device, seed=job.seed,
-            log=log, allow_infeasible_pinch=job.allow_infeasible_pinch,
+            log=log, allow_infeasible_pinch=job.allow_infeasible_pinch, generalist=job.generalist,
         )  # fmt: skip
         reports.append(report)
     return reports

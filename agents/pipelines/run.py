@@ -14,12 +14,12 @@ import numpy as np
 from agents.baselines import AnalyticTension
 from agents.config import VALIDATION_TRIALS
 from agents.evaluation import Method, MethodResult, evaluate_suite, run_method
-from agents.jobs import RunJob, contour_spec
+from agents.jobs import RunJob, job_contour
 from agents.methods import StepCallbacks, point_text
 from agents.pipelines.common import analytic_pinches, claims_out, policy_job, record_job, train_policy
 from agents.policies import nominal_validation_error, rollout_errors
 from envs.options import ENV_FIELDS, PatternCutOptions
-from warpcut.contours import Contour, load_contour
+from warpcut.contours import Contour
 from warpcut.io import write_json
 from warpcut.planning import ArmModel, Plan, plan_cut
 from warpcut.sim.config import SimConfig
@@ -94,8 +94,12 @@ def run_pipeline(
     config = job.sim.validated()
     if job.policy == "rl":  # before any work: the learner can train in the env
         job.train.check(job.env.action_type == "discrete")
+    if job.policy == "generalist":  # before any work: a generalist to play
+        from agents.generalist import generalist_settings
+
+        generalist_settings(job.generalist)
     out = Path(out)
-    loaded = load_contour(contour_spec(job.contour))
+    loaded = job_contour(job.contour, job.sim)
     record_job(out, job, resume)
     start = time.perf_counter()
 
@@ -123,6 +127,9 @@ def run_pipeline(
     if job.policy == "fixed":
         chosen = 0  # the plan's choice: the best candidate by fixed tension
         log("[2/3] --policy fixed: the plan's pinch and order")
+    elif job.policy == "generalist":
+        log(f"[2/3] scoring the generalist at {len(listed)} pinch candidate(s), zero-shot")
+        chosen = _choose_by_generalist(job, loaded, plan, listed, config, device)
     elif job.policy == "analytic":
         log(f"[2/3] scoring the analytic policy at {len(listed)} pinch candidate(s)")
         chosen = _choose_by_analytic(loaded, plan, listed, config, device, job.seed, job.arm)
@@ -136,7 +143,7 @@ def run_pipeline(
         )
     log(f"      chosen by {job.policy}: {_candidate_text(listed[chosen])}")
 
-    methods = ["none", "fixed", "analytic"] + (["rl"] if job.policy == "rl" else [])
+    methods = ["none", "fixed", "analytic"] + ([job.policy] if job.policy in ("rl", "generalist") else [])
     log(f"[3/3] evaluating {', '.join(methods)}: {settings['trials']} trials each")
     specs = [Method("none"), Method("fixed", pinches=[pinch]), analytic]
     if rl_dir is not None:
@@ -146,6 +153,16 @@ def run_pipeline(
             rl_dir, settings["trials"], job.seed + 1, device, on_step, paired_noise=(job.seed, 0)
         )
         specs.append(Method("rl", result=MethodResult.from_rollouts([rl])))
+    if job.policy == "generalist":
+        from agents.generalist import generalist_result
+
+        best = listed[chosen]
+        on_step = None if step_callbacks is None else step_callbacks("generalist", 0)
+        result = generalist_result(
+            job.generalist, [loaded], [np.asarray(best["pinch"])], [plan.ordered_segments(best["order"])],
+            settings["trials"], config, device, job.seed, on_step=on_step,
+        )  # fmt: skip
+        specs.append(Method("generalist", result=result))
     table = evaluate_suite(
         [loaded],
         specs,
@@ -180,7 +197,10 @@ def _ranked_candidates(plan: Plan, keep: int | None) -> list[dict]:
 
 def _candidate_text(candidate: dict) -> str:
     """A candidate's pinch, order and scores, as the progress lines show them."""
-    scores = ("fixed_error_vertices", "analytic_error_vertices", "rl_validation_error_vertices")
+    scores = (
+        "fixed_error_vertices", "analytic_error_vertices", "generalist_error_vertices",
+        "rl_validation_error_vertices",
+    )  # fmt: skip
     return (
         f"pinch {point_text(candidate['pinch'])}, order {candidate['order']}"
         + "".join(f", {k.split('_')[0]} {candidate[k]:.1f}" for k in scores if k in candidate)
@@ -211,6 +231,23 @@ def _choose_by_analytic(
     ).error_vertices[:, 0]
     for c, e in zip(listed, scores, strict=True):
         c["analytic_error_vertices"] = float(e)
+    return int(np.argmin(scores))
+
+
+def _choose_by_generalist(
+    job: RunJob, contour: Contour, plan: Plan, listed: list[dict], config: SimConfig, device: str | None
+) -> int:
+    """Score the generalist at every candidate (noise-free, one batch, each in its best order); the index of
+    the best."""
+    from agents.generalist import generalist_result
+
+    scores = generalist_result(
+        job.generalist, [contour] * len(listed), [np.asarray(c["pinch"]) for c in listed],
+        [plan.ordered_segments(c["order"]) for c in listed], 1, config.replace(noise_std=0.0), device,
+        job.seed,
+    ).error_vertices[:, 0]  # fmt: skip
+    for c, e in zip(listed, scores, strict=True):
+        c["generalist_error_vertices"] = float(e)
     return int(np.argmin(scores))
 
 

@@ -25,9 +25,10 @@ from agents.pipelines.common import (
 )
 from agents.policies import check_policy_run, is_run, rollout_errors
 from envs.options import ENV_FIELDS, PatternCutOptions
-from warpcut.contours import Contour, resolve_contours
+from warpcut.contours import Contour
 from warpcut.io import read_json, safe_name, write_json
 from warpcut.planning import InfeasiblePinch, Plan, check_pinch, plan_cut
+from warpcut.planning.generate import GENERATED_SPEC, resolve_specs
 from warpcut.sim.config import SimConfig
 
 
@@ -72,7 +73,11 @@ class TableReport:
         mean = self.table["mean"]
         cells = [
             f"{mean[f'{m}_improvement_pct']:+.1f} ± {mean[f'{m}_ci95']:.1f}"
-            + (" (infeasible pinches in it)" if any(r.get(f"{m}_pinch_feasible") is False for r in rows) else "")
+            + (
+                " (infeasible pinches in it)"
+                if any(r.get(f"{m}_pinch_feasible") is False for r in rows)
+                else ""
+            )
             for m in shown
         ]
         lines.append("| **mean** | | " + " | ".join(cells) + " |")
@@ -118,12 +123,16 @@ def evaluate_table(
     job = job.check()
     methods, config, trials, seed = list(job.methods), job.sim.validated(), job.trials, job.seed
     out = Path(out)
-    named = resolve_contours(job.contours)
+    named = resolve_specs(job.contours, job.sim.validated())
     loaded = [c for _, c in named]
     if job.checkpoints is not None and "rl" in methods:
         _check_checkpoints(Path(job.checkpoints), loaded, job)
     elif "rl" in methods:  # before any work: the learner can train in the env
         job.train.check(job.env.action_type == "discrete")
+    if "generalist" in methods:  # before any work: a generalist to play
+        from agents.generalist import generalist_settings
+
+        generalist_settings(job.generalist)
     record_job(out, job, resume)
     start = time.perf_counter()
     settings = dict(num_candidates=job.candidates, seed=seed, device=device, arm=job.arm)
@@ -142,6 +151,8 @@ def evaluate_table(
                 job, named, plans, out, device, resume, log, step_callbacks, stages
             )
             notes.append(functools.partial(_note_rl_iterations, kept))
+        elif spec.name == "generalist":
+            spec.result = _generalist_result(job, loaded, plans, device, step_callbacks, log)
         elif spec.name == "grad":
             spec.result, note = grad_column(
                 loaded, plans, out, trials, config, (job.grad, job.arm), device, seed, log, step_callbacks
@@ -276,7 +287,8 @@ def _rl_result(
                     "pinch_point": [float(v) for v in plans[k].chosen["pinch"]],
                     "segments": [s.tolist() for s in plans[k].ordered_segments()],
                 }
-            train_job = policy_job(options, job, seed, trials, contour=spec, **planned)
+            named_by = contour if GENERATED_SPEC.fullmatch(spec) else spec  # a generated one: stored inline
+            train_job = policy_job(options, job, seed, trials, contour=named_by, **planned)
             train_policy(train_job, run, device=device, progress=False, resume=resume)
             runs.append(run)
         iterations.append(policy_iteration(run))
@@ -292,6 +304,34 @@ def _rl_result(
     what = "trained" if checkpoints is None else "rolled out"
     log(f"  rl: {what} {len(named)} policy(ies) in {time.perf_counter() - started:.0f} s")
     return MethodResult.from_rollouts(rollouts), runs, iterations
+
+
+def _generalist_result(
+    job: EvaluateJob,
+    contours: list[Contour],
+    plans: list[Plan] | None,
+    device: str | None,
+    step_callbacks: StepCallbacks | None,
+    log: Callable[[str], None],
+) -> MethodResult:
+    """The generalist column: ``job.generalist`` zero-shot on every contour in one batch, at the planned
+    pinch points and segments (without plans: the feasible centroid, the whole contour), paired with the
+    baselines' trials."""
+    from agents.generalist import generalist_result
+    from warpcut.planning import default_pinch
+
+    started = time.perf_counter()
+    if plans is not None:
+        pinches = [p.chosen["pinch"] for p in plans]
+        segments = [p.ordered_segments() for p in plans]
+    else:
+        pinches, segments = [default_pinch(c, job.sim, job.arm) for c in contours], None
+    callback = None if step_callbacks is None else step_callbacks("generalist", 0)
+    result = generalist_result(
+        job.generalist, contours, pinches, segments, job.trials, job.sim, device, job.seed, on_step=callback
+    )
+    log(f"  generalist: {len(contours)} contour(s) zero-shot in {time.perf_counter() - started:.0f} s")
+    return result
 
 
 def _check_checkpoints(checkpoints: Path, contours: list[Contour], job: EvaluateJob) -> None:

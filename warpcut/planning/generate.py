@@ -20,6 +20,7 @@ stream, so every contour returned is usable as it is.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Sequence
 
 import numpy as np
@@ -45,6 +46,13 @@ MAX_DRAWS = 200
 """Draws tried per contour before giving up (a sheet or grid on which almost nothing is plannable)."""
 
 _DENSE = 2048
+
+GENERATED_SPEC = re.compile(
+    r"gen-(?P<split>[a-z]+)-(?P<seed>\d+)(?::(?P<count>\d+)|-(?P<index>\d+)-(?P<kind>[a-z]+))"
+)
+"""A generated contour by name, ``gen-SPLIT-SEED-INDEX-KIND`` (e.g. ``gen-test-0-0003-open``), or the first
+N of a split, ``gen-SPLIT-SEED:N`` (e.g. ``gen-test-0:24``): what ``warpcut evaluate --contours`` and the
+other commands' ``--contour`` take besides built-in names and files."""
 
 
 def generate_contours(
@@ -212,3 +220,51 @@ def _open(rng: np.random.Generator, width: float, height: float) -> tuple[bool, 
 
 
 _DRAW = {"blob": _blob, "polygon": _polygon, "notched": _notched, "open": _open}
+
+
+def generated(spec: str, config: SimConfig | None = None) -> list[Contour] | None:
+    """The contours a generated spec names (:data:`GENERATED_SPEC`: one contour, or the first N of a split),
+    drawn on ``config``'s sheet; None where ``spec`` is not one.
+
+    Raises:
+        ValueError: a generated spec with an unknown split, or a kind that is not its index's.
+    """
+    match = GENERATED_SPEC.fullmatch(spec.strip()) if isinstance(spec, str) else None
+    if match is None:
+        return None
+    split, seed = match["split"], int(match["seed"])
+    if split not in SPLITS:
+        raise ValueError(f"contour {spec!r}: the split is one of {', '.join(SPLITS)} (got {split!r})")
+    config = config or SimConfig()
+    if match["count"] is not None:
+        return generate_contours(int(match["count"]), split, seed, config)
+    index, kind = int(match["index"]), match["kind"]
+    if kind != KINDS[index % len(KINDS)]:
+        raise ValueError(
+            f"contour {spec!r}: contour {index} of a split is a {KINDS[index % len(KINDS)]} "
+            f"(gen-{split}-{seed}-{index:04d}-{KINDS[index % len(KINDS)]})"
+        )
+    return [_contour(index, split, seed, config, kind)]
+
+
+def resolve_specs(specs: str | Sequence[str], config: SimConfig | None = None) -> list[tuple[str, Contour]]:
+    """:func:`warpcut.contours.resolve_contours` that also takes generated specs (:data:`GENERATED_SPEC`):
+    ``(spec, contour)`` for each contour, in order."""
+    from warpcut.contours import resolve_contours
+
+    specs = [specs] if isinstance(specs, str) else specs
+    names = [s.strip() for arg in specs for s in arg.split(",") if s.strip()]
+    if not names:
+        raise ValueError("contours: give at least one contour name or file, or 'all'")
+    drawn = {name: generated(name, config) for name in names}
+    if not any(drawn.values()):
+        return resolve_contours(names)  # its own checks: 'all', two contours of one name
+    out: list[tuple[str, Contour]] = []
+    for name in names:
+        out += [(c.name, c) for c in drawn[name]] if drawn[name] is not None else resolve_contours([name])
+    seen: set[str] = set()
+    for _, contour in out:
+        if contour.name in seen:
+            raise ValueError(f"contours: {contour.name!r} is given twice; give it once")
+        seen.add(contour.name)
+    return out

@@ -1,0 +1,104 @@
+"""``warpcut generalist``: train one tensioning policy for every contour
+(:func:`agents.pipelines.generalist.train_generalist`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from agents.cli import common
+from agents.config import GENERALIST_CONTOURS, GENERALIST_ITERATIONS, GENERALIST_VALIDATION_CONTOURS
+
+FLAGS = {
+    "generated": "generated",
+    "contours": "contours",
+    "validation_contours": "validation_contours",
+    "iterations": "train.iterations",
+    "seed": "seed",
+}
+"""Each flag's key in the job (:class:`agents.jobs.GeneralistJob`)."""
+
+
+@click.command("generalist", cls=common.Command)
+@common.count_option("generated", None, f"Generated training contours (default {GENERALIST_CONTOURS}).")
+@click.option(
+    "--contours",
+    default=None,
+    callback=lambda ctx, param, value: (
+        None if value is None else [v.strip() for v in value.split(",") if v.strip()]
+    ),
+    help="Built-in contours to train on as well: 'all' (the suite), or comma-separated names and files "
+    "(default: none, so the suite measures the generalist zero-shot).",
+)
+@common.count_option(
+    "validation-contours",
+    None,
+    f"Generated held-out contours that choose the policy kept (default {GENERALIST_VALIDATION_CONTOURS}).",
+)
+@common.count_option(
+    "iterations", None, f"es iterations in total, a resumed run's included (default {GENERALIST_ITERATIONS})."
+)
+@common.seed_option
+@common.device_option
+@common.out_option("logs/generalist-TIMESTAMP")
+@common.run_dir_options
+@click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
+@common.config_options
+def command(
+    generated: int | None,
+    contours: list[str] | None,
+    validation_contours: int | None,
+    iterations: int | None,
+    seed: int,
+    device: str | None,
+    out: Path | None,
+    resume: bool,
+    overwrite: bool,
+    no_progress: bool,
+    config_file: str | None,
+    overrides: tuple[str, ...],
+    print_config: bool,
+) -> None:
+    """Train a generalist: one tensioning policy for every contour, over generated contours (and built-in
+    ones where asked) at once; it plays contours it never saw with no training (evaluate --methods
+    ...,generalist; run --policy generalist; simulate --policy generalist).
+
+    Everything but the flags is set with --config FILE and --set KEY=VALUE (the look-ahead: env.lookahead;
+    es: train.es.population, train.es.sigma; the physics: sim.*); --print-config shows them all.
+    """
+    from agents.jobs import GeneralistJob
+    from agents.pipelines.generalist import train_generalist
+
+    base = common.resumed_job(GeneralistJob, out, resume, "generalist")
+    job = common.resolve(GeneralistJob, config_file, overrides, FLAGS, base)
+    if base is None:
+        common.refuse_unused_settings(job, overrides, FLAGS)
+    job.check()
+    if print_config:
+        common.print_config(job)
+        return
+    out, claim = common.claim(out, "generalist", resume, overwrite, "generalist")
+    try:
+        with claim:
+            click.echo(f"training a generalist into {out} ({device})")
+            summary = train_generalist(
+                job, out, resume=resume, device=device, progress=not no_progress, log=common.log
+            )
+    except KeyboardInterrupt as stop:  # Ctrl-C, SIGTERM, SIGHUP: the checkpoint is saved
+        if not (out / "summary.json").is_file():
+            raise
+        raise common.RunInterrupted(out) from stop
+    best = summary.get("best") or {}
+    click.echo(
+        f"done: {summary['iterations']} iterations, {summary['env_steps']:,} env steps in "
+        f"{summary['wall_time_s']:.0f} s ({summary['steps_per_s']:,.0f} steps/s)"
+    )
+    if best:
+        click.echo(
+            f"kept iteration {best['iterations']}: on the {summary['validation_contours']} held-out contours "
+            f"its error is {best['validation_error']:.3f} of no tension's "
+            f"({100 * (1 - best['validation_error']):+.1f}% improvement)"
+        )
+    click.echo(f"play it: warpcut evaluate --methods none,fixed,analytic,generalist --generalist {out}")
+    click.echo(f"wrote {out}")

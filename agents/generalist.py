@@ -1,0 +1,169 @@
+"""The generalist: one tensioning policy for every contour, played zero-shot on contours it never saw
+(:func:`generalist_result`, the ``generalist`` method of ``evaluate``, ``run``, ``simulate`` and
+``robustness``). :func:`agents.pipelines.generalist.train_generalist` (``warpcut generalist``) trains one; the
+one warpcut ships is :data:`SHIPPED` (``"generalist"``).
+
+A generalist's directory holds its policy (``best.pt``, or the run's checkpoints) and ``generalist.json``:
+what it observes and how it acts (``env``: :class:`~envs.options.EnvConfig`, with its look-ahead), the
+physics it was trained on (``sim``), its training and validation contours, and the command that trained it.
+It plays each contour at a planned pinch point, in the planned segments and order, as the paper's
+per-contour policies do; what it observes lets it tension any of them (:mod:`envs.observations`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from envs.options import ENV_FIELDS, EnvConfig, PatternCutOptions, sim_config_from_dict
+from warpcut.contours import Contour
+from warpcut.io import read_json
+from warpcut.sim.config import SimConfig
+
+if TYPE_CHECKING:
+    from agents.evaluation import MethodResult
+    from warpcut.task import StepCallback
+
+GENERALIST_FILE = "generalist.json"
+"""A generalist's settings in its directory: the env it acts in (``env``, ``sim``) and how it was trained."""
+
+SHIPPED = "generalist"
+"""The name that plays the generalist warpcut ships (:data:`SHIPPED_DIR`)."""
+
+SHIPPED_DIR = Path(__file__).resolve().parent / "data" / "generalist"
+"""The shipped generalist: its policy (``best.pt``) and ``generalist.json``."""
+
+FORMAT = 1
+"""The layout of ``generalist.json``."""
+
+POLICY_FIELDS = ("actor_hidden_dims", "activation", "obs_normalization")
+"""The :class:`~agents.config.TrainConfig` fields that shape a generalist's network (``policy`` in
+``generalist.json``, with es's ``feedback`` and ``scheduled``): what fine-tuning from it takes."""
+
+SCORE_KEYS = ("error_vertices", "error_mm2", "separated", "dropped_fraction")
+
+
+def generalist_dir(source: str | Path | None) -> Path:
+    """The directory of the generalist ``source`` names: ``"generalist"`` or None, the shipped one; else a
+    run directory of ``warpcut generalist`` (or a copy of the shipped one's files)."""
+    if source is None or str(source) == SHIPPED:
+        return SHIPPED_DIR
+    path = Path(source)
+    if not (path / GENERALIST_FILE).is_file():
+        what = "no such directory" if not path.exists() else f"holds no {GENERALIST_FILE}"
+        raise ValueError(
+            f"generalist: {path}: {what}; give a run directory of 'warpcut generalist', or 'generalist' for "
+            "the shipped one"
+        )
+    return path
+
+
+def generalist_settings(source: str | Path | None) -> dict:
+    """``generalist.json`` of the generalist ``source`` (:func:`generalist_dir`)."""
+    path = generalist_dir(source) / GENERALIST_FILE
+    try:
+        data = read_json(path)
+        EnvConfig(**data["env"])
+        sim_config_from_dict(data["sim"], "sim")
+    except (OSError, KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"generalist: {path} cannot be read ({exc}); restore it, or train again") from None
+    return data
+
+
+def generalist_options(
+    source: str | Path | None,
+    contours: Sequence[Contour],
+    pinches: Sequence[np.ndarray],
+    segments: Sequence[Sequence[np.ndarray]] | None,
+    config: SimConfig,
+    trials: int = 1,
+    device: str | None = None,
+    **overrides,
+) -> PatternCutOptions:
+    """The options of a batch that plays the generalist ``source`` on ``contours`` (``trials`` envs each,
+    contour by contour, at ``pinches``, cutting ``segments``), with the observations and actions it was
+    trained with and ``config``'s physics."""
+    env = generalist_settings(source)["env"]
+    env = {name: env[name] for name in ENV_FIELDS if name in env}
+    env.update(randomize=[], randomize_ranges=None)  # played on the physics given
+    per_env = [k for k in range(len(contours)) for _ in range(trials)]
+    cut = None if segments is None else [[np.asarray(p).tolist() for p in segments[k]] for k in per_env]
+    return PatternCutOptions(
+        contour=[contours[k] for k in per_env],
+        pinch_point=np.array([np.asarray(pinches[k], dtype=np.float64) for k in per_env]),
+        segments=cut,
+        sim_config=config,
+        device=device,
+        **{**env, **overrides},
+    )
+
+
+def load_generalist(source: str | Path | None):
+    """The generalist ``source``'s actor (:func:`agents.policies.load_policy`), on the CPU, in eval mode."""
+    from agents.policies import load_policy
+
+    return load_policy(generalist_dir(source))
+
+
+def generalist_result(
+    source: str | Path | None,
+    contours: Sequence[Contour],
+    pinches: Sequence[np.ndarray],
+    segments: Sequence[Sequence[np.ndarray]] | None,
+    trials: int,
+    config: SimConfig,
+    device: str | None,
+    seed: int,
+    on_step: StepCallback | None = None,
+    allow_infeasible_pinch: bool = False,
+) -> MethodResult:
+    """The generalist on every (contour, trial) in one batch, zero-shot, paired with the baselines' trials
+    of :func:`agents.evaluation.evaluate_suite` (seeded ``seed``: trial t of contour k sees the noise of
+    their env ``k * trials + t``)."""
+    from agents.checkpoints import policy_checkpoint
+    from agents.evaluation import MethodResult
+    from agents.policies import check_layout, policy_errors
+    from envs.vector import PatternCutVecEnv
+
+    options = generalist_options(
+        source, contours, pinches, segments, config, trials, device,
+        allow_infeasible_pinch=allow_infeasible_pinch,
+    )  # fmt: skip
+    actor = load_generalist(source)
+    checkpoint = policy_checkpoint(generalist_dir(source))
+    check_layout(actor.state_dict(), checkpoint, options, GENERALIST_FILE, "restore it, or train again")
+    env = PatternCutVecEnv(len(contours) * trials, options)
+    out = policy_errors(actor, env, seed=seed + 1, on_step=on_step, paired_noise=(seed, 0))
+    problems = env.task.pinch_problems
+    rollouts = [
+        {
+            **{k: np.asarray(out[k])[c * trials : (c + 1) * trials] for k in SCORE_KEYS},
+            "pinch": np.asarray(pinches[c], dtype=np.float64),
+            "pinch_problem": problems[c * trials],
+        }
+        for c in range(len(contours))
+    ]
+    return MethodResult.from_rollouts(rollouts)
+
+
+def fine_tuning_defaults(job, explicit: set[str]):
+    """``job`` (a :class:`agents.jobs.TrainJob` with ``init``) observing and acting as its generalist does
+    (its look-ahead, fiducials, actions) and, for es, with its network (widths, activation, normaliser,
+    feedback, scheduled gains), where ``explicit`` (the dotted keys given) does not say otherwise."""
+    import dataclasses
+
+    settings = generalist_settings(job.init)
+    own, policy = settings["env"], settings.get("policy", {})
+    layout = ("num_fiducials", "contour_features", "lookahead", "action_type", "allow_z")
+    given = {name: own[name] for name in layout if name in own and f"env.{name}" not in explicit}
+    train = job.train
+    if train.algo == "es":  # fine-tuning is es's (the others refuse init)
+        net = {k: v for k, v in policy.items() if k in POLICY_FIELDS and f"train.{k}" not in explicit}
+        es = {
+            k: policy[k] for k in ("feedback", "scheduled") if k in policy and f"train.es.{k}" not in explicit
+        }
+        train = dataclasses.replace(train, **net, es=dataclasses.replace(train.es, **es))
+    return dataclasses.replace(job, env=dataclasses.replace(job.env, **given), train=train)

@@ -1,0 +1,114 @@
+"""How fast per-contour training reaches its own level when it starts from the generalist
+(``warpcut train --set init=generalist``) instead of from "hold still": docs/results.md, "Fine-tuning".
+
+For each contour: the contour planned as ``warpcut evaluate`` plans it (its pinch point, segments and
+order), then es trained for it twice with the same seed, iterations and validation episodes: from scratch
+(the default env and policy) and from the generalist (its look-ahead env and network). The scratch run's
+kept validation error is "the per-contour level"; the table gives the training seconds each run needed to
+first validate at or below it (the generalist's zero-shot error counts, at 0 s), and their ratio.
+
+Run: python scripts/fine_tuning.py --contours fls-circle,kidney,gen-test-0:2 [--generalist DIR] [--out DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+
+
+def _plan(contour, config, seed):
+    from agents.config import EVALUATION_CANDIDATES
+    from warpcut.planning import plan_cut
+
+    return plan_cut(contour, config.replace(noise_std=0.0), num_candidates=EVALUATION_CANDIDATES, seed=seed)
+
+
+def _curve(summary: dict) -> list[tuple[float, float]]:
+    """``(training seconds, validation error)`` of each validation of a run, from its summary."""
+    total = max(summary["iterations"], 1)
+    seconds = summary["wall_time_s"]
+    return [(seconds * v["iterations"] / total, v["error"]) for v in summary["validation"]]
+
+
+def _reached(curve: list[tuple[float, float]], level: float) -> float | None:
+    return next((t for t, error in curve if error <= level), None)
+
+
+def main() -> None:
+    from agents.jobs import TrainJob, job_contour
+    from agents.training import train_contour
+    from warpcut.planning.generate import resolve_specs
+    from warpcut.sim.config import SimConfig
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--contours", default="fls-circle,kidney,gen-test-0:2")
+    parser.add_argument("--generalist", default="generalist")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", type=Path, default=Path("logs/fine-tuning"))
+    args = parser.parse_args()
+    config = SimConfig()
+    rows = []
+    for name, contour in resolve_specs(args.contours.split(","), config):
+        plan = _plan(contour, config, args.seed)
+        base = TrainJob(
+            contour=name,
+            pinch=[float(v) for v in plan.chosen["pinch"]],
+            segments=[s.tolist() for s in plan.ordered_segments()],
+            seed=args.seed,
+            plots=False,
+        )
+        job_contour(base.contour, base.sim)  # a bad name: now
+        runs = {}
+        for label, job in (("scratch", base), ("generalist", _fine_tuning(base, args.generalist))):
+            out = args.out / name / label
+            if not (out / "summary.json").is_file():
+                train_contour(job, out, progress=False)
+            runs[label] = json.loads((out / "summary.json").read_text())
+        scratch, tuned = _curve(runs["scratch"]), _curve(runs["generalist"])
+        level = runs["scratch"]["best"]["validation_error"]
+        rows.append(
+            {
+                "contour": name,
+                "level": level,
+                "zero_shot": tuned[0][1],
+                "scratch_s": _reached(scratch, level),
+                "generalist_s": _reached(tuned, level),
+                "generalist_best": runs["generalist"]["best"]["validation_error"],
+            }
+        )
+        print(json.dumps(rows[-1]), flush=True)
+    print("| contour | per-contour level (vertices) | generalist zero-shot | scratch reaches it | from the "
+          "generalist | ratio | fine-tuned best |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|")
+    for r in rows:
+        ratio = (
+            "n/a"
+            if r["generalist_s"] is None or not r["scratch_s"]
+            else f"{r['generalist_s'] / r['scratch_s']:.2f}"
+        )
+        reached = "not reached" if r["generalist_s"] is None else f"{r['generalist_s']:.0f} s"
+        print(
+            f"| {r['contour']} | {r['level']:.1f} | {r['zero_shot']:.1f} | {r['scratch_s']:.0f} s | "
+            f"{reached} | "
+            f"{ratio} | {r['generalist_best']:.1f} |"
+        )
+    ratios = [
+        r["generalist_s"] / r["scratch_s"] for r in rows if r["generalist_s"] is not None and r["scratch_s"]
+    ]
+    if ratios:
+        print(f"median time ratio: {np.median(ratios):.2f} over {len(ratios)} of {len(rows)} contours")
+
+
+def _fine_tuning(base, generalist: str):
+    """``base`` started from the generalist, observing and acting as it does."""
+    from agents.jobs import with_dependent_defaults
+
+    return with_dependent_defaults(dataclasses.replace(base, init=generalist), set())
+
+
+if __name__ == "__main__":
+    main()

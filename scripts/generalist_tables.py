@@ -1,0 +1,81 @@
+"""The generalist's zero-shot tables of docs/results.md from a ``warpcut evaluate`` run with the
+``generalist`` column (``results.json``): per contour every method's improvement over no tension ± its 95%
+CI over the paired trials, the generalist's paired difference from per-contour training (``rl``) and from
+the better baseline, and the summary rows the targets read (the mean over contours ± its 95% CI over
+contours, the lead over the better of fixed and analytic, on how many contours the generalist is the best
+method or the best lies within its CI).
+
+Run: python scripts/generalist_tables.py RESULTS.json [--others fixed,analytic]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+
+from warpcut.scoring import mean_ci95, paired_improvement
+
+
+def _trials(row: dict, method: str) -> np.ndarray:
+    return paired_improvement(row["none_trials_error_vertices"], row[f"{method}_trials_error_vertices"])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("results")
+    parser.add_argument("--others", default="fixed,analytic", help="the baselines the lead is measured over")
+    args = parser.parse_args()
+    report = json.loads(open(args.results).read())
+    rows = report["rows"]
+    methods = [m for m in ("fixed", "analytic", "rl", "generalist") if f"{m}_improvement_pct" in rows[0]]
+    baselines = [b for b in args.others.split(",") if b in methods]
+    has_rl = "rl" in methods
+    head = ["contour", "no tension (vertices)", *methods]
+    head += ["generalist - rl (paired)"] if has_rl else []
+    print("| " + " | ".join(head) + " |")
+    print("|" + "---|" * len(head))
+    best_or_within, vs_rl, vs_base = 0, [], []
+    for row in rows:
+        imps = {m: row[f"{m}_improvement_pct"] for m in methods}
+        cells = [f"{imps[m]:+.1f} ± {row[f'{m}_ci95']:.1f}" for m in methods]
+        best = max(v for v in imps.values() if np.isfinite(v))
+        if imps["generalist"] >= best or best - imps["generalist"] <= row["generalist_ci95"]:
+            best_or_within += 1
+            cells[methods.index("generalist")] = f"**{cells[methods.index('generalist')]}**"
+        if has_rl:
+            diff = _trials(row, "generalist") - _trials(row, "rl")
+            mean, ci = mean_ci95(diff)
+            cells.append(f"{mean:+.1f} ± {ci:.1f}")
+            vs_rl.append(imps["generalist"] - imps["rl"])
+        vs_base.append(imps["generalist"] - max(imps[b] for b in baselines))
+        print(f"| {row['contour']} | {row['none_error_vertices']:.1f} | " + " | ".join(cells) + " |")
+    means = {m: mean_ci95([r[f"{m}_improvement_pct"] for r in rows]) for m in methods}
+    cells = [f"{means[m][0]:+.1f} ± {means[m][1]:.1f}" for m in methods]
+    if has_rl:
+        cells.append("{:+.1f} ± {:.1f}".format(*mean_ci95(vs_rl)))
+    print("| **mean** | | " + " | ".join(cells) + " |")
+    better = max(means[b][0] for b in baselines)
+    print()
+    print(f"- contours: {len(rows)}; trials per contour and method: {report['trials']}")
+    print(f"- generalist, mean over contours: {means['generalist'][0]:+.1f} ± {means['generalist'][1]:.1f}")
+    print(
+        f"- lead over the better baseline's mean ({better:+.1f}): {means['generalist'][0] - better:+.1f} "
+        f"points; contour by contour {np.mean(vs_base):+.1f} ± {mean_ci95(vs_base)[1]:.1f}"
+    )
+    print(f"- above both baselines on {sum(v > 0 for v in vs_base)} of {len(rows)} contours")
+    print(
+        f"- best, or the best within its CI: {best_or_within} of {len(rows)} "
+        f"({100 * best_or_within / len(rows):.0f}%)"
+    )
+    if has_rl:
+        print(
+            "- generalist - per-contour rl, mean over contours: {:+.1f} ± {:.1f} points".format(
+                *mean_ci95(vs_rl)
+            )
+        )
+
+
+if __name__ == "__main__":
+    main()

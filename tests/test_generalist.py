@@ -1,0 +1,298 @@
+"""The generalist: the look-ahead observation, the reward relative to no tension, gain scheduling, training
+over many contours, playing one zero-shot in every command, fine-tuning from it, and the shipped one."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from agents.checkpoints import policy_layout
+from agents.config import GENERALIST_LOOKAHEAD
+from agents.generalist import GENERALIST_FILE, SHIPPED_DIR, generalist_settings
+from agents.jobs import GeneralistJob
+from envs.observations import LOOKAHEAD_POINT, observation_bounds, observation_names
+from envs.options import PatternCutOptions
+from envs.vector import PatternCutVecEnv
+from tests.cli_runner import invoke, refused
+from warpcut.planning.generate import generate_contours, resolve_specs
+from warpcut.sim.config import SimConfig
+from warpcut.validation import ConfigError
+
+SMALL = ["--set", "sim.resolution=13"]
+COARSE = SimConfig(resolution=13)
+
+
+def _hold(env: PatternCutVecEnv) -> np.ndarray:
+    return np.zeros((env.num_envs, 3), dtype=np.float32)
+
+
+def test_the_lookahead_block_is_laid_out_as_named_and_bounded():
+    names = observation_names(12, True, 3)
+    low, high = observation_bounds(12, True, 3)
+    assert len(names) == low.size == high.size == 47 + 2 + 6 * 3
+    assert names[47:49] == ["pinch_dx", "pinch_dy"]
+    assert names[-6:] == [n.format(j=3) for n in LOOKAHEAD_POINT]
+    assert observation_bounds(12, True)[0].size == 47  # no look-ahead: the layout is unchanged
+
+
+def test_lookahead_needs_the_contour_features_and_a_count():
+    with pytest.raises(ConfigError, match="lookahead.*contour_features"):
+        PatternCutOptions(lookahead=4, contour_features=False)
+    with pytest.raises(ConfigError, match="lookahead"):
+        PatternCutOptions(lookahead=-1)
+    with pytest.raises(ConfigError, match="relative_reward.*no_tension"):
+        PatternCutOptions(reward_reference="no_tension", relative_reward=True)
+
+
+def test_the_lookahead_sees_the_planned_path_ahead_and_each_env_its_own_progress():
+    contours = generate_contours(2, "test", 0, COARSE)
+    env = PatternCutVecEnv(2, PatternCutOptions(contour=contours, lookahead=4, resolution=13, noise_std=0.0))
+    obs, _ = env.reset(seed=0)
+    task = env.task
+    for _ in range(5):
+        obs, *_ = env.step(_hold(env))
+    names = observation_names(env.options.num_fiducials, True, 4)
+    progress = obs[:, names.index("time")]
+    assert np.allclose(progress, np.minimum(task.update_index / task.trajectory_updates, 1.0), atol=1e-6)
+    assert progress[0] != progress[1]  # each contour's own length, not the batch's clock
+    # the first point ahead: the planned tip's move from the tip now, 2 steps past the next update
+    tip = task.tip_positions(task.update_index - 1)
+    ahead = task.tip_positions(task.update_index + 2 * 2)
+    half = 50.0
+    move = obs[:, [names.index("ahead_1_dx"), names.index("ahead_1_dy")]]
+    assert np.allclose(move, (ahead[:, :2] - tip[:, :2]) / half, atol=1e-5)
+    # the look-ahead of update u + 0 is the tracking error of the next update
+    tips, targets = task.lookahead([0])
+    assert np.allclose(tips[:, 0], task.tip_positions(), equal_nan=True)
+    assert np.allclose(targets[:, 0], task.target_world(), equal_nan=True)
+
+
+def test_a_reward_relative_to_no_tension_makes_the_episode_cost_the_error_over_no_tensions():
+    from agents.evaluation import run_method
+    from envs.rsl import EPISODE_COST_KEY, PatternCutRslEnv
+
+    contours = generate_contours(2, "train", 0, COARSE)
+    config = COARSE.replace(noise_std=0.0)
+    options = PatternCutOptions(contour=contours, sim_config=config, reward_reference="no_tension")
+    env = PatternCutRslEnv(PatternCutVecEnv(2, options, autoreset_mode="same_step"), seed=0)
+    costs = None
+    for _ in range(int(env.max_episode_length)):
+        _, _, _, extras = env.step(torch.zeros(2, 3))
+        costs = extras.get(EPISODE_COST_KEY, costs)
+    pinches = env.env.task.pinch_points
+    held = run_method(contours, list(pinches), None, 1, config, "cpu", 0).error_mm2[:, 0]
+    none = run_method(contours, [None, None], None, 1, config, "cpu", 0).error_mm2[:, 0]
+    assert np.allclose(costs.numpy(), held / none, rtol=1e-6)
+
+
+def test_scheduled_gains_are_played_alike_by_the_actor_and_by_es_population():
+    from agents.es.algorithm import ES
+    from agents.training import training_env
+
+    job = GeneralistJob(generated=2, sim=COARSE)
+    cfg = job.training_config(2)
+    contours = generate_contours(2, "train", 0, COARSE)
+    options = PatternCutOptions(contour=contours * 32, lookahead=2, sim_config=COARSE)
+    env = training_env(options, cfg, 0)
+    from agents.models import feedback_inputs
+
+    rsl = cfg.to_rsl_rl(None, feedback_inputs(env), int(env.max_episode_length))
+    alg = ES.construct_algorithm(env.get_observations(), env, rsl, "cpu")
+    assert alg.actor.mlp.scheduled
+    torch.manual_seed(1)
+    with torch.no_grad():
+        for p in alg.params:
+            p.normal_(0.0, 0.3)
+    alg._batch = alg._unpack(np.repeat(alg._theta()[None], alg.population, axis=0))
+    obs = env.get_observations()
+    obs["policy"] = torch.randn_like(obs["policy"])
+    batched = alg._forward(alg.actor.get_latent(obs))
+    single = alg.actor(obs)
+    assert torch.allclose(batched, single, atol=1e-5)
+    assert policy_layout(alg.actor.state_dict()) == (obs["policy"].shape[1], 3)  # 3 moves, not 12 outputs
+
+
+def test_a_generalist_job_refuses_what_cannot_train_many_contours():
+    with pytest.raises(ValueError, match="train.algo"):
+        GeneralistJob(train=GeneralistJob().train.__class__(algo="ppo")).check()
+    with pytest.raises(ValueError, match="env.lookahead"):
+        job = GeneralistJob()
+        job.env.lookahead = 0
+        job.check()
+    job = GeneralistJob()
+    job.train.num_envs = 100
+    with pytest.raises(ValueError, match="train.num_envs"):
+        job.training_config(48)
+    with pytest.raises(ValueError, match="generated"):
+        GeneralistJob(generated=0).check()
+
+
+def test_generated_contours_are_named_and_resolved_by_their_specs():
+    named = resolve_specs(["gen-test-0:2", "fls-circle", "gen-test-0-0003-open"])
+    assert [n for n, _ in named] == [
+        "gen-test-0-0000-blob", "gen-test-0-0001-polygon", "fls-circle", "gen-test-0-0003-open",
+    ]  # fmt: skip
+    assert named[3][1].points.tolist() == generate_contours(4, "test", 0)[3].points.tolist()
+    with pytest.raises(ValueError, match="is a polygon"):
+        resolve_specs(["gen-test-0-0001-blob"])
+    with pytest.raises(ValueError, match="split"):
+        resolve_specs(["gen-exam-0:2"])
+
+
+@pytest.fixture(scope="module")
+def generalist_run(tmp_path_factory):
+    """A generalist trained for one iteration on two coarse generated contours."""
+    out = tmp_path_factory.mktemp("generalist") / "run"
+    args = [
+        "generalist", "--generated", "2", "--validation-contours", "1", "--iterations", "1", "--out",
+        str(out), "--no-progress", "--set", "candidates=2", "--set", "train.es.population=2", *SMALL,
+    ]  # fmt: skip
+    code, output, _ = invoke(args)
+    assert code == 0, output
+    return out, output
+
+
+def test_a_generalist_trains_over_generated_contours_into_its_run_directory(generalist_run):
+    out, output = generalist_run
+    assert "kept iteration" in output and "held-out contours" in output
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "completed" and summary["contours"] == 2
+    settings = generalist_settings(out)
+    assert settings["env"]["lookahead"] == GENERALIST_LOOKAHEAD
+    assert settings["training_contours"] == ["gen-train-0-0000-blob", "gen-train-0-0001-polygon"]
+    assert settings["validation_contours"] == ["gen-validation-0-0000-blob"]
+    assert (out / "best.pt").is_file() and (out / "plans.json").is_file()
+
+
+def test_a_generalist_run_resumes_to_train_longer(generalist_run, tmp_path):
+    import shutil
+
+    out = tmp_path / "run"
+    shutil.copytree(generalist_run[0], out)
+    code, output, _ = invoke(
+        ["generalist", "--out", str(out), "--resume", "--iterations", "2", "--no-progress"]
+    )
+    assert code == 0, output
+    assert json.loads((out / "summary.json").read_text())["iterations"] == 2
+
+
+def test_a_resumed_generalist_keeps_its_settings(generalist_run, tmp_path, capfd):
+    import shutil
+
+    out = tmp_path / "run"
+    shutil.copytree(generalist_run[0], out)
+    line = refused(["generalist", "--out", str(out), "--resume", "--generated", "3"], capfd)
+    assert "generated" in line and "keeps its settings" in line
+
+
+def test_every_command_plays_a_generalist_zero_shot(generalist_run, tmp_path):
+    out = str(generalist_run[0])
+    code, output, _ = invoke(
+        ["simulate", "--contour", "gen-test-0-0000-blob", "--policy", "fixed,generalist", "--generalist", out,
+         "--trials", "2", "--set", "plots=false", *SMALL]
+    )  # fmt: skip
+    assert code == 0, output
+    assert "generalist" in output.splitlines()[-1]
+    results = tmp_path / "evaluate"
+    code, output, _ = invoke(
+        ["evaluate", "--contours", "gen-test-0:2", "--methods", "none,fixed,generalist", "--generalist", out,
+         "--trials", "2", "--out", str(results), "--set", "candidates=2", "--set", "plots=false", *SMALL]
+    )  # fmt: skip
+    assert code == 0, output
+    rows = json.loads((results / "results.json").read_text())["rows"]
+    assert [r["contour"] for r in rows] == ["gen-test-0-0000-blob", "gen-test-0-0001-polygon"]
+    assert all(np.isfinite(r["generalist_improvement_pct"]) for r in rows)
+    code, output, _ = invoke(
+        ["run", "--contour", "circle-small", "--policy", "generalist", "--generalist", out, "--out",
+         str(tmp_path / "run"), "--set", "candidates=2", "--set", "trials=2", "--set", "plots=false", *SMALL]
+    )  # fmt: skip
+    assert code == 0, output
+    assert any(line.startswith("generalist ") for line in output.splitlines())
+
+
+def test_the_generalist_column_is_paired_with_the_baselines_trials(generalist_run):
+    """A generalist that holds still (its policy zeroed) scores as fixed tension does, trial by trial."""
+    from agents.evaluation import run_method
+    from agents.generalist import generalist_result
+
+    contours = generate_contours(2, "test", 0, COARSE)
+    pinches = [np.asarray(p) for p in PatternCutOptions(contour=contours, sim_config=COARSE).per_env(2)[1]]
+    held = run_method(contours, pinches, None, 2, COARSE, "cpu", 3)
+    state = torch.load(generalist_run[0] / "best.pt", weights_only=True)
+    for key, value in state["actor_state_dict"].items():
+        if key.startswith("mlp.") and "weight" in key or key.endswith("bias"):
+            value.zero_()
+    still = generalist_run[0].parent / "still"
+    still.mkdir(exist_ok=True)
+    torch.save(state, still / "best.pt")
+    (still / GENERALIST_FILE).write_text((generalist_run[0] / GENERALIST_FILE).read_text())
+    played = generalist_result(still, contours, pinches, None, 2, COARSE, "cpu", 3)
+    assert np.array_equal(played.error_mm2, held.error_mm2)
+
+
+def test_training_for_one_contour_starts_from_a_generalist(generalist_run, tmp_path):
+    import shutil
+
+    source = tmp_path / "generalist"  # a generalist whose policy is not "hold still"
+    shutil.copytree(generalist_run[0], source)
+    state = torch.load(source / "best.pt", weights_only=True)
+    torch.manual_seed(0)
+    for key, value in state["actor_state_dict"].items():
+        if key.startswith("mlp."):
+            value.copy_(torch.randn_like(value) * 0.1)
+    torch.save(state, source / "best.pt")
+    out = tmp_path / "tuned"
+    code, output, _ = invoke(
+        ["train", "--contour", "circle-small", "--iterations", "1", "--out", str(out), "--no-progress",
+         "--set", f"init={source}", "--set", "train.num_envs=4", "--set", "train.es.population=2",
+         "--set", "train.validation_trials=2", "--set", "eval_trials=1", "--set", "plots=false", *SMALL]
+    )  # fmt: skip
+    assert code == 0, output
+    config = json.loads((out / "config.json").read_text())
+    assert config["init"] == str(source) and config["env"]["lookahead"] == GENERALIST_LOOKAHEAD
+    assert config["train"]["es"]["scheduled"]  # the generalist's network
+    first = torch.load(out / "model_0.pt", weights_only=True)["actor_state_dict"]  # after one es step
+    general = state["actor_state_dict"]
+    assert all(
+        torch.allclose(first[k], general[k], atol=0.11) for k in general if k.startswith("mlp.")
+    )  # one Adam step
+    assert first["mlp.body.4.weight"].abs().max() > 0.05  # not the fresh policy's zeroed output layer
+
+
+def test_fine_tuning_is_es_only(generalist_run, capfd):
+    line = refused(
+        ["train", "--contour", "circle-small", "--algo", "ppo", "--set", f"init={generalist_run[0]}", *SMALL],
+        capfd,
+    )
+    assert "init" in line and "es" in line
+
+
+def test_a_generalist_that_is_not_one_is_named(tmp_path, capfd):
+    line = refused(["simulate", "--contour", "fls-circle", "--policy", "generalist", "--generalist",
+                    str(tmp_path)], capfd)  # fmt: skip
+    assert f"{tmp_path}" in line and GENERALIST_FILE in line
+
+
+def test_warpcut_ships_a_small_generalist_with_its_command_and_figures():
+    assert (SHIPPED_DIR / "best.pt").stat().st_size < 300_000
+    settings = generalist_settings("generalist")
+    assert settings["command"].startswith("warpcut generalist")
+    assert settings["env"]["lookahead"] == GENERALIST_LOOKAHEAD
+    assert settings["figures"]["validation_improvement_pct"] is not None
+    from agents.generalist import load_generalist
+
+    actor = load_generalist("generalist")
+    assert policy_layout(actor.state_dict())[0] == observation_bounds(12, True, GENERALIST_LOOKAHEAD)[0].size
+
+
+def test_the_sensitivity_studies_take_the_generalist(generalist_run, tmp_path):
+    code, output, _ = invoke(
+        ["robustness", "--contour", "circle-small", "--study", "noise", "--methods", "none,fixed,generalist",
+         "--trials", "2", "--set", "values=[0.0,0.1]", "--set", f"generalist={generalist_run[0]}", "--out",
+         str(tmp_path / "rob"), "--set", "plots=false", *SMALL]
+    )  # fmt: skip
+    assert code == 0, output
+    report = json.loads((tmp_path / "rob" / "robustness-noise.json").read_text())
+    assert report["methods"] == ["fixed", "generalist"]
+    assert np.isfinite(report["generalist"]["median"]).all()
