@@ -30,7 +30,8 @@ def main() -> None:
     for path in args.zero_shot:
         report = json.loads(path.read_text())
         contours = [row["contour"] for row in report["rows"]]
-        zero_shot[path.parent.name] = {
+        config = json.loads((path.parent / "config.json").read_text())
+        zero_shot[",".join(config["contours"])] = {
             "contours": len(contours),
             "trials": report["trials"],
             **{k: round(v, 1) for k, v in report["mean"].items()},

@@ -237,18 +237,24 @@ def _choose_by_analytic(
 def _choose_by_generalist(
     job: RunJob, contour: Contour, plan: Plan, listed: list[dict], config: SimConfig, device: str | None
 ) -> int:
-    """Score the generalist at every candidate (noise-free, one batch, each in its best order); the index of
-    the best."""
+    """Score the generalist at every candidate (each in its best order) on validation episodes, as rl's
+    candidates are chosen: :data:`CANDIDATE_TRIALS` noisy trials each, seeded apart from the evaluation's and
+    the same for every candidate, in one batch; the index of the lowest mean error."""
     from agents.generalist import generalist_result
+    from agents.policies import VALIDATION_SEED_OFFSET
 
     scores = generalist_result(
         job.generalist, [contour] * len(listed), [np.asarray(c["pinch"]) for c in listed],
-        [plan.ordered_segments(c["order"]) for c in listed], 1, config.replace(noise_std=0.0), device,
-        job.seed,
-    ).error_vertices[:, 0]  # fmt: skip
+        [plan.ordered_segments(c["order"]) for c in listed], CANDIDATE_TRIALS, config, device,
+        job.seed + VALIDATION_SEED_OFFSET,
+    ).error_vertices.mean(axis=1)  # fmt: skip
     for c, e in zip(listed, scores, strict=True):
         c["generalist_error_vertices"] = float(e)
     return int(np.argmin(scores))
+
+
+CANDIDATE_TRIALS = 8
+"""Validation episodes per pinch candidate when the generalist chooses one (``run --policy generalist``)."""
 
 
 def _train_candidates(
