@@ -18,15 +18,15 @@ then               2      (``lookahead``) the grasp (pinch point + displacement)
 =================  =====  =====================================================================  ==========
 
 With ``lookahead = L`` the policy also sees what lies ahead of the scissors, L points ``j = 1..L`` at
-:data:`LOOKAHEAD_STEPS` ``* j`` steps past the next update along the planned trajectory: the planned tip's move from the
-tip now (x, y, normalised as positions without the centre: [-2, 2]), the look-ahead tracking error (where
-the sheet holds the material point that tip means to cut, from that tip, / ``max_displacement_mm``: [-5,
-5]; 0 where the tip will travel) and whether the tip will cut there ([0, 1]). Together they give the
-contour's direction and curvature ahead, where the segment ends, and how far the sheet has already carried
-what is to come: what a policy that tensions contours it never trained on needs to know (the time index
-alone means nothing across contours of different lengths). With a look-ahead the time index is the env's
-own progress along its trajectory, not the batch's clock (the longest trajectory of the batch), so that a
-policy sees the same whether its contour is cut alone or in a batch of others.
+:data:`LOOKAHEAD_STEPS` ``* j`` steps past the next update along the planned trajectory: the planned tip's
+move from the tip now (x, y, normalised as positions without the centre: [-2, 2]), the look-ahead tracking
+error (where the sheet holds the material point that tip means to cut, from that tip, /
+``max_displacement_mm``: [-5, 5]; 0 where the tip will travel) and whether the tip will cut there ([0, 1]).
+Together they give the contour's direction and curvature ahead, where the segment ends, and how far the sheet
+has already carried what is to come: what a policy that tensions contours it never trained on needs to know
+(the time index alone means nothing across contours of different lengths). With a look-ahead the time index is
+the env's own progress along its trajectory, not the batch's clock (the longest trajectory of the batch), so
+that a policy sees the same whether its contour is cut alone or in a batch of others.
 
 *Normalised* positions are ``(p - (W/2, H/2, 0)) / (max(W, H) / 2)``: the sheet at rest spans [-1, 1] in
 x and y, and its ~15 mm sag is about -0.3 in z. The tracking error is ``target_world() - tip``, the vector
