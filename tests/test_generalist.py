@@ -296,3 +296,19 @@ def test_the_sensitivity_studies_take_the_generalist(generalist_run, tmp_path):
     report = json.loads((tmp_path / "rob" / "robustness-noise.json").read_text())
     assert report["methods"] == ["fixed", "generalist"]
     assert np.isfinite(report["generalist"]["median"]).all()
+
+
+def test_run_holds_still_where_the_generalist_validates_no_better(generalist_run, tmp_path):
+    """A generalist that holds still (the fixture's kept policy, iteration 0) validates no better than
+    holding still: run keeps the still grasp at the plan's pinch, fixed tension trial for trial."""
+    out = tmp_path / "run"
+    code, output, _ = invoke(
+        ["run", "--contour", "circle-small", "--policy", "generalist", "--generalist", str(generalist_run[0]),
+         "--out", str(out), "--set", "candidates=2", "--set", "trials=2", "--set", "plots=false", *SMALL]
+    )  # fmt: skip
+    assert code == 0, output
+    report = json.loads((out / "results.json").read_text())
+    row = report["rows"][0]
+    assert report["generalist_holds_still"] is True
+    assert row["generalist_trials_error_vertices"] == row["fixed_trials_error_vertices"]
+    assert "still_error_vertices" in report["candidates"][0]

@@ -129,7 +129,9 @@ def run_pipeline(
         log("[2/3] --policy fixed: the plan's pinch and order")
     elif job.policy == "generalist":
         log(f"[2/3] scoring the generalist at {len(listed)} pinch candidate(s), zero-shot")
-        chosen = _choose_by_generalist(job, loaded, plan, listed, config, device)
+        chosen, plays = _choose_by_generalist(job, loaded, plan, listed, config, device)
+        if not plays:
+            log("      the generalist validated no better than holding still: it holds still (fixed tension)")
     elif job.policy == "analytic":
         log(f"[2/3] scoring the analytic policy at {len(listed)} pinch candidate(s)")
         chosen = _choose_by_analytic(loaded, plan, listed, config, device, job.seed, job.arm)
@@ -154,15 +156,8 @@ def run_pipeline(
         )
         specs.append(Method("rl", result=MethodResult.from_rollouts([rl])))
     if job.policy == "generalist":
-        from agents.generalist import generalist_result
-
-        best = listed[chosen]
         on_step = None if step_callbacks is None else step_callbacks("generalist", 0)
-        result = generalist_result(
-            job.generalist, [loaded], [np.asarray(best["pinch"])], [plan.ordered_segments(best["order"])],
-            settings["trials"], config, device, job.seed, on_step=on_step,
-        )  # fmt: skip
-        specs.append(Method("generalist", result=result))
+        specs.append(_generalist_method(job, loaded, plan, listed[chosen], plays, settings, device, on_step))
     table = evaluate_suite(
         [loaded],
         specs,
@@ -174,6 +169,8 @@ def run_pipeline(
         step_callbacks=step_callbacks,
         arm=job.arm,
     )
+    if job.policy == "generalist":
+        table["generalist_holds_still"] = not plays
     report = RunReport(
         loaded, config, plan, job.policy, methods, table, listed, chosen, job.budget, job.analytic_pinch,
         time.perf_counter() - start, runs,
@@ -236,21 +233,50 @@ def _choose_by_analytic(
 
 def _choose_by_generalist(
     job: RunJob, contour: Contour, plan: Plan, listed: list[dict], config: SimConfig, device: str | None
-) -> int:
+) -> tuple[int, bool]:
     """Score the generalist at every candidate (each in its best order) on validation episodes, as rl's
-    candidates are chosen: :data:`CANDIDATE_TRIALS` noisy trials each, seeded apart from the evaluation's and
-    the same for every candidate, in one batch; the index of the lowest mean error."""
+    candidates are chosen: :data:`CANDIDATE_TRIALS` noisy trials each, seeded apart from the evaluation's,
+    in one batch; and holding still at the plan's candidate on the same episodes. Returns the index of the
+    candidate with the lowest mean error and whether the generalist plays there: it holds still instead
+    (at the plan's candidate, index 0) where it validates no better, as rl's model selection keeps its
+    initial, still policy."""
     from agents.generalist import generalist_result
     from agents.policies import VALIDATION_SEED_OFFSET
 
+    seed = job.seed + VALIDATION_SEED_OFFSET
     scores = generalist_result(
         job.generalist, [contour] * len(listed), [np.asarray(c["pinch"]) for c in listed],
-        [plan.ordered_segments(c["order"]) for c in listed], CANDIDATE_TRIALS, config, device,
-        job.seed + VALIDATION_SEED_OFFSET,
+        [plan.ordered_segments(c["order"]) for c in listed], CANDIDATE_TRIALS, config, device, seed,
     ).error_vertices.mean(axis=1)  # fmt: skip
     for c, e in zip(listed, scores, strict=True):
         c["generalist_error_vertices"] = float(e)
-    return int(np.argmin(scores))
+    still = run_method(
+        [contour], [np.asarray(listed[0]["pinch"])], None, CANDIDATE_TRIALS, config, device, seed,
+        segments=[plan.ordered_segments(listed[0]["order"])], arm=job.arm,
+    ).error_vertices.mean()  # fmt: skip
+    listed[0]["still_error_vertices"] = float(still)
+    best = int(np.argmin(scores))
+    return (best, True) if scores[best] < still else (0, False)
+
+
+def _generalist_method(
+    job: RunJob, contour: Contour, plan: Plan, chosen: dict, plays: bool, settings: dict, device, on_step
+) -> Method:
+    """The generalist's row of the evaluation, paired with the baselines' trials: the generalist at the
+    chosen candidate, or (``plays`` False) holding still at the plan's, fixed tension trial for trial."""
+    from agents.generalist import generalist_result
+
+    pinch, cut = np.asarray(chosen["pinch"]), plan.ordered_segments(chosen["order"])
+    config, trials = job.sim.validated(), settings["trials"]
+    if plays:
+        result = generalist_result(
+            job.generalist, [contour], [pinch], [cut], trials, config, device, job.seed, on_step=on_step
+        )
+    else:
+        result = run_method(
+            [contour], [pinch], None, trials, config, device, job.seed, on_step, [cut], arm=job.arm
+        )
+    return Method("generalist", result=result)
 
 
 CANDIDATE_TRIALS = 8
