@@ -41,7 +41,14 @@ FORMAT = 1
 
 POLICY_FIELDS = ("actor_hidden_dims", "activation", "obs_normalization")
 """The :class:`~agents.config.TrainConfig` fields that shape a generalist's network (``policy`` in
-``generalist.json``, with es's ``feedback`` and ``scheduled``): what fine-tuning from it takes."""
+``generalist.json``, with :data:`ES_FIELDS`): what fine-tuning from it takes."""
+
+ES_FIELDS = ("feedback", "scheduled", "sigma", "learning_rate")
+"""es's settings fine-tuning takes from the generalist (``policy`` in ``generalist.json``): its network
+(the feedback path, scheduled gains) and the MLP's perturbation and step. Per-contour es's own σ (0.005)
+suits an MLP that starts at "hold still"; from a generalist, whose MLP carries the scheduled gains, its
+steps are too small to move it: with the generalist's (0.01, 0.003) fine-tuning reached the per-contour
+level on 3 of 4 contours, against 2 of 4 (``scripts/fine_tuning.py``; docs/results.md)."""
 
 SCORE_KEYS = ("error_vertices", "error_mm2", "separated", "dropped_fraction")
 
@@ -152,7 +159,8 @@ def generalist_result(
 def fine_tuning_defaults(job, explicit: set[str]):
     """``job`` (a :class:`agents.jobs.TrainJob` with ``init``) observing and acting as its generalist does
     (its look-ahead, fiducials, actions) and, for es, with its network (widths, activation, normaliser,
-    feedback, scheduled gains), where ``explicit`` (the dotted keys given) does not say otherwise."""
+    feedback, scheduled gains) and its MLP's σ and step (:data:`ES_FIELDS`), where ``explicit`` (the dotted
+    keys given) does not say otherwise."""
     import dataclasses
 
     settings = generalist_settings(job.init)
@@ -162,8 +170,6 @@ def fine_tuning_defaults(job, explicit: set[str]):
     train = job.train
     if train.algo == "es":  # fine-tuning is es's (the others refuse init)
         net = {k: v for k, v in policy.items() if k in POLICY_FIELDS and f"train.{k}" not in explicit}
-        es = {
-            k: policy[k] for k in ("feedback", "scheduled") if k in policy and f"train.es.{k}" not in explicit
-        }
+        es = {k: policy[k] for k in ES_FIELDS if k in policy and f"train.es.{k}" not in explicit}
         train = dataclasses.replace(train, **net, es=dataclasses.replace(train.es, **es))
     return dataclasses.replace(job, env=dataclasses.replace(job.env, **given), train=train)

@@ -728,8 +728,9 @@ class GeneralistJob:
     """Generated training contours (the ``train`` split of :func:`warpcut.planning.generate_contours`,
     seeded ``seed``)."""
     contours: list[str] = field(default_factory=list)
-    """Built-in contours (names or files; ``all``: the suite) to train on as well; by default none, so the
-    suite stays out of training and measures the generalist zero-shot."""
+    """Contours to train on as well: built-in names, files, ``all`` (the suite) or generated names of other
+    streams or seeds (``gen-train-1:24``); by default none, so the suite stays out of training and measures
+    the generalist zero-shot."""
     validation_contours: int = GENERALIST_VALIDATION_CONTOURS
     """Generated ``validation`` contours that model selection scores the policy on (held out)."""
     candidates: int = EVALUATION_CANDIDATES

@@ -4,8 +4,8 @@
 For each contour: the contour planned as ``warpcut evaluate`` plans it (its pinch point, segments and
 order), then es trained for it twice with the same seed, iterations and validation episodes: from scratch
 (the default env and policy) and from the generalist (its look-ahead env and network). The scratch run's
-kept validation error is "the per-contour level"; the table gives the training seconds each run needed to
-first validate at or below it (the generalist's zero-shot error counts, at 0 s), and their ratio.
+kept validation error is "the per-contour level"; the table gives the training iterations each run needed to
+first validate at or below it (the generalist's zero-shot error counts, at 0), and their ratio.
 
 Run: python scripts/fine_tuning.py --contours fls-circle,kidney,gen-test-0:2 [--generalist DIR] [--out DIR]
 """
@@ -27,11 +27,11 @@ def _plan(contour, config, seed):
     return plan_cut(contour, config.replace(noise_std=0.0), num_candidates=EVALUATION_CANDIDATES, seed=seed)
 
 
-def _curve(summary: dict) -> list[tuple[float, float]]:
-    """``(training seconds, validation error)`` of each validation of a run, from its summary."""
-    total = max(summary["iterations"], 1)
-    seconds = summary["wall_time_s"]
-    return [(seconds * v["iterations"] / total, v["error"]) for v in summary["validation"]]
+def _curve(summary: dict) -> list[tuple[int, float]]:
+    """``(iterations trained, validation error)`` of each validation of a run, from its summary: iterations,
+    not seconds, so that runs made at different times on a shared machine compare (an iteration of either
+    run is the same batch of whole cuts; the look-ahead observation costs a little more a step)."""
+    return [(v["iterations"], v["error"]) for v in summary["validation"]]
 
 
 def _reached(curve: list[tuple[float, float]], level: float) -> float | None:
@@ -81,8 +81,8 @@ def main() -> None:
             }
         )
         print(json.dumps(rows[-1]), flush=True)
-    print("| contour | per-contour level (vertices) | generalist zero-shot | scratch reaches it | from the "
-          "generalist | ratio | fine-tuned best |")  # fmt: skip
+    print("| contour | per-contour level (vertices) | generalist zero-shot | scratch reaches it (iterations) "
+          "| from the generalist | ratio | fine-tuned best |")  # fmt: skip
     print("|---|---|---|---|---|---|---|")
     for r in rows:
         ratio = (
@@ -90,9 +90,9 @@ def main() -> None:
             if r["generalist_s"] is None or not r["scratch_s"]
             else f"{r['generalist_s'] / r['scratch_s']:.2f}"
         )
-        reached = "not reached" if r["generalist_s"] is None else f"{r['generalist_s']:.0f} s"
+        reached = "not reached" if r["generalist_s"] is None else f"{r['generalist_s']}"
         print(
-            f"| {r['contour']} | {r['level']:.1f} | {r['zero_shot']:.1f} | {r['scratch_s']:.0f} s | "
+            f"| {r['contour']} | {r['level']:.1f} | {r['zero_shot']:.1f} | {r['scratch_s']} | "
             f"{reached} | "
             f"{ratio} | {r['generalist_best']:.1f} |"
         )
@@ -100,7 +100,9 @@ def main() -> None:
         r["generalist_s"] / r["scratch_s"] for r in rows if r["generalist_s"] is not None and r["scratch_s"]
     ]
     if ratios:
-        print(f"median time ratio: {np.median(ratios):.2f} over {len(ratios)} of {len(rows)} contours")
+        print(
+            f"median ratio of iterations: {np.median(ratios):.2f} over {len(ratios)} of {len(rows)} contours"
+        )
 
 
 def _fine_tuning(base, generalist: str):

@@ -251,7 +251,8 @@ def test_training_for_one_contour_starts_from_a_generalist(generalist_run, tmp_p
     assert code == 0, output
     config = json.loads((out / "config.json").read_text())
     assert config["init"] == str(source) and config["env"]["lookahead"] == GENERALIST_LOOKAHEAD
-    assert config["train"]["es"]["scheduled"]  # the generalist's network
+    assert config["train"]["es"]["scheduled"]  # the generalist's network, and its MLP's σ and step
+    assert (config["train"]["es"]["sigma"], config["train"]["es"]["learning_rate"]) == (0.01, 0.003)
     first = torch.load(out / "model_0.pt", weights_only=True)["actor_state_dict"]  # after one es step
     general = state["actor_state_dict"]
     assert all(

@@ -26,10 +26,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from agents.config_io import flatten, to_plain
-from agents.generalist import FORMAT, GENERALIST_FILE, POLICY_FIELDS
+from agents.generalist import ES_FIELDS, FORMAT, GENERALIST_FILE, POLICY_FIELDS
 from agents.pipelines.common import CONFIG_FILE
 from envs.options import ENV_FIELDS, PatternCutOptions
-from warpcut.contours import Contour, resolve_contours
+from warpcut.contours import Contour
 from warpcut.io import claim_run_dir, read_json, write_json
 from warpcut.planning import Plan
 
@@ -40,10 +40,10 @@ if TYPE_CHECKING:
 def training_contours(job: GeneralistJob) -> tuple[list[Contour], list[Contour]]:
     """The generalist's training contours (the built-in ones asked for, then the generated ``train``
     split) and its validation contours (the generated ``validation`` split)."""
-    from warpcut.planning.generate import generate_contours
+    from warpcut.planning.generate import generate_contours, resolve_specs
 
     config = job.sim.validated()
-    builtin = [c for _, c in resolve_contours(job.contours)] if job.contours else []
+    builtin = [c for _, c in resolve_specs(job.contours, config)] if job.contours else []
     generated = generate_contours(job.generated, "train", job.seed, config)
     validation = generate_contours(job.validation_contours, "validation", job.seed, config)
     return builtin + generated, validation
@@ -140,7 +140,7 @@ def _options(job: GeneralistJob, contours: list[Contour], plans: list[Plan], dev
 def _policy(job: GeneralistJob) -> dict:
     """The network's settings that fine-tuning takes (:data:`agents.generalist.POLICY_FIELDS`)."""
     own = {name: to_plain(getattr(job.train, name)) for name in POLICY_FIELDS}
-    return own | {"feedback": job.train.es.feedback, "scheduled": job.train.es.scheduled}
+    return own | {name: getattr(job.train.es, name) for name in ES_FIELDS}
 
 
 def _settings(job: GeneralistJob, train_set: list[Contour], validation: list[Contour]) -> dict:
