@@ -104,7 +104,7 @@ from warpcut.planning import check_pinch
 from warpcut.sim.memory import batch_named
 
 if TYPE_CHECKING:
-    from agents.jobs import TrainJob
+    from agents.jobs import GeneralistJob, TrainJob
     from agents.methods import StepCallbacks
 
 CONFIG_FILE = "config.json"
@@ -733,8 +733,9 @@ RESUMABLE_CHANGES = ("train.iterations", "record", "colour_by", "video", "plots"
 must be the run's own."""
 
 
-def check_resumed_job(resume: str | Path, job: TrainJob) -> None:
-    """A ``ValueError`` naming the first setting in which ``job`` differs from the run ``resume`` (a run
+def check_resumed_job(resume: str | Path, job: TrainJob | GeneralistJob) -> None:
+    """A ``ValueError`` naming the first setting in which ``job`` (train's or a generalist's) differs from the
+    run ``resume`` (a run
     directory or one of its checkpoints) was started with (its ``config.json``), but for
     :data:`RESUMABLE_CHANGES`; nothing for a run without a ``config.json`` of a job. A setting its
     ``config.json`` lacks (one added since) counts as the default."""

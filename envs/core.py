@@ -281,16 +281,17 @@ class PatternCut:
             time = np.minimum(self.task.update_index / self.task.trajectory_updates, 1.0)[:, None]
         else:
             time = np.full((self.num_envs, 1), self.step_index / self.task.num_steps)
+        grasp = self.task.sim.displacements()
         parts = [
             time,
-            self.task.sim.displacements() / self.config.max_displacement_mm,
+            grasp / self.config.max_displacement_mm,
             normalise_positions(fiducials, self.config).reshape(self.num_envs, -1),
         ]
         if self.options.contour_features:
             tracking = np.nan_to_num(self.tracking_error(), nan=0.0) / self.config.max_displacement_mm
             parts += [normalise_positions(tip[:, :3], self.config), tip[:, 3:4], tracking]
         if self.options.lookahead:
-            parts += self._lookahead(tip)
+            parts += self._lookahead(tip, grasp)
         obs = np.concatenate(parts, axis=1).astype(np.float32)
         obs[self.diverged] = 0.0  # a diverged env's state means nothing (and may be NaN)
         # NaN to 0 and the rest clipped to the bounds (infinities to them): np.nan_to_num then np.clip, the
@@ -298,7 +299,7 @@ class PatternCut:
         np.copyto(obs, 0.0, where=np.isnan(obs))
         return np.clip(obs, self.observation_space.low, self.observation_space.high, out=obs)
 
-    def _lookahead(self, tip: np.ndarray) -> list[np.ndarray]:
+    def _lookahead(self, tip: np.ndarray, displacements: np.ndarray) -> list[np.ndarray]:
         """The look-ahead block of the observation (``lookahead``; :mod:`envs.observations`): the grasp from
         the tip, and per look-ahead point the planned tip's move, the tracking error there and whether it
         cuts."""
@@ -307,7 +308,7 @@ class PatternCut:
         stride = LOOKAHEAD_STEPS * config.updates_per_step
         tips, targets = task.lookahead(stride * np.arange(1, count + 1))
         half = max(config.width_mm, config.height_mm) / 2
-        grasp = np.nan_to_num(task.pinch_points, nan=0.0) + self.task.sim.displacements()[:, :2]
+        grasp = np.nan_to_num(task.pinch_points, nan=0.0) + displacements[:, :2]
         pinch = (grasp - tip[:, :2]) / half
         moves = (tips[..., :2] - tip[:, None, :2]) / half
         errors = np.nan_to_num(targets - tips[..., :3], nan=0.0) / config.max_displacement_mm

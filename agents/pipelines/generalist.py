@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from agents.config_io import flatten, to_plain
+from agents.config_io import to_plain
 from agents.generalist import ES_FIELDS, FORMAT, GENERALIST_FILE, POLICY_FIELDS
 from agents.pipelines.common import CONFIG_FILE
 from envs.options import ENV_FIELDS, PatternCutOptions
@@ -85,12 +85,12 @@ def _train_generalist(
 ) -> dict:
     from agents.pipelines.table import _table_plans
     from agents.policies import VALIDATION_SEED_OFFSET, policy_errors
-    from agents.training import train, training_env
+    from agents.training import check_resumed_job, train, training_env
     from envs.vector import PatternCutVecEnv
     from warpcut.sim.memory import batch_named
 
-    if resume:
-        check_resumed(out, job)
+    if resume:  # the run's own settings, but for train.iterations (train for longer)
+        check_resumed_job(out, job)
     config = job.sim.validated()
     train_set, validation = training_contours(job)
     log(f"  {len(train_set)} training contours, {len(validation)} validation contours")
@@ -155,25 +155,7 @@ def _settings(job: GeneralistJob, train_set: list[Contour], validation: list[Con
     }
 
 
-RESUMABLE = ("train.iterations",)
-
-
-def check_resumed(out: Path, job: GeneralistJob) -> None:
-    """``ValueError`` naming the first setting in which ``job`` differs from the run in ``out`` (its
-    ``config.json``), but for the iterations (train for longer)."""
-    path = out / CONFIG_FILE
-    if not path.is_file():
-        return
-    saved, given = flatten(read_json(path)), flatten(to_plain(job))
-    for key in sorted(set(saved) | set(given)):
-        if key not in RESUMABLE and saved.get(key) != given.get(key):
-            raise ValueError(
-                f"{key}: the resumed run {out} has {saved.get(key)!r} (its {CONFIG_FILE}), this job "
-                f"{given.get(key)!r}; a resumed run keeps its settings: drop the change, or start a new run"
-            )
-
-
-__all__ = ["check_resumed", "ship_generalist", "train_generalist", "training_contours"]
+__all__ = ["ship_generalist", "train_generalist", "training_contours"]
 
 
 def ship_generalist(run: str | Path, dest: str | Path, zero_shot: dict | None = None) -> Path:
