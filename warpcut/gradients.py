@@ -30,13 +30,13 @@ The tape holds ``updates_per_step`` updates at a time, so memory grows with the 
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
+from warpcut.cores import cpu_cores
 from warpcut.scoring import Score
 from warpcut.sim import kernels
 from warpcut.sim._warp import launch, wp
@@ -129,7 +129,7 @@ class DifferentiableRollout:
         self._jacobian = _deformation_gradient(sim.settled_positions(), task.grid.nx, task.grid.ny, task.grid)
         self.capture = capture
         cpu = wp.get_device(sim.device).is_cpu
-        count = max(1, min(threads or (os.cpu_count() or 1), task.num_envs)) if cpu else 1
+        count = max(1, min(threads or cpu_cores(), task.num_envs)) if cpu else 1
         self._parts = [(int(p[0]), int(p[-1]) + 1) for p in np.array_split(np.arange(task.num_envs), count)]
         self._steps: list[_StepTape] | None = None
 

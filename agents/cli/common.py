@@ -208,6 +208,29 @@ generalist_option = click.option(
 )
 
 
+def _check_ray(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+    from agents.cluster import parse_address
+
+    try:
+        parse_address(value)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc).removeprefix("--ray: "), ctx, param) from None
+    return value
+
+
+def ray_option(units: str):
+    """``--ray ADDRESS``: run the command's independent ``units`` on a Ray cluster (:mod:`agents.cluster`)."""
+    return click.option(
+        "--ray",
+        default=None,
+        metavar="ADDRESS",
+        callback=_check_ray,
+        help=f"Run {units} as tasks on a Ray cluster: local (a cluster of this machine's cores for the "
+        "command; local:N, N CPUs), auto or HOST:PORT (one 'ray start' runs); the same results as "
+        "without it (docs/cluster.md).",
+    )
+
+
 json_option = click.option(
     "--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write results here."
 )

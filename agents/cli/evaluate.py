@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from agents import cluster
 from agents.algorithms import ALGORITHMS
 from agents.cli import common
 from agents.cli.video import videos, with_videos
@@ -59,6 +60,7 @@ FLAGS = {
 @common.count_option("trials", EVALUATION_TRIALS, "Trials per contour and method.")
 @common.seed_option
 @common.device_option
+@common.ray_option("each contour's plan and rl policy")
 @common.out_option("logs/evaluate-TIMESTAMP; results.json, results.md, plans and trained policies")
 @common.run_dir_options
 @common.json_option
@@ -72,6 +74,7 @@ def command(
     trials: int,
     seed: int,
     device: str | None,
+    ray: str | None,
     out: Path | None,
     resume: bool,
     overwrite: bool,
@@ -109,6 +112,7 @@ def command(
     cuts = common.final_cuts(not job.plots)
     with (
         claim,
+        cluster.executor(ray, device, common.log) as units,
         stage_bars() as stages,
         common.recorder(out, record, job.colour_by) as rec,
         videos(out, video) as vid,
@@ -121,6 +125,7 @@ def command(
             log=common.log,
             stages=stages,
             step_callbacks=with_videos(common.step_callbacks(rec, cuts), vid),
+            cluster=units,
         )
     click.echo(report.markdown())
     rows = report.table["rows"]

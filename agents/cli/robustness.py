@@ -98,6 +98,7 @@ def _listed(ctx: click.Context, param: click.Parameter, value: str | None) -> li
 @common.count_option("trials", EVALUATION_TRIALS, "Seeded noisy trials per value and method.")
 @common.seed_option
 @common.device_option
+@common.ray_option("each method's batch of values")
 @common.out_option("logs/robustness-CONTOUR-TIMESTAMP; robustness-STUDY.json and the figure")
 @click.option(
     "--resume",
@@ -117,6 +118,7 @@ def command(
     trials: int,
     seed: int,
     device: str | None,
+    ray: str | None,
     out: Path | None,
     resume: bool,
     overwrite: bool,
@@ -131,6 +133,7 @@ def command(
     Everything but the flags is set with --config FILE and --set KEY=VALUE (the sweep: values; the nominal
     sheet and noise without --run: sim.*; grad's optimiser: grad.*; plots); --print-config shows them all.
     """
+    from agents.cluster import executor
     from agents.jobs import RobustnessJob, contour_spec
     from agents.pipelines import robustness
     from agents.pipelines.robustness import check_job, robustness_table
@@ -148,8 +151,8 @@ def command(
         return
     common.check_outputs({"--json": json_path}, [job.contour] if isinstance(job.contour, str) else [])
     out, claim = common.claim(out, f"robustness-{safe_name(name)}", resume, overwrite, "robustness")
-    with claim:
-        reports = robustness(job, out, resume=resume, device=device, log=common.log)
+    with claim, executor(ray, device, common.log) as units:
+        reports = robustness(job, out, resume=resume, device=device, log=common.log, cluster=units)
     for report in reports:
         click.echo("\n".join(robustness_table(report)))
         common.echo_infeasible(report.get("infeasible_pinches") or {})

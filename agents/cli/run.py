@@ -65,6 +65,7 @@ FLAGS = {
 )
 @common.seed_option
 @common.device_option
+@common.ray_option("rl's pinch candidates (a policy each)")
 @common.out_option("logs/run-CONTOUR-TIMESTAMP")
 @common.run_dir_options
 @common.json_option
@@ -78,6 +79,7 @@ def command(
     algo: str,
     seed: int,
     device: str | None,
+    ray: str | None,
     out: Path | None,
     resume: bool,
     overwrite: bool,
@@ -96,6 +98,7 @@ def command(
     """
     import numpy as np
 
+    from agents.cluster import executor
     from agents.jobs import RunJob, job_contour
     from agents.pipelines import run_pipeline
     from warpcut.io import safe_name, write_json
@@ -115,7 +118,11 @@ def command(
     common.check_outputs({"--json": json_path}, inputs)
     out, claim = common.claim(out, f"run-{safe_name(contour_name)}", resume, overwrite, "run")
     cuts = common.final_cuts(not job.plots)
-    with claim, common.recorder(out, job.record, job.colour_by) as rec:
+    with (
+        claim,
+        executor(ray if job.policy == "rl" else None, device, common.log) as units,
+        common.recorder(out, job.record, job.colour_by) as rec,
+    ):
         report = run_pipeline(
             job,
             out,
@@ -123,6 +130,7 @@ def command(
             device=device,
             log=common.log,
             step_callbacks=common.step_callbacks(rec, cuts),
+            cluster=units,
         )
     name, pinch, row = report.contour.name, report.plan.chosen["pinch"], report.row
     click.echo(

@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from agents.cluster import Executor, Serial
 from agents.config import EVALUATION_TRIALS, GRAD_CONFIG, GradConfig
 from agents.evaluation import run_method
 from agents.gradient import PlanResult
@@ -142,6 +143,7 @@ def robustness_study(
     log: Callable[[str], None] = lambda _: None,
     allow_infeasible_pinch: bool = False,
     generalist: str | None = None,
+    cluster: Executor | None = None,
 ) -> dict:
     """``warpcut robustness``: sweep one setting of the simulation and score every method at each value.
 
@@ -168,6 +170,8 @@ def robustness_study(
         device, seed: Warp device; seed of the process noise (and of the plan).
         allow_infeasible_pinch: Accept infeasible pinch points (:func:`_infeasible_pinches`), not refuse them.
         generalist: The ``generalist`` method's (None: the shipped one), at fixed's pinch point and order.
+        cluster: Where each method's batches run (:mod:`agents.cluster`, a unit per method and batch of
+            values); default: here, one after another. The report is the same either way.
 
     Returns: ``{"study", "values", "unit", "metric", "contour", "trials", "nominal", "pinch", "runs",
         "methods", "seconds", "skipped": [value], "diverged": {METHOD: [count]}, METHOD: {"median", "q25",
@@ -176,7 +180,7 @@ def robustness_study(
         ``improvement_pct`` (noise, force) or ``error_pct_of_sheet`` (resolution; then ``none`` is a method
         too). Noise and force add ``none_error_mm2``, no tension's error. A run cut in another order than
         the first (another pinch) is paired with no tension cut in its own order (``own_order_none``)."""
-    start = time.perf_counter()
+    start, cluster = time.perf_counter(), cluster or Serial()
     values = check_study(study, values)
     if not isinstance(trials, int) or trials < 1:
         raise ValueError(f"trials: must be a positive integer (got {trials!r})")
@@ -192,35 +196,39 @@ def robustness_study(
     chosen, played = _methods(methods, runs, plans, scenario, grad, device, seed, out, log)
     errors: dict[str, np.ndarray] = {m: np.full((len(values), trials), np.nan) for m in chosen}
     own_none = {label: np.full((len(values), trials), np.nan) for label in own_order}
-    skipped = []
     batches = [[k] for k in range(len(values))] if study == "resolution" else [list(range(len(values)))]
-    for batch in batches:
+    common = dict(contour=contour, pinch=pinch, runs=runs, device=device, seed=seed, generalist=generalist)
+    units, owners = [], []  # a unit per batch and method (and per cut order of no tension, own_order's)
+    for b, batch in enumerate(batches):
         picked = [values[k] for k in batch]
         overrides = _override(study, picked, trials)
         sim = config.replace(**overrides)
-        log(f"  {study} {', '.join(f'{v:g}' for v in picked)}: {', '.join(chosen)} ({trials} trials)")
-        try:
-            for method in chosen:
-                errors[method][batch] = _method_errors(
-                    method, contour, pinch, segments, sim, overrides, len(picked), trials, runs, device, seed,
-                    played, generalist,
-                )  # fmt: skip
-            done: dict = {}
-            for label, cut in own_order.items():
-                key = segments_key(cut)
-                if key not in done:
-                    done[key] = _method_errors(
-                        "none", contour, pinch, cut, sim, overrides, len(picked), trials, runs, device, seed
-                    )
-                own_none[label][batch] = done[key]
-            _log_diverged(log, study, picked, {m: errors[m][batch] for m in chosen})
-        except (ContourError, ValueError) as error:
-            if study != "resolution" or not str(error).startswith(("resolution", "contour")):
-                raise
-            log(f"  skipped {study} {picked[0]:g}: {error}")  # a mesh too coarse for the contour or grasp
+        shared = dict(common, config=sim, overrides=overrides, settings=len(picked), trials=trials)
+        for method in chosen:
+            units.append(dict(shared, method=method, segments=segments, plans=played, study=study))
+            owners.append((b, method))
+        for key, cut in {segments_key(cut): cut for cut in own_order.values()}.items():
+            units.append(dict(shared, method="none", segments=cut, plans=None, study=study))
+            owners.append((b, key))
+    folders = [_unit_run(unit, runs, generalist) for unit in units]
+    log(f"  {study}: {', '.join(chosen)} at {len(values)} value(s), {trials} trials ({len(units)} batch(es))")
+    results = dict(zip(owners, cluster.map(_errors_unit, units, dirs=folders), strict=True))
+    made = {owner: value for owner, (value, _) in results.items()}
+    skipped = []
+    for b, batch in enumerate(batches):
+        picked = [values[k] for k in batch]
+        failed = next((made[(b, m)] for m in chosen if isinstance(made[(b, m)], str)), None)
+        if failed is not None:  # a mesh too coarse for the contour or grasp
+            log(f"  skipped {study} {picked[0]:g}: {failed}")
             skipped.extend(picked)
             for method in chosen:
                 errors[method][batch] = np.nan
+            continue
+        for method in chosen:
+            errors[method][batch] = made[(b, method)]
+        for label, cut in own_order.items():
+            own_none[label][batch] = made[(b, segments_key(cut))]
+        _log_diverged(log, study, picked, {m: errors[m][batch] for m in chosen})
     report = {
         "study": study,
         "values": [float(v) for v in values],
@@ -237,6 +245,7 @@ def robustness_study(
         "skipped": [float(v) for v in skipped],
         "own_order_none": sorted(own_order),
         "diverged": {m: _diverged_counts(values, skipped, errors[m]) for m in chosen},
+        "ran_on": {m: [results[(b, m)][1] for b in range(len(batches))] for m in chosen},
     }
     report.update(_method_stats(study, chosen, errors, own_none, config.width_mm * config.height_mm))
     report["seconds"] = time.perf_counter() - start
@@ -485,6 +494,34 @@ def _method_errors(
     return np.where(result.diverged_trials(), np.nan, np.asarray(result.error_mm2, dtype=np.float64))
 
 
+def _unit_run(unit: dict, runs: Mapping[str, Path], generalist: str | None) -> Path | None:
+    """The folder a robustness unit reads: its method's trained run, or the generalist given (a worker of
+    a cluster gets its files); None where it reads none."""
+    if unit["method"] in runs:
+        return Path(runs[unit["method"]])
+    return Path(generalist) if unit["method"] == "generalist" and generalist is not None else None
+
+
+def _errors_unit(unit: dict, folder: Path | None) -> np.ndarray | str:
+    """A unit of :func:`robustness_study`: :func:`_method_errors` of ``unit`` (its run or generalist read
+    from ``folder``); a resolution the contour or grasp does not fit is its error's message (the value is
+    skipped)."""
+    unit = dict(unit)
+    study, method, runs, generalist = (unit.pop(k) for k in ("study", "method", "runs", "generalist"))
+    if folder is not None:
+        runs = {**runs, method: folder} if method in runs else runs
+        generalist = folder if method == "generalist" else generalist
+    try:
+        return _method_errors(
+            method, unit["contour"], unit["pinch"], unit["segments"], unit["config"], unit["overrides"],
+            unit["settings"], unit["trials"], runs, unit["device"], unit["seed"], unit["plans"], generalist,
+        )  # fmt: skip
+    except (ContourError, ValueError) as error:
+        if study != "resolution" or not str(error).startswith(("resolution", "contour")):
+            raise
+        return str(error)
+
+
 def _diverged_words(counts: Mapping[str, int]) -> str:
     """``"diverged trials (left out of their pairs): METHOD N, ..."`` for the methods with any; else ""."""
     which = ", ".join(f"{m} {n}" for m, n in counts.items() if n)
@@ -721,6 +758,7 @@ def robustness(
     overwrite: bool = False,
     device: str | None = None,
     log: Callable[[str], None] = lambda _: None,
+    cluster: Executor | None = None,
 ) -> list[dict]:
     """``warpcut robustness``: :func:`robustness_study` for each of ``job.study``, in order.
 
@@ -735,6 +773,7 @@ def robustness(
         overwrite: Delete what ``out`` holds first.
         device: Warp device.
         log: Called with each progress line.
+        cluster: Where the studies' units run (:func:`robustness_study`); default: here.
 
     Returns:
         The studies' reports (:func:`robustness_study`'s), in order.
@@ -769,6 +808,7 @@ def robustness(
             contour, study, out, runs=job.runs or None, plans=job.plans or None, methods=job.methods,
             values=job.values, trials=job.trials, config=job.sim, grad=job.grad, device=device, seed=job.seed,
             log=log, allow_infeasible_pinch=job.allow_infeasible_pinch, generalist=job.generalist,
+            cluster=cluster,
         )  # fmt: skip
         reports.append(report)
     return reports

@@ -4,6 +4,7 @@ validates best wins), then compare none / fixed / analytic / rl over seeded tria
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -12,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from agents.baselines import AnalyticTension
+from agents.cluster import Executor, Serial, ran_here
 from agents.config import VALIDATION_TRIALS
 from agents.evaluation import Method, MethodResult, evaluate_suite, run_method
 from agents.jobs import RunJob, job_contour
@@ -74,6 +76,7 @@ def run_pipeline(
     log: Callable[[str], None] = lambda _: None,
     progress: bool = True,
     step_callbacks: StepCallbacks | None = None,
+    cluster: Executor | None = None,
 ) -> RunReport:
     """Plan ``job.contour``, choose the pinch candidate with ``job.policy``, evaluate every method.
 
@@ -89,7 +92,10 @@ def run_pipeline(
         log: Called with each progress line.
         progress: Show the training progress bars.
         step_callbacks: Step callbacks of the evaluation's batches (:data:`agents.methods.StepCallbacks`).
+        cluster: Where rl's pinch candidates train (:mod:`agents.cluster`, a unit each); default: here, one
+            after another. The results are the same either way.
     """
+    cluster = cluster or Serial()
     settings = job.settings()
     config = job.sim.validated()
     if job.policy == "rl":  # before any work: the learner can train in the env
@@ -141,7 +147,7 @@ def run_pipeline(
         )
     else:
         rl_dir, chosen, runs = _train_candidates(
-            job, loaded, plan, listed, settings["trials"], out, device, resume, log, progress
+            job, loaded, plan, listed, settings["trials"], out, device, resume, log, progress, cluster
         )
     log(f"      chosen by {job.policy}: {_candidate_text(listed[chosen])}")
 
@@ -171,6 +177,12 @@ def run_pipeline(
     )
     if job.policy == "generalist":
         table["generalist_holds_still"] = not plays
+    here = ran_here()  # where each unit of the row ran: rl's, the chosen candidate's
+    table["rows"][0]["ran_on"] = {"planning": here, "rl": listed[chosen].get("ran_on", here)} | {
+        "evaluation": here
+    }
+    if rl_dir is None:
+        del table["rows"][0]["ran_on"]["rl"]
     report = RunReport(
         loaded, config, plan, job.policy, methods, table, listed, chosen, job.budget, job.analytic_pinch,
         time.perf_counter() - start, runs,
@@ -294,17 +306,18 @@ def _train_candidates(
     resume: bool,
     log: Callable[[str], None],
     progress: bool,
+    cluster: Executor,
 ) -> tuple[Path, int, list[Path]]:
-    """The rl selector: a policy per candidate in ``listed``, each candidate cut in its best order; records
-    each candidate's validation error in ``listed``. Returns the winner's run directory, its index (the
-    first, i.e. the better fixed rank, among ties) and every run directory."""
+    """The rl selector: a policy per candidate in ``listed``, each candidate cut in its best order, a unit
+    each on ``cluster``; records each candidate's validation error (and where it trained, ``ran_on``) in
+    ``listed``. Returns the winner's run directory, its index (the first, i.e. the better fixed rank, among
+    ties) and every run directory."""
     options = PatternCutOptions(
         contour=contour,
         sim_config=job.sim,
         arm=job.arm,
         **{name: getattr(job.env, name) for name in ENV_FIELDS},
     )
-    runs = []
     article = "an" if job.train.algo[0] in "aeiou" else "a"
     where = (
         "at the best pinch candidate"
@@ -312,35 +325,54 @@ def _train_candidates(
         else f"for each of the best {len(listed)} candidates"
     )
     log(f"[2/3] training {article} {job.train.algo} policy {where} ({job.train.batch_size} envs)")
+    units, runs = [], [out / "rl" / f"candidate-{k}" for k in range(len(listed))]
     for k, candidate in enumerate(listed):
-        run_dir = out / "rl" / f"candidate-{k}"
         segments = [s.tolist() for s in plan.ordered_segments(candidate["order"])]
         train_job = policy_job(
             options, job, job.seed, trials, pinch_point=candidate["pinch"], segments=segments
         )
         where = f"candidate {k + 1}/{len(listed)} {point_text(candidate['pinch'])}"
         label = f"{job.train.algo.upper()} {contour.name}, {where}"
-        summary = train_policy(
-            train_job, run_dir, device=device, progress=progress, resume=resume, label=label
-        )
-        best = summary["best"]
-        candidate["rl_best_iteration"] = best["iterations"] if best else summary["iterations"]
-        if best is not None:
-            candidate["rl_validation_error_vertices"] = best["validation_error"]
-        if best is None or options.randomize or options.relative_reward:
-            # no validation, or one off the nominal sheet: compare the candidates on the nominal sheet
-            if best is not None:
-                candidate["rl_training_validation_error"] = best["validation_error"]
-            candidate["rl_validation_error_vertices"] = nominal_validation_error(
-                run_dir, job.train.validation_trials or VALIDATION_TRIALS, job.seed, device
-            )
-        candidate["run"] = str(run_dir.relative_to(out))
-        runs.append(run_dir)
+        # no validation, or one off the nominal sheet: the candidates are compared on the nominal sheet
+        nominal = options.randomize or options.relative_reward
+        units.append(
+            {"train": train_job, "device": device, "resume": resume, "label": label, "nominal": nominal,
+             "progress": progress and cluster.address is None, "trials": job.train.validation_trials}
+        )  # fmt: skip
+
+    def done(k: int, scores: dict, ran_on: str) -> None:
+        candidate = listed[k]
+        candidate.update(scores)
+        candidate["run"] = str(runs[k].relative_to(out))
+        if cluster.address is not None:
+            candidate["ran_on"] = ran_on
         nominal = ", nominal sheet" if "rl_training_validation_error" in candidate else ""
         log(
             f"      candidate {point_text(candidate['pinch'])}: "
             f"fixed {candidate['fixed_error_vertices']:.1f}, "
             f"rl {candidate['rl_validation_error_vertices']:.1f} vertices (validation{nominal})"
         )
+
+    cluster.map(functools.partial(_candidate_unit, seed=job.seed), units, dirs=runs, done=done)
     chosen = min(range(len(listed)), key=lambda k: (listed[k]["rl_validation_error_vertices"], k))
     return out / listed[chosen]["run"], chosen, runs
+
+
+def _candidate_unit(unit: dict, run_dir: Path, seed: int) -> dict:
+    """One pinch candidate's policy trained into ``run_dir``; its scores: the iteration it kept and its
+    validation error (on the nominal sheet where its own validation was not)."""
+    summary = train_policy(
+        unit["train"], run_dir, device=unit["device"], progress=unit["progress"], resume=unit["resume"],
+        label=unit["label"],
+    )  # fmt: skip
+    best, scores = summary["best"], {}
+    scores["rl_best_iteration"] = best["iterations"] if best else summary["iterations"]
+    if best is not None:
+        scores["rl_validation_error_vertices"] = best["validation_error"]
+    if best is None or unit["nominal"]:
+        if best is not None:
+            scores["rl_training_validation_error"] = best["validation_error"]
+        scores["rl_validation_error_vertices"] = nominal_validation_error(
+            run_dir, unit["trials"] or VALIDATION_TRIALS, seed, unit["device"]
+        )
+    return scores

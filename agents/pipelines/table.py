@@ -10,6 +10,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from agents.cluster import Executor, Serial, ran_here
 from agents.evaluation import Method, MethodResult, evaluate_suite
 from agents.gradient import grad_column
 from agents.jobs import EvaluateJob
@@ -17,7 +18,6 @@ from agents.methods import StepCallbacks
 from agents.pipelines.common import (
     analytic_pinches,
     claims_out,
-    finished_run,
     policy_iteration,
     policy_job,
     record_job,
@@ -96,6 +96,7 @@ def evaluate_table(
     log: Callable[[str], None] = lambda _: None,
     stages: Stages = lambda stage, done, total: None,
     step_callbacks: StepCallbacks | None = None,
+    cluster: Executor | None = None,
 ) -> TableReport:
     """The paper's Table I protocol on ``job.contours``.
 
@@ -119,6 +120,9 @@ def evaluate_table(
         log: Called with each progress line.
         stages: Called as each stage advances (:data:`Stages`: planning, training rl, evaluating).
         step_callbacks: Step callbacks of the batches (``("rl", k)``: contour k's rollout).
+        cluster: Where the units run (:mod:`agents.cluster`: each contour's plan, each rl policy's training
+            and rollouts); default: here, one after another. The rows are the same either way; each says
+            where its units ran (``ran_on``).
     """
     job = job.check()
     methods, config, trials, seed = list(job.methods), job.sim.validated(), job.trials, job.seed
@@ -136,8 +140,9 @@ def evaluate_table(
     record_job(out, job, resume)
     start = time.perf_counter()
     settings = dict(num_candidates=job.candidates, seed=seed, device=device, arm=job.arm)
-    plans = _table_plans(
-        plans if plans is not None else job.plan, loaded, config, settings, out, log, stages, resume
+    cluster = cluster or Serial()
+    plans, ran_on = _table_plans(
+        plans if plans is not None else job.plan, loaded, config, settings, out, log, stages, resume, cluster
     )
     specs, runs, notes = [Method(m) for m in methods], [], []  # notes: add a column's own fields to the table
     for spec in specs:
@@ -147,8 +152,8 @@ def evaluate_table(
             spec.pinches = analytic_pinches(job.analytic_pinch, loaded, plans)
             spec.allow_infeasible_pinch = job.analytic_pinch == "centroid"  # the paper's, feasible or not
         elif spec.name == "rl":
-            spec.result, runs, kept = _rl_result(
-                job, named, plans, out, device, resume, log, step_callbacks, stages
+            spec.result, runs, kept, ran_on["rl"] = _rl_result(
+                job, named, plans, out, device, resume, log, step_callbacks, stages, cluster
             )
             notes.append(functools.partial(_note_rl_iterations, kept))
         elif spec.name == "generalist":
@@ -176,6 +181,8 @@ def evaluate_table(
     log(f"  evaluated {len(methods)} method(s) x {len(loaded)} contour(s) x {trials} trials")
     for note in notes:
         note(table)
+    for k, row in enumerate(table["rows"]):  # where each unit of the row ran
+        row["ran_on"] = {unit: where[k] for unit, where in ran_on.items()} | {"evaluation": ran_here()}
     report = TableReport(
         loaded, methods, config, table, plans, job.analytic_pinch, time.perf_counter() - start, runs
     )
@@ -209,18 +216,21 @@ def _table_plans(
     log: Callable[[str], None],
     stages: Stages,
     resume: bool = False,
-) -> list[Plan] | None:
+    cluster: Executor | None = None,
+) -> tuple[list[Plan] | None, dict[str, list[str | None]]]:
     """:func:`evaluate_table`'s plans: the ones given (checked against the contours), or made now with the
-    plan search's ``settings`` (noise-free; written to ``out/plans.json``), or None (``plan`` False). With
-    ``resume``, the plans ``out/plans.json`` holds are read back instead of searched again: the request
-    (checked already) names the same contours, points and settings, and the search is deterministic."""
+    plan search's ``settings`` (noise-free; written to ``out/plans.json``) on ``cluster``, or None (``plan``
+    False). With ``resume``, the plans ``out/plans.json`` holds are read back instead of searched again: the
+    request (checked already) names the same contours, points and settings, and the search is
+    deterministic. Also returns where each plan was made (``{"planning": [HOST:PID]}``; none where given or
+    kept)."""
     if isinstance(plan, list | tuple):  # plans made already, one per contour
         plans = list(plan)
         if [p.contour.name for p in plans] != [c.name for c in contours]:
             raise ValueError("plan: give one Plan per contour, in the contours' order (or True / False)")
-        return plans
+        return plans, {}
     if not plan:
-        return None
+        return None, {}
     config, path = config.replace(noise_std=0.0), out / "plans.json"
     if resume and path.is_file():
         try:
@@ -232,24 +242,43 @@ def _table_plans(
         else:
             stages("planning", len(contours), len(contours))
             log(f"  kept the {len(plans)} plan(s) in {path}")
-            return plans
-    plans = _plan_all(contours, config, settings, log, stages)
+            return plans, {"planning": [None] * len(plans)}
+    plans, where = plan_all(contours, config, settings, log, stages, cluster or Serial())
     write_json(path, {p.contour.name: p.to_json() for p in plans})
-    return plans
+    return plans, {"planning": where}
 
 
-def _plan_all(
-    contours: list[Contour], config: SimConfig, settings: dict, log: Callable[[str], None], stages: Stages
-) -> list[Plan]:
-    """Plan every contour (:func:`~warpcut.planning.plan_cut` with ``settings``), saying how far it got."""
-    plans, started = [], time.perf_counter()
-    for k, contour in enumerate(contours):
-        log(f"  [{k + 1}/{len(contours)}] planning {contour.name} ({settings['num_candidates']} candidates)")
-        stages("planning", k, len(contours))
-        plans.append(plan_cut(contour, config, **settings))
-    stages("planning", len(contours), len(contours))
-    log(f"  planned {len(plans)} contour(s) in {time.perf_counter() - started:.0f} s")
-    return plans
+def plan_all(
+    contours: list[Contour],
+    config: SimConfig,
+    settings: dict,
+    log: Callable[[str], None],
+    stages: Stages,
+    cluster: Executor,
+) -> tuple[list[Plan], list[str]]:
+    """Plan every contour (:func:`~warpcut.planning.plan_cut` with ``settings``), a unit each on
+    ``cluster``, saying how far it got; returns the plans and where each was made."""
+    started, count = time.perf_counter(), len(contours)
+    log(f"  planning {count} contour(s) ({settings['num_candidates']} candidates each)")
+    stages("planning", 0, count)
+    finished = iter(range(1, count + 1))
+
+    def done(k: int, plan: Plan, where: str) -> None:
+        n = next(finished)
+        log(
+            f"  [{n}/{count}] planned {plan.contour.name}"
+            + ("" if cluster.address is None else f" on {where}")
+        )
+        stages("planning", n, count)
+
+    made = cluster.map(functools.partial(_plan_unit, config=config, settings=settings), contours, done=done)
+    log(f"  planned {count} contour(s) in {time.perf_counter() - started:.0f} s")
+    return [plan for plan, _ in made], [where for _, where in made]
+
+
+def _plan_unit(contour: Contour, config: SimConfig, settings: dict) -> Plan:
+    """One contour's plan (a unit of :func:`plan_all`)."""
+    return plan_cut(contour, config, **settings)
 
 
 def _rl_result(
@@ -262,25 +291,24 @@ def _rl_result(
     log: Callable[[str], None],
     step_callbacks: StepCallbacks | None,
     stages: Stages,
-) -> tuple[MethodResult, list[Path], list[int | None]]:
+    cluster: Executor | None = None,
+) -> tuple[MethodResult, list[Path], list[int | None], list[str]]:
     """The rl column: per contour a run (from ``job.checkpoints``, or trained now with ``job.train``, at the
     planned pinch and segments when planned) rolled out for ``job.trials``, paired with the baselines'
-    noise."""
-    trials, seed, checkpoints = job.trials, job.seed, job.checkpoints
+    noise. A contour's training and rollouts are a unit on ``cluster`` (its rollouts here where a step
+    callback watches them). Also returns where each contour's unit ran."""
+    trials, seed, checkpoints, cluster = job.trials, job.seed, job.checkpoints, cluster or Serial()
     env = {name: getattr(job.env, name) for name in ENV_FIELDS}
     options = PatternCutOptions(sim_config=job.sim, arm=job.arm, **env)
     # checkpoints at infeasible pinch points were refused before any work (_check_checkpoints) unless allowed
     allowed = {}
     if checkpoints is not None and job.allow_infeasible_pinch:
         allowed = {"allow_infeasible_pinch": True}
-    rollouts, runs, iterations, started = [], [], [], time.perf_counter()
+    started, units, runs = time.perf_counter(), [], []
+    watched = [None if step_callbacks is None else step_callbacks("rl", k) for k in range(len(named))]
     for k, (spec, contour) in enumerate(named):
-        if checkpoints is not None:
-            run = Path(checkpoints) / safe_name(contour.name)
-        else:
-            run = out / "policies" / safe_name(contour.name)
-            verb = "kept" if resume and finished_run(run) else "training"
-            log(f"  [{k + 1}/{len(named)}] {verb} {job.train.algo} for {contour.name}")
+        train_job = None
+        if checkpoints is None:
             planned = {}
             if plans is not None:
                 planned = {
@@ -289,21 +317,62 @@ def _rl_result(
                 }
             named_by = contour if GENERATED_SPEC.fullmatch(spec) else spec  # a generated one: stored inline
             train_job = policy_job(options, job, seed, trials, contour=named_by, **planned)
-            train_policy(train_job, run, device=device, progress=False, resume=resume)
-            runs.append(run)
-        iterations.append(policy_iteration(run))
-        callback = None if step_callbacks is None else step_callbacks("rl", k)
-        # Trial t sees the noise of the baselines' trial t of this contour (env k * trials + t there).
-        rollouts.append(
-            rollout_errors(
-                run, trials, seed=seed + 1, device=device, on_step=callback, paired_noise=(seed, k * trials),
-                overrides=allowed,
-            )
-        )  # fmt: skip
-        stages("training rl" if checkpoints is None else "rolling out rl", k + 1, len(named))
+        rollout = None
+        if (
+            watched[k] is None
+        ):  # trial t sees the noise of the baselines' trial t of contour k (env k*trials+t)
+            rollout = dict(trials=trials, seed=seed + 1, device=device, paired_noise=(seed, k * trials))
+            rollout["overrides"] = allowed
+        units.append({"train": train_job, "device": device, "resume": resume, "rollout": rollout})
+        runs.append(
+            Path(checkpoints) / safe_name(contour.name)
+            if checkpoints
+            else out / "policies" / safe_name(contour.name)
+        )
+    what = "training" if checkpoints is None else "rolling out"
+    stage = "training rl" if checkpoints is None else "rolling out rl"
+    log(f"  {what} {job.train.algo if checkpoints is None else 'rl'} for {len(named)} contour(s)")
+    finished = iter(range(1, len(named) + 1))
+
+    def done(k: int, _, where: str) -> None:
+        n = next(finished)
+        log(f"  [{n}/{len(named)}] {named[k][1].name}" + ("" if cluster.address is None else f" on {where}"))
+        stages(stage, n, len(named))
+
+    stages(stage, 0, len(named))
+    if checkpoints is None:
+        made = cluster.map(_rl_unit, units, dirs=runs, done=done, gpu=_cuda(device))
+    else:  # trained already: rolled out here
+        made = [(_rl_unit(unit, run), ran_here()) for unit, run in zip(units, runs, strict=True)]
+    rollouts, iterations = [], []
+    for k, ((value, _), run) in enumerate(zip(made, runs, strict=True)):
+        iterations.append(value["iteration"])
+        rollouts.append(value["rollouts"])
+        if rollouts[-1] is None:  # watched: rolled out here, paired as the unit would have
+            rollouts[-1] = rollout_errors(
+                run, trials, seed=seed + 1, device=device, on_step=watched[k],
+                paired_noise=(seed, k * trials), overrides=allowed,
+            )  # fmt: skip
     what = "trained" if checkpoints is None else "rolled out"
     log(f"  rl: {what} {len(named)} policy(ies) in {time.perf_counter() - started:.0f} s")
-    return MethodResult.from_rollouts(rollouts), runs, iterations
+    trained = runs if checkpoints is None else []
+    return MethodResult.from_rollouts(rollouts), trained, iterations, [where for _, where in made]
+
+
+def _rl_unit(unit: dict, run: Path) -> dict:
+    """One contour's rl unit: its policy trained into ``run`` (unless given), the iteration it kept and,
+    unless watched, its paired rollouts."""
+    if unit["train"] is not None:
+        train_policy(unit["train"], run, device=unit["device"], progress=False, resume=unit["resume"])
+    rollouts = None if unit["rollout"] is None else rollout_errors(run, **unit["rollout"])
+    return {"iteration": policy_iteration(run), "rollouts": rollouts}
+
+
+def _cuda(device: str | None) -> bool:
+    """Whether ``device`` is a GPU (a unit there declares one)."""
+    from warpcut.sim.simulator import resolve_device
+
+    return resolve_device(device).startswith("cuda")
 
 
 def _generalist_result(

@@ -14,6 +14,7 @@ from concurrent.futures import ThreadPoolExecutor, wait
 
 import numpy as np
 
+from warpcut.cores import cpu_cores
 from warpcut.sim import kernels
 from warpcut.sim._warp import LaunchRecords, init, launch, wp
 from warpcut.sim.checks import DIVERGENCE_REASONS, check_pinch_points
@@ -172,8 +173,7 @@ class Simulator(StateReads):
                 "pass backend='colours' or capture=False"
             )
         self.capture = bool(capture)
-        cores = os.cpu_count() or 1
-        self.threads = max(1, min(threads or cores, blocks))
+        self.threads = max(1, min(threads or cpu_cores(), blocks))
         self._slices = [(len(c), int(c[0])) for c in np.array_split(np.arange(blocks), self.threads)]
         # The calling thread steps the first slice itself; the pool's threads step the others (a handoff
         # and a wake-up fewer per update than a pool of one thread per slice).

@@ -21,6 +21,8 @@ import threading
 import time
 from pathlib import Path
 
+from warpcut.cores import cpu_cores
+
 PROCESS_NICE = 10
 """How much the recorder process lowers its scheduling priority (``nice``): where no core is free, the
 stepping loop keeps its core and the recording catches up while the stepping process waits (at the latest
@@ -119,7 +121,7 @@ def _child_environment() -> dict[str, str]:
 def default_background() -> str | bool:
     """``Recorder(background=None)``: a recorder process on a POSIX machine with more than one core (a
     core the stepping loop may leave free), else the step callback itself."""
-    return "process" if os.name == "posix" and (os.cpu_count() or 1) > 1 else False
+    return "process" if os.name == "posix" and cpu_cores() > 1 else False
 
 
 # The pipe to the recorder process carries messages of a kind byte and a payload length, then the payload:

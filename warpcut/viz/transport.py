@@ -17,7 +17,6 @@ the recording (:meth:`close`), and says how the step callback should batch (:met
 from __future__ import annotations
 
 import math
-import os
 import pickle
 import queue
 import struct
@@ -30,6 +29,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from warpcut.cores import cpu_cores
 from warpcut.viz.frames import Frame, TaskSetup
 from warpcut.viz.process import (
     CLOSE_TIMEOUT_S,
@@ -160,7 +160,7 @@ class ProcessSink:
         but where the simulator's threads use every core, groups of :data:`FLUSH_FRAMES` (as the step
         callback batches them): there the recorder process only runs on time taken from the stepping
         threads, and fewer, larger batches cost it less."""
-        if task is not None and (os.cpu_count() or 1) <= task.sim.threads:
+        if task is not None and cpu_cores() <= task.sim.threads:
             return FLUSH_FRAMES, ()
         return PROCESS_BATCH_FRAMES, PROCESS_LEAD_FRAMES
 
