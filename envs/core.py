@@ -74,12 +74,31 @@ DISCRETE_MOVES = np.array(
 """Grasp move of each discrete action, in units of ``max_step_mm``: stay, +x, -x, +y, -y, +z, -z."""
 
 
+def check_part(part: tuple[int, int] | None, num_envs: int) -> tuple[int, int]:
+    """``part`` (``(first, total)``: ``num_envs`` envs from ``first`` of a batch of ``total``) checked; None:
+    the whole batch, ``(0, num_envs)``."""
+    if part is None:
+        return 0, num_envs
+    ok = isinstance(part, tuple | list) and len(part) == 2
+    ok = ok and all(isinstance(v, int | np.integer) for v in part)
+    if not ok or not (0 <= part[0] and part[0] + num_envs <= part[1]):
+        raise ValueError(
+            f"part: give (first, total), {num_envs} envs from env first of a batch of total envs, "
+            f"0 <= first and first + {num_envs} <= total (got {part!r})"
+        )
+    return int(part[0]), int(part[1])
+
+
 class PatternCut:
     """B pattern-cutting scenes on one episode clock: NumPy observations, actions, rewards; no autoreset.
 
     Args:
         options: The scenario.
         num_envs: Batch size B.
+        part: ``(first, total)``: these B envs are envs ``first .. first + B - 1`` of a batch of ``total``
+            (``options`` theirs: :meth:`~envs.options.PatternCutOptions.part`), and cut as those envs of the
+            whole batch would, for the same seed and actions: the same process noise, fiducials and
+            randomised sheets. Default: the whole batch.
 
     Attributes:
         task: The underlying :class:`~warpcut.task.CuttingTask` (what the baseline tensioners drive).
@@ -91,9 +110,10 @@ class PatternCut:
         last_moves: (B, 3) the grasp moves (mm) of the last step.
     """
 
-    def __init__(self, options: PatternCutOptions, num_envs: int):
+    def __init__(self, options: PatternCutOptions, num_envs: int, part: tuple[int, int] | None = None):
         check_instance("PatternCut.options", options, PatternCutOptions, "a PatternCutOptions")
         num_envs = check_integer("PatternCut.num_envs", num_envs, 1)
+        self.part = check_part(part, num_envs)
         options.validated()  # its fields may have been changed since it was made
         self._randomized = options.randomized()
         self.options = options
@@ -104,6 +124,7 @@ class PatternCut:
             config, contours, num_envs, pinch_points=pinch_points, segments=segments, device=options.device,
             arm=options.arm, allow_infeasible_pinch=options.allow_infeasible_pinch,
         )  # fmt: skip
+        self.task.sim.first_noise_stream = self.part[0]  # env e draws the noise of env first + e
         self.config = self.task.config
         self.area_mm2 = np.array([c.area_mm2 for c in contours])
         self.episode_steps = min(self.task.num_steps, options.max_episode_steps or self.task.num_steps)
@@ -161,14 +182,17 @@ class PatternCut:
                 self.fiducials.material = np.zeros((self.num_envs, 0, 2))
             else:
                 self.fiducials.material = sample_fiducials(
-                    rng, self.options.num_fiducials, self.task.contours, self.task.pinch_points, self.config
-                )
+                    rng, self.options.num_fiducials, self.task.contours, self.task.pinch_points, self.config,
+                    self.part,
+                )  # fmt: skip
             self._sampled = True
         if self._randomized:
-            if repeat < 1 or self.num_envs % repeat:
-                raise ValueError(f"repeat: {repeat} must be >= 1 and divide the {self.num_envs} envs")
-            draws = sample_parameters(rng, self._randomized, self.num_envs // repeat)
-            self.task.set_params(**{name: np.tile(values, repeat) for name, values in draws.items()})
+            first, total = self.part
+            if repeat < 1 or total % repeat:
+                raise ValueError(f"repeat: {repeat} must be >= 1 and divide the {total} envs")
+            draws = sample_parameters(rng, self._randomized, total // repeat)
+            rows = slice(first, first + self.num_envs)
+            self.task.set_params(**{name: np.tile(values, repeat)[rows] for name, values in draws.items()})
             steps = self.task.num_steps
             self.episode_steps = min(steps, self.options.max_episode_steps or steps)
         if self.options.relative_reward:

@@ -18,6 +18,7 @@ from warpcut.contours import Contour, builtin_names, contour_from_json, load_con
 from warpcut.fiducials import NUM_FIDUCIALS, SHAFT_RADIUS_MM
 from warpcut.planning import ArmModel, check_pinch, default_pinch
 from warpcut.sim.config import (
+    PHYSICAL_PARAMETERS,
     RANDOMIZE_ALIASES,
     RANDOMIZE_RANGES,
     PerEnv,
@@ -305,6 +306,26 @@ class PatternCutOptions(EnvConfig):
     def nominal(self) -> PatternCutOptions:
         """These options without domain randomisation: the scenario a policy is evaluated on."""
         return dataclasses.replace(self, randomize=(), randomize_ranges=None)
+
+    def part(self, first: int, count: int, total: int) -> PatternCutOptions:
+        """The options of envs ``first .. first + count - 1`` of a batch of ``total``: their contours, pinch
+        points, segments and per-env physical parameters (a ``PatternCutVecEnv(count, ..., part=(first,
+        total))`` of them cuts as those envs of the whole batch)."""
+        contours, pinch, segments = self.per_env(total)
+        config, rows = self.config(), slice(first, first + count)
+        physics = {}
+        for name in PHYSICAL_PARAMETERS:
+            values = np.asarray(getattr(config, name), dtype=np.float64)
+            if values.ndim == 1 and values.size == total > 1:
+                physics[name] = values[rows].tolist()
+        return dataclasses.replace(
+            self,
+            contour=contours[rows],
+            pinch_point=pinch[rows],
+            segments=None if segments is None else segments[rows],
+            sim_config=config.replace(**physics),
+            **{name: None for name in SIM_OVERRIDES},  # in sim_config now
+        )
 
     def contours(self, num_envs: int) -> list[Contour]:
         """One loaded contour per env."""

@@ -83,6 +83,9 @@ class PatternCutVecEnv(VectorEnv):
         render_envs: How many envs :meth:`render` draws, the first ones; default all.
         render_size: Rendered image size in pixels: ``N`` (square) or ``(width, height)``.
         render_view: The rendering camera, ``"top"`` or ``"three-quarter"``.
+        part: ``(first, total)``: these envs are envs ``first ..`` of a batch of ``total`` and cut as those
+            would (:class:`envs.core.PatternCut`; ``options`` theirs, :meth:`PatternCutOptions.part`): a batch
+            split over processes, each stepping a part.
 
     ``reset(seed=..., options=...)`` takes Gymnasium's forms (module docstring). Actions are (B,) indices
     (discrete) or (B, A) moves (continuous).
@@ -104,6 +107,7 @@ class PatternCutVecEnv(VectorEnv):
         render_envs: int | None = None,
         render_size: int | tuple[int, int] = 256,
         render_view: str = "top",
+        part: tuple[int, int] | None = None,
         **kwargs: Any,
     ):
         num_envs = check_integer("PatternCutVecEnv.num_envs", num_envs, 1)
@@ -118,7 +122,7 @@ class PatternCutVecEnv(VectorEnv):
             check_render_settings(render_size, render_view, prefix="render_")
         self.options = PatternCutOptions.build(options, **kwargs)
         self.num_envs = num_envs
-        self.scene = PatternCut(self.options, num_envs)
+        self.scene = PatternCut(self.options, num_envs, part)
         self.single_observation_space = self.scene.observation_space
         self.single_action_space = self.scene.action_space
         self.observation_space = batch_space(self.single_observation_space, num_envs)

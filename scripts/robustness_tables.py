@@ -13,7 +13,7 @@ import json
 import math
 from pathlib import Path
 
-from agents.pipelines.robustness import robustness_target
+from agents.pipelines.robustness_target import robustness_target
 
 
 def table(report: dict) -> list[str]:
@@ -48,7 +48,7 @@ def _counts(verdicts: list[str], table: bool = False) -> str:
 
 
 def targets(reports: dict[str, dict], policy: str) -> list[str]:
-    """The robustness target check (agents.pipelines.robustness.robustness_target) as lines: the medians'
+    """The robustness target check (agents.pipelines.robustness_target) as lines: the medians'
     reading, then the 95% intervals' (per value: in, open = undecided at these trials, out)."""
     result = robustness_target(reports, policy)
     out = []

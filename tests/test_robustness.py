@@ -19,8 +19,8 @@ from agents.pipelines.robustness import (
     parse_studies,
     robustness_study,
     robustness_table,
-    robustness_target,
 )
+from agents.pipelines.robustness_target import robustness_target
 from envs.options import EnvConfig, PatternCutOptions
 from envs.vector import PatternCutVecEnv
 from warpcut.contours import load_contour

@@ -78,6 +78,7 @@ def sample_fiducials(
     contours: Sequence[Contour],
     pinch_points: np.ndarray,
     config: SimConfig,
+    part: tuple[int, int] | None = None,
 ) -> np.ndarray:
     """``num`` random material points per env, preferably where they stay informative.
 
@@ -91,12 +92,16 @@ def sample_fiducials(
         contours: (B,) each env's contour.
         pinch_points: (B, 2) each env's pinch point (mm); NaN rows for no grasp.
         config: Simulation parameters (sheet size, cut and grasp radii).
+        part: ``(first, total)``: the envs are ``first, first + 1, ...`` of a batch of ``total``, and draw
+            what those envs of the whole batch draw from the same ``rng``.
 
     Returns:
         (B, num, 2) material coordinates (mm).
     """
     num_envs = len(contours)
-    draws = rng.uniform([0.0, 0.0], [config.width_mm, config.height_mm], size=(num_envs, 16 * num, 2))
+    first, total = part or (0, num_envs)
+    draws = rng.uniform([0.0, 0.0], [config.width_mm, config.height_mm], size=(total, 16 * num, 2))
+    draws = draws[first : first + num_envs]
     preferred = np.ones(draws.shape[:2], dtype=bool)
     for contour in {id(c): c for c in contours}.values():
         envs = np.array([c is contour for c in contours])

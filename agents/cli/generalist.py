@@ -41,6 +41,7 @@ FLAGS = {
 )
 @common.seed_option
 @common.device_option
+@common.ray_option("the contours' plans and es's perturbed policies (the envs of whole policies a worker)")
 @common.out_option("logs/generalist-TIMESTAMP")
 @common.run_dir_options
 @click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
@@ -52,6 +53,7 @@ def command(
     iterations: int | None,
     seed: int,
     device: str | None,
+    ray: str | None,
     out: Path | None,
     resume: bool,
     overwrite: bool,
@@ -67,6 +69,7 @@ def command(
     Everything but the flags is set with --config FILE and --set KEY=VALUE (the look-ahead: env.lookahead;
     es: train.es.population, train.es.sigma; the physics: sim.*); --print-config shows them all.
     """
+    from agents.cluster import executor
     from agents.jobs import GeneralistJob
     from agents.pipelines.generalist import train_generalist
 
@@ -80,11 +83,12 @@ def command(
         return
     out, claim = common.claim(out, "generalist", resume, overwrite, "generalist")
     try:
-        with claim:
+        with claim, executor(ray, device, common.log) as units:
             click.echo(f"training a generalist into {out} ({device})")
             summary = train_generalist(
-                job, out, resume=resume, device=device, progress=not no_progress, log=common.log
-            )
+                job, out, resume=resume, device=device, progress=not no_progress, log=common.log,
+                cluster=units,
+            )  # fmt: skip
     except KeyboardInterrupt as stop:  # Ctrl-C, SIGTERM, SIGHUP: the checkpoint is saved
         if not (out / "summary.json").is_file():
             raise

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from agents.cluster import Executor
 from agents.config_io import to_plain
 from agents.generalist import ES_FIELDS, FORMAT, GENERALIST_FILE, POLICY_FIELDS
 from agents.pipelines.common import CONFIG_FILE
@@ -57,6 +58,7 @@ def train_generalist(
     device: str | None = None,
     progress: bool = True,
     log: Callable[[str], None] = lambda _: None,
+    cluster: Executor | None = None,
 ) -> dict:
     """Train ``job``'s generalist into ``out`` (module docstring); Ctrl-C saves a checkpoint and re-raises.
 
@@ -67,12 +69,15 @@ def train_generalist(
         device: The simulator's Warp device.
         progress: Show the progress bar.
         log: Called with each progress line.
+        cluster: Where the contours are planned and the envs step (:mod:`agents.cluster`; on a Ray cluster
+            each worker steps the envs of whole perturbed policies, :class:`agents.shards.ShardedEnv`);
+            default: here. The policy trained is the same either way.
 
     Returns:
         The training summary (``summary.json``).
     """
     with claim_run_dir(out, command="generalist", resume=resume):
-        return _train_generalist(job.check(), Path(out), resume, device, progress, log)
+        return _train_generalist(job.check(), Path(out), resume, device, progress, log, cluster)
 
 
 def _train_generalist(
@@ -82,6 +87,7 @@ def _train_generalist(
     device: str | None,
     progress: bool,
     log: Callable[[str], None],
+    cluster: Executor | None,
 ) -> dict:
     from agents.pipelines.table import _table_plans
     from agents.policies import VALIDATION_SEED_OFFSET, policy_errors
@@ -95,7 +101,8 @@ def _train_generalist(
     train_set, validation = training_contours(job)
     log(f"  {len(train_set)} training contours, {len(validation)} validation contours")
     settings = dict(num_candidates=job.candidates, seed=job.seed, device=device, arm=job.arm)
-    plans = _table_plans(True, train_set + validation, config, settings, out, log, lambda *_: None, resume)
+    stages = lambda *_: None  # noqa: E731
+    plans, _ = _table_plans(True, train_set + validation, config, settings, out, log, stages, resume, cluster)
     write_json(out / CONFIG_FILE, to_plain(job))
     cfg = job.training_config(len(train_set))
     count = len(train_set)
@@ -104,7 +111,13 @@ def _train_generalist(
     options = _options(job, [train_set[k] for k in order], [plans[k] for k in order], device)
     write_json(out / GENERALIST_FILE, _settings(job, train_set, validation))
     log(f"  es: {population} perturbed policies x {count} contours = {cfg.batch_size} envs an iteration")
-    env = training_env(options, cfg, job.seed)
+    if cluster is None or cluster.address is None:
+        env = training_env(options, cfg, job.seed)
+    else:  # each worker steps whole perturbed policies' envs
+        from agents.shards import ShardedEnv
+
+        env = ShardedEnv(options, cfg.batch_size, cluster, count, cfg.torch_device, job.seed)
+        log(f"  es: the batch in {len(env.parts)} part(s), on {', '.join(env.ran_on)}")
     val_plans = plans[count:]
     val_options = _options(job, validation, val_plans, device)
     with batch_named("validation_contours", "set validation_contours to at most {fits}"):
@@ -117,11 +130,15 @@ def _train_generalist(
         return errors * validation_env.scene.reward_scale / area
 
     latest = out if resume and any(out.glob("*.pt")) else None
-    return train(
-        env, cfg, out, seed=job.seed, resume=latest, progress=progress, validate=validate,
-        label=f"{cfg.algo.upper()} generalist",
-        marks={"contours": count, "validation_contours": len(validation)},
-    )  # fmt: skip
+    try:
+        return train(
+            env, cfg, out, seed=job.seed, resume=latest, progress=progress, validate=validate,
+            label=f"{cfg.algo.upper()} generalist",
+            marks={"contours": count, "validation_contours": len(validation)},
+        )  # fmt: skip
+    finally:
+        if hasattr(env, "close"):
+            env.close()
 
 
 def _options(job: GeneralistJob, contours: list[Contour], plans: list[Plan], device: str | None):

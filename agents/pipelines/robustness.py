@@ -21,8 +21,8 @@ centroid), no tension none.
 
 A trial whose simulation diverges (at large noise, say) is not refused: its error is undefined, so it is
 left out of its pair (a method's trial k and no tension's), and every method's count of diverged trials per
-value is in the report (``diverged``) and in its table. :func:`robustness_target` counts a value where the
-policy diverged in more trials than no tension against the policy.
+value is in the report (``diverged``) and in its table. The robustness target (``agents.pipelines.
+robustness_target``) counts a value where the policy diverged in more trials than no tension against it.
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ from agents.methods import BASELINES, check_methods, tensioner
 from agents.pipelines.common import claims_out, record_job
 from warpcut.contours import Contour, ContourError, load_contour
 from warpcut.planning import ArmModel, InfeasiblePinch, check_pinch
-from warpcut.scoring import bootstrap_ci, bootstrap_difference_ci, paired_improvement
+from warpcut.scoring import bootstrap_ci, paired_improvement
 from warpcut.sim.config import GRAVITY_MM_S2, SimConfig
 from warpcut.sim.memory import batch_named
 from warpcut.task import segments_key
@@ -194,41 +194,9 @@ def robustness_study(
         if segments_key(cut) != segments_key(segments)
     }
     chosen, played = _methods(methods, runs, plans, scenario, grad, device, seed, out, log)
-    errors: dict[str, np.ndarray] = {m: np.full((len(values), trials), np.nan) for m in chosen}
-    own_none = {label: np.full((len(values), trials), np.nan) for label in own_order}
-    batches = [[k] for k in range(len(values))] if study == "resolution" else [list(range(len(values)))]
-    common = dict(contour=contour, pinch=pinch, runs=runs, device=device, seed=seed, generalist=generalist)
-    units, owners = [], []  # a unit per batch and method (and per cut order of no tension, own_order's)
-    for b, batch in enumerate(batches):
-        picked = [values[k] for k in batch]
-        overrides = _override(study, picked, trials)
-        sim = config.replace(**overrides)
-        shared = dict(common, config=sim, overrides=overrides, settings=len(picked), trials=trials)
-        for method in chosen:
-            units.append(dict(shared, method=method, segments=segments, plans=played, study=study))
-            owners.append((b, method))
-        for key, cut in {segments_key(cut): cut for cut in own_order.values()}.items():
-            units.append(dict(shared, method="none", segments=cut, plans=None, study=study))
-            owners.append((b, key))
-    folders = [_unit_run(unit, runs, generalist) for unit in units]
-    log(f"  {study}: {', '.join(chosen)} at {len(values)} value(s), {trials} trials ({len(units)} batch(es))")
-    results = dict(zip(owners, cluster.map(_errors_unit, units, dirs=folders), strict=True))
-    made = {owner: value for owner, (value, _) in results.items()}
-    skipped = []
-    for b, batch in enumerate(batches):
-        picked = [values[k] for k in batch]
-        failed = next((made[(b, m)] for m in chosen if isinstance(made[(b, m)], str)), None)
-        if failed is not None:  # a mesh too coarse for the contour or grasp
-            log(f"  skipped {study} {picked[0]:g}: {failed}")
-            skipped.extend(picked)
-            for method in chosen:
-                errors[method][batch] = np.nan
-            continue
-        for method in chosen:
-            errors[method][batch] = made[(b, method)]
-        for label, cut in own_order.items():
-            own_none[label][batch] = made[(b, segments_key(cut))]
-        _log_diverged(log, study, picked, {m: errors[m][batch] for m in chosen})
+    common = dict(contour=contour, pinch=pinch, runs=runs, device=device, seed=seed, trials=trials)
+    common |= {"generalist": generalist, "study": study, "config": config, "segments": segments}
+    errors, own_none, skipped, ran_on = _study_errors(values, chosen, own_order, played, common, cluster, log)
     report = {
         "study": study,
         "values": [float(v) for v in values],
@@ -245,7 +213,7 @@ def robustness_study(
         "skipped": [float(v) for v in skipped],
         "own_order_none": sorted(own_order),
         "diverged": {m: _diverged_counts(values, skipped, errors[m]) for m in chosen},
-        "ran_on": {m: [results[(b, m)][1] for b in range(len(batches))] for m in chosen},
+        "ran_on": ran_on,
     }
     report.update(_method_stats(study, chosen, errors, own_none, config.width_mm * config.height_mm))
     report["seconds"] = time.perf_counter() - start
@@ -254,6 +222,54 @@ def robustness_study(
 
         write_json(Path(out) / f"robustness-{study}.json", report)
     return report
+
+
+def _study_errors(
+    values: list[float],
+    chosen: list[str],
+    own_order: dict,
+    played: Mapping[str, PlanResult],
+    common: dict,
+    cluster: Executor,
+    log: Callable[[str], None],
+) -> tuple[dict, dict, list[float], dict]:
+    """:func:`robustness_study`'s (values, trials) errors of every method in ``chosen`` (and of no tension
+    in each cut order of ``own_order``), a unit per method and batch of values on ``cluster``: the errors,
+    no tension's own-order errors, the values skipped (a mesh too coarse) and where each unit ran."""
+    study, trials, config = common["study"], common["trials"], common["config"]
+    errors: dict[str, np.ndarray] = {m: np.full((len(values), trials), np.nan) for m in chosen}
+    own_none = {label: np.full((len(values), trials), np.nan) for label in own_order}
+    batches = [[k] for k in range(len(values))] if study == "resolution" else [list(range(len(values)))]
+    units, owners = [], []  # a unit per batch and method (and per cut order of no tension, own_order's)
+    for b, batch in enumerate(batches):
+        overrides = _override(study, [values[k] for k in batch], trials)
+        shared = dict(common, config=config.replace(**overrides), overrides=overrides, settings=len(batch))
+        for method in chosen:
+            units.append(dict(shared, method=method, plans=played))
+            owners.append((b, method))
+        for key, cut in {segments_key(cut): cut for cut in own_order.values()}.items():
+            units.append(dict(shared, method="none", segments=cut, plans=None))
+            owners.append((b, key))
+    # the folder a unit reads (a worker of a cluster gets its files): its method's run, or the generalist
+    runs, generalist = common["runs"], common["generalist"]
+    folders = [runs.get(u["method"]) or (generalist if u["method"] == "generalist" else None) for u in units]
+    log(f"  {study}: {', '.join(chosen)} at {len(values)} value(s), {trials} trials ({len(units)} batch(es))")
+    results = dict(zip(owners, cluster.map(_errors_unit, units, dirs=folders), strict=True))
+    made, skipped = {owner: value for owner, (value, _) in results.items()}, []
+    for b, batch in enumerate(batches):
+        picked = [values[k] for k in batch]
+        failed = next((made[(b, m)] for m in chosen if isinstance(made[(b, m)], str)), None)
+        for method in chosen:  # all NaN where the mesh was too coarse for the contour or grasp
+            errors[method][batch] = np.nan if failed is not None else made[(b, method)]
+        if failed is not None:
+            log(f"  skipped {study} {picked[0]:g}: {failed}")
+            skipped.extend(picked)
+            continue
+        for label, cut in own_order.items():
+            own_none[label][batch] = made[(b, segments_key(cut))]
+        _log_diverged(log, study, picked, {m: errors[m][batch] for m in chosen})
+    ran_on = {m: [results[(b, m)][1] for b in range(len(batches))] for m in chosen}
+    return errors, own_none, skipped, ran_on
 
 
 def _infeasible_pinches(
@@ -494,23 +510,12 @@ def _method_errors(
     return np.where(result.diverged_trials(), np.nan, np.asarray(result.error_mm2, dtype=np.float64))
 
 
-def _unit_run(unit: dict, runs: Mapping[str, Path], generalist: str | None) -> Path | None:
-    """The folder a robustness unit reads: its method's trained run, or the generalist given (a worker of
-    a cluster gets its files); None where it reads none."""
-    if unit["method"] in runs:
-        return Path(runs[unit["method"]])
-    return Path(generalist) if unit["method"] == "generalist" and generalist is not None else None
-
-
 def _errors_unit(unit: dict, folder: Path | None) -> np.ndarray | str:
-    """A unit of :func:`robustness_study`: :func:`_method_errors` of ``unit`` (its run or generalist read
-    from ``folder``); a resolution the contour or grasp does not fit is its error's message (the value is
-    skipped)."""
-    unit = dict(unit)
-    study, method, runs, generalist = (unit.pop(k) for k in ("study", "method", "runs", "generalist"))
-    if folder is not None:
-        runs = {**runs, method: folder} if method in runs else runs
-        generalist = folder if method == "generalist" else generalist
+    """A unit of :func:`robustness_study`: :func:`_method_errors` of ``unit``, its run or generalist read
+    from ``folder``; a resolution the contour or grasp does not fit: its error's message (a skipped value)."""
+    study, method, runs, generalist = (unit[k] for k in ("study", "method", "runs", "generalist"))
+    runs = {**runs, method: folder} if method in runs else runs
+    generalist = folder if method == "generalist" else generalist
     try:
         return _method_errors(
             method, unit["contour"], unit["pinch"], unit["segments"], unit["config"], unit["overrides"],
@@ -542,16 +547,6 @@ def _diverged_counts(values: list, skipped: list, errors: np.ndarray) -> list[in
     return [0 if v in skipped else int(np.sum(~np.isfinite(row))) for v, row in rows]
 
 
-def _diverged_more(report: dict, policy: str) -> list[bool]:
-    """Per value: the policy diverged in more trials than no tension did (False for a report without
-    counts)."""
-    counts = report.get("diverged") or {}
-    mine, none = counts.get(policy), counts.get("none")
-    if mine is None or none is None:
-        return [False] * len(report["values"])
-    return [a > b for a, b in zip(mine, none, strict=True)]
-
-
 def robustness_table(report: dict) -> list[str]:
     """The report as text lines: one row per value, one column per method (median [q25, q75]; a method at
     a pinch point the gripper could not hold is headed "METHOD (infeasible)")."""
@@ -578,123 +573,6 @@ def robustness_table(report: dict) -> list[str]:
     return lines
 
 
-TARGET_BAND = 0.1
-"""The target's noise half (:func:`robustness_target`): a policy's improvement stays within this fraction
-of its nominal improvement across the noise sweep."""
-
-
-def _trials(report: dict, method: str, k: int) -> np.ndarray:
-    """Value ``k``'s per-trial statistics of ``method`` (NaN where undefined); empty for a report written
-    before the reports kept them."""
-    rows = report[method].get("per_trial")
-    return np.array([] if rows is None else rows[k], dtype=np.float64)
-
-
-def _verdict(interval: tuple[float, float] | None, low: float, high: float = float("inf")) -> str:
-    """``in`` when the 95% ``interval`` lies within ``[low, high]``, ``out`` when it lies wholly outside,
-    ``open`` when it straddles an edge or there is none (too few trials)."""
-    if interval is None:
-        return "open"
-    if interval[0] >= low and interval[1] <= high:
-        return "in"
-    return "out" if interval[1] < low or interval[0] > high else "open"
-
-
-def robustness_target(reports: Mapping[str, dict], policy: str, band: float = TARGET_BAND) -> dict:
-    """The robustness target for the method ``policy`` in the force and noise reports of one contour
-    (:func:`robustness_study`'s, by study name): a policy that never does worse than no tension across the
-    force sweep (its median improvement >= 0 at every gravity), and whose improvement stays within ``band``
-    of its nominal improvement across the noise sweep, judged two ways.
-
-    - ``median``: on the medians over trials, as the target reads.
-    - ``ci``: on 95% bootstrap intervals: a force value is ``in`` if its median's interval lies at or above
-      0, ``out`` if wholly below it, ``open`` if it straddles 0; a noise value compares the interval of its
-      median minus the nominal one with ``+- band x |nominal median|`` (``in`` inside it, ``out`` outside
-      it, ``open`` across an edge; ``one_sided`` with the lower edge only). Values whose trials all agree
-      (a deterministic sheet, e.g. no noise) are listed in ``deterministic``: their interval is the nominal
-      one's alone, and their one outcome stands for a chaotic distribution.
-
-    A value where the policy diverged in more trials than no tension (the report's ``diverged`` counts) is
-    ``out`` in both readings and listed in ``diverged_more``; at the noise sweep's nominal value, which has
-    no verdict of its own, it fails the noise half (``nominal_diverged_more``).
-
-    Returns ``{"force": {...}, "noise": {...}}`` for the studies present, each with ``values``, the median
-    reading (``median_met``; force ``lowest`` [median, value] and ``below``, noise ``within`` /
-    ``not_below`` counts and the band) and the interval reading (``ci``: a verdict per value; ``ci_met``:
-    "yes" when every value is ``in``, "no" when one is ``out``, else "open"). ``ValueError`` names a missing
-    policy."""
-    out: dict = {}
-    force, noise = reports.get("force"), reports.get("noise")
-    for study, report in (("force", force), ("noise", noise)):
-        if report is not None and policy not in report:
-            methods = ", ".join(report["methods"])
-            raise ValueError(f"policy: {policy!r} is not in the {study} report (methods: {methods})")
-    if force is not None:
-        medians = force[policy]["median"]
-        cis = force[policy].get("median_ci95") or [None] * len(medians)
-        more = _diverged_more(force, policy)
-        verdicts = [
-            "out" if worse else _verdict(None if ci is None else tuple(ci), 0.0)
-            for ci, worse in zip(cis, more, strict=True)
-        ]
-        out["force"] = {
-            "values": force["values"],
-            "lowest": list(
-                min((m, v) for m, v in zip(medians, force["values"], strict=True) if m is not None)
-            ),
-            "below": [v for v, m in zip(force["values"], medians, strict=True) if m is not None and m < 0],
-            "diverged_more": [v for v, worse in zip(force["values"], more, strict=True) if worse],
-            "median_met": all(m is None or m >= 0 for m in medians) and not any(more),
-            "ci": verdicts,
-            "ci_met": _overall(verdicts),
-        }
-    if noise is not None:
-        values, medians = noise["values"], noise[policy]["median"]
-        k0 = int(np.argmin([abs(v - noise["nominal"]) for v in values]))
-        nominal, width = medians[k0], band * abs(medians[k0])
-        reference = _trials(noise, policy, k0)
-        more = _diverged_more(noise, policy)
-        two, one, deterministic = [], [], []
-        for k, value in enumerate(values):
-            if k == k0:
-                continue
-            trials = _trials(noise, policy, k)
-            finite = trials[np.isfinite(trials)]
-            if finite.size > 1 and np.all(finite == finite[0]):
-                deterministic.append(value)
-            interval = bootstrap_difference_ci(trials, reference) if trials.size else None
-            two.append("out" if more[k] else _verdict(interval, -width, width))
-            one.append("out" if more[k] else _verdict(interval, -width))
-        # a value where the policy diverged more often than no tension counts as outside the band; at the
-        # nominal one, the band's reference itself is a policy that fails more often: no value is within
-        others = [None if more[k] or more[k0] else m for k, m in enumerate(medians) if k != k0]
-        if more[k0]:
-            two, one = ["out"] * len(two), ["out"] * len(one)
-        out["noise"] = {
-            "values": [v for k, v in enumerate(values) if k != k0],
-            "nominal": values[k0],
-            "nominal_median": nominal,
-            "band": width,
-            "diverged_more": [v for v, worse in zip(values, more, strict=True) if worse],
-            "nominal_diverged_more": bool(more[k0]),
-            "within": sum(m is not None and abs(m - nominal) <= width for m in others),
-            "not_below": sum(m is not None and m >= nominal - width for m in others),
-            "median_met": all(m is not None and abs(m - nominal) <= width for m in others),
-            "median_met_one_sided": all(m is not None and m >= nominal - width for m in others),
-            "ci": two,
-            "ci_one_sided": one,
-            "ci_met": _overall(two),
-            "ci_met_one_sided": _overall(one),
-            "deterministic": deterministic,
-        }
-    return out
-
-
-def _overall(verdicts: Sequence[str]) -> str:
-    """ "yes" if every verdict is ``in``, "no" if one is ``out``, else "open"."""
-    return "no" if "out" in verdicts else "yes" if all(v == "in" for v in verdicts) else "open"
-
-
 __all__ = [
     "STUDIES",
     "REPORT_FIELDS",
@@ -709,7 +587,6 @@ __all__ = [
     "robustness",
     "robustness_study",
     "robustness_table",
-    "robustness_target",
 ]
 
 

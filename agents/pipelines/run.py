@@ -178,11 +178,8 @@ def run_pipeline(
     if job.policy == "generalist":
         table["generalist_holds_still"] = not plays
     here = ran_here()  # where each unit of the row ran: rl's, the chosen candidate's
-    table["rows"][0]["ran_on"] = {"planning": here, "rl": listed[chosen].get("ran_on", here)} | {
-        "evaluation": here
-    }
-    if rl_dir is None:
-        del table["rows"][0]["ran_on"]["rl"]
+    rl = {} if rl_dir is None else {"rl": listed[chosen].get("ran_on", here)}
+    table["rows"][0]["ran_on"] = {"planning": here, **rl, "evaluation": here}
     report = RunReport(
         loaded, config, plan, job.policy, methods, table, listed, chosen, job.budget, job.analytic_pinch,
         time.perf_counter() - start, runs,
