@@ -28,7 +28,7 @@ import tempfile
 import time
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 UNIT_CPUS = 1
 """CPUs each unit declares (and the threads warpcut and torch use in it): one unit a core keeps every core
@@ -42,6 +42,14 @@ CONNECT_TIMEOUT_S = 5.0
 """How long joining a cluster at ``HOST:PORT`` waits for its head to answer."""
 
 LOCAL = "local"
+
+
+class Done(NamedTuple):
+    """A unit's result: its value, where it ran (``HOST:PID``) and how long it took there (s)."""
+
+    value: Any
+    ran_on: str
+    seconds: float
 
 
 def ran_here() -> str:
@@ -83,16 +91,18 @@ class Serial:
         items: Sequence[Any],
         *,
         dirs: Sequence[Path | None] | None = None,
-        done: Callable[[int, Any, str], None] = lambda k, value, where: None,
+        done: Callable[[int, Done], None] = lambda k, result: None,
         gpu: bool = False,
-    ) -> list[tuple[Any, str]]:
-        """``[(fn(item), ran_on)]`` in the items' order (``fn(item, dirs[k])`` where ``dirs`` are given: the
-        folder unit k works in, or None), calling ``done(k, value, ran_on)`` as each finishes."""
+    ) -> list[Done]:
+        """Each item's :class:`Done`, ``fn(item)`` (``fn(item, dirs[k])`` where ``dirs`` are given: the
+        folder unit k works in, or None), in the items' order, calling ``done(k, result)`` as each
+        finishes."""
         results = []
         for k, item in enumerate(items):
+            started = time.perf_counter()
             value = fn(item) if dirs is None else fn(item, None if dirs[k] is None else Path(dirs[k]))
-            done(k, value, ran_here())
-            results.append((value, ran_here()))
+            results.append(Done(value, ran_here(), time.perf_counter() - started))
+            done(k, results[-1])
         return results
 
 
@@ -152,9 +162,9 @@ class RayCluster:
         items: Sequence[Any],
         *,
         dirs: Sequence[Path | None] | None = None,
-        done: Callable[[int, Any, str], None] = lambda k, value, where: None,
+        done: Callable[[int, Done], None] = lambda k, result: None,
         gpu: bool = False,
-    ) -> list[tuple[Any, str]]:
+    ) -> list[Done]:
         """:meth:`Serial.map`'s results, the units run as Ray tasks; where ``dirs`` are given, each unit
         works in a folder of its own on its worker, given the files ``dirs[k]`` holds now (None: no
         folder), and the files it wrote there are written into ``dirs[k]`` here as it finishes, before
@@ -178,11 +188,11 @@ class RayCluster:
             while pending:
                 ready, pending = ray.wait(pending, num_returns=1)
                 k = order[ready[0]]
-                value, files, where = self._get(ready[0])
+                value, files, where, seconds = self._get(ready[0])
                 for name, data in (files or {}).items():
                     write_atomic(Path(dirs[k]) / name, data)
-                done(k, value, where)
-                results[k] = (value, where)
+                results[k] = Done(value, where, seconds)
+                done(k, results[k])
         except BaseException:
             for ref in pending:  # Ctrl-C, SIGTERM or a failed unit: stop the rest
                 ray.cancel(ref, force=True)
@@ -271,19 +281,19 @@ def _files(folder: Path) -> dict[str, bytes]:
 
 def _run_unit(
     fn: Callable, item: Any, in_folder: bool, given: dict[str, bytes] | None
-) -> tuple[Any, dict | None, str]:
+) -> tuple[Any, dict | None, str, float]:
     """A Ray task: ``fn(item)``, or (``in_folder``) ``fn(item, folder)`` in a fresh folder holding the
     ``given`` files (None: ``fn(item, None)``); returns the value, the folder's files that are new or
-    changed, and where it ran. Threads: one unit's CPUs (:data:`UNIT_CPUS`)."""
+    changed, where it ran and its seconds. Threads: one unit's CPUs (:data:`UNIT_CPUS`)."""
     import torch
 
     from warpcut.io import RUN_MARKER, claim_run_dir, write_atomic
 
     torch.set_num_threads(UNIT_CPUS)
-    if not in_folder:
-        return fn(item), None, ran_here()
-    if given is None:
-        return fn(item, None), None, ran_here()
+    started = time.perf_counter()
+    if not in_folder or given is None:
+        value = fn(item) if not in_folder else fn(item, None)
+        return value, None, ran_here(), time.perf_counter() - started
     with (
         tempfile.TemporaryDirectory(prefix="warpcut-unit-") as tmp,
         claim_run_dir(Path(tmp) / "unit", command=None) as folder,  # held as the driver holds its own
@@ -297,7 +307,7 @@ def _run_unit(
             for name, data in _files(folder).items()
             if given.get(name) != data and Path(name).name != RUN_MARKER
         }
-    return value, files, ran_here()
+    return value, files, ran_here(), time.perf_counter() - started
 
 
 @contextlib.contextmanager

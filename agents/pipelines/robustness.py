@@ -255,7 +255,7 @@ def _study_errors(
     folders = [runs.get(u["method"]) or (generalist if u["method"] == "generalist" else None) for u in units]
     log(f"  {study}: {', '.join(chosen)} at {len(values)} value(s), {trials} trials ({len(units)} batch(es))")
     results = dict(zip(owners, cluster.map(_errors_unit, units, dirs=folders), strict=True))
-    made, skipped = {owner: value for owner, (value, _) in results.items()}, []
+    made, skipped = {owner: unit.value for owner, unit in results.items()}, []
     for b, batch in enumerate(batches):
         picked = [values[k] for k in batch]
         failed = next((made[(b, m)] for m in chosen if isinstance(made[(b, m)], str)), None)
@@ -268,7 +268,7 @@ def _study_errors(
         for label, cut in own_order.items():
             own_none[label][batch] = made[(b, segments_key(cut))]
         _log_diverged(log, study, picked, {m: errors[m][batch] for m in chosen})
-    ran_on = {m: [results[(b, m)][1] for b in range(len(batches))] for m in chosen}
+    ran_on = {m: [results[(b, m)].ran_on for b in range(len(batches))] for m in chosen}
     return errors, own_none, skipped, ran_on
 
 

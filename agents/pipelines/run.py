@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from agents.baselines import AnalyticTension
-from agents.cluster import Executor, Serial, ran_here
+from agents.cluster import Done, Executor, Serial, ran_here
 from agents.config import VALIDATION_TRIALS
 from agents.evaluation import Method, MethodResult, evaluate_suite, run_method
 from agents.jobs import RunJob, job_contour
@@ -337,12 +337,11 @@ def _train_candidates(
              "progress": progress and cluster.address is None, "trials": job.train.validation_trials}
         )  # fmt: skip
 
-    def done(k: int, scores: dict, ran_on: str) -> None:
+    def done(k: int, unit: Done) -> None:
         candidate = listed[k]
-        candidate.update(scores)
+        candidate.update(unit.value)
         candidate["run"] = str(runs[k].relative_to(out))
-        if cluster.address is not None:
-            candidate["ran_on"] = ran_on
+        candidate["ran_on"], candidate["unit_seconds"] = unit.ran_on, round(unit.seconds, 3)
         nominal = ", nominal sheet" if "rl_training_validation_error" in candidate else ""
         log(
             f"      candidate {point_text(candidate['pinch'])}: "

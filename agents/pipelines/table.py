@@ -10,7 +10,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from agents.cluster import Executor, Serial, ran_here
+from agents.cluster import Done, Executor, Serial, ran_here
 from agents.evaluation import Method, MethodResult, evaluate_suite
 from agents.gradient import grad_column
 from agents.jobs import EvaluateJob
@@ -181,8 +181,10 @@ def evaluate_table(
     log(f"  evaluated {len(methods)} method(s) x {len(loaded)} contour(s) x {trials} trials")
     for note in notes:
         note(table)
-    for k, row in enumerate(table["rows"]):  # where each unit of the row ran
-        row["ran_on"] = {unit: where[k] for unit, where in ran_on.items()} | {"evaluation": ran_here()}
+    for k, row in enumerate(table["rows"]):  # where each unit of the row ran, and its seconds there
+        done = {unit: units[k] for unit, units in ran_on.items() if units[k] is not None}
+        row["ran_on"] = {unit: d.ran_on for unit, d in done.items()} | {"evaluation": ran_here()}
+        row["unit_seconds"] = {unit: round(d.seconds, 3) for unit, d in done.items()}
     report = TableReport(
         loaded, methods, config, table, plans, job.analytic_pinch, time.perf_counter() - start, runs
     )
@@ -217,13 +219,12 @@ def _table_plans(
     stages: Stages,
     resume: bool = False,
     cluster: Executor | None = None,
-) -> tuple[list[Plan] | None, dict[str, list[str | None]]]:
+) -> tuple[list[Plan] | None, dict[str, list[Done | None]]]:
     """:func:`evaluate_table`'s plans: the ones given (checked against the contours), or made now with the
     plan search's ``settings`` (noise-free; written to ``out/plans.json``) on ``cluster``, or None (``plan``
     False). With ``resume``, the plans ``out/plans.json`` holds are read back instead of searched again: the
     request (checked already) names the same contours, points and settings, and the search is
-    deterministic. Also returns where each plan was made (``{"planning": [HOST:PID]}``; none where given or
-    kept)."""
+    deterministic. Also returns each plan's unit (``{"planning": [Done]}``; none where given or kept)."""
     if isinstance(plan, list | tuple):  # plans made already, one per contour
         plans = list(plan)
         if [p.contour.name for p in plans] != [c.name for c in contours]:
@@ -255,25 +256,23 @@ def plan_all(
     log: Callable[[str], None],
     stages: Stages,
     cluster: Executor,
-) -> tuple[list[Plan], list[str]]:
+) -> tuple[list[Plan], list[Done]]:
     """Plan every contour (:func:`~warpcut.planning.plan_cut` with ``settings``), a unit each on
-    ``cluster``, saying how far it got; returns the plans and where each was made."""
+    ``cluster``, saying how far it got; returns the plans and their units (where and how long)."""
     started, count = time.perf_counter(), len(contours)
     log(f"  planning {count} contour(s) ({settings['num_candidates']} candidates each)")
     stages("planning", 0, count)
     finished = iter(range(1, count + 1))
 
-    def done(k: int, plan: Plan, where: str) -> None:
+    def done(k: int, unit: Done) -> None:
         n = next(finished)
-        log(
-            f"  [{n}/{count}] planned {plan.contour.name}"
-            + ("" if cluster.address is None else f" on {where}")
-        )
+        on = "" if cluster.address is None else f" on {unit.ran_on}"
+        log(f"  [{n}/{count}] planned {unit.value.contour.name}{on} ({unit.seconds:.0f} s)")
         stages("planning", n, count)
 
     made = cluster.map(functools.partial(_plan_unit, config=config, settings=settings), contours, done=done)
     log(f"  planned {count} contour(s) in {time.perf_counter() - started:.0f} s")
-    return [plan for plan, _ in made], [where for _, where in made]
+    return [unit.value for unit in made], made
 
 
 def _plan_unit(contour: Contour, config: SimConfig, settings: dict) -> Plan:
@@ -292,11 +291,11 @@ def _rl_result(
     step_callbacks: StepCallbacks | None,
     stages: Stages,
     cluster: Executor | None = None,
-) -> tuple[MethodResult, list[Path], list[int | None], list[str]]:
+) -> tuple[MethodResult, list[Path], list[int | None], list[Done]]:
     """The rl column: per contour a run (from ``job.checkpoints``, or trained now with ``job.train``, at the
     planned pinch and segments when planned) rolled out for ``job.trials``, paired with the baselines'
     noise. A contour's training and rollouts are a unit on ``cluster`` (its rollouts here where a step
-    callback watches them). Also returns where each contour's unit ran."""
+    callback watches them). Also returns each contour's unit (where and how long)."""
     trials, seed, checkpoints, cluster = job.trials, job.seed, job.checkpoints, cluster or Serial()
     env = {name: getattr(job.env, name) for name in ENV_FIELDS}
     options = PatternCutOptions(sim_config=job.sim, arm=job.arm, **env)
@@ -334,20 +333,21 @@ def _rl_result(
     log(f"  {what} {job.train.algo if checkpoints is None else 'rl'} for {len(named)} contour(s)")
     finished = iter(range(1, len(named) + 1))
 
-    def done(k: int, _, where: str) -> None:
+    def done(k: int, unit: Done) -> None:
         n = next(finished)
-        log(f"  [{n}/{len(named)}] {named[k][1].name}" + ("" if cluster.address is None else f" on {where}"))
+        on = "" if cluster.address is None else f" on {unit.ran_on}"
+        log(f"  [{n}/{len(named)}] {named[k][1].name}{on} ({unit.seconds:.0f} s)")
         stages(stage, n, len(named))
 
     stages(stage, 0, len(named))
     if checkpoints is None:
         made = cluster.map(_rl_unit, units, dirs=runs, done=done, gpu=_cuda(device))
     else:  # trained already: rolled out here
-        made = [(_rl_unit(unit, run), ran_here()) for unit, run in zip(units, runs, strict=True)]
+        made = Serial().map(lambda pair: _rl_unit(*pair), list(zip(units, runs, strict=True)), done=done)
     rollouts, iterations = [], []
-    for k, ((value, _), run) in enumerate(zip(made, runs, strict=True)):
-        iterations.append(value["iteration"])
-        rollouts.append(value["rollouts"])
+    for k, (unit, run) in enumerate(zip(made, runs, strict=True)):
+        iterations.append(unit.value["iteration"])
+        rollouts.append(unit.value["rollouts"])
         if rollouts[-1] is None:  # watched: rolled out here, paired as the unit would have
             rollouts[-1] = rollout_errors(
                 run, trials, seed=seed + 1, device=device, on_step=watched[k],
@@ -356,7 +356,7 @@ def _rl_result(
     what = "trained" if checkpoints is None else "rolled out"
     log(f"  rl: {what} {len(named)} policy(ies) in {time.perf_counter() - started:.0f} s")
     trained = runs if checkpoints is None else []
-    return MethodResult.from_rollouts(rollouts), trained, iterations, [where for _, where in made]
+    return MethodResult.from_rollouts(rollouts), trained, iterations, made
 
 
 def _rl_unit(unit: dict, run: Path) -> dict:
