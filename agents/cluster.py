@@ -30,6 +30,8 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
+from warpcut.cores import CORES_VARIABLE
+
 UNIT_CPUS = 1
 """CPUs each unit declares (and the threads warpcut and torch use in it): one unit a core keeps every core
 busy, as the units outnumber the cores, and measured faster than fewer units on more threads each
@@ -40,6 +42,9 @@ RETRIES = 3
 
 CONNECT_TIMEOUT_S = 5.0
 """How long joining a cluster at ``HOST:PORT`` waits for its head to answer."""
+
+WAIT_S = 0.5
+"""How long the driver waits for a unit before it looks at its signals (Ctrl-C, SIGTERM) again."""
 
 LOCAL = "local"
 
@@ -115,7 +120,7 @@ class RayCluster:
         self.ray = ray
         self.address = address
         self.device = device
-        env = {"WARPCUT_CPU_THREADS": str(UNIT_CPUS), "OMP_NUM_THREADS": str(UNIT_CPUS)}
+        env = {CORES_VARIABLE: str(UNIT_CPUS), "OMP_NUM_THREADS": str(UNIT_CPUS)}
         local = address == LOCAL
         if local:  # its workers share this process's kernel cache, filled before any unit starts
             env["WARP_CACHE_PATH"] = _warm_cache(device)
@@ -129,11 +134,15 @@ class RayCluster:
                 ray.init(address=address, **settings)
         except ConnectionError as exc:
             raise ValueError(f"--ray {address}: {_first_line(exc)}; {_START_HINT}") from None
-        self.workers = max(1, int(ray.cluster_resources().get("CPU", 1)) // UNIT_CPUS)
-        nodes = [n for n in ray.nodes() if n.get("Alive")]
-        log(f"  ray: {len(nodes)} node(s), {self.workers} worker(s) at {address}")
-        if not local:
-            self._warm_nodes(nodes)
+        try:
+            self.workers = max(1, int(ray.cluster_resources().get("CPU", 1)) // UNIT_CPUS)
+            nodes = [n for n in ray.nodes() if n.get("Alive")]
+            log(f"  ray: {len(nodes)} node(s), {self.workers} worker(s) at {address}")
+            if not local:
+                self._warm_nodes(nodes)
+        except BaseException:
+            ray.shutdown()
+            raise
 
     def _warm_nodes(self, nodes: list[dict]) -> None:
         """Fill each node's kernel cache with one task there, before the units start (and check that each
@@ -186,7 +195,10 @@ class RayCluster:
         pending = list(refs)
         try:
             while pending:
-                ready, pending = ray.wait(pending, num_returns=1)
+                # a timeout lets Ctrl-C and SIGTERM through while the units run
+                ready, pending = ray.wait(pending, num_returns=1, timeout=WAIT_S)
+                if not ready:
+                    continue
                 k = order[ready[0]]
                 value, files, where, seconds = self._get(ready[0])
                 for name, data in (files or {}).items():

@@ -98,7 +98,10 @@ class ShardedEnv(VecEnv):
         groups = np.array_split(np.arange(num_envs // group), min(cluster.workers, num_envs // group))
         self.parts = [(int(g[0]) * group, len(g) * group) for g in groups]
         self._options = [options.part(first, count, num_envs) for first, count in self.parts]
-        self._actor = self.ray.remote(num_cpus=UNIT_CPUS)(EnvShard)
+        gpus = (
+            1 if str(options.device or "").startswith("cuda") else 0
+        )  # an actor steps where the batch would
+        self._actor = self.ray.remote(num_cpus=UNIT_CPUS, num_gpus=gpus)(EnvShard)
         self._seed, self._common = seed, 1
         self.shards = [self._make(k) for k in range(len(self.parts))]
         described = self.ray.get([s.describe.remote() for s in self.shards])

@@ -6,15 +6,20 @@ machine falls on every variant; prints each run's wall time (the whole command: 
 included), its ratio to the serial run of the same round, whether its rows are the serial run's bit for bit
 (but for ran_on and unit_seconds), and the units' seconds.
 
-    python scripts/cluster_scaling.py measure --contours fls-circle,kidney,wave-1,hexagon --workers 1,2 \
-        --rounds 2 --out logs/cluster-scaling
+    python scripts/cluster_scaling.py measure --contours fls-circle,kidney,wave-1,ellipse-tilted \
+        --workers 1,2 --rounds 2 --out logs/cluster-scaling
 
-Estimate: the suite's time on N nodes of C cores, from a serial evaluate run's measured unit seconds (its
-results.json `unit_seconds`: planning and rl per contour; the rest of its seconds is the driver's own) and
-the Ray overheads measured above: each phase's units (plans, then policies) scheduled longest first on
-N x C one-CPU workers, plus the work the driver does itself and Ray's start.
+Estimate: the suite's time on N nodes of C cores, from an evaluate run's measured unit seconds (its
+results.json `unit_seconds`: planning and rl per contour, on one-CPU workers with --ray, else times
+--slowdown) and the Ray overheads measured below: each stage's units (plans, then policies) scheduled
+longest first on N x C one-CPU workers, plus the driver's own work (the run's seconds but its planning and
+rl stages, `stage_seconds`) and Ray's start.
 
     python scripts/cluster_scaling.py estimate RUN/results.json --start-s 8 --nodes 1,2,4,8,13,26 --cores 2
+
+Overheads: Ray's start and stop here, a worker's first unit, and a unit's round trip.
+
+    python scripts/cluster_scaling.py overheads
 """
 
 from __future__ import annotations
@@ -86,6 +91,39 @@ def measure(contours: str, workers: list[int], rounds: int, out: Path, seed: int
     return report
 
 
+def overheads(units: int, cpus: int) -> dict:
+    """Ray's own costs here: starting and stopping a local instance of ``cpus`` CPUs (the driver's kernel
+    cache warm), its workers' first unit (a fresh process importing warpcut and torch), and a unit's round
+    trip once they run (``units`` no-op units, median per unit)."""
+    from agents.cluster import RayCluster
+
+    started = time.perf_counter()
+    cluster = RayCluster("local", cpus, "cpu", lambda _: None)
+    start_s = time.perf_counter() - started
+    started = time.perf_counter()
+    cluster.map(_import_unit, list(range(cpus)))
+    first_s = time.perf_counter() - started
+    rounds = []
+    for _ in range(5):
+        started = time.perf_counter()
+        cluster.map(abs, list(range(units)))
+        rounds.append((time.perf_counter() - started) / units)
+    started = time.perf_counter()
+    cluster.close()
+    figures = {"start_s": start_s, "first_units_s": first_s, "per_unit_s": statistics.median(rounds),
+               "stop_s": time.perf_counter() - started, "cpus": cpus}  # fmt: skip
+    print(json.dumps(figures, indent=2))
+    return figures
+
+
+def _import_unit(_: int) -> bool:
+    """What a worker's first unit pays: warpcut's learners and the simulator imported."""
+    import agents.training  # noqa: F401
+    import warpcut.task  # noqa: F401
+
+    return True
+
+
 def makespan(seconds: list[float], workers: int) -> float:
     """The longest-first schedule of ``seconds`` on ``workers`` identical workers: its finish time."""
     loads = [0.0] * workers
@@ -102,7 +140,8 @@ def estimate(
     measured = {kind: [r["unit_seconds"][kind] for r in rows if kind in r.get("unit_seconds", {})]
                 for kind in ("planning", "rl")}  # fmt: skip
     units = {kind: [s * slowdown for s in v] for kind, v in measured.items()}
-    driver = report["seconds"] - sum(sum(v) for v in measured.values())  # a serial run: the rest is its own
+    stages = report["stage_seconds"]  # the driver's own work: all but the planning and rl stages
+    driver = report["seconds"] - stages.get("planning", 0.0) - stages.get("rl", 0.0)
     print(f"{len(rows)} contours; unit seconds x {slowdown:g} (one-CPU workers): planning "
           f"{sum(units['planning']):.0f} s in all (longest {max(units['planning'], default=0):.0f}), rl "
           f"{sum(units['rl']):.0f} s (longest {max(units['rl'], default=0):.0f}); the driver's own work "
@@ -121,11 +160,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="what", required=True)
     m = sub.add_parser("measure")
-    m.add_argument("--contours", default="fls-circle,kidney,wave-1,hexagon")
+    m.add_argument("--contours", default="fls-circle,kidney,wave-1,ellipse-tilted")
     m.add_argument("--workers", default="1,2")
     m.add_argument("--rounds", type=int, default=2)
     m.add_argument("--seed", type=int, default=0)
     m.add_argument("--out", type=Path, default=Path("logs/cluster-scaling"))
+    o = sub.add_parser("overheads")
+    o.add_argument("--units", type=int, default=200)
+    o.add_argument("--cpus", type=int, default=2)
     e = sub.add_parser("estimate")
     e.add_argument("results", type=Path)
     e.add_argument("--start-s", type=float, required=True, help="Ray's start and stop, measured (s)")
@@ -137,6 +179,8 @@ def main() -> None:
     args = parser.parse_args()
     if args.what == "measure":
         measure(args.contours, [int(k) for k in args.workers.split(",")], args.rounds, args.out, args.seed)
+    elif args.what == "overheads":
+        overheads(args.units, args.cpus)
     else:
         estimate(args.results, args.start_s, args.per_unit_s, [int(n) for n in args.nodes.split(",")],
                  args.cores, args.slowdown)  # fmt: skip

@@ -101,6 +101,23 @@ def test_an_address_nobody_answers_at_is_one_line_naming_it(tmp_path):
     )
 
 
+def test_ray_where_nothing_fans_out_or_at_a_bad_address_is_refused_in_one_line(tmp_path, capfd):
+    from cli_runner import refused
+
+    out = ["--out", str(tmp_path / "o")]
+    assert "--policy fixed trains nothing to fan out" in refused(
+        ["run", "--policy", "fixed", "--ray", "local", *out], capfd
+    )
+    line = refused(
+        ["evaluate", "--methods", "none,fixed", "--set", "plan=false", "--ray", "local", *out], capfd
+    )
+    assert "nothing to fan out" in line
+    assert "'here' is not an address" in refused(
+        ["robustness", "--contour", "kidney", "--ray", "here", *out], capfd
+    )
+    assert not (tmp_path / "o").exists()
+
+
 def test_evaluate_gives_the_same_rows_and_policies_on_two_workers(tmp_path, cluster):
     """none, fixed, analytic and the default learner: rows and trained policies bit for bit; each row
     says where its units ran; the run directory holds the same files and its marker lists them."""
@@ -232,3 +249,36 @@ def test_serial_is_what_every_pipeline_ran_before():
     with executor(None) as units:
         assert isinstance(units, Serial) and units.address is None
         assert [unit.value for unit in units.map(abs, [-1, 2])] == [1, 2]
+
+
+def test_warpcut_cpu_threads_caps_the_simulators_threads_and_names_a_bad_value(monkeypatch):
+    from warpcut.cores import CORES_VARIABLE, cpu_cores
+    from warpcut.sim.simulator import Simulator
+
+    monkeypatch.setenv(CORES_VARIABLE, "1")
+    assert cpu_cores() == 1 and Simulator(SMALL, 64, device="cpu").threads == 1
+    monkeypatch.setenv(CORES_VARIABLE, "two")
+    with pytest.raises(ValueError, match=rf"^{CORES_VARIABLE}: must be a positive integer"):
+        cpu_cores()
+    monkeypatch.delenv(CORES_VARIABLE)
+    assert cpu_cores() == len(os.sched_getaffinity(0))
+
+
+def test_a_policys_rollout_runs_torch_on_one_thread_whatever_the_process_has(tmp_path):
+    """A Ray unit runs torch on one thread, this process on every core: a policy's moves must not depend on
+    it. torch's CPU forward pass can differ in the last bit with the thread count (a trained es policy on
+    ellipse-tilted, 10 envs: one move of one env at one step), so a rollout runs torch on one thread."""
+    from agents.policies import load_policy, policy_errors, policy_options
+    from envs.vector import PatternCutVecEnv
+
+    evaluate_table(_job(contours=["kidney"], methods=["rl"], trials=2), tmp_path / "e")
+    run, threads, seen = tmp_path / "e/policies/kidney", torch.get_num_threads(), []
+    actor = load_policy(run)
+    actor.register_forward_pre_hook(lambda module, args: seen.append(torch.get_num_threads()))
+    try:
+        torch.set_num_threads(2)
+        policy_errors(actor, PatternCutVecEnv(10, policy_options(run, "cpu")), seed=1)
+        assert torch.get_num_threads() == 2  # restored
+    finally:
+        torch.set_num_threads(threads)
+    assert seen and set(seen) == {1}

@@ -102,6 +102,11 @@ def command(
     if "rl" in job.methods and job.checkpoints is None:
         common.check_learner(job)
     resolve_specs(job.contours, job.sim.validated())  # a bad name or file: now
+    if ray is not None and not job.plan and ("rl" not in job.methods or job.checkpoints is not None):
+        raise click.UsageError(
+            "--ray: nothing to fan out: the units are each contour's plan (plan true) and rl policy "
+            "(--methods with rl, without --checkpoints); leave out --ray"
+        )
     if print_config:
         common.print_config(job)
         return

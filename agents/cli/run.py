@@ -111,6 +111,11 @@ def command(
     contour_name = job_contour(job.contour, job.sim).name
     if job.policy == "rl":
         common.check_learner(job)
+    elif ray is not None:
+        raise click.UsageError(
+            f"--ray: --policy {job.policy} trains nothing to fan out (--policy rl trains a policy per pinch "
+            "candidate); leave out --ray"
+        )
     if print_config:
         common.print_config(job)
         return
@@ -120,7 +125,7 @@ def command(
     cuts = common.final_cuts(not job.plots)
     with (
         claim,
-        executor(ray if job.policy == "rl" else None, device, common.log) as units,
+        executor(ray, device, common.log) as units,
         common.recorder(out, job.record, job.colour_by) as rec,
     ):
         report = run_pipeline(

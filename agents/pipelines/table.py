@@ -144,6 +144,7 @@ def evaluate_table(
     plans, ran_on = _table_plans(
         plans if plans is not None else job.plan, loaded, config, settings, out, log, stages, resume, cluster
     )
+    clock = {"planning": time.perf_counter() - start}  # each stage's seconds, the driver's view
     specs, runs, notes = [Method(m) for m in methods], [], []  # notes: add a column's own fields to the table
     for spec in specs:
         if spec.name == "fixed" and plans is not None:
@@ -152,9 +153,11 @@ def evaluate_table(
             spec.pinches = analytic_pinches(job.analytic_pinch, loaded, plans)
             spec.allow_infeasible_pinch = job.analytic_pinch == "centroid"  # the paper's, feasible or not
         elif spec.name == "rl":
+            started = time.perf_counter()
             spec.result, runs, kept, ran_on["rl"] = _rl_result(
                 job, named, plans, out, device, resume, log, step_callbacks, stages, cluster
             )
+            clock["rl"] = time.perf_counter() - started
             notes.append(functools.partial(_note_rl_iterations, kept))
         elif spec.name == "generalist":
             spec.result = _generalist_result(job, loaded, plans, device, step_callbacks, log)
@@ -164,7 +167,7 @@ def evaluate_table(
             )
             notes.append(note)
     batches = len({spec.name for spec in specs} | {"none"})  # evaluate_suite also runs none, the baseline
-    running = iter(range(batches))
+    running, started = iter(range(batches)), time.perf_counter()
     table = evaluate_suite(
         loaded,
         specs,
@@ -178,6 +181,7 @@ def evaluate_table(
         arm=job.arm,
     )
     stages("evaluating", batches, batches)
+    table["stage_seconds"] = clock | {"evaluating": time.perf_counter() - started}
     log(f"  evaluated {len(methods)} method(s) x {len(loaded)} contour(s) x {trials} trials")
     for note in notes:
         note(table)
