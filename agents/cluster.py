@@ -8,8 +8,11 @@ Ray is imported only when ``--ray`` is given (an optional extra: ``pip install -
 
 - ``local`` starts a Ray instance on this machine for the command (``local:N``: N CPUs of it) and stops it
   afterwards; ``auto`` or ``HOST:PORT`` joins a running cluster (``ray start --head``; docs/cluster.md).
-- Each unit declares :data:`UNIT_CPUS` CPU (and one GPU where the device is CUDA); warpcut's and torch's
-  threads in a worker are set to it, so workers do not oversubscribe a node.
+- Each unit declares :data:`UNIT_CPUS` CPU (and one GPU where the device is CUDA), and warpcut's simulator
+  steps on that many threads, so workers do not oversubscribe a node. torch runs on as many threads as in
+  the driver: a policy's forward pass (and PPO's update) can differ in the last bit with torch's thread
+  count, so this keeps a unit's results those of a serial run on the driver's machine; the simulator's
+  results do not depend on its threads.
 - Warp's kernel cache is filled once before the units start: by this process for a local instance (its
   workers use this process's cache), else by one task per node, so N workers never compile from cold.
 - A unit writes its files (a training run) into a folder of its own on the worker, and the driver writes
@@ -33,9 +36,8 @@ from typing import Any, NamedTuple
 from warpcut.cores import CORES_VARIABLE
 
 UNIT_CPUS = 1
-"""CPUs each unit declares (and the threads warpcut and torch use in it): one unit a core keeps every core
-busy, as the units outnumber the cores, and measured faster than fewer units on more threads each
-(docs/cluster.md)."""
+"""CPUs each unit declares (and the threads its simulator steps on): one unit a core keeps every core busy
+while the units outnumber the cores (docs/cluster.md has the scaling measured)."""
 
 RETRIES = 3
 """How often a unit whose worker died is run again before the command fails."""
@@ -120,7 +122,7 @@ class RayCluster:
         self.ray = ray
         self.address = address
         self.device = device
-        env = {CORES_VARIABLE: str(UNIT_CPUS), "OMP_NUM_THREADS": str(UNIT_CPUS)}
+        env = {CORES_VARIABLE: str(UNIT_CPUS)}
         local = address == LOCAL
         if local:  # its workers share this process's kernel cache, filled before any unit starts
             env["WARP_CACHE_PATH"] = _warm_cache(device)
@@ -184,9 +186,14 @@ class RayCluster:
         task = ray.remote(_run_unit).options(
             num_cpus=UNIT_CPUS, num_gpus=1 if gpu else 0, max_retries=RETRIES, retry_exceptions=False
         )
+        threads = torch_threads()
         refs = [
             task.remote(
-                fn, item, dirs is not None, None if dirs is None or dirs[k] is None else _files(dirs[k])
+                fn,
+                item,
+                dirs is not None,
+                None if dirs is None or dirs[k] is None else _files(dirs[k]),
+                threads,
             )
             for k, item in enumerate(items)
         ]
@@ -291,17 +298,24 @@ def _files(folder: Path) -> dict[str, bytes]:
     return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
+def torch_threads() -> int:
+    """torch's threads in this process (the driver's: what a unit runs torch on)."""
+    import torch
+
+    return torch.get_num_threads()
+
+
 def _run_unit(
-    fn: Callable, item: Any, in_folder: bool, given: dict[str, bytes] | None
+    fn: Callable, item: Any, in_folder: bool, given: dict[str, bytes] | None, threads: int
 ) -> tuple[Any, dict | None, str, float]:
     """A Ray task: ``fn(item)``, or (``in_folder``) ``fn(item, folder)`` in a fresh folder holding the
-    ``given`` files (None: ``fn(item, None)``); returns the value, the folder's files that are new or
-    changed, where it ran and its seconds. Threads: one unit's CPUs (:data:`UNIT_CPUS`)."""
+    ``given`` files (None: ``fn(item, None)``), torch on ``threads`` threads (the driver's); returns the
+    value, the folder's files that are new or changed, where it ran and its seconds."""
     import torch
 
     from warpcut.io import RUN_MARKER, claim_run_dir, write_atomic
 
-    torch.set_num_threads(UNIT_CPUS)
+    torch.set_num_threads(threads)
     started = time.perf_counter()
     if not in_folder or given is None:
         value = fn(item) if not in_folder else fn(item, None)

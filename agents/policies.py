@@ -10,7 +10,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -336,20 +336,6 @@ def same_contour(a: Contour, b: Contour) -> bool:
     )
 
 
-@contextlib.contextmanager
-def one_torch_thread() -> Iterator[None]:
-    """torch on one thread in the block: a policy's moves are then the same bits whatever the cores of the
-    machine or the CPUs of a Ray unit (torch's CPU matrix product splits a batch's rows between its threads,
-    and a row's result depends on the split); a 2 x 32 MLP gains nothing from more, as training's rollouts
-    (:meth:`agents.training.Runner.learn`)."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(threads)
-
-
 def policy_errors(
     actor: torch.nn.Module,
     env: PatternCutVecEnv,
@@ -376,7 +362,7 @@ def policy_errors(
         on_step(env.task, None)
     final = None
     discrete = env.options.action_type == "discrete"
-    with torch.inference_mode(), one_torch_thread():
+    with torch.inference_mode():
         for _ in range(env.task.num_steps):
             obs_td = {"policy": torch.as_tensor(obs)}
             action = actor(_tensordict(obs_td, trials)).cpu().numpy().reshape(trials, -1)

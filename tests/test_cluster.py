@@ -264,21 +264,20 @@ def test_warpcut_cpu_threads_caps_the_simulators_threads_and_names_a_bad_value(m
     assert cpu_cores() == len(os.sched_getaffinity(0))
 
 
-def test_a_policys_rollout_runs_torch_on_one_thread_whatever_the_process_has(tmp_path):
-    """A Ray unit runs torch on one thread, this process on every core: a policy's moves must not depend on
-    it. torch's CPU forward pass can differ in the last bit with the thread count (a trained es policy on
-    ellipse-tilted, 10 envs: one move of one env at one step), so a rollout runs torch on one thread."""
-    from agents.policies import load_policy, policy_errors, policy_options
-    from envs.vector import PatternCutVecEnv
+def _unit_threads(_: int) -> tuple[int, int]:
+    from warpcut.cores import cpu_cores
 
-    evaluate_table(_job(contours=["kidney"], methods=["rl"], trials=2), tmp_path / "e")
-    run, threads, seen = tmp_path / "e/policies/kidney", torch.get_num_threads(), []
-    actor = load_policy(run)
-    actor.register_forward_pre_hook(lambda module, args: seen.append(torch.get_num_threads()))
+    return torch.get_num_threads(), cpu_cores()
+
+
+def test_a_unit_runs_torch_on_the_drivers_threads_and_the_simulator_on_its_cpu(cluster):
+    """torch's forward pass can differ in the last bit with its thread count (a trained es policy on
+    ellipse-tilted, 10 envs, 1 thread against 2: one move of one env at one step), so a unit runs torch on
+    the driver's threads, and its results are a serial run's; the simulator steps on the unit's CPU."""
+    threads = torch.get_num_threads()
     try:
-        torch.set_num_threads(2)
-        policy_errors(actor, PatternCutVecEnv(10, policy_options(run, "cpu")), seed=1)
-        assert torch.get_num_threads() == 2  # restored
+        for count in (2, 1):
+            torch.set_num_threads(count)
+            assert [unit.value for unit in cluster.map(_unit_threads, [0, 1])] == [(count, 1)] * 2
     finally:
         torch.set_num_threads(threads)
-    assert seen and set(seen) == {1}
