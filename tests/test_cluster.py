@@ -281,3 +281,36 @@ def test_a_unit_runs_torch_on_the_drivers_threads_and_the_simulator_on_its_cpu(c
             assert [unit.value for unit in cluster.map(_unit_threads, [0, 1])] == [(count, 1)] * 2
     finally:
         torch.set_num_threads(threads)
+
+
+def test_sigterm_stops_a_fanned_out_evaluate_and_resume_finishes_it(tmp_path):
+    """The command line end to end: SIGTERM while the policies train on a local cluster ends the command
+    with the interrupted message (no traceback) and stops its Ray instance; --resume finishes the run."""
+    import time
+
+    pytest.importorskip("ray")
+    out = tmp_path / "e"
+    args = [sys.executable, "-m", "warpcut", "evaluate", "--contours", "fls-circle,kidney,wave-1",
+            "--methods", "fixed,rl", "--trials", "2", "--set", "sim.resolution=13", "--set", "candidates=4",
+            "--set", "train.iterations=40", "--set", "plots=false", "--out", str(out)]  # fmt: skip
+
+    def raylets() -> set[str]:
+        return set(subprocess.run(["pgrep", "-f", "raylet"], capture_output=True, text=True).stdout.split())
+
+    before = raylets()  # another instance (this module's) stays
+    proc = subprocess.Popen(
+        [*args, "--ray", "local:2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    deadline = time.monotonic() + 120
+    while not (out / "plans.json").is_file() and time.monotonic() < deadline:
+        time.sleep(0.2)
+    time.sleep(3)  # the policies are training on the workers
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 128 + signal.SIGTERM, err[-2000:]
+    assert "Traceback" not in err and "terminated (SIGTERM)" in err and "--resume" in err, err[-2000:]
+    time.sleep(1)
+    assert raylets() <= before, "the command's Ray instance outlived it"
+    done = subprocess.run([*args, "--resume"], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert len(json.loads((out / "results.json").read_text())["rows"]) == 3
