@@ -48,6 +48,16 @@ CONNECT_TIMEOUT_S = 5.0
 WAIT_S = 0.5
 """How long the driver waits for a unit before it looks at its signals (Ctrl-C, SIGTERM) again."""
 
+RUN_KEYS = ("ran_on", "unit_seconds")
+"""A result row's fields that say where and how long its units ran: the rest of a row is the same in every
+run of the job at its seed, here or on a cluster."""
+
+
+def same_results(row: dict) -> dict:
+    """``row`` without :data:`RUN_KEYS`: what two runs of a job at one seed give alike."""
+    return {key: value for key, value in row.items() if key not in RUN_KEYS}
+
+
 LOCAL = "local"
 
 
@@ -100,12 +110,14 @@ class Serial:
         dirs: Sequence[Path | None] | None = None,
         done: Callable[[int, Done], None] = lambda k, result: None,
         gpu: bool = False,
+        start: Callable[[int], None] = lambda k: None,
     ) -> list[Done]:
         """Each item's :class:`Done`, ``fn(item)`` (``fn(item, dirs[k])`` where ``dirs`` are given: the
-        folder unit k works in, or None), in the items' order, calling ``done(k, result)`` as each
-        finishes."""
+        folder unit k works in, or None), in the items' order, calling ``start(k)`` as each starts and
+        ``done(k, result)`` as each finishes."""
         results = []
         for k, item in enumerate(items):
+            start(k)
             started = time.perf_counter()
             value = fn(item) if dirs is None else fn(item, None if dirs[k] is None else Path(dirs[k]))
             results.append(Done(value, ran_here(), time.perf_counter() - started))
@@ -175,11 +187,12 @@ class RayCluster:
         dirs: Sequence[Path | None] | None = None,
         done: Callable[[int, Done], None] = lambda k, result: None,
         gpu: bool = False,
+        start: Callable[[int], None] = lambda k: None,
     ) -> list[Done]:
-        """:meth:`Serial.map`'s results, the units run as Ray tasks; where ``dirs`` are given, each unit
-        works in a folder of its own on its worker, given the files ``dirs[k]`` holds now (None: no
-        folder), and the files it wrote there are written into ``dirs[k]`` here as it finishes, before
-        ``done``."""
+        """:meth:`Serial.map`'s results, the units run as Ray tasks (``start`` is not called: they start
+        on their workers); where ``dirs`` are given, each unit works in a folder of its own on its worker,
+        given the files ``dirs[k]`` holds now (None: no folder), and the files it wrote there are written
+        into ``dirs[k]`` here as it finishes, before ``done``."""
         from warpcut.io import write_atomic
 
         ray = self.ray

@@ -36,8 +36,9 @@ from pathlib import Path
 
 
 def _rows(path: Path) -> list[dict]:
-    rows = json.loads(path.read_text())["rows"]
-    return [{k: v for k, v in r.items() if k not in ("ran_on", "unit_seconds")} for r in rows]
+    from agents.cluster import same_results
+
+    return [same_results(r) for r in json.loads(path.read_text())["rows"]]
 
 
 def measure(contours: str, workers: list[int], rounds: int, out: Path, seed: int) -> dict:

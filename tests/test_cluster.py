@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import torch
 
-from agents.cluster import RayCluster, Serial, executor, parse_address
+from agents.cluster import RayCluster, Serial, executor, parse_address, same_results
 from agents.config import TrainConfig
 from agents.es.config import EsConfig
 from agents.jobs import EvaluateJob, RobustnessJob
@@ -53,7 +53,7 @@ def _rows(report_or_path) -> list[dict]:
         if hasattr(report_or_path, "table")
         else json.loads(Path(report_or_path).read_text())
     )
-    return [{k: v for k, v in row.items() if k not in ("ran_on", "unit_seconds")} for row in table["rows"]]
+    return [same_results(row) for row in table["rows"]]
 
 
 def _weights(run: Path) -> dict[str, torch.Tensor]:

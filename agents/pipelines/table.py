@@ -18,6 +18,7 @@ from agents.methods import StepCallbacks
 from agents.pipelines.common import (
     analytic_pinches,
     claims_out,
+    finished_run,
     policy_iteration,
     policy_job,
     record_job,
@@ -263,18 +264,23 @@ def plan_all(
 ) -> tuple[list[Plan], list[Done]]:
     """Plan every contour (:func:`~warpcut.planning.plan_cut` with ``settings``), a unit each on
     ``cluster``, saying how far it got; returns the plans and their units (where and how long)."""
-    started, count = time.perf_counter(), len(contours)
-    log(f"  planning {count} contour(s) ({settings['num_candidates']} candidates each)")
+    started, count, candidates = time.perf_counter(), len(contours), settings["num_candidates"]
+    if cluster.address is not None:
+        log(f"  planning {count} contour(s) ({candidates} candidates each) on {cluster.workers} worker(s)")
     stages("planning", 0, count)
     finished = iter(range(1, count + 1))
 
+    def start(k: int) -> None:  # here, one after another
+        log(f"  [{k + 1}/{count}] planning {contours[k].name} ({candidates} candidates)")
+
     def done(k: int, unit: Done) -> None:
         n = next(finished)
-        on = "" if cluster.address is None else f" on {unit.ran_on}"
-        log(f"  [{n}/{count}] planned {unit.value.contour.name}{on} ({unit.seconds:.0f} s)")
+        if cluster.address is not None:
+            log(f"  [{n}/{count}] planned {unit.value.contour.name} on {unit.ran_on} ({unit.seconds:.0f} s)")
         stages("planning", n, count)
 
-    made = cluster.map(functools.partial(_plan_unit, config=config, settings=settings), contours, done=done)
+    unit = functools.partial(_plan_unit, config=config, settings=settings)
+    made = cluster.map(unit, contours, done=done, start=start)
     log(f"  planned {count} contour(s) in {time.perf_counter() - started:.0f} s")
     return [unit.value for unit in made], made
 
@@ -332,20 +338,25 @@ def _rl_result(
             if checkpoints
             else out / "policies" / safe_name(contour.name)
         )
-    what = "training" if checkpoints is None else "rolling out"
     stage = "training rl" if checkpoints is None else "rolling out rl"
-    log(f"  {what} {job.train.algo if checkpoints is None else 'rl'} for {len(named)} contour(s)")
+    if cluster.address is not None and checkpoints is None:
+        log(f"  training {job.train.algo} for {len(named)} contour(s) on {cluster.workers} worker(s)")
     finished = iter(range(1, len(named) + 1))
+
+    def start(k: int) -> None:  # here, one after another
+        if checkpoints is None:
+            verb = "kept" if resume and finished_run(runs[k]) else "training"
+            log(f"  [{k + 1}/{len(named)}] {verb} {job.train.algo} for {named[k][1].name}")
 
     def done(k: int, unit: Done) -> None:
         n = next(finished)
-        on = "" if cluster.address is None else f" on {unit.ran_on}"
-        log(f"  [{n}/{len(named)}] {named[k][1].name}{on} ({unit.seconds:.0f} s)")
+        if cluster.address is not None:
+            log(f"  [{n}/{len(named)}] {named[k][1].name} on {unit.ran_on} ({unit.seconds:.0f} s)")
         stages(stage, n, len(named))
 
     stages(stage, 0, len(named))
     if checkpoints is None:
-        made = cluster.map(_rl_unit, units, dirs=runs, done=done, gpu=_cuda(device))
+        made = cluster.map(_rl_unit, units, dirs=runs, done=done, gpu=_cuda(device), start=start)
     else:  # trained already: rolled out here
         made = Serial().map(lambda pair: _rl_unit(*pair), list(zip(units, runs, strict=True)), done=done)
     rollouts, iterations = [], []
