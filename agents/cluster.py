@@ -26,8 +26,10 @@ from __future__ import annotations
 
 import contextlib
 import os
+import signal
 import socket
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
@@ -141,6 +143,7 @@ class RayCluster:
         else:
             _check_reachable(address)
         settings = {"runtime_env": {"env_vars": env}, "log_to_driver": True, "configure_logging": False}
+        handlers = _signal_handlers()
         try:
             if local:
                 ray.init(num_cpus=cpus, include_dashboard=False, **settings)
@@ -148,6 +151,9 @@ class RayCluster:
                 ray.init(address=address, **settings)
         except ConnectionError as exc:
             raise ValueError(f"--ray {address}: {_first_line(exc)}; {_START_HINT}") from None
+        finally:  # Ray's core puts its own in (SIGTERM: a stack dump, then abort): stop as the command does
+            for signum, handler in handlers.items():
+                signal.signal(signum, handler)
         try:
             self.workers = max(1, int(ray.cluster_resources().get("CPU", 1)) // UNIT_CPUS)
             nodes = [n for n in ray.nodes() if n.get("Alive")]
@@ -256,6 +262,13 @@ class RayCluster:
 _START_HINT = (
     "start one with 'ray start --head' (docs/cluster.md), or use --ray local for a cluster on this machine"
 )
+
+
+def _signal_handlers() -> dict:
+    """This process's handlers of Ctrl-C, SIGTERM and SIGHUP (the main thread's only: none elsewhere)."""
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {signum: signal.getsignal(signum) for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
 
 
 def _first_line(exc: BaseException) -> str:

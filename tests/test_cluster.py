@@ -290,9 +290,10 @@ def test_sigterm_stops_a_fanned_out_evaluate_and_resume_finishes_it(tmp_path):
 
     pytest.importorskip("ray")
     out = tmp_path / "e"
-    args = [sys.executable, "-m", "warpcut", "evaluate", "--contours", "fls-circle,kidney,wave-1",
+    args = [sys.executable, "-m", "warpcut", "evaluate", "--contours", "fls-circle,kidney",
             "--methods", "fixed,rl", "--trials", "2", "--set", "sim.resolution=13", "--set", "candidates=4",
-            "--set", "train.iterations=40", "--set", "plots=false", "--out", str(out)]  # fmt: skip
+            "--set", "train.iterations=10", "--set", "train.num_envs=16", "--set", "train.es.population=8",
+            "--set", "plots=false", "--out", str(out)]  # fmt: skip
 
     def raylets() -> set[str]:
         return set(subprocess.run(["pgrep", "-f", "raylet"], capture_output=True, text=True).stdout.split())
@@ -304,7 +305,7 @@ def test_sigterm_stops_a_fanned_out_evaluate_and_resume_finishes_it(tmp_path):
     deadline = time.monotonic() + 120
     while not (out / "plans.json").is_file() and time.monotonic() < deadline:
         time.sleep(0.2)
-    time.sleep(3)  # the policies are training on the workers
+    time.sleep(1)  # the policies are training on the workers
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 128 + signal.SIGTERM, err[-2000:]
@@ -313,4 +314,4 @@ def test_sigterm_stops_a_fanned_out_evaluate_and_resume_finishes_it(tmp_path):
     assert raylets() <= before, "the command's Ray instance outlived it"
     done = subprocess.run([*args, "--resume"], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
-    assert len(json.loads((out / "results.json").read_text())["rows"]) == 3
+    assert len(json.loads((out / "results.json").read_text())["rows"]) == 2

@@ -36,7 +36,7 @@ class CleanErrors(click.Group):
             result = super().main(*args, **kwargs)
         except click.exceptions.Abort as exc:  # Ctrl-C, SIGTERM, SIGHUP: what was saved, how to continue
             click.echo(_interrupted_message(exc, args[0] if args else sys.argv[1:]), err=True)
-            stop = _cause(exc, Terminated)
+            stop = _stop(exc)
             sys.exit(128 + stop.signum if stop is not None else 130)
         except click.exceptions.NoArgsIsHelpError as exc:  # no command given: the help, as --help shows it
             click.echo(exc.ctx.get_help())
@@ -89,8 +89,21 @@ class RunInterrupted(KeyboardInterrupt):
         self.run_dir = run_dir
 
 
+_RECEIVED: list[int] = []
+"""The signals :func:`_raise_terminated` turned into :class:`Terminated` (a library that catches the
+exception and raises a KeyboardInterrupt of its own, as Ray's waits do, loses its type, not the signal)."""
+
+
 def _raise_terminated(signum: int, frame) -> None:
+    _RECEIVED.append(signum)
     raise Terminated(signum)
+
+
+def _stop(exc: BaseException) -> Terminated | None:
+    """The SIGTERM or SIGHUP that stopped the command (its :class:`Terminated` in ``exc``'s causes, or the
+    signal received), or None: a Ctrl-C."""
+    stop = _cause(exc, Terminated)
+    return stop if stop is not None or not _RECEIVED else Terminated(_RECEIVED[-1])
 
 
 def _stop_on_signals() -> dict:
@@ -114,7 +127,7 @@ def _cause(exc: BaseException, kind: type | str) -> BaseException | None:
 
 def _interrupted_message(exc: BaseException, argv: list[str]) -> str:
     """What an interrupted command says: the signal, the checkpoint a training saved and how to continue."""
-    stop = _cause(exc, Terminated)
+    stop = _stop(exc)
     what = f"terminated ({stop})" if stop is not None else "interrupted"
     where = getattr(_cause(exc, "run_dir"), "run_dir", None)  # a pipeline's TrainingInterrupted
     command = next((a for a in argv if not a.startswith("-")), None)
