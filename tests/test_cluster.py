@@ -227,7 +227,7 @@ def test_the_sharded_env_steps_as_the_whole_batch_even_when_an_actor_dies(cluste
         env.seed(7)
     assert torch.equal(whole.get_observations()["policy"], parts.get_observations()["policy"])
     rng, ended = np.random.default_rng(0), 0
-    for step in range(2 * whole.max_episode_length + 2):
+    for step in range(whole.max_episode_length + 2):
         if step == 5:
             ray.kill(parts.shards[1])
         actions = torch.as_tensor(rng.uniform(-1, 1, (12, 3)), dtype=torch.float32)
@@ -241,7 +241,7 @@ def test_the_sharded_env_steps_as_the_whole_batch_even_when_an_actor_dies(cluste
             ended += 1
             assert torch.equal(a[3][EPISODE_COST_KEY], b[3][EPISODE_COST_KEY])
             assert all(torch.equal(a[3]["log"][k], b[3]["log"][k]) for k in a[3]["log"])
-    assert ended == 2 and parts.revived == 1
+    assert ended == 1 and parts.revived == 1
     parts.close()
 
 
@@ -283,9 +283,10 @@ def test_a_unit_runs_torch_on_the_drivers_threads_and_the_simulator_on_its_cpu(c
         torch.set_num_threads(threads)
 
 
-def test_sigterm_stops_a_fanned_out_evaluate_and_resume_finishes_it(tmp_path):
+def test_sigterm_stops_a_fanned_out_evaluate_and_its_ray_instance(tmp_path):
     """The command line end to end: SIGTERM while the policies train on a local cluster ends the command
-    with the interrupted message (no traceback) and stops its Ray instance; --resume finishes the run."""
+    with the interrupted message (no traceback) and stops its Ray instance (resuming after an interruption:
+    test_an_interrupted_fanned_out_evaluate_resumes_to_the_same_rows)."""
     import time
 
     pytest.importorskip("ray")
@@ -312,6 +313,4 @@ def test_sigterm_stops_a_fanned_out_evaluate_and_resume_finishes_it(tmp_path):
     assert "Traceback" not in err and "terminated (SIGTERM)" in err and "--resume" in err, err[-2000:]
     time.sleep(1)
     assert raylets() <= before, "the command's Ray instance outlived it"
-    done = subprocess.run([*args, "--resume"], capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr[-2000:]
-    assert len(json.loads((out / "results.json").read_text())["rows"]) == 2
+    assert (out / "plans.json").is_file() and (out / ".warpcut-run.json").is_file()  # resumable
