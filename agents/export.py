@@ -24,7 +24,14 @@ import torch
 from agents.checkpoints import policy_checkpoint
 from agents.policies import is_run, load_options, load_policy, policy_runs
 from agents.training import make_run_dir
-from warpcut.io import claim_run_dir, enclosing_run, note_written, write_atomic, written_by_warpcut
+from warpcut.io import (
+    claim_run_dir,
+    enclosing_run,
+    note_written,
+    temp_file,
+    write_atomic,
+    written_by_warpcut,
+)
 from warpcut.planning import check_pinch
 
 ONNX_OPSET = 18
@@ -180,8 +187,10 @@ def export_policy(source: str | Path, out_dir: str | Path | None = None) -> dict
     # A batch of 2: torch.export would specialize a batch of 1 to a constant.
     example = torch.zeros(2, onnx_model.input_size)
     onnx_path = out_dir / "policy.onnx"
-    tmp_path = out_dir / f".{onnx_path.name}.tmp"
     note_written(onnx_path)  # in a run directory, a file of its run
+    fd, tmp = temp_file(onnx_path)
+    os.close(fd)
+    tmp_path = Path(tmp)
     try:
         with _quiet_onnx_exporter():
             program = torch.onnx.export(

@@ -736,25 +736,79 @@ def test_export_never_replaces_a_file_warpcut_did_not_write(tmp_path):
     for _ in range(2):  # its own folder: marked, and exported into again
         code, output = invoke(["export", str(run), "--out", str(fresh)])
         assert code == 0, output
+        (fresh / ".policy.onnx.tmp").write_text("the user's")  # a name like a temporary file's: kept
     assert {"policy.pt", "policy.onnx"} <= set(read_run_marker(fresh)["files"])
+    assert (fresh / ".policy.onnx.tmp").read_text() == "the user's"
 
 
-def test_overwrite_never_follows_a_link_out_of_the_run(tmp_path):
-    """A folder of a run replaced by a link to the user's files: ``--overwrite`` deletes the link's
-    listed files only inside the run, never through the link."""
+@pytest.mark.parametrize("mode", ["resume", "overwrite", "reuse"])
+def test_a_run_never_writes_or_deletes_through_a_link_out_of_it(tmp_path, mode):
+    """A folder of a run replaced by a link to the user's files (and a marker that lists them): resuming,
+    overwriting or writing into the run again is refused in one line naming the link, and nothing outside
+    is created, replaced or deleted."""
+    import shutil
+
     out = tmp_path / "run"
     with claim_run_dir(out, command="evaluate"):
-        write_json(out / "sub" / "results.json", {"run": True})
+        write_json(out / "policies" / "c" / "results.json", {"run": True})
     outside = tmp_path / "project"
     outside.mkdir()
     (outside / "results.json").write_text("the user's")
-    import shutil
-
-    shutil.rmtree(out / "sub")
-    (out / "sub").symlink_to(outside)
-    with claim_run_dir(out, command="evaluate", overwrite=True):
-        pass
+    shutil.rmtree(out / "policies" / "c")
+    (out / "policies" / "c").symlink_to(outside)
+    marker = read_run_marker(out)
+    marker["files"].append("../project/config.json")
+    (out / RUN_MARKER).write_text(json.dumps(marker))
+    with pytest.raises(ValueError, match=r"policies/c: a link to .*project, out of the run directory"):
+        with claim_run_dir(out, command="evaluate", **{mode: True}):
+            write_json(out / "policies" / "c" / "results.json", {"run": False})
+    assert [p.name for p in outside.iterdir()] == ["results.json"]
     assert (outside / "results.json").read_text() == "the user's"
+    code, output = invoke(["evaluate", "--contours", "circle-small", "--methods", "none", "--out", str(out),
+                           f"--{mode}" if mode != "reuse" else "--resume"])  # fmt: skip
+    assert code == 2 and "a link to" in output and "remove the link" in output, output
+    assert [p.name for p in outside.iterdir()] == ["results.json"]
+
+
+def test_overwrite_deletes_only_warpcuts_own_temporary_files(tmp_path):
+    """Files a user put beside a run's files under names like theirs (``.config.json.orig``, an editor's
+    ``.summary.json.swp``) are kept by ``--overwrite``; the temporary files warpcut's writers leave when
+    killed (a form only they use) go."""
+    from warpcut.io import temp_file
+
+    out = tmp_path / "run"
+    with claim_run_dir(out, command="train"):
+        for name in ("config.json", "summary.json", "best.pt", "model_0.pt", "env_0.mp4"):
+            write_json(out / name, {})
+    users = [".config.json.orig", ".best.pt.bak", ".summary.json.swp", ".model_0.notes.mp4", ".env_0.x.mp4",
+             ".config.json.tmp", ".best.pt.abcdefgh.tmp"]  # fmt: skip
+    for name in users:
+        (out / name).write_text("the user's")
+    leftovers = [temp_file(out / "config.json")[1], temp_file(out / "env_0.mp4", ".mp4")[1]]
+    with claim_run_dir(out, command="train", overwrite=True):
+        pass
+    assert sorted(p.name for p in out.iterdir() if p.name != RUN_MARKER) == sorted(users)
+    assert not any(Path(p).exists() for p in leftovers)
+
+
+def test_a_link_made_during_a_run_is_never_written_through(tmp_path):
+    """A link out of the run made while it runs: every writer (JSON, checkpoints, recordings, videos) lists
+    its file first, and refuses, naming the link, before it creates anything outside."""
+    from warpcut.io import note_written
+
+    out, outside = tmp_path / "run", tmp_path / "project"
+    outside.mkdir()
+    with claim_run_dir(out, command="train"):
+        write_json(out / "config.json", {})
+        (out / "late").symlink_to(outside)
+        for path in (out / "late" / "summary.json", out / "late" / "deeper" / "best.pt"):
+            with pytest.raises(ValueError, match="leads out of the run directory"):
+                write_json(path, {})
+        (out / "file-link.json").symlink_to(outside / "x.json")
+        with pytest.raises(ValueError, match="exists, and warpcut did not write it"):
+            note_written(out / "file-link.json")
+    assert not list(outside.iterdir())
+    assert all(not f.startswith("..") for f in read_run_marker(out)["files"])
 
 
 def test_implicit_outputs_go_only_into_a_folder_warpcut_marks(tmp_path):

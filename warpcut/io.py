@@ -27,6 +27,12 @@ deletes)."""
 
 _SAFE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
 
+_TEMP_TAG = ".warpcut.tmp"
+_TEMP_NAME = re.compile(r"\.(.+)\.[a-z0-9_]{8}" + re.escape(_TEMP_TAG) + r"(?:\.[a-z0-9]{1,4})?")
+"""The temporary file of NAME that :func:`temp_file` makes: ``.NAME.XXXXXXXX.warpcut.tmp`` (and an
+extension its writer needs, e.g. ``.mp4``), a form no one else uses: ``--overwrite`` deletes only these
+beside the files a run wrote, never a user's ``.NAME.orig`` or ``.NAME.swp``."""
+
 
 def plain_file_mode() -> int:
     """The mode a plain ``open(path, "w")`` would give a new file: mkstemp's temporary files are 0600."""
@@ -68,6 +74,15 @@ class WriteFailed(ValueError):
         super().__init__(f"{path}: not written, {self.reason}; its previous version (if any) is intact")
 
 
+def temp_file(path: Path, extension: str = "") -> tuple[int, str]:
+    """A new temporary file beside ``path`` for writing it atomically: its open descriptor (the mode a
+    plain ``open`` would give) and its name, which only warpcut's temporary files have (:data:`_TEMP_NAME`;
+    ``extension``, e.g. ``".mp4"``, for a writer that needs one)."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=_TEMP_TAG + extension)
+    os.fchmod(fd, plain_file_mode())
+    return fd, tmp
+
+
 def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
     """Write ``data`` to a temporary file beside ``path``, fsync it, then rename it over ``path``: a write
     that fails (a full disk, a file-size limit, a read-only folder, a signal) leaves the file at ``path`` as
@@ -84,10 +99,9 @@ def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
     raw = data.encode() if isinstance(data, str) else data
     tmp = None
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
         note_written(path)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-        os.fchmod(fd, plain_file_mode())
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = temp_file(path)
         with os.fdopen(fd, "wb") as f:
             f.write(raw)
             f.flush()
@@ -206,7 +220,29 @@ def written_by_warpcut(path: str | os.PathLike) -> bool:
         return False
     claim = _holder(Path(path))
     files = claim.marker["files"] if claim is not None else (read_run_marker(run) or {}).get("files", [])
-    return os.path.relpath(Path(path).resolve(), Path(run).resolve()) in files
+    return _in_run(Path(path), Path(run)) in files
+
+
+def _in_run(path: Path, run: Path) -> str | None:
+    """``path`` relative to the run directory ``run``, both resolved (``path``'s folders, not ``path``
+    itself: a file that is a link is the link), or None where ``path`` leads out of ``run`` (through a link
+    among its folders)."""
+    path = Path(os.path.abspath(path))
+    relative = os.path.relpath(path.parent.resolve() / path.name, run.resolve())
+    return None if relative == ".." or relative.startswith(f"..{os.sep}") else relative
+
+
+def _link_out(path: Path) -> tuple[Path, str] | None:
+    """A link among the folders in the run directory ``path`` that leads out of it, and where to: what a
+    run writes or deletes there would land outside (a folder of the run replaced by a link), or None."""
+    real = os.path.realpath(path)
+    for folder, dirs, _ in os.walk(path):
+        for name in dirs:  # os.walk lists a link to a folder here and does not descend into it
+            entry = os.path.join(folder, name)
+            target = os.path.realpath(entry)
+            if os.path.islink(entry) and os.path.commonpath([real, target]) != real:
+                return Path(entry), target
+    return None
 
 
 def note_written(path: str | os.PathLike, *, written: bool = False) -> None:
@@ -231,7 +267,13 @@ def note_written(path: str | os.PathLike, *, written: bool = False) -> None:
             with claim_run_dir(run, command=None, resume=True):
                 note_written(path, written=written)
         return
-    relative = os.path.relpath(path.resolve(), claim.path.resolve())
+    relative = _in_run(path, claim.path)
+    if relative is None:
+        raise ValueError(
+            f"{path}: leads out of the run directory {claim.path} through a link ({path.parent} is "
+            f"{path.parent.resolve()}); warpcut never writes through it: remove the link, or choose another "
+            "output folder"
+        )
     if relative in claim.listed:
         return
     if (path.exists() or path.is_symlink()) and not written:
@@ -280,15 +322,10 @@ def _delete_written(path: Path, files: list[str]) -> tuple[list[str], list[str]]
             present = os.listdir(folder)  # once per folder: a marker may list many thousands of files
         except OSError:
             continue
-        hidden = [e for e in present if e.startswith(".")]
-        wanted = set(names)
-        for name in names:  # the temporary files of its writers: .NAME.*, .STEM.*.mp4
-            stem = os.path.splitext(name)[0]
-            wanted.update(
-                e
-                for e in hidden
-                if e.startswith(f".{name}.") or e.startswith(f".{stem}.") and e.endswith(".mp4")
-            )
+        listed = set(names)
+        wanted = listed | {  # the temporary files of its writers, by the form only warpcut uses
+            e for e in present if (temp := _TEMP_NAME.fullmatch(e)) is not None and temp.group(1) in listed
+        }
         for name in sorted(wanted.intersection(present)):
             entry = os.path.join(folder, name)
             if os.path.islink(entry) or os.path.isfile(entry):
@@ -409,6 +446,12 @@ def claim_run_dir(
     claim, deleted, kept = None, [], []
     try:
         marker, contents = _check_run_dir(path, command, resume, overwrite, option, reuse)
+        link = _link_out(path) if contents else None
+        if link is not None:
+            raise ValueError(
+                f"{link[0]}: a link to {link[1]}, out of the run directory {path}; warpcut never writes or "
+                f"deletes through it: remove the link, or choose another {option}"
+            )
         if overwrite and marker is not None:
             deleted, kept = _delete_written(path, marker["files"])
         if (resume or reuse) and marker is not None and contents:

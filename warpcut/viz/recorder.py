@@ -51,7 +51,6 @@ when the stepping process dies. Use a recorder as a context manager::
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -59,7 +58,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from warpcut.fiducials import SHAFT_RADIUS_MM
-from warpcut.io import note_written, plain_file_mode
+from warpcut.io import note_written, temp_file
 from warpcut.viz.colours import COLOUR_FIELDS
 from warpcut.viz.frames import EnvSetup, Frame, TaskSetup
 from warpcut.viz.process import default_background
@@ -126,11 +125,10 @@ class Recorder:
             )
         self.path = Path(path)
         self.envs, self.every, self.colour_by, self.background = envs, every, colour_by, background
-        self.path.parent.mkdir(parents=True, exist_ok=True)
         for written in (self.path, self.path.with_suffix(".partial.rrd")):  # a run directory's files
             note_written(written)
-        fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=f".{self.path.name}.", suffix=".tmp")
-        os.fchmod(fd, plain_file_mode())
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = temp_file(self.path)
         os.close(fd)
         self._tmp = Path(tmp)
         try:

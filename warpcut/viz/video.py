@@ -17,13 +17,12 @@ Drawing costs a few milliseconds per env and step in the stepping loop; the enco
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from warpcut.io import note_written, plain_file_mode, safe_name
+from warpcut.io import note_written, safe_name, temp_file
 from warpcut.viz.render import RENDER_COLOURS, TaskRenderer, check_render_settings, step_fps
 
 if TYPE_CHECKING:
@@ -155,10 +154,9 @@ class _Writer:
         import imageio_ffmpeg
 
         self.path = path
-        path.parent.mkdir(parents=True, exist_ok=True)
         note_written(path)  # a run directory's file
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".mp4")
-        os.fchmod(fd, plain_file_mode())
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = temp_file(path, ".mp4")
         os.close(fd)
         self.tmp = Path(tmp)
         self._frames = imageio_ffmpeg.write_frames(
