@@ -498,6 +498,35 @@ def test_plan_json_never_overwrites_its_contour(tmp_path):
     assert code == 2 and "is an input" in output and contour.read_bytes() == before
 
 
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["plan", "--contour", "circle-small"],
+        ["contours"],
+        ["simulate", "--contour", "circle-small", "--policy", "none", "--set", "plots=false"],
+        ["evaluate", "--contours", "circle-small", "--methods", "none", "--out", "OUT"],
+        ["bench", "--repeats", "1"],
+    ],
+)
+def test_a_json_output_never_replaces_a_users_file_or_writes_into_another_run(tmp_path, args):
+    """``--json`` keeps the promise of the run directories: a file warpcut cannot tell it wrote (a user's
+    results, in no run directory) is never replaced, and a file in a run directory the command does not own
+    (a finished run's ``config.json``) is never written, before any work."""
+    user = tmp_path / "user_results.json"
+    user.write_text("the user's")
+    run = tmp_path / "run"
+    with claim_run_dir(run, command="train"):
+        write_json(run / "config.json", {"train": True})
+    for path, why in [(user, "lies in no run directory of warpcut's"), (run / "config.json", "does not own"),
+                      (run / "new.json", "does not own")]:  # fmt: skip
+        given = [str(tmp_path / "out") if a == "OUT" else a for a in args]
+        code, output = invoke([*given, "--json", str(path)])
+        assert code == 2 and f"--json: {path}" in output and why in output, output
+    assert user.read_text() == "the user's"
+    assert json.loads((run / "config.json").read_text()) == {"train": True}
+    assert not (run / "new.json").exists() and not (tmp_path / "out").exists()
+
+
 def test_train_refuses_an_existing_run_and_stops_on_sigterm_with_a_checkpoint(tmp_path):
     run = tmp_path / "run"
     args = ["train", "--contour", "circle-small", *TINY_FLAGS, "--set", "eval_trials=1",

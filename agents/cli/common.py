@@ -306,9 +306,14 @@ def _claimed(out: Path, command: str, resume: bool, overwrite: bool):
         yield out
 
 
-def check_outputs(outputs: dict[str, Path | None], inputs: list[str] = ()) -> None:
+def check_outputs(
+    outputs: dict[str, Path | None], inputs: list[str] = (), own: tuple[Path, str] | None = None
+) -> None:
     """Refuse, before any work, an output path (``{option: path}``, files or directories) that cannot be
-    written, or a file that is one of the input files (contour files): writing it would destroy the input."""
+    written, or a file that is one of the input files (contour files): writing it would destroy the input.
+    A file the user names (``--json``) is refused where it would replace a file warpcut did not write, or
+    land in a run directory the command does not own (``own``: its run directory and the command, whose
+    marker it may carry)."""
     files = [Path(i) for i in inputs if Path(i).is_file()]
     for option, path in outputs.items():
         if path is None:
@@ -318,13 +323,44 @@ def check_outputs(outputs: dict[str, Path | None], inputs: list[str] = ()) -> No
             raise click.BadParameter(
                 f"cannot write {path} ({problem}); choose another path", param_hint=option
             )
-        if not path.exists():
-            continue
         for given in files:
-            if path.resolve() == given.resolve():
+            if path.exists() and path.resolve() == given.resolve():
                 raise click.BadParameter(
                     f"{path} is an input (a contour file); choose another file", param_hint=option
                 )
+        if option == "--json":
+            _check_named_file(path, own, option)
+
+
+def _check_named_file(path: Path, own: tuple[Path, str] | None, option: str) -> None:
+    """Refuse the file ``path`` a user named for ``option`` where writing it would replace a file warpcut
+    did not write (one in no run directory: warpcut cannot tell it wrote it), or land in a run directory
+    other than ``own`` (another run's ``config.json``: that run could no longer be resumed)."""
+    from warpcut.io import enclosing_run, read_run_marker, written_by_warpcut
+
+    run = enclosing_run(path)
+    if run is not None:
+        marker = read_run_marker(run) or {}
+        mine = own is not None and run.resolve() == own[0].resolve()
+        if not mine or marker.get("command") not in (own[1], None):
+            command = marker.get("command") or "COMMAND"
+            raise click.BadParameter(
+                f"{path} lies in the warpcut {command} run in {run}, which this command does not own, so "
+                "it never writes there; choose a file outside it",
+                param_hint=option,
+            )
+        if path.exists() and not written_by_warpcut(path):
+            raise click.BadParameter(
+                f"{path} exists, and warpcut did not write it, so it never replaces it; move it, or choose "
+                "another file",
+                param_hint=option,
+            )
+    elif path.exists() or path.is_symlink():
+        raise click.BadParameter(
+            f"{path} exists, and lies in no run directory of warpcut's, so warpcut never replaces it; move "
+            "it, or choose another file",
+            param_hint=option,
+        )
 
 
 def _unwritable(path: Path) -> str | None:

@@ -112,8 +112,8 @@ def command(
         return
     record = _first_contour_envs("record", job.record, job.trials, "recording")
     video = _first_contour_envs("video", job.video, job.trials, "filming")
-    common.check_outputs({"--json": json_path}, list(job.contours))
     out, claim = common.claim(out, "evaluate", resume, overwrite, "evaluate")
+    common.check_outputs({"--json": json_path}, list(job.contours), own=(out, "evaluate"))
     cuts = common.final_cuts(not job.plots)
     with (
         claim,

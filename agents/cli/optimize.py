@@ -98,8 +98,10 @@ def command(
         from warpcut.planning import check_pinch
 
         check_pinch(job.pinch, contour, job.sim.validated(), None, job.arm, allow=job.allow_infeasible_pinch)
-    common.check_outputs({"--json": json_path}, [job.contour] if isinstance(job.contour, str) else [])
     out, claim = common.claim(out, f"optimize-{safe_name(contour_name)}", resume, overwrite, "optimize")
+    common.check_outputs(
+        {"--json": json_path}, [job.contour] if isinstance(job.contour, str) else [], own=(out, "optimize")
+    )
     with claim:
         report = optimize_contour(job, out, resume=resume, device=device, log=common.log)
     optimized = report["optimized"]

@@ -149,8 +149,10 @@ def command(
     if print_config:
         common.print_config(job)
         return
-    common.check_outputs({"--json": json_path}, [job.contour] if isinstance(job.contour, str) else [])
     out, claim = common.claim(out, f"robustness-{safe_name(name)}", resume, overwrite, "robustness")
+    common.check_outputs(
+        {"--json": json_path}, [job.contour] if isinstance(job.contour, str) else [], own=(out, "robustness")
+    )
     with claim, executor(ray, device, common.log) as units:
         reports = robustness(job, out, resume=resume, device=device, log=common.log, cluster=units)
     for report in reports:

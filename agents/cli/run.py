@@ -120,8 +120,8 @@ def command(
         common.print_config(job)
         return
     inputs = [job.contour] if isinstance(job.contour, str) else []
-    common.check_outputs({"--json": json_path}, inputs)
     out, claim = common.claim(out, f"run-{safe_name(contour_name)}", resume, overwrite, "run")
+    common.check_outputs({"--json": json_path}, inputs, own=(out, "run"))
     cuts = common.final_cuts(not job.plots)
     with (
         claim,

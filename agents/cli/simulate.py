@@ -96,7 +96,8 @@ def command(
     writes_out = job.plots or job.record is not None or job.video is not None  # the figures, .rrd, .mp4
     out_option = "--json's folder" if json_path else "the output folder"
     outputs = {"--json": json_path, "export_mesh": mesh_dir, out_option: out if writes_out else None}
-    common.check_outputs(outputs, inputs)  # before the simulation: a folder it could not write
+    # before the simulation: a folder it could not write, a file it did not write
+    common.check_outputs(outputs, inputs, own=(out, "simulate"))
     with contextlib.ExitStack() as claims:  # the folders of its implicit outputs: warpcut's own, or new
         if writes_out:
             claims.enter_context(claim_run_dir(out, command="simulate", reuse=True, option=out_option))
