@@ -36,7 +36,7 @@ def benchmark_training(
     options = PatternCutOptions(contour="fls-circle", device=device, action_type=entry(algo).action_type)
     cfg = TrainConfig(algo=algo, num_envs=num_envs, save_interval=10**6, validation_trials=0)
     env = training_env(options, cfg, batch=("--train-envs", "give --train-envs batches of at most {fits}"))
-    per_iteration = cfg.ppo.num_steps_per_env if algo == "ppo" else env.max_episode_length
+    per_iteration = cfg.to_rsl_rl(None, (0, 1), int(env.max_episode_length))["num_steps_per_env"]
     steady_iterations = -(-episodes * env.max_episode_length // per_iteration)
     cfg = dataclasses.replace(cfg, iterations=1 + steady_iterations)
     with tempfile.TemporaryDirectory() as out:

@@ -231,8 +231,11 @@ def start_from(runner, source: str | Path) -> None:
         ValueError: not es, or the policy does not observe and act as the env does (the message names the
             checkpoint).
     """
-    if runner.algo != "es":
-        raise ValueError(f"init: fine-tuning starts es from a generalist; train.algo is {runner.algo}")
+    from agents.algorithms import ALGORITHMS, algorithm
+
+    if not algorithm(runner.algo).fine_tunes:
+        which = ", ".join(name for name, entry in ALGORITHMS.items() if entry.fine_tunes)
+        raise ValueError(f"init: fine-tuning starts {which} from a generalist; train.algo is {runner.algo}")
     checkpoint = policy_checkpoint(source)
     state = read_checkpoint(checkpoint)["actor_state_dict"]
     actor = runner.alg.actor

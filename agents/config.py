@@ -14,10 +14,14 @@ import math
 import re
 from dataclasses import dataclass, field
 
-from agents.algorithms import ALGORITHMS, DEFAULT_ALGORITHM, algorithm, default_iterations
-from agents.apg.config import ApgConfig
+from agents.algorithms import (
+    ALGORITHMS,
+    CRITIC_HIDDEN_DIMS,
+    DEFAULT_ALGORITHM,
+    algorithm,
+    default_iterations,
+)
 from agents.es.config import EsConfig
-from agents.ppo.config import PpoConfig
 from warpcut.sim.config import PINCH_CANDIDATES, RANDOMIZE_ALIASES, randomize_ranges
 from warpcut.validation import (
     check_choice,
@@ -48,18 +52,19 @@ OBS_GROUPS = {"actor": ["policy"], "critic": ["policy"]}
 
 
 @dataclass
-class TrainConfig:
+class _TrainSettings:
     """How a policy is trained: the learner and its batch, the policy network, and model selection; each
-    learner's own settings in its section (``ppo``, ``es``, ``apg``; only the chosen one's are used)."""
+    learner's own settings in its section (:class:`TrainConfig`)."""
 
     algo: str = DEFAULT_ALGORITHM
-    """The learner (:data:`agents.algorithms.ALGORITHMS`): ``es`` (the default), ``ppo`` or ``apg``."""
+    """The learner (:data:`agents.algorithms.ALGORITHMS`): ``es`` (the default), ``gps``, ``ppo`` or
+    ``apg``."""
     num_envs: int | None = None
-    """Parallel envs. None: the learner's (256 for es and PPO, 16 for APG)."""
+    """Parallel envs. None: the learner's (256 for es, gps and PPO, 16 for APG)."""
     iterations: int | None = None
     """Learning iterations of the run, counting those before a resume. None: the learner's (PPO 150, APG 30;
-    es as many whole cuts as PPO's 150 x 256 x 32 env steps, at least 10: :func:`agents.es.config.
-    default_iterations`)."""
+    es as many whole cuts as PPO's 150 x 256 x 32 env steps, gps half as many, at least 10:
+    :func:`agents.algorithms.default_iterations`)."""
     validation_trials: int = VALIDATION_TRIALS
     """Held-out episodes that score the deterministic policy before training and every
     ``validation_interval`` iterations; the best is the run's policy (``best.pt``). 0: no validation, the
@@ -82,12 +87,6 @@ class TrainConfig:
     torch_device: str = "cpu"
     """Torch device of the policy and its updates; the simulator's Warp device is the env's own. The CPU by
     default, wherever the simulator runs: the policy is a small MLP fed NumPy observations every step."""
-    ppo: PpoConfig = field(default_factory=PpoConfig)
-    """PPO's settings (``algo = "ppo"``)."""
-    es: EsConfig = field(default_factory=EsConfig)
-    """es's settings (``algo = "es"``)."""
-    apg: ApgConfig = field(default_factory=ApgConfig)
-    """APG's settings (``algo = "apg"``)."""
 
     def __post_init__(self) -> None:
         """Each field on its own, as it is given (a file and ``--set`` set one key at a time); what depends on
@@ -108,7 +107,7 @@ class TrainConfig:
         check_flag(where + "obs_normalization", self.obs_normalization)
         if not (isinstance(self.torch_device, str) and TORCH_DEVICE.fullmatch(self.torch_device)):
             fail(where + "torch_device", "a torch device: cpu, cuda, cuda:N or mps", self.torch_device)
-        for name, kind in (("ppo", PpoConfig), ("es", EsConfig), ("apg", ApgConfig)):
+        for name, kind in _SECTIONS.items():
             check_instance(where + name, getattr(self, name), kind, f"a {kind.__name__}")
 
     def check(self, discrete: bool | None = None) -> TrainConfig:
@@ -136,9 +135,13 @@ class TrainConfig:
                 f"train.algo: {self.algo} plays continuous moves; set env.action_type=continuous "
                 "(or train with ppo)"
             )
-        section = getattr(self, self.algo)
-        section.check(self.batch_size) if self.algo == "es" else section.check()
+        self.learner.check(self.batch_size)
         return self
+
+    @property
+    def learner(self):
+        """The chosen learner's section of settings (``train.ALGO``)."""
+        return getattr(self, self.algo)
 
     @property
     def batch_size(self) -> int:
@@ -158,7 +161,8 @@ class TrainConfig:
         feedback_inputs: tuple[int, int] | None = None,
         episode_steps: int | None = None,
     ) -> dict:
-        """rsl-rl 5.5's ``OnPolicyRunner`` config.
+        """rsl-rl 5.5's ``OnPolicyRunner`` config: the network settings here, the learner's part from its
+        section (:mod:`agents.algorithms`).
 
         Args:
             num_action_choices: Options per discrete action (the env's ``num_action_choices``); None for
@@ -166,9 +170,9 @@ class TrainConfig:
             feedback_inputs: ``(start, size)`` of the tracking error in the observation
                 (:func:`agents.models.feedback_inputs`); required where the learner's actor has the feedback
                 path.
-            episode_steps: The env's episode length: es plays one whole cut per env an iteration.
+            episode_steps: The env's episode length (es and gps play one whole cut per env an iteration).
         """
-        discrete = num_action_choices is not None
+        part = self.learner.rsl_rl(num_action_choices is not None, num_action_choices, episode_steps)
         model = {"class_name": "rsl_rl.models:MLPModel", "activation": self.activation}
         actor = dict(model)
         if self.feedback:
@@ -177,27 +181,10 @@ class TrainConfig:
                     "feedback: the actor's feedback path needs the tracking error in the observation"
                 )
             actor.update(class_name="agents.models:FeedbackMLPModel", feedback_inputs=list(feedback_inputs))
-            if self.algo == "es" and self.es.scheduled:
-                actor["scheduled"] = True
-        if self.algo == "ppo":
-            ppo = self.ppo.rsl_rl(discrete, num_action_choices)
-            algorithm_cfg, distribution = ppo["algorithm"], ppo["distribution"]
-            critic_dims, steps = ppo["critic_hidden_dims"], self.ppo.num_steps_per_env
-        else:
-            # es and APG play the actor's deterministic output (the Gaussian's mean); the distribution is
-            # kept so that the actor, its checkpoints and its exports are those of a continuous PPO policy.
-            distribution = {"class_name": "rsl_rl.modules:GaussianDistribution", "init_std": 1.0}
-            if self.algo == "es":
-                if episode_steps is None:
-                    raise ValueError("es plays whole cuts: give the env's episode_steps")
-                algorithm_cfg, steps = self.es.rsl_rl(), episode_steps
-            else:  # APG's runner steps whole episodes itself; rsl-rl's PPO only holds its actor
-                algorithm_cfg, steps = {"class_name": "agents.ppo.algorithm:PPO"}, 1
-            critic_dims = PpoConfig().critic_hidden_dims
-        own = {"apg": dataclasses.asdict(self.apg)} if self.algo == "apg" else {}
+        actor.update(part.get("actor", {}))
         return {
-            **own,
-            "num_steps_per_env": steps,
+            **part.get("own", {}),
+            "num_steps_per_env": part["num_steps_per_env"],
             "save_interval": self.save_interval,
             "obs_groups": {name: list(groups) for name, groups in OBS_GROUPS.items()},
             "logger": "tensorboard",
@@ -205,25 +192,37 @@ class TrainConfig:
                 **actor,
                 "hidden_dims": list(self.actor_hidden_dims),
                 "obs_normalization": self.obs_normalization,
-                "distribution_cfg": distribution,
+                "distribution_cfg": part["distribution"],
             },
             "critic": {
                 **model,
-                "hidden_dims": list(critic_dims),
+                "hidden_dims": list(part.get("critic_hidden_dims", CRITIC_HIDDEN_DIMS)),
                 "obs_normalization": self.obs_normalization,
             },
-            "algorithm": algorithm_cfg,
+            "algorithm": part["algorithm"],
         }
 
     @property
     def feedback(self) -> bool:
-        """Whether the actor has the linear feedback path on the tracking error (the learner's ``feedback``;
-        APG: never)."""
-        return self.algo in ("ppo", "es") and getattr(self, self.algo).feedback
+        """Whether the actor has the linear feedback path on the tracking error (the learner's
+        ``feedback``)."""
+        return bool(self.learner.feedback)
 
 
-APG_FIXED_SHEET = "env.randomize: APG differentiates one fixed sheet; train with es or ppo (--algo)"
-"""Why APG refuses domain randomisation and a relative reward (:class:`agents.apg.runner.ApgRunner`)."""
+_SECTIONS = {name: entry.settings_class() for name, entry in ALGORITHMS.items()}
+"""Each learner's settings class, by name: :class:`TrainConfig`'s sections."""
+
+TrainConfig = dataclasses.make_dataclass(
+    "TrainConfig",
+    [(name, kind, field(default_factory=kind)) for name, kind in _SECTIONS.items()],
+    bases=(_TrainSettings,),
+)
+TrainConfig.__module__ = __name__
+TrainConfig.__doc__ = """How a policy is trained: the learner and its batch, the policy network, and model
+selection (:class:`_TrainSettings`' fields); then one section per learner of the registry
+(:data:`agents.algorithms.ALGORITHMS`), named after it (``es``, ``gps``, ``ppo``, ``apg``; only the chosen
+one's is used): that learner's settings class (``Algorithm.settings``)."""
+
 
 BUDGETS = {
     # candidates for the pinch search, of which the best rl_candidates (by fixed tension; None: all, as in
@@ -266,8 +265,9 @@ GENERALIST_LOOKAHEAD = 8
 """Look-ahead points a generalist observes (``env.lookahead``; :mod:`envs.observations`)."""
 
 
-GRAD_ESTIMATORS = ("tape", "es")
-"""How the plan optimiser may estimate its gradient (``GradConfig.estimator``): "tape" or "es"."""
+GRAD_ESTIMATORS = ("es", "tape")
+"""How the plan optimiser may estimate its gradient (``GradConfig.estimator``): "es" (the default) or
+"tape"."""
 
 
 @dataclass(frozen=True)
@@ -275,14 +275,15 @@ class GradConfig:
     """Gradient-based tensioning (:mod:`agents.gradient`): Adam on an open-loop plan of grasp moves (and
     optionally the pinch point) through the differentiable simulator (:mod:`warpcut.gradients`)."""
 
-    estimator: str = "tape"
-    """How each step's gradient is estimated. "tape": the path surrogate's gradient through ``wp.Tape``
-    (:mod:`warpcut.gradients`), over ``trials`` episodes. "es": evolution strategies, the gradient of the path
-    score itself smoothed by Gaussian perturbations of the plan (``es_population`` perturbed plans, antithetic
-    pairs, ``es_trials`` episodes each, ranked; forward passes only, one batch a step)."""
-    iterations: int = 20
-    """Adam steps (tape: each one forward and one backward pass of ``trials`` episodes; es: one batch of
-    ``es_population x es_trials`` episodes)."""
+    estimator: str = "es"
+    """How each step's gradient is estimated. "es" (the default: +70.2% on the suite against the tape's
+    +45.9%, docs/results.md): evolution strategies, the gradient of the path score itself smoothed by
+    Gaussian perturbations of the plan (``es_population`` perturbed plans, antithetic pairs, ``es_trials``
+    episodes each, ranked; forward passes only, one batch a step). "tape": the path surrogate's gradient
+    through ``wp.Tape`` (:mod:`warpcut.gradients`), over ``trials`` episodes."""
+    iterations: int = 40
+    """Adam steps (es: one batch of ``es_population x es_trials`` episodes; tape: each one forward and one
+    backward pass of ``trials`` episodes). Each estimator has its own default (:data:`GRAD_CONFIGS`)."""
     trials: int = 8
     """Noisy episodes per step of the tape estimator, the same seeds every step (the expected surrogate over
     them is minimised); their noise is not the evaluation's (seed ``seed + GRAD_SEED_OFFSET``)."""
@@ -318,8 +319,9 @@ class GradConfig:
     """es: the range of a randomised parameter, ``{name: [low, high]}`` in its units, where it differs from
     :data:`warpcut.sim.config.RANDOMIZE_RANGES` (``warpcut optimize --randomize-range``); None: the
     defaults."""
-    learning_rate: float = 0.3
-    """Adam's step (mm per grasp move); moves are projected back onto ``max_step_mm`` per axis."""
+    learning_rate: float = 0.1
+    """Adam's step (mm per grasp move); moves are projected back onto ``max_step_mm`` per axis. Each estimator
+    has its own default (:data:`GRAD_CONFIGS`)."""
     validation_trials: int = 8
     """Held-out noisy episodes every iterate is scored on (path score); the best is kept. 0: keep the
     iterate with the lowest error on the optimiser's own episodes."""
@@ -414,16 +416,17 @@ class GradConfig:
 
 
 GRAD_CONFIGS = {
-    "tape": GradConfig(),
-    "es": GradConfig(estimator="es", iterations=40, learning_rate=0.1),
+    "es": GradConfig(),
+    "tape": GradConfig(estimator="tape", iterations=20, learning_rate=0.3),
 }
 """The optimiser's defaults per estimator (library and command line). es: 40 steps of 0.1 mm, on fls-circle
-and kidney +74.6% and +55.3% against +75.3% and +48.9% with 20 steps of 0.3 mm (docs/results.md)."""
+and kidney +74.6% and +55.3% against +75.3% and +48.9% with 20 steps of 0.3 mm (docs/results.md); tape: 20
+steps of 0.3 mm, windows of 10 steps."""
 
 assert tuple(GRAD_CONFIGS) == GRAD_ESTIMATORS
 
 
-def grad_config(estimator: str = "tape", **overrides) -> GradConfig:
+def grad_config(estimator: str = "es", **overrides) -> GradConfig:
     """``estimator``'s defaults (:data:`GRAD_CONFIGS`) with the ``overrides`` that are not None (the CLI's
     options left unset are None), validated."""
     base = GRAD_CONFIGS.get(estimator, GradConfig(estimator=estimator))  # unknown: validated() names it
@@ -431,8 +434,9 @@ def grad_config(estimator: str = "tape", **overrides) -> GradConfig:
     return dataclasses.replace(base, **given).validated()
 
 
-GRAD_CONFIG = GRAD_CONFIGS["tape"]
-"""The optimiser's defaults (library and command line): the tape estimator's."""
+GRAD_CONFIG = GRAD_CONFIGS["es"]
+"""The optimiser's defaults (library and command line): the es estimator's, the better measured on the
+suite (docs/results.md, "Why the plan optimiser's default is es")."""
 
 GRAD_SEED_OFFSET = 4241
 """The gradient optimiser's episodes use seed ``seed + GRAD_SEED_OFFSET``: never the evaluation's noise."""

@@ -65,7 +65,7 @@ from rsl_rl.runners import OnPolicyRunner
 from rsl_rl.utils import resolve_callable
 from rsl_rl.utils.logger import Logger
 
-from agents.algorithms import algorithm
+from agents.algorithms import ALGORITHMS, algorithm
 from agents.checkpoints import (
     BEST_CHECKPOINT,
     LATEST_CHECKPOINT,
@@ -165,7 +165,7 @@ def train(
     runner_class = resolve_callable(algorithm(cfg.algo).runner)
     runner: Runner = runner_class(env, rsl_cfg, out_dir, cfg.torch_device)
     runner.selection_margin = cfg.selection_margin
-    runner.algo = cfg.algo
+    runner.algo, runner.seed = cfg.algo, seed
     if hasattr(env, "seed"):  # once the learner has set the env up (es: its common sheets)
         env.seed(seed)
     checkpoint, note = None, None
@@ -223,6 +223,7 @@ def train(
             "resumed_from": None if checkpoint is None else str(checkpoint),
             "resume_note": note,
             **(marks or {}),
+            **runner.own_summary,
             "validation": runner.validation,
             "history": runner.history,
             "best": _best(runner),
@@ -252,7 +253,7 @@ def _log_hparams(writer, cfg: TrainConfig, runner: Runner) -> None:
     settings = {
         k: v if isinstance(v, int | float | str | bool) else json.dumps(v)
         for k, v in _flat(asdict(cfg)).items()
-        if not (k.split(".")[0] in ("ppo", "es", "apg") and k.split(".")[0] != cfg.algo)
+        if not (k.split(".")[0] in ALGORITHMS and k.split(".")[0] != cfg.algo)
     }
     outcome = {
         "hparam/final_error": runner.metrics.get("final_error"),
@@ -364,6 +365,10 @@ class Runner(OnPolicyRunner):
             device=self.device,
         )
         self.algo = ""
+        self.seed = 0
+        """The run's seed (:func:`train` sets it), for a learner that draws episodes of its own."""
+        self.own_summary: dict = {}
+        """Fields of the learner's own that the run's summary records (e.g. gps's teacher)."""
         self.iterations_done = 0
         self.steps_per_iteration = self.cfg["num_steps_per_env"] * self.env.num_envs
         """Env steps one learning iteration simulates."""
@@ -413,6 +418,7 @@ class Runner(OnPolicyRunner):
             "validation_baseline": self.validation_baseline,
             "wall_time_s": None if self.earlier_wall_time is None else self.wall_time(),
             "episode_start": self.env.episode_start() if hasattr(self.env, "episode_start") else None,
+            "own_summary": self.own_summary,
             **(infos or {}),
         }
         buffer = io.BytesIO()
@@ -566,6 +572,7 @@ class Runner(OnPolicyRunner):
         self.best_iterations = infos.get("best_iterations")
         self.validation_baseline = infos.get("validation_baseline")
         self.earlier_wall_time = infos.get("wall_time_s")
+        self.own_summary = dict(infos.get("own_summary") or {})
         start = infos.get("episode_start")
         if start is not None and hasattr(self.env, "restart_episode"):
             self.env.restart_episode(start)
@@ -680,8 +687,9 @@ def _train_contour(
 ) -> dict:
     options = job.options(device)
     cfg = job.train.check(options.action_type == "discrete")
-    if job.init is not None and cfg.algo != "es":
-        raise ValueError(f"init: fine-tuning starts es from a generalist; train.algo is {cfg.algo}")
+    if job.init is not None and not algorithm(cfg.algo).fine_tunes:
+        which = ", ".join(name for name, entry in ALGORITHMS.items() if entry.fine_tunes)
+        raise ValueError(f"init: fine-tuning starts {which} from a generalist; train.algo is {cfg.algo}")
     if resume is not None:  # before anything is written: a resume with other settings changes nothing
         check_resumed_job(resume, job)
     if resume is not None and saved_nothing(resume):

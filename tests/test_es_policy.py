@@ -4,6 +4,7 @@ rsl-rl's ``OnPolicyRunner`` drives, one whole cut per env an iteration, ranked b
 from __future__ import annotations
 
 import dataclasses
+import functools
 import shutil
 
 import numpy as np
@@ -416,12 +417,14 @@ def test_es_trains_on_randomised_sheets_weighing_each_cut_by_its_sheet():
 def test_es_trains_as_many_whole_cuts_as_ppos_env_steps_unless_told(tmp_path, monkeypatch):
     """Without iterations es plays PPO's default run's env steps in whole cuts: a contour's iterations
     follow its episode's length (41 to 380 steps on the suite)."""
-    import agents.es.config as es_settings
+    import agents.algorithms as es_settings
 
     ppo = ALGORITHMS["ppo"]
     assert es_settings.ENV_STEPS == ppo.iterations * ppo.num_envs * PpoConfig().num_steps_per_env
-    assert es_settings.default_iterations(256, 48) == 100 and es_settings.default_iterations(256, 380) == 13
-    assert es_settings.default_iterations(256, 10**5) == es_settings.MIN_ITERATIONS
+    iterations = functools.partial(es_settings.default_iterations, "es")
+    assert iterations(256, 48) == 100 and iterations(256, 380) == 13
+    assert iterations(256, 10**5) == es_settings.MIN_ITERATIONS
+    assert es_settings.default_iterations("gps", 256, 48) == 50  # half of es's env steps
     assert ALGORITHMS["es"].iterations is None and TrainConfig().total_iterations(48) == 100
     cfg = dataclasses.replace(es_config(), iterations=None)
     env = es_env(cfg)

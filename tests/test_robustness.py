@@ -390,7 +390,9 @@ def test_a_randomised_run_compares_its_pinch_candidates_on_the_nominal_sheet(tmp
 
 
 def test_apg_refuses_randomised_sheets_in_the_library_and_on_the_command_line(tmp_path):
-    from agents.config import APG_FIXED_SHEET
+    from agents.algorithms import algorithm
+
+    APG_FIXED_SHEET = algorithm("apg").fixed_sheet  # noqa: N806 -- the registry's refusal
     from agents.training import train_contour
 
     job = TrainJob(

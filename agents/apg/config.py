@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
+from agents.algorithms import DETERMINISTIC_GAUSSIAN
 from warpcut.validation import ConfigError, check_flag, shown
 
 
@@ -30,8 +32,8 @@ class ApgConfig:
     def __post_init__(self) -> None:  # each field as it is given (a file's or --set's key at a time)
         self.check()
 
-    def check(self) -> None:
-        """``ValueError`` naming the first field out of range."""
+    def check(self, num_envs: int | None = None) -> None:
+        """``ValueError`` naming the first field out of range (``num_envs``: unused)."""
         for name in ("learning_rate", "max_grad_norm"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | float) or not (0 < value < math.inf):
@@ -43,3 +45,18 @@ class ApgConfig:
                 f"must be an integer >= 1 or null, the whole episode (got {shown(window)})",
             )
         check_flag("train.apg.accept", self.accept)
+
+    feedback = False
+    """APG's actor has no feedback path."""
+
+    def rsl_rl(
+        self, discrete: bool, num_action_choices: int | None, episode_steps: int | None = None
+    ) -> dict:
+        """APG's part of rsl-rl's runner config (:mod:`agents.algorithms`): its runner steps whole episodes
+        itself; rsl-rl's PPO only holds its actor, which plays its deterministic output."""
+        return {
+            "algorithm": {"class_name": "agents.ppo.algorithm:PPO"},
+            "distribution": dict(DETERMINISTIC_GAUSSIAN),
+            "num_steps_per_env": 1,
+            "own": {"apg": dataclasses.asdict(self)},
+        }

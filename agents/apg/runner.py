@@ -28,8 +28,8 @@ import numpy as np
 import torch
 from rsl_rl.env import VecEnv
 
+from agents.algorithms import algorithm
 from agents.checkpoints import read_checkpoint
-from agents.config import APG_FIXED_SHEET
 from agents.training import Runner
 
 
@@ -144,7 +144,7 @@ class ApgRunner(EpisodeRunner):
         super().__init__(env, train_cfg, log_dir, device)
         options = self.scene.options
         if options.randomize or options.relative_reward:
-            raise ValueError(APG_FIXED_SHEET)
+            raise ValueError(algorithm("apg").fixed_sheet)
         self.engine = DifferentiableRollout(self.scene.task)
         settings = train_cfg["apg"]
         self.apg_optimizer = torch.optim.Adam(self.alg.actor.parameters(), lr=settings["learning_rate"])

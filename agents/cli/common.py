@@ -741,7 +741,9 @@ def check_learner(job) -> None:
     train in its env (``job.env``): an action type it does not play, a population that does not fit the
     batch, an actor's feedback path on a tracking error the policy does not observe, or domain
     randomisation (or a relative reward) for APG, which differentiates one fixed sheet."""
-    from agents.config import APG_FIXED_SHEET
+    import dataclasses
+
+    from agents.algorithms import algorithm
 
     job.train.check(job.env.action_type == "discrete")
     device = job.train.torch_device
@@ -753,9 +755,12 @@ def check_learner(job) -> None:
         if not backend.is_available() or (backend is torch.cuda and index >= torch.cuda.device_count()):
             raise ValueError(f"train.torch_device: {device} is not available here; use cpu (the default)")
     if job.train.feedback and not job.env.contour_features:
+        own = {f.name for f in dataclasses.fields(job.train.learner)}
+        drop = f"train.{job.train.algo}.feedback=false" if "feedback" in own else "--algo ppo"
         raise ValueError(
             "feedback: the policy observes no tracking error (env.contour_features=false); observe the "
-            f"contour, or train without the feedback path (train.{job.train.algo}.feedback=false)"
+            f"contour, or train without the feedback path ({drop})"
         )
-    if job.train.algo == "apg" and (job.env.randomize or job.env.relative_reward):
-        raise ValueError(APG_FIXED_SHEET)
+    fixed_sheet = algorithm(job.train.algo).fixed_sheet
+    if fixed_sheet is not None and (job.env.randomize or job.env.relative_reward):
+        raise ValueError(fixed_sheet)

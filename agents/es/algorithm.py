@@ -144,8 +144,13 @@ class ES:
         with torch.inference_mode():
             if self.actor.obs_normalization:  # the normaliser learns from the iteration's raw observations
                 self._seen.append(torch.cat([obs[group] for group in self.actor.obs_groups], dim=-1))
-            out = self._forward(self.actor.get_latent(obs))
+            out = self._moves(obs)
         return torch.clamp(out, -1.0, 1.0)
+
+    def _moves(self, obs: TensorDict) -> torch.Tensor:
+        """(B, A) unclipped moves of every env's policy for ``obs`` (:meth:`_forward` of the normalised
+        observations; a learner that adds to the network's output overrides it)."""
+        return self._forward(self.actor.get_latent(obs))
 
     def process_env_step(
         self, obs: TensorDict, rewards: torch.Tensor, dones: torch.Tensor, extras: dict

@@ -5,22 +5,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from agents.algorithms import DETERMINISTIC_GAUSSIAN
 from warpcut.validation import ConfigError, check_flag, shown
-
-ENV_STEPS = 150 * 256 * 32
-"""es's env steps per run where no iterations are given: as many as PPO's default run simulates (150
-iterations x 256 envs x 32 steps = 1,228,800). An es iteration plays whole cuts, 41 to 380 steps on the
-suite, so a fixed count of iterations would cost eight times more on the longest contour than on the
-shortest."""
-
-MIN_ITERATIONS = 10
-"""The fewest iterations :func:`default_iterations` gives (one validation after the initial one)."""
-
-
-def default_iterations(num_envs: int, episode_steps: int) -> int:
-    """es's iterations where none are given: :data:`ENV_STEPS` over ``num_envs`` whole cuts of
-    ``episode_steps``, at least :data:`MIN_ITERATIONS`."""
-    return max(MIN_ITERATIONS, round(ENV_STEPS / (num_envs * episode_steps)))
 
 
 @dataclass
@@ -96,14 +82,28 @@ class EsConfig:
                 "train.es.scheduled", "schedules the feedback gains: needs train.es.feedback=true"
             )
 
-    def rsl_rl(self) -> dict:
-        """rsl-rl's ``algorithm`` section (``class_name`` and the arguments of
-        :class:`agents.es.algorithm.ES`)."""
+    def algorithm_section(self, class_name: str = "agents.es.algorithm:ES") -> dict:
+        """rsl-rl's ``algorithm`` section: ``class_name`` and the arguments of
+        :class:`agents.es.algorithm.ES`."""
         return {
-            "class_name": "agents.es.algorithm:ES",
+            "class_name": class_name,
             "population": self.population,
             "sigma": self.sigma,
             "feedback_sigma": self.feedback_sigma,
             "learning_rate": self.learning_rate,
             "feedback_learning_rate": self.feedback_learning_rate,
+        }
+
+    def rsl_rl(
+        self, discrete: bool, num_action_choices: int | None, episode_steps: int | None = None
+    ) -> dict:
+        """es's part of rsl-rl's runner config (:mod:`agents.algorithms`): one whole cut of
+        ``episode_steps`` per env an iteration, the actor's deterministic output."""
+        if episode_steps is None:
+            raise ValueError("es plays whole cuts: give the env's episode_steps")
+        return {
+            "algorithm": self.algorithm_section(),
+            "distribution": dict(DETERMINISTIC_GAUSSIAN),
+            "num_steps_per_env": episode_steps,
+            "actor": {"scheduled": True} if self.feedback and self.scheduled else {},
         }

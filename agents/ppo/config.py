@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from agents.algorithms import CRITIC_HIDDEN_DIMS
 from warpcut.validation import ConfigError, check_flag, is_integer, is_number, shown
 
 
@@ -49,7 +50,7 @@ class PpoConfig:
     start (the paper's)."""
     init_noise_std: float = 1.0
     """Continuous actions only: the initial action standard deviation, in the env's action units."""
-    critic_hidden_dims: list[int] = field(default_factory=lambda: [64, 64])
+    critic_hidden_dims: list[int] = field(default_factory=lambda: list(CRITIC_HIDDEN_DIMS))
     """Hidden layer widths of the value MLP."""
     feedback: bool = False
     """Give the actor the linear feedback path on the tracking error (:class:`agents.models.FeedbackMLP`),
@@ -58,8 +59,8 @@ class PpoConfig:
     def __post_init__(self) -> None:  # each field as it is given (a file's or --set's key at a time)
         self.check()
 
-    def check(self) -> None:
-        """``ValueError`` naming the first field out of range."""
+    def check(self, num_envs: int | None = None) -> None:
+        """``ValueError`` naming the first field out of range (``num_envs``: unused)."""
         for name in ("num_steps_per_env", "num_learning_epochs", "num_mini_batches"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
@@ -84,9 +85,11 @@ class PpoConfig:
             if isinstance(value, bool) or not isinstance(value, int | float) or not 0 < value < float("inf"):
                 raise ConfigError(f"train.ppo.{name}", f"must be a finite number > 0 (got {shown(value)})")
 
-    def rsl_rl(self, discrete: bool, num_action_choices: int | None) -> dict:
-        """rsl-rl's ``algorithm`` section, the actor's ``distribution_cfg`` and the ``critic`` section's
-        hidden dims: ``{"algorithm": ..., "distribution": ..., "critic_hidden_dims": ...}``."""
+    def rsl_rl(
+        self, discrete: bool, num_action_choices: int | None, episode_steps: int | None = None
+    ) -> dict:
+        """PPO's part of rsl-rl's runner config (:mod:`agents.algorithms`): the ``algorithm`` section, the
+        actor's ``distribution``, the ``critic_hidden_dims`` and ``num_steps_per_env``."""
         if discrete:
             if num_action_choices is None:
                 raise ValueError("discrete training needs the env's num_action_choices")
@@ -119,4 +122,5 @@ class PpoConfig:
             "algorithm": algorithm,
             "distribution": distribution,
             "critic_hidden_dims": self.critic_hidden_dims,
+            "num_steps_per_env": self.num_steps_per_env,
         }

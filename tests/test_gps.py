@@ -1,0 +1,202 @@
+"""gps: a closed-loop policy trained from the contour's optimised plan (agents.gps): the teacher's plan as
+the student's feed-forward, es on the correction, model selection over the still grasp, the plan and the
+student, exact resume, exports that carry the plan; and the learner registry as the one place a learner is
+added."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+from tensordict import TensorDict
+
+from agents.checkpoints import read_checkpoint
+from agents.config import TrainConfig
+from agents.es.config import EsConfig
+from agents.gps.config import GpsConfig
+from agents.gps.model import PlanLookup
+from agents.policies import load_policy
+from agents.training import train, training_env
+from envs.options import PatternCutOptions
+from warpcut.sim.config import SimConfig
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+SMALL = SimConfig(resolution=13, noise_std=0.03)
+
+
+def gps_config(iterations: int = 2, **train) -> TrainConfig:
+    """gps on a small batch, with a teacher of 2 optimiser steps."""
+    gps = GpsConfig(teacher_iterations=2, refine=EsConfig(population=4))
+    return TrainConfig(
+        algo="gps", num_envs=8, iterations=iterations, save_interval=1, validation_trials=4, gps=gps, **train
+    )  # fmt: skip
+
+
+def gps_env(cfg: TrainConfig, seed: int = 0):
+    return training_env(PatternCutOptions(contour="circle-small", sim_config=SMALL), cfg, seed)
+
+
+def validation(cfg: TrainConfig, seed: int = 0):
+    """A validation of 4 held-out episodes, as :func:`agents.training.train_contour` builds it."""
+    from agents.policies import policy_errors
+    from envs.vector import PatternCutVecEnv
+
+    env = PatternCutVecEnv(cfg.validation_trials, PatternCutOptions(contour="circle-small", sim_config=SMALL))
+    return lambda actor: policy_errors(actor, env, seed + 99)["error_vertices"]
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    """A gps run of 2 iterations on circle-small."""
+    out = tmp_path_factory.mktemp("gps")
+    cfg = gps_config()
+    summary = train(gps_env(cfg), cfg, out, seed=0, progress=False, validate=validation(cfg))
+    return out, summary
+
+
+def test_the_plan_lookup_plays_the_move_of_the_step_the_time_index_names():
+    lookup = PlanLookup(4, 3)
+    lookup.plan.copy_(torch.arange(12, dtype=torch.float32).reshape(4, 3))
+    time = torch.tensor([0.0, 0.25, 0.5 + 1e-6, 0.75, 1.0, -0.25])
+    moves = lookup(time)
+    assert torch.equal(moves[:4], lookup.plan)
+    assert torch.equal(moves[4:], torch.zeros(2, 3))  # past the plan's end: hold still
+
+
+def test_gps_trains_from_its_teacher_and_selects_among_still_plan_and_student(trained):
+    """The teacher is optimised into the run's teacher/ folder and becomes the actor's feed-forward; the
+    first validation scores the plan (the student as it starts) and the still grasp on the same episodes,
+    later ones the student; the kept policy is the best of them."""
+    out, summary = trained
+    teacher = json.loads((out / "teacher" / "circle-small.json").read_text())
+    plan = np.asarray(teacher["plan"], dtype=np.float32)
+    assert plan.shape[1] == 3 and np.abs(plan).max() > 0  # the optimiser moved
+    assert summary["teacher"]["best_iteration"] == teacher["best_iteration"]
+    labels = [(v["iterations"], v["policy"]) for v in summary["validation"]]
+    assert labels[:2] == [(0, "plan"), (0, "still")] and {p for _, p in labels[2:]} == {"student"}
+    best = min(summary["validation"], key=lambda v: v["score"])
+    assert summary["kept"] == best["policy"] and summary["best"]["validation_score"] == best["score"]
+    kept = read_checkpoint(out / "best.pt")["actor_state_dict"]["lookup.plan"]
+    if summary["kept"] == "still":
+        assert torch.count_nonzero(kept) == 0
+    else:  # max_step_mm is 1 mm: the actor's plan is the teacher's in mm
+        assert torch.equal(kept, torch.as_tensor(plan)[: len(kept)])
+
+
+def test_the_student_starts_as_its_teacher_and_stays_closed_loop(trained):
+    """Before any correction the student's move is the plan's move at the observed step; the trained one
+    adds a correction that depends on what it observes (the tracking error)."""
+    out, _ = trained
+    actor = load_policy(out / "latest.pt")
+    steps = actor.lookup.plan.shape[0]
+    obs = torch.zeros(steps, actor.obs_dim)
+    obs[:, 0] = torch.arange(steps) / steps
+    with torch.no_grad():
+        correction = actor(TensorDict({"policy": obs}, batch_size=[steps])) - actor.lookup.plan
+        start, size = actor.mlp.start, actor.mlp.size
+        seen = obs.clone()
+        seen[:, start : start + size] = 0.5
+        moved = actor(TensorDict({"policy": seen}, batch_size=[steps])) - actor.lookup.plan
+    assert not torch.allclose(correction, moved)  # the move depends on the observed tracking error
+    assert torch.count_nonzero(actor.mlp.feedback.weight) > 0
+
+
+def test_a_resumed_gps_run_ends_as_an_uninterrupted_one(tmp_path):
+    """One iteration, then one more on resume (the teacher read back from the run's folder, the plan from
+    the checkpoint), ends with exactly the weights of two in one go."""
+    cfg = gps_config(iterations=1)
+    two = dataclasses.replace(cfg, iterations=2)
+    train(gps_env(cfg, 2), cfg, tmp_path / "a", seed=2, progress=False, validate=validation(cfg, 2))
+    resumed = train(
+        gps_env(cfg, 2), two, tmp_path / "a", seed=2, resume=tmp_path / "a", progress=False,
+        validate=validation(cfg, 2),
+    )  # fmt: skip
+    straight = train(
+        gps_env(cfg, 2), two, tmp_path / "b", seed=2, progress=False, validate=validation(cfg, 2)
+    )
+    a = read_checkpoint(tmp_path / "a" / "latest.pt")["actor_state_dict"]
+    b = read_checkpoint(tmp_path / "b" / "latest.pt")["actor_state_dict"]
+    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+    same = ("best_iteration", "validation_error", "env_steps")
+    assert [resumed["teacher"][k] for k in same] == [straight["teacher"][k] for k in same]
+    assert resumed["kept"] == straight["kept"]
+    assert resumed["validation"][-1]["error"] == straight["validation"][-1]["error"]
+
+
+def test_the_exports_carry_the_plan(trained, tmp_path):
+    """TorchScript and ONNX play what the actor plays, the plan's feed-forward included."""
+    ort = pytest.importorskip("onnxruntime")
+    from agents.export import export_policy
+
+    out, _ = trained
+    paths = export_policy(out / "latest.pt", tmp_path / "x")
+    actor = load_policy(out / "latest.pt")
+    steps = actor.lookup.plan.shape[0]
+    obs = torch.rand(steps, actor.obs_dim) * 0.2
+    obs[:, 0] = torch.arange(steps) / steps
+    with torch.no_grad():
+        expected = actor(TensorDict({"policy": obs}, batch_size=[steps])).numpy()
+    assert np.abs(actor.lookup.plan.numpy()).max() > 0
+    scripted = torch.jit.load(str(paths["torchscript"]))(obs).detach().numpy()
+    session = ort.InferenceSession(str(paths["onnx"]))
+    onnx = session.run(None, {"obs": obs.numpy()})[0]
+    np.testing.assert_allclose(scripted, expected, atol=1e-5)
+    np.testing.assert_allclose(onnx, expected, atol=1e-5)
+
+
+def test_gps_settings_are_checked_where_they_are_given():
+    with pytest.raises(ValueError, match="train.gps.teacher_iterations"):
+        GpsConfig(teacher_iterations=0)
+    with pytest.raises(ValueError, match="train.gps.refine.feedback"):
+        GpsConfig(refine=EsConfig(feedback=False))
+
+
+REGISTERED = """
+import dataclasses, json
+from dataclasses import dataclass
+import agents.algorithms as registry
+
+@dataclass
+class ToyConfig:
+    step: float = 0.5
+    feedback = False
+    def check(self, num_envs=None):
+        if not 0 < self.step:
+            raise ValueError("train.toy.step: must be > 0")
+    def rsl_rl(self, discrete, num_action_choices, episode_steps=None):
+        return {"algorithm": {"class_name": "toy:Toy", "step": self.step},
+                "distribution": dict(registry.DETERMINISTIC_GAUSSIAN), "num_steps_per_env": 7}
+
+import __main__
+__main__.ToyConfig = ToyConfig
+registry.ALGORITHMS["toy"] = registry.Algorithm(
+    "toy", "a learner of one entry", num_envs=8, iterations=3, action_type="continuous",
+    continuous_only=True, runner="agents.training:Runner", settings="__main__:ToyConfig")
+
+from agents.config import TrainConfig
+from agents.config_io import apply, to_plain
+from agents.jobs import TrainJob
+job = apply(TrainJob(contour="fls-circle"), {"train.algo": "toy", "train.toy.step": 2.0}, "--set")
+part = job.train.check().to_rsl_rl(None, None, 40)
+print(json.dumps({"section": to_plain(job.train)["toy"], "algorithm": part["algorithm"],
+                  "steps": part["num_steps_per_env"], "batch": job.train.batch_size}))
+"""
+
+
+def test_a_learner_is_added_by_its_registry_entry_alone():
+    """A learner registered in agents.algorithms (its settings class named there) is a section of the
+    settings, reachable by ``--set``, checked, and configures rsl-rl's runner: nothing else names it."""
+    done = subprocess.run([sys.executable, "-c", REGISTERED], capture_output=True, text=True, check=True)
+    result = json.loads(done.stdout)
+    assert result == {
+        "section": {"step": 2.0},
+        "algorithm": {"class_name": "toy:Toy", "step": 2.0},
+        "steps": 7,
+        "batch": 8,
+    }
