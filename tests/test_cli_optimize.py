@@ -16,7 +16,16 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 SMALL = ["--contour", "circle-small", "--trials", "2", "--set", "candidates=2", "--set", "sim.resolution=13"]
 """A small job: a 13 x 13 sheet, 2 pinch candidates, 2 evaluation trials."""
-TAPE = ["--iterations", "2", "--set", "grad.trials=2", "--set", "grad.validation_trials=2"]
+TAPE = [
+    "--estimator",
+    "tape",
+    "--iterations",
+    "2",
+    "--set",
+    "grad.trials=2",
+    "--set",
+    "grad.validation_trials=2",
+]
 """A short tape optimisation."""
 
 
@@ -89,7 +98,9 @@ def test_optimize_a_closed_loop_policy_under_randomisation(tmp_path):
     bad = ["--set", "grad.es_randomize=gravity", "--set", "grad.es_randomize_ranges={noise: [0, 0.27]}"]
     code, _, stderr = invoke(args + bad + ["--out", str(tmp_path / "bad")])
     assert code == 2 and "grad.es_randomize_ranges: noise not randomised" in stderr
-    code, _, stderr = invoke(["--contour", "circle-small", "--set", "grad.es_feedback_phases=1"])
+    code, _, stderr = invoke(
+        ["--contour", "circle-small", "--estimator", "tape", "--set", "grad.es_feedback_phases=1"]
+    )
     assert code == 2 and "grad.es_feedback_phases: only estimator 'es'" in stderr
     code, _, stderr = invoke(
         ["--contour", "circle-small", "--estimator", "es", "--set", "grad.es_feedback_sag=true"]
@@ -147,15 +158,15 @@ def test_a_config_file_yaml_or_toml_sets_the_job_and_print_config_reads_back(tmp
 def test_a_setting_the_estimator_does_not_read_is_refused(tmp_path):
     """es's settings with tape (and tape's with es) would be ignored: refused by name, whether given by --set
     or by a config file; a run directory's config.json, which holds them at their defaults, is not."""
-    code, _, stderr = invoke(["--contour", "kidney", "--set", "grad.es_population=4"])
+    code, _, stderr = invoke(["--contour", "kidney", "--estimator", "tape", "--set", "grad.es_population=4"])
     assert code == 2 and "grad.es_population: read by estimator es only (--estimator es)" in stderr
-    (tmp_path / "es.yaml").write_text("contour: kidney\ngrad:\n  es_sigma_mm: 0.5\n")
+    (tmp_path / "es.yaml").write_text("contour: kidney\ngrad:\n  estimator: tape\n  es_sigma_mm: 0.5\n")
     code, _, stderr = invoke(["--config", str(tmp_path / "es.yaml")])
     assert code == 2 and "grad.es_sigma_mm: read by estimator es only" in stderr
     code, _, stderr = invoke(["--contour", "kidney", "--estimator", "es", "--set", "grad.window=5"])
     assert code == 2 and "grad.window: read by estimator tape only (--estimator tape)" in stderr
     code, stdout, _ = invoke(["--contour", "kidney", "--print-config"])
-    (tmp_path / "all.yaml").write_text(stdout)  # every key, those of es at their defaults
+    (tmp_path / "all.yaml").write_text(stdout)  # every key, those of tape at their defaults
     code, _, stderr = invoke(["--config", str(tmp_path / "all.yaml"), "--print-config"])
     assert code == 0, stderr
 

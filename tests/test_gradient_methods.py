@@ -40,7 +40,9 @@ def test_plan_policy_plays_each_contours_plan_to_its_trials():
 
 def test_optimize_plan_lowers_the_surrogate_within_the_move_limits():
     contour = load_contour("circle-small")
-    settings = GradConfig(iterations=4, trials=2, learning_rate=0.2, window=None)  # the whole gradient
+    settings = GradConfig(
+        estimator="tape", iterations=4, trials=2, learning_rate=0.2, window=None
+    )  # the whole gradient
     result = optimize_plan(contour, PINCH, config=SMALL, settings=settings)
     surrogate = [h["surrogate"] for h in result.history]
     held_out = [h["validation_error_vertices"] for h in result.history]
@@ -78,7 +80,7 @@ def test_an_interrupted_optimisation_continues_from_its_state(tmp_path, monkeypa
     from warpcut.gradients import DifferentiableRollout
 
     contour = load_contour("circle-small")
-    settings = GradConfig(iterations=3, trials=2, learning_rate=0.2)
+    settings = GradConfig(estimator="tape", iterations=3, trials=2, learning_rate=0.2)
     whole = optimize_plan(contour, PINCH, config=SMALL, settings=settings)
 
     state = tmp_path / "state.json"
@@ -87,16 +89,20 @@ def test_an_interrupted_optimisation_continues_from_its_state(tmp_path, monkeypa
     assert [h["error_vertices"] for h in resumed.history] == [h["error_vertices"] for h in whole.history]
     with pytest.raises(ValueError, match="other settings"):
         optimize_plan(
-            contour, PINCH, config=SMALL, settings=GradConfig(iterations=5, trials=2), state_file=state
+            contour,
+            PINCH,
+            config=SMALL,
+            settings=GradConfig(estimator="tape", iterations=5, trials=2),
+            state_file=state,
         )
 
 
 def test_grad_config_names_a_bad_field():
     with pytest.raises(ValueError, match="iterations"):
-        GradConfig(iterations=0).validated()
+        GradConfig(estimator="tape", iterations=0).validated()
     with pytest.raises(ValueError, match="learning_rate"):
         GradConfig(learning_rate=float("nan")).validated()
-    with pytest.raises(ValueError, match="estimator: must be one of tape, es"):
+    with pytest.raises(ValueError, match="estimator: must be one of es, tape"):
         GradConfig(estimator="cma").validated()
     with pytest.raises(ValueError, match="es_population: must be even"):
         GradConfig(estimator="es", es_population=5).validated()
@@ -111,10 +117,12 @@ def test_grad_config_names_a_bad_field():
 
 
 def test_grad_config_takes_the_estimators_defaults_and_the_given_fields():
-    assert grad_config() == GRAD_CONFIGS["tape"] == GradConfig()
+    assert grad_config() == GRAD_CONFIGS["es"] == GradConfig()  # es is the default estimator
     es = grad_config("es", iterations=None, learning_rate=None, es_population=8)
     assert es == dataclasses.replace(GRAD_CONFIGS["es"], es_population=8)
-    assert es.learning_rate != GradConfig().learning_rate  # es's own step, not tape's
+    tape = grad_config("tape", iterations=None, learning_rate=None, trials=2)
+    assert tape == dataclasses.replace(GRAD_CONFIGS["tape"], trials=2)
+    assert es.learning_rate != tape.learning_rate  # each estimator's own step
 
 
 class _QuadraticTask:
@@ -186,7 +194,7 @@ def test_the_grad_column_passes_its_evaluation_batch_to_the_step_callback(tmp_pa
 
     contour = load_contour("circle-small")
     cuts = FinalCuts()
-    settings = GradConfig(iterations=1, trials=2, validation_trials=2)
+    settings = GradConfig(estimator="tape", iterations=1, trials=2, validation_trials=2)
     method, _ = grad_result(
         [contour], [PINCH], [None], 2, SMALL, settings, folder=tmp_path, on_step=cuts.step_callback("grad")
     )
@@ -196,7 +204,7 @@ def test_the_grad_column_passes_its_evaluation_batch_to_the_step_callback(tmp_pa
 
 def test_a_kept_plan_of_other_settings_is_refused(tmp_path):
     contour = load_contour("circle-small")
-    settings = GradConfig(iterations=1, trials=2, validation_trials=2)
+    settings = GradConfig(estimator="tape", iterations=1, trials=2, validation_trials=2)
     first = cached_plan(contour, PINCH, None, SMALL, settings, folder=tmp_path)
     again = cached_plan(contour, PINCH, None, SMALL, settings, folder=tmp_path)  # read back, not rerun
     np.testing.assert_array_equal(again.plan, first.plan)
@@ -296,7 +304,9 @@ def test_optimize_pinch_moves_the_pinch_point_and_keeps_it_feasible():
     from warpcut.planning.feasibility import pinch_feasible
 
     contour = load_contour("circle-small")
-    settings = GradConfig(iterations=3, trials=2, optimize_pinch=True, pinch_learning_rate=2.0)
+    settings = GradConfig(
+        estimator="tape", iterations=3, trials=2, optimize_pinch=True, pinch_learning_rate=2.0
+    )
     result = optimize_plan(contour, PINCH, config=SMALL, settings=settings)
     pinches = np.array([h["pinch"] for h in result.history])
     assert np.linalg.norm(pinches[-1] - PINCH) > 0.5  # it moved along its gradient
@@ -458,12 +468,12 @@ def test_randomised_episodes_are_weighed_by_their_sheets_no_tension_error():
 
 def test_a_kept_plan_must_match_its_pinch_and_closed_loop_settings_need_es(tmp_path):
     contour = load_contour("circle-small")
-    tape = GradConfig(iterations=1, trials=2, validation_trials=2)
+    tape = GradConfig(estimator="tape", iterations=1, trials=2, validation_trials=2)
     cached_plan(contour, PINCH, None, SMALL, tape, folder=tmp_path)
     with pytest.raises(ValueError, match="a plan optimised at the pinch point"):
         cached_plan(contour, PINCH + 1.0, None, SMALL, tape, folder=tmp_path)
     with pytest.raises(ValueError, match="es_feedback_phases: only estimator 'es'"):
-        GradConfig(es_feedback_phases=1).validated()
+        GradConfig(estimator="tape", es_feedback_phases=1).validated()
     with pytest.raises(ValueError, match="es_randomize: unknown parameter 'gravty'"):
         GradConfig(estimator="es", es_randomize="gravty").validated()
 

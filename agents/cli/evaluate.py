@@ -138,10 +138,14 @@ def command(
         {f"{r['contour']} {m}": r.get(f"{m}_pinch_problem") for r in rows for m in job.methods}
     )
     click.echo(f"({len(report.contours)} contours x {job.trials} trials in {report.seconds:.0f} s)")
-    for method, what in (("grad", "its initial plan (hold still)"), ("rl", "its initial policy")):
-        if f"{method}_initial_{'plan' if method == 'grad' else 'policy'}_contours" in report.table:
-            count = report.table[f"{method}_initial_{'plan' if method == 'grad' else 'policy'}_contours"]
-            click.echo(f"{method} kept {what} on {count} of {len(report.contours)} contours")
+    kept = (
+        ("grad_initial_plan_contours", "grad kept its initial plan (hold still)"),
+        ("rl_initial_policy_contours", "rl kept its initial policy (hold still)"),
+        ("rl_plan_contours", "rl kept its teacher's plan (open loop)"),
+    )
+    for key, what in kept:
+        if key in report.table:
+            click.echo(f"{what} on {report.table[key]} of {len(report.contours)} contours")
     if json_path:
         write_json(json_path, report.to_json())
         click.echo(f"wrote {json_path}")

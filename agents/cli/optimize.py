@@ -35,15 +35,15 @@ FLAGS = {
     type=click.Choice(GRAD_ESTIMATORS),
     default=GRAD_CONFIG.estimator,
     show_default=True,
-    help="How the optimiser estimates its gradient: 'tape', the path surrogate's through wp.Tape; 'es', "
-    "evolution strategies on the path score itself (perturbed plans cut in one batch; with "
-    "grad.es_feedback_phases, feedback gains too).",
+    help="How the optimiser estimates its gradient: 'es', evolution strategies on the path score itself "
+    "(perturbed plans cut in one batch; with grad.es_feedback_phases, feedback gains too); 'tape', the path "
+    "surrogate's through wp.Tape (weaker on the suite: docs/results.md).",
 )
 @common.count_option(
     "iterations",
     None,
-    f"Optimiser steps; default the estimator's: {GRAD_CONFIGS['tape'].iterations} (tape: a forward and a "
-    f"backward pass each), {GRAD_CONFIGS['es'].iterations} (es: one batch of perturbed plans each).",
+    f"Optimiser steps; default the estimator's: {GRAD_CONFIGS['es'].iterations} (es: one batch of perturbed "
+    f"plans each), {GRAD_CONFIGS['tape'].iterations} (tape: a forward and a backward pass each).",
 )
 @common.count_option("trials", EVALUATION_TRIALS, "Evaluation trials (none, fixed and grad, paired).")
 @common.seed_option

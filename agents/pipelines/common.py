@@ -140,6 +140,21 @@ def analytic_pinches(mode: str, contours: Sequence[Contour], plans: Sequence[Pla
     return None if plans is None else [p.analytic_pinch for p in plans]
 
 
+def policy_kept(run_dir: Path) -> str | None:
+    """What a training run's model selection kept: ``"still"`` (the still grasp: fixed tension), ``"plan"``
+    (gps's teacher played open loop) or ``"trained"`` (a policy its learner moved); None where the run has
+    no summary."""
+    path = Path(run_dir) / "summary.json"
+    if not path.is_file():
+        return None
+    kept = read_json(path).get("kept")  # gps names it; the others start from the still grasp
+    if kept in ("still", "plan"):
+        return kept
+    if kept == "student":
+        return "trained"
+    return "still" if policy_iteration(run_dir) == 0 else "trained"
+
+
 def policy_iteration(run_dir: Path) -> int | None:
     """The iteration whose policy a training run kept (0: the initial policy): the validated best, or the
     last without validation; None where the run has no summary."""

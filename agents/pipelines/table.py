@@ -21,6 +21,7 @@ from agents.pipelines.common import (
     finished_run,
     policy_iteration,
     policy_job,
+    policy_kept,
     record_job,
     train_policy,
 )
@@ -159,7 +160,7 @@ def evaluate_table(
                 job, named, plans, out, device, resume, log, step_callbacks, stages, cluster
             )
             clock["rl"] = time.perf_counter() - started
-            notes.append(functools.partial(_note_rl_iterations, kept))
+            notes.append(functools.partial(_note_rl_iterations, kept, runs))
         elif spec.name == "generalist":
             spec.result = _generalist_result(job, loaded, plans, device, step_callbacks, log)
         elif spec.name == "grad":
@@ -205,13 +206,17 @@ Stages = Callable[[str, int, int], None]
 done (a progress bar per stage; ``warpcut evaluate`` draws them)."""
 
 
-def _note_rl_iterations(kept: list[int | None], table: dict) -> None:
-    """Which iteration each contour's policy kept (``rl_policy_iteration``), and on how many contours model
-    selection kept the initial policy (it holds still)."""
-    for row, iteration in zip(table["rows"], kept, strict=False):
-        row["rl_policy_iteration"] = iteration
+def _note_rl_iterations(kept: list[int | None], runs: list[Path], table: dict) -> None:
+    """Which iteration each contour's policy kept (``rl_policy_iteration``) and what it is (``rl_kept``:
+    :func:`~agents.pipelines.common.policy_kept`), and on how many contours model selection kept the still
+    grasp (``rl_initial_policy_contours``) or a teacher's plan (``rl_plan_contours``)."""
+    kinds = [policy_kept(run) for run in runs]
+    for row, iteration, kind in zip(table["rows"], kept, kinds, strict=False):
+        row["rl_policy_iteration"], row["rl_kept"] = iteration, kind
     if kept:
-        table["rl_initial_policy_contours"] = sum(1 for it in kept if it == 0)
+        table["rl_initial_policy_contours"] = sum(1 for kind in kinds if kind == "still")
+        if "plan" in kinds:
+            table["rl_plan_contours"] = kinds.count("plan")
 
 
 def _table_plans(
