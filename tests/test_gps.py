@@ -200,3 +200,37 @@ def test_a_learner_is_added_by_its_registry_entry_alone():
         "steps": 7,
         "batch": 8,
     }
+
+
+def test_an_exported_student_runs_on_the_env_its_metadata_makes(tmp_path):
+    """``warpcut train --algo gps`` then ``warpcut export``: the ONNX file alone (its ``warpcut.options``
+    metadata for ``gym.make``) plays the run's student, plan included, step for step through a whole cut."""
+    ort = pytest.importorskip("onnxruntime")
+    import gymnasium as gym
+
+    import warpcut.gym  # noqa: F401 -- registers the env
+    from agents.export import export_policy
+    from agents.jobs import TrainJob
+    from agents.training import train_contour
+
+    job = TrainJob(contour="circle-small", sim=SMALL, train=gps_config(iterations=1), eval_trials=2)
+    result = train_contour(job, tmp_path / "run", progress=False)
+    assert result["summary"]["teacher"]["env_steps"] > 0
+    paths = export_policy(tmp_path / "run", tmp_path / "exported")
+    session = ort.InferenceSession(str(paths["onnx"]))
+    options = json.loads(session.get_modelmeta().custom_metadata_map["warpcut.options"])
+    env = gym.make("warpcut/PatternCut-v0", **options)
+    actor = load_policy(tmp_path / "run")
+    obs, _ = env.reset(seed=0)
+    done, steps, moved = False, 0, 0.0
+    while not done:
+        with torch.no_grad():
+            expected = actor(TensorDict({"policy": torch.as_tensor(obs[None])}, batch_size=[1])).numpy()
+        action = session.run(None, {"obs": obs[None].astype(np.float32)})[0]
+        np.testing.assert_allclose(action, expected, atol=1e-5)
+        moved += float(np.abs(action).sum())
+        obs, _, terminated, truncated, info = env.step(expected[0])
+        done, steps = terminated or truncated, steps + 1
+    assert steps == actor.lookup.plan.shape[0] and np.isfinite(info["error_vertices"])
+    if result["summary"]["kept"] != "still":
+        assert moved > 0  # the plan's moves are in the file
