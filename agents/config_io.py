@@ -26,7 +26,17 @@ from typing import Any
 
 import numpy as np
 
+from warpcut.io import MAX_NESTING, check_nesting
 from warpcut.validation import ConfigError
+
+MAX_VALUES = 100_000
+"""How many values a config file or a ``--set`` value may expand to: YAML's aliases let a few hundred bytes
+expand to billions (8 levels of 10), which checking or printing them would walk for hours; a config holds
+a few hundred."""
+
+MAX_INTEGER = 2**31 - 1
+"""The largest integer any setting takes (the seeds' range, as ``--seed``'s): a larger one would overflow
+where it reaches NumPy, torch, Warp or the clock (a progress line's ETA) after the work had started."""
 
 PRESETS_DIR = Path(__file__).parent / "presets"
 """Where the named presets live: ``NAME.yaml``."""
@@ -73,8 +83,11 @@ def read_file(source: str | Path) -> dict:
         if str(exc).startswith("--config"):
             raise
         raise ValueError(f"--config: {path}: not valid {suffix[1:].upper()} ({_one_line(exc)})") from None
+    except RecursionError:  # too deep for the parser itself
+        raise ValueError(f"--config: {path}: nests deeper than {MAX_NESTING} levels") from None
     except Exception as exc:  # yaml's errors
         raise ValueError(f"--config: {path}: not valid YAML ({_one_line(exc)})") from None
+    check_nesting(data, f"--config: {path}", items=MAX_VALUES)
     if data is None:
         return {}
     if not isinstance(data, dict):
@@ -93,9 +106,11 @@ def parse_override(text: str) -> tuple[str, Any]:
         raise ValueError(f"--set: expected KEY=VALUE, e.g. train.iterations=30 (got {text!r})")
     try:
         parsed = yaml.safe_load(value) if value.strip() else ""
+    except RecursionError:
+        raise ValueError(f"--set {key}: nests deeper than {MAX_NESTING} levels") from None
     except Exception:  # not YAML: text
         parsed = value
-    return key, parsed
+    return key, check_nesting(parsed, f"--set {key}", items=MAX_VALUES)
 
 
 def flatten(data: Mapping, prefix: str = "") -> dict[str, Any]:
@@ -170,6 +185,10 @@ def _set(config: Any, path: list[str], value: Any, key: str, where: str) -> Any:
 def _convert(value: Any, hint: Any, key: str, where: str) -> Any:
     """``value`` as the type ``hint`` takes it (a list for a tuple field becomes a tuple), or
     ``ValueError``."""
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) > MAX_INTEGER:
+        raise ValueError(
+            f"{where}: {key}: {str(value)[:30]} is beyond any setting's range (integers up to {MAX_INTEGER})"
+        )
     converted = _try(value, hint)
     if converted is _NO:
         raise ValueError(f"{where}: {key}: expected {_describe(hint)} (got {value!r:.60})")

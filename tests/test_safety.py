@@ -527,6 +527,51 @@ def test_a_json_output_never_replaces_a_users_file_or_writes_into_another_run(tm
     assert not (run / "new.json").exists() and not (tmp_path / "out").exists()
 
 
+def test_deeply_nested_or_huge_inputs_are_one_line_before_any_work(tmp_path):
+    """JSON nested past Python's recursion (a run's marker, config.json, plans.json), YAML whose aliases
+    expand to billions of values or hold themselves, and integers beyond any setting's range: each is one
+    line naming the file or setting, before a run is claimed or anything is computed."""
+    from warpcut.io import read_json
+
+    deep = "[" * 100_000 + "]" * 100_000
+    run = tmp_path / "run"
+    with claim_run_dir(run, command="evaluate"):
+        write_json(run / "config.json", {})
+        write_json(run / "plans.json", {})
+    (run / "plans.json").write_text(deep)
+    with pytest.raises(ValueError, match=r"plans.json: nests deeper than 32 levels"):
+        read_json(run / "plans.json")
+    (run / "plans.json").write_text('{"a": ' * 900 + "1" + "}" * 900)  # parses, but nothing could walk it
+    with pytest.raises(ValueError, match=r"plans.json: nests deeper than 32 levels"):
+        read_json(run / "plans.json")
+    (run / "config.json").write_text(deep)
+    code, output = invoke(["evaluate", "--contours", "circle-small", "--out", str(run), "--resume"])
+    assert code == 2 and "config.json: nests deeper than 32 levels" in output, output
+    (run / RUN_MARKER).write_text('{"format": "warpcut-run", "files": ' + deep + "}")
+    code, output = invoke(["evaluate", "--contours", "circle-small", "--out", str(run), "--resume"])
+    assert code == 2 and f"its {RUN_MARKER} is damaged" in output, output
+    aliases = ["a0: &a0 [x, x, x, x, x, x, x, x, x, x]"] + [
+        f"a{k}: &a{k} [{', '.join([f'*a{k - 1}'] * 10)}]" for k in range(1, 9)
+    ]
+    bomb = tmp_path / "bomb.yaml"
+    bomb.write_text("train:\n  es:\n" + "".join(f"    {line}\n" for line in aliases))  # 8 levels of 10
+    itself = tmp_path / "itself.yaml"
+    itself.write_text("train: &a [*a]\n")
+    start = time.perf_counter()
+    for args, said in [
+        (["--config", str(bomb)], "expands to more than 100,000 values"),
+        (["--config", str(itself)], "holds itself"),
+        (["--set", "train.actor_hidden_dims=" + "[" * 50 + "]" * 50], "--set train.actor_hidden_dims: nests"),
+        (["--set", "train.iterations=" + "9" * 23], "train.iterations: " + "9" * 23 + " is beyond"),
+        (["--set", "seed=2147483648"], "seed: 2147483648 is beyond any setting's range"),
+        (["--iterations", "99999999999999999999999"], "--iterations: train.iterations: 9999"),
+    ]:
+        for then in (["--print-config"], ["--out", str(tmp_path / "out")]):
+            code, output = invoke(["train", "--contour", "circle-small", *args, *then])
+            assert code == 2 and said in output and "Traceback" not in output, output
+    assert time.perf_counter() - start < 30 and not (tmp_path / "out").exists()
+
+
 def test_train_refuses_an_existing_run_and_stops_on_sigterm_with_a_checkpoint(tmp_path):
     run = tmp_path / "run"
     args = ["train", "--contour", "circle-small", *TINY_FLAGS, "--set", "eval_trials=1",

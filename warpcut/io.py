@@ -175,8 +175,8 @@ def read_run_marker(path: str | os.PathLike) -> dict | None:
     """The marker of the run directory ``path`` (:data:`RUN_MARKER`), or None where warpcut never marked it
     (no marker, or a file there that is not one)."""
     try:
-        marker = json.loads(_marker_path(Path(path)).read_text())
-    except (OSError, ValueError):
+        marker = check_nesting(json.loads(_marker_path(Path(path)).read_text()), RUN_MARKER)
+    except (OSError, ValueError, RecursionError):
         return None
     if not (isinstance(marker, dict) and marker.get("format") == "warpcut-run"):
         return None
@@ -501,11 +501,68 @@ def overwritten(path: str | os.PathLike) -> tuple[list[str], list[str]]:
     return (claim.deleted, claim.kept) if claim is not None else ([], [])
 
 
+MAX_NESTING = 32
+"""How deep the data warpcut reads (a run's JSON files, a config, a contour) may nest: its own nest fewer
+than 10 levels; deeper data is refused before anything walks it (Python's recursion stops near 1,000)."""
+
+def check_nesting(data: Any, where: str, items: int | None = None) -> Any:
+    """``data`` (parsed JSON or YAML) as is, after checking, without expanding it, that it nests at most
+    :data:`MAX_NESTING` deep, holds no cycle (a YAML alias inside itself) and, where ``items`` is given,
+    expands to at most that many values (each shared part counted as often as it is reached).
+
+    Raises:
+        ValueError: one line naming ``where``, what was found and the limit.
+    """
+    sizes: dict[int, int] = {}
+    open_: set[int] = set()
+
+    def size(obj: Any, depth: int) -> int:
+        if isinstance(obj, dict):
+            children = obj.values()
+        elif isinstance(obj, list | tuple):
+            children = obj
+        else:
+            return 1
+        key = id(obj)
+        if key in sizes:
+            return sizes[key]
+        if key in open_:
+            raise ValueError(f"{where}: holds itself (a recursive alias); write the data out")
+        if depth >= MAX_NESTING:
+            raise ValueError(_too_deep(where))
+        open_.add(key)
+        total = 1
+        for child in children:
+            total += size(child, depth + 1)
+            if items is not None and total > items:
+                raise ValueError(
+                    f"{where}: expands to more than {items:,} values (nested aliases?); write the data out "
+                    "without them, or make it smaller"
+                )
+        open_.discard(key)
+        sizes[key] = total
+        return total
+
+    size(data, 0)
+    return data
+
+
 def read_json(path: str | os.PathLike) -> Any:
-    """The JSON in ``path``; a file that is not valid JSON raises ``ValueError`` naming it (a missing
-    file: ``FileNotFoundError``, as ``open`` raises it)."""
+    """The JSON in ``path``; a file that is not valid JSON, or nests deeper than any of warpcut's
+    (:func:`check_nesting`), raises ``ValueError`` naming it (a missing file: ``FileNotFoundError``, as
+    ``open`` raises it)."""
     path = Path(path)
     try:
-        return json.loads(path.read_text())
+        data = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ValueError(f"{path}: not a valid JSON file ({exc}); restore or remove it") from None
+    except RecursionError:  # too deep for the parser itself
+        raise ValueError(f"{_too_deep(path)}; not a file warpcut wrote: restore or remove it") from None
+    try:
+        return check_nesting(data, str(path))
+    except ValueError as exc:
+        raise ValueError(f"{exc}; not a file warpcut wrote: restore or remove it") from None
+
+
+def _too_deep(where: str | os.PathLike) -> str:
+    return f"{where}: nests deeper than {MAX_NESTING} levels (warpcut's data nest a few)"
