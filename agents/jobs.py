@@ -439,6 +439,10 @@ def _recording_keys(job: Any) -> dict[str, str]:
     return {}
 
 
+CONFIG_FILE = "config.json"
+"""A run directory's job (this module's dataclasses, as plain data): ``--config`` takes it back, ``--resume``
+checks it."""
+
 OUTPUT_KEYS = ("record", "colour_by", "video", "plots", "export_mesh")
 """The keys of a job that say only what a run writes besides its results: a resumed run may change them."""
 

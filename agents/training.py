@@ -77,6 +77,7 @@ from agents.checkpoints import (
 )
 from agents.config import TrainConfig
 from agents.config_io import flatten, to_plain
+from agents.jobs import CONFIG_FILE
 from agents.policies import (
     OPTIONS_FILE,
     RESUME_FIX,
@@ -106,9 +107,6 @@ from warpcut.sim.memory import batch_named
 if TYPE_CHECKING:
     from agents.jobs import GeneralistJob, TrainJob
     from agents.methods import StepCallbacks
-
-CONFIG_FILE = "config.json"
-"""The run directory's job (:class:`agents.jobs.TrainJob`), which ``--config`` takes back."""
 
 
 def train(

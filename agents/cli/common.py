@@ -646,7 +646,7 @@ def resumed_job(job_class, out: Path | None, resume: bool, command: str):
     """With ``--resume``, the job the run in ``out`` was started with (its ``config.json``): the base of the
     settings, so that a resumed run keeps its own and only what is given again changes (and is then
     checked against the run's); None when not resuming, or when the run saved no settings yet."""
-    from agents.training import CONFIG_FILE
+    from agents.jobs import CONFIG_FILE
     from warpcut.io import check_run_dir
 
     if not resume or out is None or not out.is_dir():

@@ -89,7 +89,6 @@ def command(
     plan, analytic_pinch, train.iterations, grad.estimator); --print-config shows them all.
     """
     from agents.jobs import EvaluateJob
-    from agents.pipelines import evaluate_table
     from agents.progress import stage_bars
     from warpcut.io import safe_name, write_json
     from warpcut.planning.generate import resolve_specs
@@ -115,6 +114,8 @@ def command(
     out, claim = common.claim(out, "evaluate", resume, overwrite, "evaluate")
     common.check_outputs({"--json": json_path}, list(job.contours), own=(out, "evaluate"))
     cuts = common.final_cuts(not job.plots)
+    from agents.pipelines import evaluate_table  # torch: after every check, so that a refusal is quick
+
     with (
         claim,
         cluster.executor(ray, device, common.log) as units,

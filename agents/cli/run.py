@@ -100,7 +100,6 @@ def command(
 
     from agents.cluster import executor
     from agents.jobs import RunJob, job_contour
-    from agents.pipelines import run_pipeline
     from warpcut.io import safe_name, write_json
 
     base = common.resumed_job(RunJob, out, resume, "run")
@@ -123,6 +122,8 @@ def command(
     out, claim = common.claim(out, f"run-{safe_name(contour_name)}", resume, overwrite, "run")
     common.check_outputs({"--json": json_path}, inputs, own=(out, "run"))
     cuts = common.final_cuts(not job.plots)
+    from agents.pipelines import run_pipeline  # torch: after every check, so that a refusal is quick
+
     with (
         claim,
         executor(ray, device, common.log) as units,

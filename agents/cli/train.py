@@ -79,9 +79,7 @@ def command(
     and reward: env.*; the physics and noise: sim.*; the learner: train.*; fine-tuning from a generalist:
     init=generalist, or init=DIR of 'warpcut generalist'); --print-config shows them all.
     """
-    from agents.checkpoints import saved_nothing
-    from agents.jobs import TrainJob
-    from agents.training import CONFIG_FILE, check_resumed_job, train_contour
+    from agents.jobs import CONFIG_FILE, TrainJob
     from warpcut.io import check_run_dir, safe_name
 
     base, run = None, None
@@ -96,6 +94,8 @@ def command(
         base = common.saved_job(TrainJob, run / CONFIG_FILE)
     job = common.resolve(TrainJob, config_file, overrides, FLAGS, base)
     if run is not None:
+        from agents.training import check_resumed_job
+
         check_resumed_job(run, job)
     else:  # a resumed run's config.json holds every setting it was started with
         common.refuse_unused_settings(job, overrides, FLAGS)
@@ -107,11 +107,22 @@ def command(
         return
     out = out or (run if run is not None else common.run_dir(None, f"train-{safe_name(contour_name)}"))
     out, claim = common.claim(out, "train", resume is not None, overwrite, "train")
+    from agents.checkpoints import resume_checkpoint, saved_nothing  # torch: after every check
+    from agents.training import train_contour
+
     try:
         with claim, common.recorder(out, job.record, job.colour_by) as rec, videos(out, job.video) as vid:
-            click.echo(f"training {contour_name} with {job.train.algo} into {out} ({device})")
             if run is not None and saved_nothing(run):
                 click.echo(f"{run} saved no checkpoint before it stopped: training it from the start")
+            elif run is not None:
+                checkpoint, state, _ = resume_checkpoint(resume)
+                done = (state.get("infos") or {}).get("iterations_done", state.get("iter", -1) + 1)
+                click.echo(
+                    f"resuming {contour_name} with {job.train.algo} in {out} ({device}) after iteration "
+                    f"{done} ({checkpoint.name})"
+                )
+            else:
+                click.echo(f"training {contour_name} with {job.train.algo} into {out} ({device})")
             result = train_contour(
                 job,
                 out,

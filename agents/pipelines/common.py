@@ -15,14 +15,11 @@ import numpy as np
 
 from agents.config import ANALYTIC_PINCHES
 from agents.config_io import flatten, to_plain
-from agents.jobs import OUTPUT_KEYS, TrainJob
+from agents.jobs import CONFIG_FILE, OUTPUT_KEYS, TrainJob
 from envs.options import PatternCutOptions
 from warpcut.contours import Contour
 from warpcut.io import claim_run_dir, read_json, write_json
 from warpcut.planning import Plan
-
-CONFIG_FILE = "config.json"
-"""A pipeline's job in its run directory: ``--config`` takes it back, ``--resume`` checks it."""
 
 
 class TrainingInterrupted(KeyboardInterrupt):

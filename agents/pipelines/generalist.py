@@ -28,7 +28,7 @@ import numpy as np
 from agents.cluster import Executor
 from agents.config_io import to_plain
 from agents.generalist import ES_FIELDS, FORMAT, GENERALIST_FILE, POLICY_FIELDS
-from agents.pipelines.common import CONFIG_FILE
+from agents.jobs import CONFIG_FILE
 from envs.options import ENV_FIELDS, PatternCutOptions
 from warpcut.contours import Contour
 from warpcut.io import claim_run_dir, read_json, write_json
