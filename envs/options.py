@@ -26,6 +26,7 @@ from warpcut.sim.config import (
     check_sim_field,
     randomize_ranges,
 )
+from warpcut.sim.memory import check_batch_memory
 from warpcut.validation import (
     ConfigError,
     check_choice,
@@ -339,9 +340,13 @@ class PatternCutOptions(EnvConfig):
         return loaded * num_envs if len(loaded) == 1 else loaded
 
     def per_env(self, num_envs: int) -> tuple[list[Contour], np.ndarray, list[list[np.ndarray]] | None]:
-        """Per env: the contour, the pinch point (B, 2) and the segments (None: each contour whole)."""
-        contours = self.contours(num_envs)
+        """Per env: the contour, the pinch point (B, 2) and the segments (None: each contour whole).
+
+        A batch that could not fit in memory is refused first, before these per-env lists are made
+        (:func:`~warpcut.sim.memory.check_batch_memory` on the sheets alone; the task checks the episode)."""
         config = self.config()
+        check_batch_memory(num_envs, config.nx * config.ny)
+        contours = self.contours(num_envs)
         if self.pinch_point is None:
             # Once per distinct contour (envs of one contour share its object): the grid search is slow.
             by_contour = {id(c): c for c in contours}

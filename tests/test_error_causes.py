@@ -67,6 +67,36 @@ def test_bench_names_the_option_of_the_batch_too_big(tiny_memory, monkeypatch, c
         assert error.startswith(f"error: {start} would need") and f"give {option} of at most" in error, error
 
 
+def test_every_size_a_user_sets_is_checked_before_it_is_allocated(tmp_path, monkeypatch, capfd):
+    """A billion envs, an actor of ten billion weights, a million generated contours: each is one line
+    naming the setting, in seconds, before memory is taken (a list of a billion envs' contours is 8 GB)."""
+    import time
+
+    import gymnasium as gym
+
+    import warpcut.gym  # noqa: F401 -- registers the env
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv(MEMORY_LIMIT_ENV, "8")
+    start = time.perf_counter()
+    with pytest.raises(ValueError, match="num_envs: 1000000000 envs would need about"):
+        gym.make_vec("warpcut/PatternCut-v0", num_envs=10**9, vectorization_mode="vector_entry_point")
+    train = ["train", "--contour", "circle-small"]
+    for args, said in [
+        ([*train, "--num-envs", "1000000000"], "train.num_envs: 1000000000 envs"),
+        ([*train, "--set", "train.actor_hidden_dims=[100000,100000]"],
+         "train.actor_hidden_dims: [100000, 100000] make an actor of at least 10,000,400,001 weights"),
+        ([*train, "--algo", "ppo", "--set", "train.actor_hidden_dims=[99999,99999]"],
+         "train.actor_hidden_dims: [99999, 99999]"),
+        (["generalist", "--set", "train.actor_hidden_dims=[100000,100000]"], "train.actor_hidden_dims"),
+        (["evaluate", "--contours", "gen-test-0:1000000"], "at most 10000 contours of a split"),
+        (["generalist", "--set", "generated=1000000"], "generated: at most 10000 contours"),
+    ]:  # fmt: skip
+        error = refused([*args, "--device", "cpu", "--out", str(tmp_path / "out")], capfd)
+        assert said in error and not (tmp_path / "out").exists(), error
+    assert time.perf_counter() - start < 60
+
+
 # ------------------------------------------------------------------ the OS cause of a failed write
 
 

@@ -764,3 +764,23 @@ def check_learner(job) -> None:
     fixed_sheet = algorithm(job.train.algo).fixed_sheet
     if fixed_sheet is not None and (job.env.randomize or job.env.relative_reward):
         raise ValueError(fixed_sheet)
+    check_network_memory(job.train)
+
+
+def check_network_memory(train) -> None:
+    """``ValueError`` naming ``train.actor_hidden_dims`` where the actor's weights alone, with the copies
+    training keeps of them (gradients, Adam's moments, an es population's perturbations, as float64), would
+    not fit in the memory a batch may take (:func:`warpcut.sim.memory.memory_limit`): torch's allocator would
+    fail mid-run, or the kernel kill the process."""
+    from warpcut.sim.memory import memory_limit
+
+    dims = [1, *train.actor_hidden_dims, 1]  # the narrowest input and output: a lower bound
+    weights = sum(a * b + b for a, b in zip(dims, dims[1:], strict=False))
+    copies = 4 + getattr(train.learner, "population", 0)
+    needed, (limit, source) = 8 * weights * copies, memory_limit()
+    if needed > limit:
+        raise ValueError(
+            f"train.actor_hidden_dims: {list(train.actor_hidden_dims)} make an actor of at least {weights:,} "
+            f"weights, which training would need about {needed / 1e9:.3g} GB for, more than the "
+            f"{limit / 1e9:.3g} GB allowed ({source}); use narrower layers"
+        )

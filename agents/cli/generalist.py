@@ -81,6 +81,14 @@ def command(
     if print_config:
         common.print_config(job)
         return
+    common.check_network_memory(job.train)
+    from warpcut.planning.generate import MAX_CONTOURS
+
+    for name in ("generated", "validation_contours"):
+        if getattr(job, name) > MAX_CONTOURS:
+            raise ValueError(
+                f"{name}: at most {MAX_CONTOURS} contours (got {getattr(job, name)}); give fewer"
+            )
     out, claim = common.claim(out, "generalist", resume, overwrite, "generalist")
     try:
         with claim, executor(ray, device, common.log) as units:

@@ -47,6 +47,10 @@ MAX_DRAWS = 200
 
 _DENSE = 2048
 
+MAX_CONTOURS = 10_000
+"""The most contours one call draws (the names' four-digit index): each is drawn, resolved and planned
+(tenths of a second), and a batch holds them all, so a count beyond would run for days or take the memory."""
+
 GENERATED_SPEC = re.compile(
     r"gen-(?P<split>[a-z]+)-(?P<seed>\d+)(?::(?P<count>\d+)|-(?P<index>\d+)-(?P<kind>[a-z]+))"
 )
@@ -82,6 +86,8 @@ def generate_contours(
     for name, value in (("count", count), ("seed", seed)):
         if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
             raise ValueError(f"{name}: an integer >= 0 (got {value!r})")
+    if count > MAX_CONTOURS:
+        raise ValueError(f"count: at most {MAX_CONTOURS} contours of a split (got {count}); give fewer")
     kinds = list(kinds)
     unknown = [k for k in kinds if k not in KINDS]
     if not kinds or unknown:
@@ -237,6 +243,11 @@ def generated(spec: str, config: SimConfig | None = None) -> list[Contour] | Non
         raise ValueError(f"contour {spec!r}: the split is one of {', '.join(SPLITS)} (got {split!r})")
     config = config or SimConfig()
     if match["count"] is not None:
+        if int(match["count"]) > MAX_CONTOURS:
+            raise ValueError(
+                f"contour {spec!r}: at most {MAX_CONTOURS} contours of a split (gen-{split}-{seed}:"
+                f"{MAX_CONTOURS}); give fewer"
+            )
         return generate_contours(int(match["count"]), split, seed, config)
     index, kind = int(match["index"]), match["kind"]
     if kind != KINDS[index % len(KINDS)]:
