@@ -215,6 +215,7 @@ def _load_svg(path: Path, sheet_size: tuple[float, float]) -> Contour:
     for name in ("width", "height", "viewBox", "preserveAspectRatio"):
         root.attrib.pop(name, None)
     viewport = None if box is None else box[2:]
+    _check_expanded_size(where, root)
     for element in root.iter():
         if _local_tag(element.tag) == "path" and element.get("d"):
             _check_path_data(where, element.get("d"))
@@ -385,6 +386,42 @@ def _check_path_data(where: str, d: str) -> None:
             f"{where}: cannot read the path data at character {lexer.pos} (near {near!r}): a command is cut "
             "short or unknown; give SVG path commands (M, L, H, V, C, S, Q, T, A, Z) with their numbers"
         )
+
+
+MAX_SVG_ELEMENTS = 20_000
+"""The most elements an SVG contour file may draw once its ``<use>`` references are instantiated: nested
+``<use>`` (7 levels of 10 in 2 kB) expand to millions, which the parser would take hours to instantiate
+(20,000 take it about 3 s)."""
+
+
+def _check_expanded_size(where: str, root: ET.Element) -> None:
+    """Refuse a drawing whose ``<use>`` references, instantiated, would make more than
+    :data:`MAX_SVG_ELEMENTS` elements, or refer to themselves, before anything is instantiated."""
+    by_id = {e.get("id"): e for e in root.iter() if e.get("id")}
+    sizes: dict[int, int] = {}
+    open_: set[int] = set()
+    pending: list[tuple[ET.Element, bool]] = [(root, False)]
+    while pending:  # post-order without recursion: a file may nest deeper than Python recurses
+        element, children_done = pending.pop()
+        key = id(element)
+        if key in sizes:
+            continue
+        href = element.get("href") or element.get("{http://www.w3.org/1999/xlink}href") or ""
+        target = by_id.get(href[1:]) if _local_tag(element.tag) == "use" and href.startswith("#") else None
+        parts = [*element, *([target] if target is not None else [])]
+        if not children_done:
+            if key in open_:
+                raise ContourError(f"{where}: a <use> refers to an element that holds it; draw it out")
+            open_.add(key)
+            pending.append((element, True))
+            pending.extend((part, False) for part in parts)
+            continue
+        sizes[key] = 1 + sum(sizes[id(part)] for part in parts)
+        if sizes[key] > MAX_SVG_ELEMENTS:
+            raise ContourError(
+                f"{where}: its <use> references expand to more than {MAX_SVG_ELEMENTS:,} elements; draw the "
+                "contour as one shape"
+            )
 
 
 def _first_shape(where: str, root: ET.Element, ppi: float, viewport: tuple[float, float] | None):
