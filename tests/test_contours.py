@@ -429,6 +429,26 @@ def test_svg_use_nested_svg_and_hidden_shapes(tmp_path):
     assert contour.area_mm2 == pytest.approx(400.0)
 
 
+def test_a_contour_too_dense_to_plan_is_refused_in_seconds(tmp_path):
+    """A contour of 200,000 points (8 MB, under the file cap) would take many minutes to plan: it is refused
+    as it is loaded, in seconds, with the spacing to resample it at; 10,000 points still load."""
+    import time
+
+    from warpcut.contours.contour import MAX_POINTS
+
+    def circle(n):
+        t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+        return np.stack([50 + 20 * np.cos(t), 50 + 20 * np.sin(t)], axis=1)
+
+    path = tmp_path / "dense.json"
+    path.write_text(json.dumps({"name": "dense", "closed": True, "points": circle(200_000).tolist()}))
+    start = time.perf_counter()
+    with pytest.raises(ContourError, match=r"200,000 points, more than the 10,000 .* a point every 0.5 mm"):
+        load_contour(path)
+    assert time.perf_counter() - start < 10
+    assert len(validate("ok", True, circle(MAX_POINTS)).points) == MAX_POINTS
+
+
 def test_svg_use_bombs_are_refused_before_they_expand(tmp_path):
     """Nested ``<use>`` (7 levels of 10 in 1.4 kB: ten million circles) are refused in one line, in well
     under a second, before the parser instantiates them (a ``<use>`` inside what it refers to: above)."""

@@ -31,6 +31,11 @@ DEFAULT_SHEET_MM = (100.0, 100.0)
 EDGE_REACH_MM = 5.0
 """An open contour's end within this distance of a sheet edge is extended straight onto that edge (mm)."""
 
+MAX_POINTS = 10_000
+"""The most points a contour may have (after repeated points are removed): planning one takes seconds
+(segmenting it grows faster than its points: 10^6 would take hours); the built-in contours have a point
+every 0.5 mm, a few hundred."""
+
 # Coordinates closer than this to an edge count as on it (mm): absorbs round-off such as
 # 100 + 35 * cos(pi / 2), far below anything that matters on a 4 mm simulation grid.
 _EDGE_TOL_MM = 1e-6
@@ -168,6 +173,13 @@ def validate(
             f"({bad.size} such point(s)); give finite x, y in mm"
         )
     pts = _drop_duplicates(_onto_sheet(name, pts, closed, width, height), closed) if len(pts) else pts
+    if len(pts) > MAX_POINTS:
+        length = float(np.hypot(*np.diff(pts, axis=0).T).sum())
+        raise ContourError(
+            f"contour {name!r}: {len(pts):,} points, more than the {MAX_POINTS:,} warpcut plans (not "
+            f"resampled); resample it, e.g. a point every {max(0.5, length / MAX_POINTS):.2g} mm "
+            "(warpcut.contours.polyline.resample_polyline)"
+        )
     if len(pts) < 3:
         raise ContourError(
             f"contour {name!r}: fewer than 3 distinct points ({len(pts)} after removing repeated points); "
