@@ -4,11 +4,11 @@ pipelines and the command line read (torch-free). Adding a learner is its folder
 Each learner has its folder (``agents/NAME/``) with its settings dataclass (the ``train.NAME`` section of
 :class:`agents.config.TrainConfig`) and its implementation:
 
-- ``es`` (:mod:`agents.es`, the default): evolution strategies on the policy's weights, an rsl-rl algorithm
+- ``gps`` (:mod:`agents.gps`, the default): guided policy search from the contour's optimised plan: the
+  student plays the teacher's plan as its feed-forward and learns a closed-loop correction by es;
+- ``es`` (:mod:`agents.es`): evolution strategies on the policy's weights, an rsl-rl algorithm
   (``class_name`` ``agents.es.algorithm:ES``) that rsl-rl's ``OnPolicyRunner`` drives, one whole cut per env
   an iteration;
-- ``gps`` (:mod:`agents.gps`): guided policy search from the contour's optimised plan: the student plays the
-  teacher's plan as its feed-forward and learns a closed-loop correction by es;
 - ``ppo`` (:mod:`agents.ppo`): rsl-rl's PPO with warpcut's speed-ups and a categorical policy that starts
   by holding still;
 - ``apg`` (:mod:`agents.apg`): analytic policy gradients through the differentiable simulator, on a runner
@@ -68,18 +68,6 @@ class Algorithm:
 
 
 ALGORITHMS = {
-    "es": Algorithm(
-        "es",
-        "evolution strategies on the policy (an MLP plus feedback gains on the tracking error), whole cuts "
-        "ranked by the path score",
-        num_envs=256,
-        iterations=None,
-        action_type="continuous",
-        continuous_only=True,
-        runner="agents.training:Runner",
-        settings="agents.es.config:EsConfig",
-        fine_tunes=True,
-    ),
     "gps": Algorithm(
         "gps",
         "guided policy search: the contour's es-optimised plan as the feed-forward of a closed-loop policy "
@@ -91,6 +79,18 @@ ALGORITHMS = {
         runner="agents.gps.runner:GpsRunner",
         settings="agents.gps.config:GpsConfig",
         cut_budget=0.5,
+    ),
+    "es": Algorithm(
+        "es",
+        "evolution strategies on the policy (an MLP plus feedback gains on the tracking error), whole cuts "
+        "ranked by the path score",
+        num_envs=256,
+        iterations=None,
+        action_type="continuous",
+        continuous_only=True,
+        runner="agents.training:Runner",
+        settings="agents.es.config:EsConfig",
+        fine_tunes=True,
     ),
     "ppo": Algorithm(
         "ppo",
@@ -116,7 +116,7 @@ ALGORITHMS = {
 }
 """Every learner, the default first."""
 
-DEFAULT_ALGORITHM = "es"
+DEFAULT_ALGORITHM = "gps"
 """The learner ``train``, ``run`` and ``evaluate`` use unless told otherwise: the best measured on the suite
 (docs/results.md)."""
 

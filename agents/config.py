@@ -57,7 +57,7 @@ class _TrainSettings:
     learner's own settings in its section (:class:`TrainConfig`)."""
 
     algo: str = DEFAULT_ALGORITHM
-    """The learner (:data:`agents.algorithms.ALGORITHMS`): ``es`` (the default), ``gps``, ``ppo`` or
+    """The learner (:data:`agents.algorithms.ALGORITHMS`): ``gps`` (the default), ``es``, ``ppo`` or
     ``apg``."""
     num_envs: int | None = None
     """Parallel envs. None: the learner's (256 for es, gps and PPO, 16 for APG)."""
@@ -447,4 +447,6 @@ def generalist_train_config() -> TrainConfig:
     policies, each cutting every training contour, its gains scheduled on the look-ahead, larger steps on
     the MLP than one contour's es (the MLP carries the contour's shape here), validated every 5 iterations."""
     es = EsConfig(population=GENERALIST_POPULATION, sigma=0.01, learning_rate=0.003, scheduled=True)
-    return TrainConfig(iterations=GENERALIST_ITERATIONS, validation_interval=5, save_interval=5, es=es)
+    return TrainConfig(
+        algo="es", iterations=GENERALIST_ITERATIONS, validation_interval=5, save_interval=5, es=es
+    )

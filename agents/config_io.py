@@ -265,7 +265,12 @@ def _describe(hint: Any) -> str:
     """A type as words for an error."""
     origin = typing.get_origin(hint)
     if origin in (typing.Union, types.UnionType):
-        return " or ".join(dict.fromkeys(_describe(a) for a in typing.get_args(hint)))
+        words = list(dict.fromkeys(_describe(a) for a in typing.get_args(hint)))
+        if "a number" in words and "an integer" in words:  # an integer is a number
+            words.remove("an integer")
+        if "a list" in words and any(w.startswith("a list (") for w in words):  # the typed list says it
+            words.remove("a list")
+        return " or ".join(words)
     names = {bool: "true or false", int: "an integer", float: "a number", str: "text", type(None): "null"}
     if hint in names:
         return names[hint]

@@ -160,14 +160,20 @@ def fine_tuning_defaults(job, explicit: set[str]):
     """``job`` (a :class:`agents.jobs.TrainJob` with ``init``) observing and acting as its generalist does
     (its look-ahead, fiducials, actions) and, for es, with its network (widths, activation, normaliser,
     feedback, scheduled gains) and its MLP's σ and step (:data:`ES_FIELDS`), where ``explicit`` (the dotted
-    keys given) does not say otherwise."""
+    keys given) does not say otherwise. The learner is one that fine-tunes (es) unless ``train.algo`` is
+    given."""
     import dataclasses
+
+    from agents.algorithms import ALGORITHMS
 
     settings = generalist_settings(job.init)
     own, policy = settings["env"], settings.get("policy", {})
     layout = ("num_fiducials", "contour_features", "lookahead", "action_type", "allow_z")
     given = {name: own[name] for name in layout if name in own and f"env.{name}" not in explicit}
     train = job.train
+    if "train.algo" not in explicit and not ALGORITHMS[train.algo].fine_tunes:
+        fine_tuner = next(name for name, entry in ALGORITHMS.items() if entry.fine_tunes)
+        train = dataclasses.replace(train, algo=fine_tuner)
     if train.algo == "es":  # fine-tuning is es's (the others refuse init)
         net = {k: v for k, v in policy.items() if k in POLICY_FIELDS and f"train.{k}" not in explicit}
         es = {k: policy[k] for k in ES_FIELDS if k in policy and f"train.es.{k}" not in explicit}

@@ -198,7 +198,7 @@ def _read_state(state_file: Path | None, identity: dict) -> dict | None:
     if state_file is None or not Path(state_file).is_file():
         return None
     state = read_json(state_file)
-    if _settings_of(state.get("identity")) != identity:
+    if plan_settings(state.get("identity")) != identity:
         raise ValueError(
             f"{state_file}: an optimisation of other settings ({state.get('identity')}); delete it, or start "
             "a new run"
@@ -206,7 +206,7 @@ def _read_state(state_file: Path | None, identity: dict) -> dict | None:
     return state
 
 
-def _settings_of(saved: dict | None) -> dict | None:
+def plan_settings(saved: dict | None) -> dict | None:
     """Settings (or an identity holding them) read from a file, with the :class:`GradConfig` fields it
     lacks at their defaults (e.g. ``es_feedback_sag``), the behaviour of a plan without them."""
     if saved is None or "estimator" not in saved:
@@ -581,7 +581,7 @@ def cached_plan(
         state = done.with_suffix(".state.json")
         if done.is_file():
             data = read_json(done)
-            if _settings_of(data.get("settings", wanted)) != wanted:  # none kept: as wanted
+            if plan_settings(data.get("settings", wanted)) != wanted:  # none kept: as wanted
                 raise ValueError(
                     f"{done}: a plan optimised with other settings ({data['settings']}, here {wanted}); "
                     "delete it to optimise again, or run with its settings"

@@ -354,7 +354,7 @@ JOB = TrainJob(
     contour="circle-small",
     sim=SMALL,
     eval_trials=1,
-    train=TrainConfig(num_envs=2, iterations=1, validation_trials=1, es=EsConfig(population=2)),
+    train=TrainConfig(algo="es", num_envs=2, iterations=1, validation_trials=1, es=EsConfig(population=2)),
 )
 """A tiny run of the default learner (es, observing the contour) on circle-small."""
 

@@ -58,6 +58,8 @@ def invoke(args):
         (["evaluate", "--markdown", "t.md"], "No such option '--markdown'"),
         (["run", "--recipe", "paper"], "No such option '--recipe'"),
         (["run", "--shared-policy"], "No such option '--shared-policy'"),
+        (["run", "--trials", "3"], "--trials: 'run' has no such option; it is a setting: --set trials=VALUE"),
+        (["run", "--num-envs", "8"], "'run' has no such option; it is a setting: --set train.num_envs=VALUE"),
         (["run", "--set", "budget=huge"], "budget: choose one of fast, paper"),
     ],
 )
@@ -98,7 +100,8 @@ def test_warp_starts_quietly_unless_asked():
 
 SMALL = ["--set", "sim.resolution=13"]
 """A 13 x 13 sheet: the commands' fast runs."""
-TINY_ES = ["--set", "train.iterations=2", "--set", "train.num_envs=8", "--set", "train.es.population=4",
+TINY_ES = ["--set", "train.algo=es", "--set", "train.iterations=2", "--set", "train.num_envs=8",
+           "--set", "train.es.population=4",
            "--set", "train.validation_trials=2"]  # fmt: skip
 """es for 2 iterations on 8 envs (4 perturbed policies), validated on 2 episodes."""
 
@@ -111,7 +114,18 @@ def test_train_resume_export_and_evaluate_with_checkpoints(tmp_path):
     from envs.pattern_cut import PatternCutEnv
 
     run = tmp_path / "runs" / "circle-small"
-    args = ["train", "--contour", "circle-small", "--iterations", "2", "--num-envs", "8", *SMALL]
+    args = [
+        "train",
+        "--contour",
+        "circle-small",
+        "--algo",
+        "es",
+        "--iterations",
+        "2",
+        "--num-envs",
+        "8",
+        *SMALL,
+    ]
     args += ["--set", "train.es.population=4", "--set", "train.validation_trials=2", "--set", "eval_trials=2"]
     code, stdout, _ = invoke([*args, "--no-progress", "--out", str(run), "--record"])
     assert code == 0, stdout
@@ -494,7 +508,7 @@ def test_train_es_trains_its_feedback_path_and_refuses_a_population_that_does_no
         "--set",
         "plots=false",
     ]
-    four = ["--set", "train.es.population=4"]
+    four = ["--set", "train.algo=es", "--set", "train.es.population=4"]
     code, stdout, _ = invoke(
         [*args, *four, "--set", "train.es.feedback_learning_rate=0.2", "--out", str(run)]
     )
@@ -515,7 +529,9 @@ def test_train_es_trains_its_feedback_path_and_refuses_a_population_that_does_no
     policy = read_checkpoint(tmp_path / "blind" / "latest.pt")["policy"]
     assert policy["actor"]["class_name"] == "rsl_rl.models:MLPModel"
     assert policy["obs_shapes"]["policy"] == [40]  # the paper's observation: no contour features
-    code, _, stderr = invoke([*args, "--set", "train.es.population=6", "--out", str(tmp_path / "other")])
+    code, _, stderr = invoke(
+        [*args, "--set", "train.algo=es", "--set", "train.es.population=6", "--out", str(tmp_path / "other")]
+    )
     assert code == 2 and "es.population: 6 must divide num_envs (8)" in stderr
     assert "e.g. train.es.population=8" in stderr and not (tmp_path / "other").exists()
 
@@ -572,7 +588,17 @@ def test_evaluate_with_the_grad_column(tmp_path):
     "args",
     [
         ["train", "--contour", "circle-small", "--algo", "ppo", "--set", "env.randomize=[gravity,noise]"],
-        ["run", "--contour", "wave-1", "--set", "sim.noise_std=0.01", "--set", "train.es.sigma=0.02"],
+        [
+            "run",
+            "--contour",
+            "wave-1",
+            "--algo",
+            "es",
+            "--set",
+            "sim.noise_std=0.01",
+            "--set",
+            "train.es.sigma=0.02",
+        ],
         [
             "evaluate",
             "--contours",

@@ -42,7 +42,8 @@ def test_robustness_of_a_randomised_run_end_to_end(tmp_path):
     code, _, err = invoke(
         ["train", "--contour", "fls-circle", "--set", "env.randomize=[gravity,noise_std]", "--set",
          "env.randomize_ranges={gravity: [200, 800]}", "--set", "env.relative_reward=true", "--iterations",
-         "2", "--num-envs", "8", "--set", "train.es.population=4", "--set", "train.validation_trials=2",
+         "2", "--num-envs", "8", "--set", "train.algo=es",
+         "--set", "train.es.population=4", "--set", "train.validation_trials=2",
          "--set", "eval_trials=2", "--set", f"sim.resolution={RES}", "--device", "cpu", "--out", str(run),
          "--no-progress", "--set", "plots=false"]
     )  # fmt: skip
@@ -155,10 +156,11 @@ def test_grad_settings_apply_only_with_the_grad_method(in_tmp):
     --methods they set its optimiser, and a run directory's config.json (grad at its defaults) runs again."""
     code, _, err = robustness(*FORCE, "--set", "grad.iterations=1")
     assert code == 2 and "grad.iterations: read by the grad method only (--methods ...,grad); drop it" in err
-    (in_tmp / "grad.yaml").write_text("grad:\n  estimator: es\n")
+    (in_tmp / "grad.yaml").write_text("grad:\n  estimator: tape\n")
     code, _, err = robustness(*FORCE, "--config", "grad.yaml")
     assert code == 2 and re.search(r"grad.estimator(, grad\.\w+)*: read by the grad method only", err)
-    grad = ["--methods", "none,grad", "--set", "grad.iterations=1", "--set", "grad.trials=2"]
+    grad = ["--methods", "none,grad", "--set", "grad.estimator=tape", "--set", "grad.iterations=1"]
+    grad += ["--set", "grad.trials=2"]
     grad += ["--set", "grad.validation_trials=2", "--set", f"sim.resolution={RES}"]
     code, stdout, err = robustness(*FORCE, *grad, "--device", "cpu", "--out", "grad", "--json", "grad.json")
     assert code == 0, err

@@ -42,7 +42,8 @@ def cluster():
 def _job(**changes) -> EvaluateJob:
     settings = dict(
         contours=["fls-circle", "kidney", "wave-1"], methods=["none", "fixed", "analytic", "rl"], trials=3,
-        sim=SMALL, candidates=4, train=TrainConfig(num_envs=16, iterations=3, es=EsConfig(population=8)),
+        sim=SMALL, candidates=4,
+        train=TrainConfig(algo="es", num_envs=16, iterations=3, es=EsConfig(population=8)),
     )  # fmt: skip
     return EvaluateJob(**(settings | changes))
 
@@ -293,7 +294,8 @@ def test_sigterm_stops_a_fanned_out_evaluate_and_its_ray_instance(tmp_path):
     out = tmp_path / "e"
     args = [sys.executable, "-m", "warpcut", "evaluate", "--contours", "fls-circle,kidney",
             "--methods", "fixed,rl", "--trials", "2", "--set", "sim.resolution=13", "--set", "candidates=4",
-            "--set", "train.iterations=10", "--set", "train.num_envs=16", "--set", "train.es.population=8",
+            "--set", "train.iterations=10", "--set", "train.num_envs=16", "--set", "train.algo=es",
+            "--set", "train.es.population=8",
             "--set", "plots=false", "--out", str(out)]  # fmt: skip
 
     def raylets() -> set[str]:

@@ -529,7 +529,7 @@ def test_es_learns_a_neural_policy_that_beats_a_still_grasp(tmp_path):
     plan = plan_cut(load_contour("edge-bite"), SMALL.replace(noise_std=0.0), num_candidates=8, seed=0)
     job = EvaluateJob(
         contours=["edge-bite"], methods=["fixed", "rl"], trials=10, sim=SMALL,
-        train=TrainConfig(num_envs=64, iterations=20, es=EsConfig(population=16)),
+        train=TrainConfig(algo="es", num_envs=64, iterations=20, es=EsConfig(population=16)),
     )  # fmt: skip
     report = evaluate_table(job, tmp_path / "table", plans=[plan])
     row = report.table["rows"][0]

@@ -26,7 +26,7 @@ from envs.observations import observation_names
 from warpcut.sim.config import SimConfig
 
 SMALL = SimConfig(resolution=13)
-TINY = TrainConfig(num_envs=4, iterations=1, validation_trials=0, es=EsConfig(population=4))
+TINY = TrainConfig(algo="es", num_envs=4, iterations=1, validation_trials=0, es=EsConfig(population=4))
 """The default learner (es) on 4 envs for one iteration."""
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -43,7 +43,16 @@ def trained(tmp_path_factory):
     run = tmp_path_factory.mktemp("export") / "run"
     invoke(
         ["train", "--contour", "circle-small", "--set", "sim.resolution=13", "--num-envs", "8"]
-        + ["--set", "train.es.population=4", "--iterations", "2", "--set", "eval_trials=1"]
+        + [
+            "--set",
+            "train.algo=es",
+            "--set",
+            "train.es.population=4",
+            "--iterations",
+            "2",
+            "--set",
+            "eval_trials=1",
+        ]
         + ["--set", "train.validation_trials=2", "--set", "plots=false", "--no-progress", "--out", str(run)]
     )
     output = invoke(["export", str(run)])

@@ -146,7 +146,8 @@ def generalist_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("generalist") / "run"
     args = [
         "generalist", "--generated", "2", "--validation-contours", "1", "--iterations", "1", "--out",
-        str(out), "--no-progress", "--set", "candidates=2", "--set", "train.es.population=2", *SMALL,
+        str(out), "--no-progress", "--set", "candidates=2", "--set", "train.algo=es",
+        "--set", "train.es.population=2", *SMALL,
     ]  # fmt: skip
     code, output, _ = invoke(args)
     assert code == 0, output
@@ -245,7 +246,8 @@ def test_training_for_one_contour_starts_from_a_generalist(generalist_run, tmp_p
     out = tmp_path / "tuned"
     code, output, _ = invoke(
         ["train", "--contour", "circle-small", "--iterations", "1", "--out", str(out), "--no-progress",
-         "--set", f"init={source}", "--set", "train.num_envs=4", "--set", "train.es.population=2",
+         "--set", f"init={source}", "--set", "train.num_envs=4", "--set", "train.algo=es",
+         "--set", "train.es.population=2",
          "--set", "train.validation_trials=2", "--set", "eval_trials=1", "--set", "plots=false", *SMALL]
     )  # fmt: skip
     assert code == 0, output

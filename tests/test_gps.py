@@ -234,3 +234,32 @@ def test_an_exported_student_runs_on_the_env_its_metadata_makes(tmp_path):
     assert steps == actor.lookup.plan.shape[0] and np.isfinite(info["error_vertices"])
     if result["summary"]["kept"] != "still":
         assert moved > 0  # the plan's moves are in the file
+
+
+def test_evaluates_grad_column_plays_the_teachers_plans_as_it_would_have_found_them(tmp_path):
+    """With gps in the rl column, the grad column reads each contour's plan from its teacher (the same
+    optimiser, settings, pinch point, order and seed) instead of optimising it again, and its row is the row
+    the grad column gives alone."""
+    from agents.config import grad_config
+    from agents.jobs import EvaluateJob
+    from agents.pipelines import evaluate_table
+
+    grad = grad_config("es", iterations=2)
+    job = EvaluateJob(
+        contours=["circle-small"], trials=2, candidates=3, sim=SMALL, grad=grad, train=gps_config(iterations=1),
+        methods=["none", "grad", "rl"],
+    )  # fmt: skip
+    both = evaluate_table(job, tmp_path / "both", log=lambda _: None)
+    teacher = tmp_path / "both" / "policies" / "circle-small" / "teacher" / "circle-small.json"
+    assert json.loads((tmp_path / "both" / "grad" / "circle-small.json").read_text()) == json.loads(
+        teacher.read_text()
+    )
+    alone = evaluate_table(
+        dataclasses.replace(job, methods=["none", "grad"]), tmp_path / "alone", log=lambda _: None
+    )
+    a, b = both.table["rows"][0], alone.table["rows"][0]
+    assert a["grad_trials_error_vertices"] == b["grad_trials_error_vertices"]
+    assert (
+        json.loads((tmp_path / "alone" / "grad" / "circle-small.json").read_text())["plan"]
+        == json.loads(teacher.read_text())["plan"]
+    )

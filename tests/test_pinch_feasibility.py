@@ -33,7 +33,18 @@ FEASIBLE = [83.0, 83.0]
 SHEET = ["--set", "sim.resolution=13"]
 ALLOW = ["--set", "allow_infeasible_pinch=true"]
 TINY_TRAINING = [
-    *("--num-envs", "8", "--set", "train.es.population=4", "--iterations", "1", "--set", "eval_trials=1"),
+    *(
+        "--num-envs",
+        "8",
+        "--set",
+        "train.algo=es",
+        "--set",
+        "train.es.population=4",
+        "--iterations",
+        "1",
+        "--set",
+        "eval_trials=1",
+    ),
     *("--set", "train.validation_trials=0", "--set", "plots=false", "--no-progress"),
 ]
 

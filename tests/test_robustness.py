@@ -350,7 +350,8 @@ def test_a_run_cut_in_another_order_is_paired_with_no_tension_in_that_order(tmp_
     runs = {}
     for label, segments in (("whole", None), ("split", other)):
         code, _, err = invoke(
-            ["train", "--contour", "fls-circle", "--iterations", "1", "--num-envs", "4", "--set",
+            ["train", "--contour", "fls-circle", "--algo", "es",
+            "--iterations", "1", "--num-envs", "4", "--set",
              "train.es.population=4", "--set", "train.validation_trials=0", "--set", "eval_trials=2",
              "--device", "cpu", "--out", str(tmp_path / label), "--no-progress", "--set", "plots=false"]
         )  # fmt: skip
@@ -377,7 +378,8 @@ def test_a_randomised_run_compares_its_pinch_candidates_on_the_nominal_sheet(tmp
     code, _, err = invoke(
         ["run", "--contour", "circle-small", "--set", "env.randomize=[gravity]", "--set", "candidates=2",
          "--set", "rl_candidates=1", "--set", "train.iterations=2", "--set", "trials=2", "--set",
-         "train.num_envs=8", "--set", "train.es.population=4", "--set", f"sim.resolution={RES}",
+         "train.num_envs=8", "--set", "train.algo=es",
+         "--set", "train.es.population=4", "--set", f"sim.resolution={RES}",
          "--device", "cpu", "--out", str(out), "--set", "plots=false"]
     )  # fmt: skip
     assert code == 0, err

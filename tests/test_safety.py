@@ -31,9 +31,10 @@ from warpcut.viz.process import RecordingError, place_file
 
 SMALL = SimConfig(resolution=13)
 ROOT = Path(__file__).resolve().parents[1]
-TINY = TrainConfig(num_envs=4, iterations=2, validation_trials=0, es=EsConfig(population=4))
+TINY = TrainConfig(algo="es", num_envs=4, iterations=2, validation_trials=0, es=EsConfig(population=4))
 """es on 4 envs for 2 iterations (one whole cut each), no validation: a policy in a few seconds."""
-TINY_FLAGS = ["--set", "train.num_envs=4", "--set", "train.es.population=4", "--set", "sim.resolution=13"]
+TINY_FLAGS = ["--set", "train.num_envs=4", "--set", "train.algo=es", "--set", "train.es.population=4",
+              "--set", "sim.resolution=13"]  # fmt: skip
 
 
 def invoke(args):
@@ -165,7 +166,7 @@ def test_a_run_resumes_only_as_the_command_that_made_it(tmp_path):
         ["run", "--contour", "circle-small", "--policy", "fixed", "--set", "trials=1"],
     ):
         code, output = invoke([*command, "--out", str(run), "--resume"])
-        assert code == 2 and f"holds a warpcut train run, not a warpcut {command[0]} run" in output, output
+        assert code == 2 and f"holds a run of 'warpcut train', not of 'warpcut {command[0]}'" in output, output
     assert {p: p.stat().st_mtime_ns for p in run.iterdir()} == before
 
 
@@ -936,7 +937,7 @@ def test_a_resume_stays_in_its_run_and_says_what_it_cannot_continue(tmp_path):
     with claim_run_dir(tmp_path / "outer", command="run"):  # a policy inside another command's run
         write_json(tmp_path / "outer" / "rl" / "candidate-0" / "config.json", {})
     code, output = invoke(["train", "--resume", str(tmp_path / "outer" / "rl" / "candidate-0")])
-    assert code == 2 and "is part of the warpcut run run in" in output and "--resume" in output
+    assert code == 2 and "is part of the run of 'warpcut run' in" in output and "--resume" in output
 
 
 def test_print_config_refuses_the_options_it_would_ignore():

@@ -353,7 +353,7 @@ def _check_run_dir(
         if outer is not None:
             command_of = (read_run_marker(outer) or {}).get("command") or "COMMAND"
             raise ValueError(
-                f"{path}: is part of the warpcut {command_of} run in {outer}, not a run of its own; "
+                f"{path}: is part of the run of 'warpcut {command_of}' in {outer}, not a run of its own; "
                 f"continue that one (warpcut {command_of} ... --out {outer} --resume), or choose another "
                 "--out"
             )
@@ -365,7 +365,7 @@ def _check_run_dir(
             + ("there is no run to resume; " if resume else "")
             + f"choose a new or empty folder for {option}"
         )
-    what = f"a warpcut {marker.get('command')} run" if marker and marker.get("command") else "a warpcut run"
+    what = f"a run of 'warpcut {marker.get('command')}'" if marker and marker.get("command") else "a warpcut run"
     if reuse and marker is not None and marker.get("command") not in (command, None):
         raise ValueError(
             f"{path}: holds {what}; choose a new or empty folder for {option} (or one of warpcut {command}'s)"
@@ -377,8 +377,8 @@ def _check_run_dir(
         )
     if resume and marker is not None and command and marker.get("command") not in (command, None):
         raise ValueError(
-            f"{path}: holds {what}, not a warpcut {command} run; resume it with warpcut "
-            f"{marker.get('command')}, or choose another --out"
+            f"{path}: holds {what}, not of 'warpcut {command}'; resume it with 'warpcut "
+            f"{marker.get('command')}', or choose another --out"
         )
     return marker, contents
 

@@ -345,7 +345,7 @@ def _check_named_file(path: Path, own: tuple[Path, str] | None, option: str) -> 
         if not mine or marker.get("command") not in (own[1], None):
             command = marker.get("command") or "COMMAND"
             raise click.BadParameter(
-                f"{path} lies in the warpcut {command} run in {run}, which this command does not own, so "
+                f"{path} lies in the run of 'warpcut {command}' in {run}, which this command does not own, so "
                 "it never writes there; choose a file outside it",
                 param_hint=option,
             )
@@ -516,6 +516,18 @@ class Command(click.Command):
     """click's command that refuses an option given twice: click would keep the last value without a word."""
 
     def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        try:
+            return self._parse_args(ctx, args)
+        except click.NoSuchOption as error:
+            key = setting_of(self.name, error.option_name)
+            if key is None:
+                raise
+            raise click.UsageError(
+                f"{error.option_name}: '{self.name}' has no such option; it is a setting: --set {key}=VALUE",
+                ctx=ctx,
+            ) from None
+
+    def _parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
         if args:
             _, _, order = self.make_parser(ctx).parse_args(args=list(args))
             seen: set[str] = set()
@@ -526,6 +538,32 @@ class Command(click.Command):
                     raise click.UsageError(f"{param.opts[0]}: given twice; give it once", ctx=ctx)
                 seen.add(param.name)
         return super().parse_args(ctx, args)
+
+
+COMMAND_JOBS = {
+    "run": "RunJob",
+    "evaluate": "EvaluateJob",
+    "train": "TrainJob",
+    "optimize": "OptimizeJob",
+    "robustness": "RobustnessJob",
+    "simulate": "SimulateJob",
+    "generalist": "GeneralistJob",
+}
+"""Each command's job (:mod:`agents.jobs`): the settings ``--set`` reaches."""
+
+
+def setting_of(command: str | None, option: str) -> str | None:
+    """The ``--set`` key of ``command``'s job that an option it lacks (``--trials``, ``--num-envs``) names:
+    the key itself, or the one key ending in it (``iterations``: ``train.iterations``); None if none."""
+    if command not in COMMAND_JOBS:
+        return None
+    import agents.jobs
+    from agents.config_io import flatten, to_plain
+
+    name = option.lstrip("-").replace("-", "_")
+    keys = flatten(to_plain(getattr(agents.jobs, COMMAND_JOBS[command])()))
+    found = [key for key in keys if key == name or key.endswith(f".{name}")]
+    return found[0] if len(found) == 1 or name in found else None
 
 
 def config_options(command):

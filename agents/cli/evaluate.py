@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from agents import cluster
-from agents.algorithms import ALGORITHMS
+from agents.algorithms import ALGORITHMS, DEFAULT_ALGORITHM
 from agents.cli import common
 from agents.cli.video import videos, with_videos
 from agents.config import EVALUATION_TRIALS
@@ -45,7 +45,7 @@ FLAGS = {
 @click.option(
     "--algo",
     type=click.Choice(list(ALGORITHMS)),
-    default=next(iter(ALGORITHMS)),
+    default=DEFAULT_ALGORITHM,
     show_default=True,
     help="The rl column's learner.",
 )

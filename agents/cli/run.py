@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from agents.algorithms import ALGORITHMS
+from agents.algorithms import ALGORITHMS, DEFAULT_ALGORITHM
 from agents.cli import common
 from agents.config import BUDGETS, DEFAULT_BUDGET, DEFAULT_CONTOUR, DEFAULT_SELECTOR
 from agents.methods import SELECTORS, point_text
@@ -59,7 +59,7 @@ FLAGS = {
 @click.option(
     "--algo",
     type=click.Choice(list(ALGORITHMS)),
-    default=next(iter(ALGORITHMS)),
+    default=DEFAULT_ALGORITHM,
     show_default=True,
     help="The learner of --policy rl.",
 )

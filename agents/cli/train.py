@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from agents.algorithms import ALGORITHMS
+from agents.algorithms import ALGORITHMS, DEFAULT_ALGORITHM
 from agents.cli import common
 from agents.cli.video import videos, with_videos
 
@@ -34,7 +34,7 @@ FLAGS = {
 @click.option(
     "--algo",
     type=click.Choice(list(ALGORITHMS)),
-    default=next(iter(ALGORITHMS)),
+    default=DEFAULT_ALGORITHM,
     show_default=True,
     help="The learner: " + "; ".join(f"{a.name}: {a.summary}" for a in ALGORITHMS.values()) + ".",
 )

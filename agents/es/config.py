@@ -49,9 +49,9 @@ class EsConfig:
     def __post_init__(self) -> None:  # each field as it is given (a file's or --set's key at a time)
         self.check()
 
-    def check(self, num_envs: int | None = None) -> None:
+    def check(self, num_envs: int | None = None, where: str = "train.es") -> None:
         """``ValueError`` naming the first field out of range (``num_envs``: the batch the population must
-        divide)."""
+        divide; ``where``: the section's key, e.g. ``train.gps.refine`` where another learner holds it)."""
         population = self.population
         if (
             isinstance(population, bool)
@@ -60,26 +60,26 @@ class EsConfig:
             or population % 2
         ):
             raise ConfigError(
-                "train.es.population",
+                f"{where}.population",
                 f"must be an even integer >= 2, antithetic pairs (got {shown(population)})",
             )
         if num_envs is not None and num_envs % population:
             fits = max((p for p in range(2, min(num_envs, 64) + 1, 2) if num_envs % p == 0), default=None)
-            fix = f"e.g. train.es.population={fits}" if fits else "give an even num_envs"
+            fix = f"e.g. {where}.population={fits}" if fits else "give an even num_envs"
             raise ValueError(
-                f"train.es.population: {population} must divide num_envs ({num_envs}), each perturbed "
+                f"{where}.population: {population} must divide num_envs ({num_envs}), each perturbed "
                 "policy playing "
                 f"as many episodes; {fix}"
             )
         for name in ("sigma", "feedback_sigma", "learning_rate", "feedback_learning_rate"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | float) or not (0 < value < math.inf):
-                raise ConfigError(f"train.es.{name}", f"must be a finite number > 0 (got {shown(value)})")
-        check_flag("train.es.feedback", self.feedback)
-        check_flag("train.es.scheduled", self.scheduled)
+                raise ConfigError(f"{where}.{name}", f"must be a finite number > 0 (got {shown(value)})")
+        check_flag(f"{where}.feedback", self.feedback)
+        check_flag(f"{where}.scheduled", self.scheduled)
         if self.scheduled and not self.feedback:
             raise ConfigError(
-                "train.es.scheduled", "schedules the feedback gains: needs train.es.feedback=true"
+                f"{where}.scheduled", f"schedules the feedback gains: needs {where}.feedback=true"
             )
 
     def algorithm_section(self, class_name: str = "agents.es.algorithm:ES") -> dict:

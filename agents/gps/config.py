@@ -34,7 +34,7 @@ class GpsConfig:
         check_integer("train.gps.teacher_iterations", self.teacher_iterations, 1, optional=True,
                       note="the optimiser's")  # fmt: skip
         check_instance("train.gps.refine", self.refine, EsConfig, "an EsConfig")
-        self.refine.check(num_envs)
+        self.refine.check(num_envs, "train.gps.refine")
         if not self.refine.feedback:
             raise ValueError(
                 "train.gps.refine.feedback: the student's correction acts on the tracking error; leave it "

@@ -10,6 +10,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from agents.cluster import Done, Executor, Serial, ran_here
 from agents.evaluation import Method, MethodResult, evaluate_suite
 from agents.gradient import grad_column
@@ -148,7 +150,7 @@ def evaluate_table(
     )
     clock = {"planning": time.perf_counter() - start}  # each stage's seconds, the driver's view
     specs, runs, notes = [Method(m) for m in methods], [], []  # notes: add a column's own fields to the table
-    for spec in specs:
+    for spec in sorted(specs, key=lambda s: s.name == "grad"):  # grad last: it reads rl's teachers
         if spec.name == "fixed" and plans is not None:
             spec.pinches = [p.chosen["pinch"] for p in plans]
         elif spec.name == "analytic":
@@ -164,6 +166,7 @@ def evaluate_table(
         elif spec.name == "generalist":
             spec.result = _generalist_result(job, loaded, plans, device, step_callbacks, log)
         elif spec.name == "grad":
+            _share_teachers(job, runs, loaded, plans, out)
             spec.result, note = grad_column(
                 loaded, plans, out, trials, config, (job.grad, job.arm), device, seed, log, step_callbacks
             )
@@ -204,6 +207,32 @@ def evaluate_table(
 Stages = Callable[[str, int, int], None]
 """``stages(stage, done, total)``: a pipeline's stage (e.g. "planning") has ``done`` of ``total`` steps
 done (a progress bar per stage; ``warpcut evaluate`` draws them)."""
+
+
+def _share_teachers(
+    job: EvaluateJob, runs: list[Path], contours: list[Contour], plans: list[Plan] | None, out: Path
+) -> None:
+    """The grad column's plans that the rl column's runs already optimised as their teachers (gps: the same
+    optimiser, settings, sheet, pinch point, order and seed as the grad column's), copied into ``out/grad``
+    where the grad column reads a plan found there instead of optimising it again; only where the
+    teacher's settings and pinch point are the column's, and the policies trained on the nominal sheet."""
+    from agents.gps.runner import TEACHER_DIR
+    from agents.gradient import GradConfig, plan_settings
+
+    env = {name: getattr(job.env, name) for name in ENV_FIELDS}
+    options = PatternCutOptions(sim_config=job.sim, arm=job.arm, **env)
+    if not runs or plans is None or options.config() != job.sim.validated() or options.randomize:
+        return
+    wanted = dataclasses.asdict(job.grad if isinstance(job.grad, GradConfig) else GradConfig())
+    for run, contour, plan in zip(runs, contours, plans, strict=True):
+        name = f"{safe_name(contour.name)}.json"
+        teacher, kept = Path(run) / TEACHER_DIR / name, out / "grad" / name
+        if not teacher.is_file() or kept.exists():
+            continue
+        data = read_json(teacher)
+        started = data["history"][0]["pinch"] if data.get("history") else data["pinch"]
+        if plan_settings(data.get("settings")) == wanted and np.allclose(started, plan.chosen["pinch"]):
+            write_json(kept, data)
 
 
 def _note_rl_iterations(kept: list[int | None], runs: list[Path], table: dict) -> None:
