@@ -684,3 +684,21 @@ def test_set_reads_numbers_in_exponent_notation():
     code, stdout, stderr = invoke(["run", "--set", "sim.noise_std=1e-3", "--print-config"])
     assert code == 0, stderr
     assert yaml.safe_load(stdout)["sim"]["noise_std"] == 0.001
+
+
+def test_a_seed_is_refused_where_its_noise_would_repeat_a_smaller_seeds(capfd):
+    """The noise kernels key on the seed modulo 2^31 - 1: ``--seed 2147483647`` would replay ``--seed 0``'s
+    noise bit for bit, and a seed near it would reach it with an offset (validation's); ``--set seed`` takes
+    the range ``--seed`` takes."""
+    from cli_runner import refused
+
+    from agents.cli.common import SEED_RANGE
+
+    top, simulate = SEED_RANGE[1], ["simulate", "--contour", "circle-small"]
+    for args in (["--seed", "2147483647"], ["--seed", str(top + 1)]):
+        assert f"not in the range 0<=x<={top}" in refused([*simulate, *args], capfd)
+    for value in (top + 1, 2_147_483_647):
+        error = refused([*simulate, "--set", f"seed={value}"], capfd)
+        assert error == f"error: seed: an integer in [0, {top}] (got {value}), as --seed takes"
+    code, stdout, _ = invoke([*simulate, "--seed", str(top), "--print-config"])
+    assert code == 0 and f"seed: {top}" in stdout

@@ -200,7 +200,7 @@ CONSTRUCTOR_CASES = {
     "config": [None, {"resolution": 5}, "SimConfig()"],
     "contours": [None, "circle-small", [], [CONTOUR, "x"]],
     "num_envs": [0, 2.0, True, "1"],
-    "seed": [-1, 1.5, True, "0", None],
+    "seed": [-1, 1.5, True, "0", None, 2_147_483_647],  # the last: seed 0's noise again (modulo a prime)
     "device": [0, True],
     "backend": ["magic", 1, None],
     "threads": [0, 2.0, True],

@@ -21,7 +21,7 @@ from warpcut.sim.checks import DIVERGENCE_REASONS, check_pinch_points
 from warpcut.sim.config import SheetGrid, SimConfig, SimulationDiverged
 from warpcut.sim.material import interpolate, interpolate_corners, material_cells, material_to_world
 from warpcut.sim.memory import check_batch_memory
-from warpcut.sim.simulator import BACKENDS, Simulator, resolve_device
+from warpcut.sim.simulator import BACKENDS, NOISE_SEEDS, Simulator, resolve_device
 from warpcut.validation import check_choice, check_flag, check_instance, check_integer, check_text, fail
 
 if TYPE_CHECKING:
@@ -204,7 +204,7 @@ class CuttingTask:
             raise ValueError(
                 f"CuttingTask.contours: got {len(contours)} for {num_envs} envs; give one or one per env"
             )
-        check_integer("CuttingTask.seed", seed, 0)
+        check_integer("CuttingTask.seed", seed, 0, NOISE_SEEDS - 1)
         check_text("CuttingTask.device", device, optional=True, note="the default device")
         check_choice("CuttingTask.backend", backend, BACKENDS)
         check_integer("CuttingTask.threads", threads, 1, optional=True, note="one per core")

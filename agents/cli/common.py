@@ -177,9 +177,10 @@ class FloatRange(click.FloatRange):
         return number
 
 
-SEED_RANGE = (0, 2**31 - 1)
-"""``--seed``'s range: derived seeds (the seed plus an offset, e.g. validation's) stay within the 32 bits that
-NumPy's ``RandomState`` and torch's generators take."""
+SEED_RANGE = (0, 2**31 - 1 - 2**16)
+"""``--seed``'s (and ``seed``'s) range: the seed and those derived from it (the seed plus an offset under
+65536, e.g. validation's) stay distinct noise seeds (:data:`warpcut.sim.simulator.NOISE_SEEDS`: a larger one
+would replay a small one's noise bit for bit), within the 32 bits NumPy's and torch's generators take."""
 
 
 device_option = click.option(
@@ -345,8 +346,8 @@ def _check_named_file(path: Path, own: tuple[Path, str] | None, option: str) -> 
         if not mine or marker.get("command") not in (own[1], None):
             command = marker.get("command") or "COMMAND"
             raise click.BadParameter(
-                f"{path} lies in the run of 'warpcut {command}' in {run}, which this command does not own, so "
-                "it never writes there; choose a file outside it",
+                f"{path} lies in the run of 'warpcut {command}' in {run}, which this command does not own, "
+                "so it never writes there; choose a file outside it",
                 param_hint=option,
             )
         if path.exists() and not written_by_warpcut(path):
@@ -632,6 +633,10 @@ def resolve(job_class, config_file: str | None, overrides: tuple[str, ...], flag
     explicit |= set(sets) | set(given)
     if base is not None:  # a resumed run's own settings count as given
         explicit |= set(flatten(to_plain(base)))
+    seed = getattr(job, "seed", None)
+    if isinstance(seed, int) and not SEED_RANGE[0] <= seed <= SEED_RANGE[1]:
+        low, high = SEED_RANGE
+        raise ValueError(f"seed: an integer in [{low}, {high}] (got {seed}), as --seed takes")
     return with_dependent_defaults(job, explicit)
 
 

@@ -35,6 +35,11 @@ __all__ = [
     "resolve_device",
 ]
 
+NOISE_SEEDS = 2_147_483_647
+"""How many distinct noise seeds there are: the noise kernels key each update's stream on the seed modulo
+this prime (an int32), so seed ``s + NOISE_SEEDS`` would replay seed ``s``'s noise bit for bit; a seed is
+one of ``0 .. NOISE_SEEDS - 1``."""
+
 BACKENDS = ("auto", "simd", "colours")
 
 
@@ -201,7 +206,7 @@ class Simulator(StateReads):
 
     @seed.setter
     def seed(self, value: int) -> None:
-        self._seed = check_integer("Simulator.seed", value, 0)
+        self._seed = check_integer("Simulator.seed", value, 0, NOISE_SEEDS - 1)
         # The colours path (and its captured graphs) reads the seed from device memory.
         self._seed_base.assign(np.array([self._noise_seed_base()], dtype=np.int32))
 
@@ -522,10 +527,10 @@ class Simulator(StateReads):
     def _noise_seed(self) -> int:
         # A distinct stream per update; kept in int32 range for the kernel argument. The colours path
         # computes the same on the device from _noise_seed_base() and its update counter.
-        return (self._noise_seed_base() + self.update_count) % 2_147_483_647
+        return (self._noise_seed_base() + self.update_count) % NOISE_SEEDS
 
     def _noise_seed_base(self) -> int:
-        return (self.seed * 1_000_003) % 2_147_483_647
+        return (self.seed * 1_000_003) % NOISE_SEEDS
 
     def _own_arrays(self) -> bool:
         """Whether the update reads and writes only the simulator's own arrays, the ones graphs are
