@@ -47,6 +47,37 @@ def presets() -> list[str]:
     return sorted(p.stem for p in PRESETS_DIR.glob("*.yaml"))
 
 
+class _KeyTwice(ValueError):
+    """A mapping gives a key twice."""
+
+
+def _unique_keys(pairs: list[tuple[Any, Any]]) -> dict:
+    """A mapping of ``pairs`` (a JSON object's, a YAML mapping's), or :class:`_KeyTwice` naming a key given
+    twice: a parser would keep the last without a word."""
+    data: dict = {}
+    for key, value in pairs:
+        if key in data:
+            raise _KeyTwice(f"{key}: given twice in one mapping; give it once")
+        data[key] = value
+    return data
+
+
+def _yaml_load(text: str) -> Any:
+    """YAML's safe load, refusing a key given twice in one mapping (:func:`_unique_keys`)."""
+    import yaml
+
+    class Loader(yaml.SafeLoader):
+        pass
+
+    def mapping(loader: yaml.SafeLoader, node: yaml.MappingNode) -> dict:
+        merge = "tag:yaml.org,2002:merge"  # a key merged in (<<: *alias) may be given again: an override
+        _unique_keys([(loader.construct_object(k), None) for k, _ in node.value if k.tag != merge])
+        return loader.construct_mapping(node)
+
+    Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, mapping)
+    return yaml.load(text, Loader=Loader)  # noqa: S506 -- a SafeLoader
+
+
 def read_file(source: str | Path) -> dict:
     """The settings in a TOML, YAML or JSON file, or of a named preset, as a dict.
 
@@ -70,9 +101,7 @@ def read_file(source: str | Path) -> dict:
 
             data = tomllib.loads(text)
         elif suffix in (".yaml", ".yml", ".json"):
-            import yaml
-
-            data = yaml.safe_load(text) if suffix != ".json" else json.loads(text)
+            data = _yaml_load(text) if suffix != ".json" else json.loads(text, object_pairs_hook=_unique_keys)
         else:
             raise ValueError(
                 f"--config: {path}: unknown format {suffix or '(none)'}; give .toml, .yaml or .json"
@@ -98,16 +127,16 @@ def read_file(source: str | Path) -> dict:
 def parse_override(text: str) -> tuple[str, Any]:
     """``KEY=VALUE`` as ``(key, value)``, the value read as YAML (``3``, ``0.1``, ``true``, ``null``,
     ``[gravity, noise]``, ``{gravity: [0, 1042]}``, or else text)."""
-    import yaml
-
     key, sep, value = text.partition("=")
     key = key.strip()
     if not sep or not key:
         raise ValueError(f"--set: expected KEY=VALUE, e.g. train.iterations=30 (got {text!r})")
     try:
-        parsed = yaml.safe_load(value) if value.strip() else ""
+        parsed = _yaml_load(value) if value.strip() else ""
     except RecursionError:
         raise ValueError(f"--set {key}: nests deeper than {MAX_NESTING} levels") from None
+    except _KeyTwice as exc:
+        raise ValueError(f"--set {key}: {exc}") from None
     except Exception:  # not YAML: text
         parsed = value
     return key, check_nesting(parsed, f"--set {key}", items=MAX_VALUES)

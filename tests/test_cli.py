@@ -702,3 +702,24 @@ def test_a_seed_is_refused_where_its_noise_would_repeat_a_smaller_seeds(capfd):
         assert error == f"error: seed: an integer in [0, {top}] (got {value}), as --seed takes"
     code, stdout, _ = invoke([*simulate, "--seed", str(top), "--print-config"])
     assert code == 0 and f"seed: {top}" in stdout
+
+
+def test_a_setting_given_twice_in_one_file_or_value_is_refused(tmp_path, capfd):
+    """YAML and JSON parsers keep the last of a key given twice without a word: a config that sets ``seed``
+    twice is refused, naming it; a key merged in with ``<<:`` and then set is YAML's override, and kept."""
+    from cli_runner import refused
+
+    simulate = ["simulate", "--contour", "circle-small", "--print-config"]
+    for name, text in [
+        ("twice.yaml", "seed: 1\nsim:\n  dt: 0.016\nseed: 2\n"),
+        ("twice.json", '{"seed": 1, "seed": 2}'),
+    ]:
+        (tmp_path / name).write_text(text)
+        assert "(seed: given twice in one mapping; give it once)" in refused(
+            [*simulate, "--config", str(tmp_path / name)], capfd
+        )
+    error = refused([*simulate, "--set", "sim={noise_std: 0.1, noise_std: 0.2}"], capfd)
+    assert error == "error: --set sim: noise_std: given twice in one mapping; give it once"
+    (tmp_path / "merged.yaml").write_text("sim:\n  <<: {noise_std: 0.02, dt: 0.016}\n  noise_std: 0.01\n")
+    code, stdout, _ = invoke([*simulate, "--config", str(tmp_path / "merged.yaml")])
+    assert code == 0 and yaml.safe_load(stdout)["sim"]["noise_std"] == 0.01
