@@ -38,7 +38,7 @@ def assert_documented_json(result: dict, batches: set[str]) -> None:
     assert isinstance(result["scoring_overhead_pct"], float)  # may be negative at B = 2 (noise)
     assert set(result["updates_per_s_noise_free"]) == {"4"} and result["updates_per_s_noise_free"]["4"] > 0
     assert set(result["sim_env_steps_per_s"]) == batches and min(result["sim_env_steps_per_s"].values()) > 0
-    assert result["default_learner"] == DEFAULT_ALGORITHM == "es"
+    assert result["default_learner"] == DEFAULT_ALGORITHM == "gps"
     assert set(result["training"]) == LEARNERS
     for learner, figures in result["training"].items():
         assert set(figures) == set(TRAINING_KEYS), learner
@@ -58,7 +58,7 @@ def test_bench_reports_the_default_learners_and_ppos_training_beside_the_simulat
 
     def training(device, num_envs, episodes=3, algo="ppo"):
         calls.append((algo, num_envs))
-        rate = {"es": 300.0, "ppo": 100.0}[algo]
+        rate = {"gps": 300.0, "ppo": 100.0}[algo]
         return {
             "train_steps_per_s": rate,
             "train_collection_steps_per_s": 2 * rate,
@@ -72,13 +72,13 @@ def test_bench_reports_the_default_learners_and_ppos_training_beside_the_simulat
     args = ["bench", "--device", "cpu", "--batch-sizes", "1,4", "--rollout-envs", "2", "--train-envs", "64"]
     code, stdout, _ = invoke([*args, "--repeats", "1", "--json", str(out)])
     assert code == 0, stdout
-    assert sorted(calls) == [("es", 64), ("ppo", 64)]
+    assert sorted(calls) == [("gps", 64), ("ppo", 64)]
     result = json.loads(out.read_text())
     assert_documented_json(result, {"64"})
-    assert result["training"]["es"]["train_vs_sim_pct"]["64"] == pytest.approx(30.0)
+    assert result["training"]["gps"]["train_vs_sim_pct"]["64"] == pytest.approx(30.0)
     assert result["training"]["ppo"]["train_vs_sim_pct"]["64"] == pytest.approx(10.0)
     assert "env steps/s at 64 envs (tensioned fls-circle): simulator 1,000" in stdout
-    assert "es (the default learner) training in steady state 300 (30% of the simulator" in stdout
+    assert "gps (the default learner) training in steady state 300 (30% of the simulator" in stdout
     assert "ppo training in steady state 100 (10% of the simulator" in stdout
 
 
@@ -108,7 +108,7 @@ def test_bench_refuses_a_batch_the_default_learner_cannot_train_on():
     code, stdout, stderr = invoke(["bench", "--train-envs", "64,4"])
     assert code == 2 and not stdout
     assert (
-        "--train-envs: 4: es cannot train on 4 envs (train.es.population: 64 must divide num_envs (4)"
+        "--train-envs: 4: gps cannot train on 4 envs (train.gps.refine.population: 64 must divide num_envs (4)"
         in stderr
     )
 

@@ -92,7 +92,10 @@ def test_robustness_names_what_is_wrong(tmp_path):
             "values: force -1.0: gravity",
         ),
         (["--study", "noise", "--contour", "fls-circle", "--methods", "none,rl"], "methods: unknown rl"),
-        (["--study", "noise", "--contour", "fls-circle", "--values", "0,1"], "No such option '--values'"),
+        (
+            ["--study", "noise", "--contour", "fls-circle", "--values", "0,1"],
+            "--values: 'robustness' has no such option; it is a setting: --set values=VALUE",
+        ),
         (["--study", "noise", "--contour", "fls-circle", "--set", "value=[0]"], "value: unknown setting"),
     ]:
         code, _, err = robustness(*args, "--out", str(tmp_path / "never"))

@@ -68,7 +68,7 @@ def test_rsl_rls_runner_drives_es_one_whole_cut_an_iteration(tmp_path, monkeypat
 
     assert resolve_callable(ALGORITHMS["es"].runner) is Runner
     assert ALGORITHMS["es"].runner == ALGORITHMS["ppo"].runner
-    assert TrainConfig().algo == "es"
+    assert TrainConfig().algo == "gps" and TrainConfig(algo="es").learner == EsConfig()
     assert es_config().to_rsl_rl(None, (0, 3), 40)["algorithm"]["class_name"] == "agents.es.algorithm:ES"
     loops = []
     learn = OnPolicyRunner.learn
@@ -425,7 +425,7 @@ def test_es_trains_as_many_whole_cuts_as_ppos_env_steps_unless_told(tmp_path, mo
     assert iterations(256, 48) == 100 and iterations(256, 380) == 13
     assert iterations(256, 10**5) == es_settings.MIN_ITERATIONS
     assert es_settings.default_iterations("gps", 256, 48) == 50  # half of es's env steps
-    assert ALGORITHMS["es"].iterations is None and TrainConfig().total_iterations(48) == 100
+    assert ALGORITHMS["es"].iterations is None and TrainConfig(algo="es").total_iterations(48) == 100
     cfg = dataclasses.replace(es_config(), iterations=None)
     env = es_env(cfg)
     steps = int(env.max_episode_length)

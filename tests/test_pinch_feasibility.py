@@ -265,7 +265,8 @@ def test_export_records_an_infeasible_pinch_in_the_metadata(infeasible_run, tmp_
 
 def test_optimize_refuses_an_infeasible_pinch_unless_allowed(tmp_path, capfd):
     args = ["optimize", "--contour", "fls-circle", "--trials", "1", "--set", "candidates=2", *SHEET]
-    args += ["--iterations", "1", "--set", "grad.trials=1", "--set", "grad.validation_trials=0"]
+    args += ["--estimator", "tape", "--iterations", "1", "--set", "grad.trials=1"]
+    args += ["--set", "grad.validation_trials=0"]
     message = refused([*args, "--pinch", "25,50", "--out", str(tmp_path / "refused")], capfd)
     assert_names_the_rule(message, "on the cut line")
     out = tmp_path / "allowed"

@@ -345,7 +345,7 @@ def test_agent_configs_and_jobs_check_each_field_as_they_are_made():
         (lambda: TrainConfig(num_envs=True), "TrainConfig.num_envs: an integer >= 1"),
         (lambda: TrainConfig(iterations=1.5), "TrainConfig.iterations: an integer >= 1"),
         (lambda: TrainConfig(activation="nope"), "TrainConfig.activation: one of 'elu'"),
-        (lambda: TrainConfig(algo="x"), "TrainConfig.algo: choose one of es, gps, ppo, apg"),
+        (lambda: TrainConfig(algo="x"), "TrainConfig.algo: choose one of gps, es, ppo, apg"),
         (lambda: TrainConfig(actor_hidden_dims=[]), "TrainConfig.actor_hidden_dims: a non-empty list"),
         (lambda: TrainConfig(torch_device="gpu"), "TrainConfig.torch_device: a torch device"),
         (lambda: TrainConfig(obs_normalization="no"), "TrainConfig.obs_normalization: True or False"),
