@@ -108,8 +108,8 @@ def test_bench_refuses_a_batch_the_default_learner_cannot_train_on():
     code, stdout, stderr = invoke(["bench", "--train-envs", "64,4"])
     assert code == 2 and not stdout
     assert (
-        "--train-envs: 4: gps cannot train on 4 envs (train.gps.refine.population: 64 must divide num_envs (4)"
-        in stderr
+        "--train-envs: 4: gps cannot train on 4 envs (train.gps.refine.population: 64 must divide "
+        "num_envs (4)" in stderr
     )
 
 

@@ -246,8 +246,8 @@ def test_evaluates_grad_column_plays_the_teachers_plans_as_it_would_have_found_t
 
     grad = grad_config("es", iterations=2)
     job = EvaluateJob(
-        contours=["circle-small"], trials=2, candidates=3, sim=SMALL, grad=grad, train=gps_config(iterations=1),
-        methods=["none", "grad", "rl"],
+        contours=["circle-small"], trials=2, candidates=3, sim=SMALL, grad=grad,
+        train=gps_config(iterations=1), methods=["none", "grad", "rl"],
     )  # fmt: skip
     both = evaluate_table(job, tmp_path / "both", log=lambda _: None)
     teacher = tmp_path / "both" / "policies" / "circle-small" / "teacher" / "circle-small.json"

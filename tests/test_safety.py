@@ -166,7 +166,8 @@ def test_a_run_resumes_only_as_the_command_that_made_it(tmp_path):
         ["run", "--contour", "circle-small", "--policy", "fixed", "--set", "trials=1"],
     ):
         code, output = invoke([*command, "--out", str(run), "--resume"])
-        assert code == 2 and f"holds a run of 'warpcut train', not of 'warpcut {command[0]}'" in output, output
+        expected = f"holds a run of 'warpcut train', not of 'warpcut {command[0]}'"
+        assert code == 2 and expected in output, output
     assert {p: p.stat().st_mtime_ns for p in run.iterdir()} == before
 
 
