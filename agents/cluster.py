@@ -95,6 +95,8 @@ def parse_address(value: str | None) -> tuple[str | None, int | None]:
     host, _, port = value.rpartition(":")
     if not host or not port.isdigit() or not 0 < int(port) < 65536:
         raise ValueError(f"--ray: {value!r} is not an address; {fix}")
+    if ":" in host and not (host.startswith("[") and host.endswith("]")):
+        raise ValueError(f"--ray: {value!r}: an IPv6 address goes in brackets, [HOST]:PORT (e.g. [::1]:6379)")
     return value, None
 
 
@@ -281,6 +283,7 @@ def _check_reachable(address: str) -> None:
     if address == "auto":
         return  # Ray finds the cluster this machine runs, or says it found none at once
     host, _, port = address.rpartition(":")
+    host = host[1:-1] if host.startswith("[") and host.endswith("]") else host  # an IPv6 address
     try:
         with socket.create_connection((host, int(port)), timeout=CONNECT_TIMEOUT_S):
             pass

@@ -166,7 +166,20 @@ def export_policy(source: str | Path, out_dir: str | Path | None = None) -> dict
     """
     actor = load_policy(source)
     metadata = policy_metadata(source)
-    out_dir = make_run_dir(out_dir if out_dir is not None else policy_checkpoint(source).parent / "exported")
+    target = Path(out_dir if out_dir is not None else policy_checkpoint(source).parent / "exported")
+    made = [p for p in (target, *target.parents) if not p.exists()]
+    out_dir = make_run_dir(target)
+    try:
+        return _write_policy(actor, metadata, out_dir)
+    except BaseException:
+        for folder in made:  # a refused export leaves no folder behind (only where it is empty)
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        raise
+
+
+def _write_policy(actor, metadata: dict, out_dir: Path) -> dict[str, Path]:
+    """:func:`export_policy`'s files, in the folder ``out_dir``."""
     for name in ("policy.pt", "policy.onnx"):
         if (out_dir / name).is_dir():
             raise ValueError(f"{out_dir / name}: is a directory; remove it, or choose another --out")

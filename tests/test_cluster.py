@@ -69,6 +69,29 @@ def test_parse_address_takes_local_auto_and_host_port_and_names_a_bad_one():
     for bad in ("local:0", "local:x", "nowhere", "host:99999", ":6379"):
         with pytest.raises(ValueError, match=r"^--ray: .*HOST:PORT"):
             parse_address(bad)
+    assert parse_address("[::1]:6379") == ("[::1]:6379", None)  # IPv6, in brackets as in a URL
+    with pytest.raises(ValueError, match=r"an IPv6 address goes in brackets, \[HOST\]:PORT"):
+        parse_address("::1:6379")
+
+
+def test_an_ipv6_address_is_reached_as_one(monkeypatch):
+    """``[::1]:6379`` is tried as the IPv6 host ``::1``, not looked up as a name (said to be unknown)."""
+    import socket
+
+    from agents import cluster
+
+    tried = []
+
+    def connect(address, timeout):
+        tried.append(address)
+        raise ConnectionRefusedError(111, "Connection refused")
+
+    monkeypatch.setattr(socket, "create_connection", connect)
+    with pytest.raises(
+        ValueError, match=r"--ray \[::1\]:6379: no Ray cluster answers there \(Connection refused\)"
+    ):
+        cluster._check_reachable("[::1]:6379")
+    assert tried == [("::1", 6379)]
 
 
 def test_without_ray_the_command_never_imports_ray(tmp_path):

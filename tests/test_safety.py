@@ -941,6 +941,34 @@ def test_a_resume_stays_in_its_run_and_says_what_it_cannot_continue(tmp_path):
     assert code == 2 and "is part of the run of 'warpcut run' in" in output and "--resume" in output
 
 
+def test_a_refusal_names_the_option_that_gave_the_path(tmp_path, monkeypatch):
+    """A checkpoint outside any run given to ``train --resume``, a file given as ``export_mesh``: the error
+    names the option the path came from, never ``--out``; a refused export leaves no folder behind."""
+    checkpoint = tmp_path / "f.pt"
+    checkpoint.write_bytes(b"not a run's")
+    code, output = invoke(["train", "--resume", str(checkpoint)])
+    assert code == 2 and "--resume" in output and "not a checkpoint of a warpcut run" in output, output
+    assert "--out" not in output
+    code, output = invoke(["simulate", "--contour", "circle-small", "--set", f"export_mesh={checkpoint}"])
+    assert code == 2 and "is a file, not a run directory; choose another export_mesh" in output, output
+    run = tmp_path / "run"
+    settings = [*TINY_FLAGS, "--set", "eval_trials=1", "--set", "plots=false", "--out", str(run)]
+    code, output = invoke(["train", "--contour", "circle-small", "--iterations", "1", *settings])
+    assert code == 0, output
+    import agents.export
+    import warpcut.io
+
+    def refused(path, **kwargs):
+        raise ValueError(f"{path}: in use by another warpcut process")
+
+    for module in (agents.export, warpcut.io):
+        monkeypatch.setattr(module, "note_written", refused)
+    for given in ([], ["--out", str(tmp_path / "new" / "deeper")]):
+        code, output = invoke(["export", str(run), *given])
+        assert code == 2 and "in use" in output, output
+    assert not (run / "exported").exists() and not (tmp_path / "new").exists()
+
+
 def test_print_config_refuses_the_options_it_would_ignore():
     code, output = invoke(["evaluate", "--print-config", "--json", "x.json", "--device", "cpu"])
     assert code == 2 and "--device, --json: --print-config prints the settings and exits" in output

@@ -286,7 +286,7 @@ def note_written(path: str | os.PathLike, *, written: bool = False) -> None:
     _write_marker(claim)
 
 
-def _lock(path: Path) -> int:
+def _lock(path: Path, option: str = "--out") -> int:
     """An open descriptor of the directory ``path`` holding its exclusive lock; a ``ValueError`` names the
     process that holds it already."""
     fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
@@ -295,11 +295,11 @@ def _lock(path: Path) -> int:
     except OSError as exc:
         os.close(fd)
         if exc.errno not in (errno.EAGAIN, errno.EACCES, errno.EWOULDBLOCK):
-            raise ValueError(f"{path}: cannot be locked ({exc.strerror}); choose another --out") from None
+            raise ValueError(f"{path}: cannot be locked ({exc.strerror}); choose another {option}") from None
         marker = read_run_marker(path) or {}
         holder = f"warpcut process {marker['pid']}" if marker.get("pid") else "another warpcut process"
         raise ValueError(
-            f"{path}: in use by {holder}; wait for it to finish, or choose another --out"
+            f"{path}: in use by {holder}; wait for it to finish, or choose another {option}"
         ) from None
     return fd
 
@@ -365,7 +365,8 @@ def _check_run_dir(
             + ("there is no run to resume; " if resume else "")
             + f"choose a new or empty folder for {option}"
         )
-    what = f"a run of 'warpcut {marker.get('command')}'" if marker and marker.get("command") else "a warpcut run"
+    command_of = marker.get("command") if marker else None
+    what = f"a run of 'warpcut {command_of}'" if command_of else "a warpcut run"
     if reuse and marker is not None and marker.get("command") not in (command, None):
         raise ValueError(
             f"{path}: holds {what}; choose a new or empty folder for {option} (or one of warpcut {command}'s)"
@@ -426,22 +427,20 @@ def claim_run_dir(
         yield path
         return
     if path.exists() and not path.is_dir():
-        raise ValueError(f"{path}: is a file, not a run directory; choose another --out")
-    made = not path.exists()
+        raise ValueError(f"{path}: is a file, not a run directory; choose another {option}")
+    made = [p for p in (path, *path.parents) if not p.exists()]  # removed again where nothing is written
     if made:
         try:
             path.mkdir(parents=True)
         except OSError as exc:
             reason, fix = WRITE_ERRORS.get(exc.errno, (exc.strerror, "fix that"))
             raise ValueError(
-                f"{path}: cannot create the folder, {reason}; {fix}, or choose another --out"
+                f"{path}: cannot create the folder, {reason}; {fix}, or choose another {option}"
             ) from None
     try:
-        fd = _lock(path)
+        fd = _lock(path, option)
     except BaseException:
-        if made:
-            with contextlib.suppress(OSError):
-                path.rmdir()
+        _remove_empty(made)
         raise
     claim, deleted, kept = None, [], []
     try:
@@ -470,9 +469,7 @@ def claim_run_dir(
         _write_marker(claim)
     except BaseException:
         os.close(fd)
-        if made:
-            with contextlib.suppress(OSError):
-                path.rmdir()
+        _remove_empty(made)
         raise
     key = path.resolve()
     _HELD[key] = claim
@@ -483,8 +480,7 @@ def claim_run_dir(
         try:
             if not claim.marker["files"] and not [p for p in path.iterdir() if p.name != RUN_MARKER]:
                 _marker_path(path).unlink(missing_ok=True)  # nothing written: no run left behind
-                if made:
-                    path.rmdir()
+                _remove_empty(made)
             else:
                 claim.marker.pop("pid", None)
                 _write_marker(claim)
@@ -492,6 +488,13 @@ def claim_run_dir(
             pass  # the marker stays as it was: it still lists every file written
         finally:
             os.close(fd)
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Remove ``folders`` (deepest first), each only where it is empty: the folders a claim made."""
+    for folder in folders:
+        with contextlib.suppress(OSError):
+            folder.rmdir()
 
 
 def overwritten(path: str | os.PathLike) -> tuple[list[str], list[str]]:
@@ -504,6 +507,7 @@ def overwritten(path: str | os.PathLike) -> tuple[list[str], list[str]]:
 MAX_NESTING = 32
 """How deep the data warpcut reads (a run's JSON files, a config, a contour) may nest: its own nest fewer
 than 10 levels; deeper data is refused before anything walks it (Python's recursion stops near 1,000)."""
+
 
 def check_nesting(data: Any, where: str, items: int | None = None) -> Any:
     """``data`` (parsed JSON or YAML) as is, after checking, without expanding it, that it nests at most

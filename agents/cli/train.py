@@ -80,7 +80,7 @@ def command(
     init=generalist, or init=DIR of 'warpcut generalist'); --print-config shows them all.
     """
     from agents.jobs import CONFIG_FILE, TrainJob
-    from warpcut.io import check_run_dir, safe_name
+    from warpcut.io import RUN_MARKER, check_run_dir, enclosing_run, read_run_marker, safe_name
 
     base, run = None, None
     if resume is not None:
@@ -89,6 +89,12 @@ def command(
             raise click.BadParameter(
                 f"a resumed run continues in its own directory ({run}), never in another; drop --out {out}",
                 param_hint="--out",
+            )
+        if resume.is_file() and read_run_marker(run) is None and enclosing_run(run) is None:
+            raise click.BadParameter(
+                f"{resume}: not a checkpoint of a warpcut run ({run} holds no {RUN_MARKER}); give the "
+                "directory of a warpcut train run, or one of its checkpoints",
+                param_hint="--resume",
             )
         check_run_dir(run, command="train", resume=True)  # before its settings are read
         base = common.saved_job(TrainJob, run / CONFIG_FILE)
