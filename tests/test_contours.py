@@ -449,6 +449,27 @@ def test_a_contour_too_dense_to_plan_is_refused_in_seconds(tmp_path):
     assert len(validate("ok", True, circle(MAX_POINTS)).points) == MAX_POINTS
 
 
+def test_svg_sizes_it_cannot_read_are_named_not_misread(tmp_path):
+    """A root size in a unit SVG does not have (``0.1m``) is refused, not read as user units; a viewBox too
+    small to compute with (1e-300: its lengths' squares underflow) is named as such, not reported as a
+    self-intersection."""
+    circle = '<circle cx="50" cy="50" r="20"/>'
+    for root, message in [
+        (
+            'width="0.1m" height="0.1m" viewBox="0 0 100 100"',
+            r"the svg's width '0.1m' has a unit SVG does not",
+        ),
+        ('viewBox="0 0 1e-300 1e-300" width="100mm" height="100mm"', r"too small to compute with"),
+    ]:
+        with pytest.raises(ContourError, match=message):
+            load_contour(write(tmp_path, "sized.svg", f"<svg {root}>{circle}</svg>"))
+    for unit in ("px", "em"):  # not physical: a user unit is a mm, as before
+        contour = load_contour(
+            write(tmp_path, "screen.svg", f'<svg width="100{unit}" height="100{unit}">{circle}</svg>')
+        )
+        assert contour.area_mm2 == pytest.approx(np.pi * 400, rel=1e-3)
+
+
 def test_svg_use_bombs_are_refused_before_they_expand(tmp_path):
     """Nested ``<use>`` (7 levels of 10 in 1.4 kB: ten million circles) are refused in one line, in well
     under a second, before the parser instantiates them (a ``<use>`` inside what it refers to: above)."""

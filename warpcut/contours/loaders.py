@@ -254,7 +254,16 @@ def _view_box(where: str, root: ET.Element) -> tuple[float, float, float, float]
             f"{where}: cannot read viewBox {root.get('viewBox')!r}; give four numbers: "
             "min-x min-y width height"
         )
+    if 0 < min(numbers[2:]) < _TINIEST_VIEW_BOX:
+        raise ContourError(
+            f"{where}: viewBox {root.get('viewBox')!r} is too small to compute with (a width or height under "
+            f"{_TINIEST_VIEW_BOX:g} user units: the squares of its lengths underflow); scale the drawing up"
+        )
     return numbers[0], numbers[1], numbers[2], numbers[3]
+
+
+_TINIEST_VIEW_BOX = 1e-100
+"""The smallest viewBox width or height read: the geometry squares lengths, which underflow below 1e-154."""
 
 
 _MM_PER = {"mm": 1.0, "cm": 10.0, "q": 0.25, "in": 25.4, "pt": 25.4 / 72.0, "pc": 25.4 / 6.0}
@@ -264,10 +273,23 @@ _NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _LENGTH = re.compile(rf"\s*({_NUMBER})\s*([A-Za-z]+)\s*")
 
 
+_SCREEN_UNITS = ("px", "em", "ex", "rem", "ch", "vw", "vh", "vmin", "vmax")
+"""CSS's units that are not physical lengths: the drawing's user units are taken as mm."""
+
+
 def _physical_size(where: str, root: ET.Element) -> tuple[float, float] | None:
     """The root's ``width`` and ``height`` in mm where both are in a physical unit (mm, cm, Q, in, pt, pc);
-    None otherwise."""
+    None otherwise. A unit CSS does not have (``0.1m``) is refused, not ignored."""
     size = []
+    for name in ("width", "height"):
+        match = _LENGTH.fullmatch(root.get(name) or "")
+        unit = match.group(2).lower() if match is not None else None
+        if unit is not None and unit not in _MM_PER and unit not in _SCREEN_UNITS:
+            units = ", ".join(u if u != "q" else "Q" for u in _MM_PER)
+            raise ContourError(
+                f"{where}: the svg's {name} {root.get(name)!r} has a unit SVG does not have "
+                f"({match.group(2)!r}); give it in {units} (or px: a user unit is a mm)"
+            )
     for name in ("width", "height"):
         match = _LENGTH.fullmatch(root.get(name) or "")
         if match is None or match.group(2).lower() not in _MM_PER:
