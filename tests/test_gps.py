@@ -263,3 +263,29 @@ def test_evaluates_grad_column_plays_the_teachers_plans_as_it_would_have_found_t
         json.loads((tmp_path / "alone" / "grad" / "circle-small.json").read_text())["plan"]
         == json.loads(teacher.read_text())["plan"]
     )
+
+
+def test_a_run_stopped_while_its_teacher_is_optimised_resumes_with_its_teacher(tmp_path, monkeypatch):
+    """Ctrl-C in the teacher's optimisation saves a checkpoint without a plan; the resumed run optimises the
+    teacher (from its state file) and trains on it, ending as a run never stopped."""
+    import agents.gradient
+
+    cfg = gps_config(iterations=1)
+    straight = train(gps_env(cfg, 5), cfg, tmp_path / "b", seed=5, progress=False, validate=validation(cfg, 5))
+    optimize = agents.gradient.optimize_plan
+
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(agents.gradient, "optimize_plan", stopped)
+    with pytest.raises(KeyboardInterrupt):
+        train(gps_env(cfg, 5), cfg, tmp_path / "a", seed=5, progress=False, validate=validation(cfg, 5))
+    monkeypatch.setattr(agents.gradient, "optimize_plan", optimize)
+    resumed = train(
+        gps_env(cfg, 5), cfg, tmp_path / "a", seed=5, resume=tmp_path / "a", progress=False,
+        validate=validation(cfg, 5),
+    )  # fmt: skip
+    assert resumed["teacher"]["best_iteration"] == straight["teacher"]["best_iteration"]
+    a = read_checkpoint(tmp_path / "a" / "latest.pt")["actor_state_dict"]
+    b = read_checkpoint(tmp_path / "b" / "latest.pt")["actor_state_dict"]
+    assert torch.count_nonzero(a["lookup.plan"]) > 0 and all(torch.equal(a[k], b[k]) for k in a)

@@ -98,4 +98,5 @@ class GpsRunner(Runner):
 
     def load_checkpoint(self, path: str | Path, state: dict | None = None) -> None:
         super().load_checkpoint(path, state)
-        self._taught = True  # the plan is in the checkpoint's actor
+        # the plan is in the checkpoint's actor, unless the run stopped while its teacher was optimised
+        self._taught = "teacher" in self.own_summary
