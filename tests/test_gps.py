@@ -271,7 +271,8 @@ def test_a_run_stopped_while_its_teacher_is_optimised_resumes_with_its_teacher(t
     import agents.gradient
 
     cfg = gps_config(iterations=1)
-    straight = train(gps_env(cfg, 5), cfg, tmp_path / "b", seed=5, progress=False, validate=validation(cfg, 5))
+    check = validation(cfg, 5)
+    straight = train(gps_env(cfg, 5), cfg, tmp_path / "b", seed=5, progress=False, validate=check)
     optimize = agents.gradient.optimize_plan
 
     def stopped(*args, **kwargs):
