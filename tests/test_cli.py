@@ -723,3 +723,32 @@ def test_a_setting_given_twice_in_one_file_or_value_is_refused(tmp_path, capfd):
     (tmp_path / "merged.yaml").write_text("sim:\n  <<: {noise_std: 0.02, dt: 0.016}\n  noise_std: 0.01\n")
     code, stdout, _ = invoke([*simulate, "--config", str(tmp_path / "merged.yaml")])
     assert code == 0 and yaml.safe_load(stdout)["sim"]["noise_std"] == 0.01
+
+
+def test_advice_names_each_setting_as_the_command_gives_it(tmp_path, capfd):
+    """A refusal's advice names only what the command has, in its form: plan's --resolution and
+    --arm-radius (plan has no --pinch), train's --set sim.resolution=N and --pinch; a sheet too small to
+    grasp is blamed, not the arm; from Python the settings are named as keys."""
+    from cli_runner import refused
+
+    from warpcut.contours import load_contour
+    from warpcut.planning.feasibility import no_pinch_error
+
+    error = refused(["plan", "--contour", "circle-small", "--resolution", "5"], capfd)
+    assert error.endswith("use resolution 8 or finer (--resolution 8)"), error
+    error = refused(["plan", "--contour", "fls-circle", "--arm-radius", "60"], capfd)
+    assert "(--arm-radius R or --arm-length L)" in error and "pinch" not in error.split("arm.radius_mm")[1]
+    error = refused(["train", "--contour", "fls-circle", "--set", "sim.resolution=5"], capfd)
+    assert (
+        "(--set sim.resolution=12), or pinch an infeasible point of your choosing (--pinch X,Y --set "
+        in error
+    )
+    assert "--resolution" not in error
+    contour = tmp_path / "small.json"
+    contour.write_text('{"name": "t", "closed": true, "points": [[4, 4], [6, 4], [6, 6], [4, 6]]}')
+    sheet = ["--set", "sim.width_mm=10", "--set", "sim.height_mm=10"]
+    error = refused(["simulate", "--contour", str(contour), "--policy", "fixed", *sheet], capfd)
+    assert error.startswith("error: sheet: 10 x 10 mm is too small to grasp") and "thinner arm" not in error
+    assert "(--set sim.width_mm=W --set sim.height_mm=H)" in error
+    message = str(no_pinch_error(load_contour("fls-circle"), SimConfig(resolution=5)))
+    assert "(sim.resolution=12), or pinch an infeasible point of your choosing (pinch=X,Y " in message

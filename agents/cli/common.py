@@ -528,6 +528,14 @@ class Command(click.Command):
                 ctx=ctx,
             ) from None
 
+    def invoke(self, ctx: click.Context):
+        """Run the command with the library's advice in errors naming settings as this command gives them
+        (:func:`setting_form`)."""
+        from warpcut.planning.feasibility import setting_forms
+
+        with setting_forms(lambda key, value: setting_form(self, key, value)):
+            return super().invoke(ctx)
+
     def _parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
         if args:
             _, _, order = self.make_parser(ctx).parse_args(args=list(args))
@@ -565,6 +573,25 @@ def setting_of(command: str | None, option: str) -> str | None:
     keys = flatten(to_plain(getattr(agents.jobs, COMMAND_JOBS[command])()))
     found = [key for key in keys if key == name or key.endswith(f".{name}")]
     return found[0] if len(found) == 1 or name in found else None
+
+
+def setting_form(command: click.Command, key: str, value: str) -> str | None:
+    """How ``command`` gives the setting ``key`` the value ``value``: its own flag (``--resolution 12``,
+    from its module's ``FLAGS``), else ``--set KEY=VALUE`` where its job has the setting, else None (it
+    has no such setting: advice leaves it out)."""
+    import sys
+
+    flags = getattr(sys.modules.get(command.callback.__module__), "FLAGS", {})
+    for param in command.params:
+        if flags.get(param.name) == key and isinstance(param, click.Option):
+            return f"{param.opts[0]} {value}"
+    if command.name not in COMMAND_JOBS:
+        return None
+    import agents.jobs
+    from agents.config_io import flatten, to_plain
+
+    keys = flatten(to_plain(getattr(agents.jobs, COMMAND_JOBS[command.name])()))
+    return f"--set {key}={value}" if key in keys else None
 
 
 def config_options(command):

@@ -12,6 +12,9 @@ from agents.config import EVALUATION_CANDIDATES
 from agents.methods import point_text
 from warpcut.sim.config import ARM_RADIUS_MM, SEGMENT_TOLERANCE_MM, SimConfig
 
+FLAGS = {"resolution": "sim.resolution", "arm_radius": "arm.radius_mm", "arm_length": "arm.length_mm"}
+"""The settings plan's flags give (plan has no --set): advice in its errors names these flags."""
+
 
 @click.command("plan", cls=common.Command)
 @common.contour_option

@@ -12,8 +12,10 @@ closed contour, so no point inside it is feasible: the piece being cut out canno
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -204,13 +206,20 @@ class InfeasiblePinch(ValueError):
         self.point = np.asarray(point, dtype=np.float64)
         self.problem = problem
         x, y = (float(v) for v in self.point)
+        if _SETTING_FORM.get() is None:  # from Python: both forms, as ALLOW_INFEASIBLE says them
+            omit, allow = " (--pinch)", ALLOW_INFEASIBLE
+        else:  # a command's: only what it has
+            flag = (_given("pinch", "X,Y") or "").split(" ")[0]
+            omit = f" ({flag})" if flag.startswith("--") and flag != "--set" else ""
+            allow = _given("allow_infeasible_pinch", "true")
+            allow = allow and f"{allow} runs it anyway, its results marked infeasible"
         fix = fix or (
-            "omit it (--pinch) for the default pinch point, feasible by construction, or choose a point "
-            "clear of the cut and of the arm ('warpcut plan' lists feasible candidates)"
+            f"omit it{omit} for the default pinch point, feasible by construction, or choose a point clear "
+            "of the cut and of the arm ('warpcut plan' lists feasible candidates)"
         )
         super().__init__(
             f"pinch point ({x:.1f}, {y:.1f}) mm is not a feasible grasp for {contour.name}: {problem}; "
-            f"{fix}; {ALLOW_INFEASIBLE}"
+            f"{fix}" + (f"; {allow}" if allow else "")
         )
 
 
@@ -304,6 +313,37 @@ def nearest_feasible(
     return grid[np.argmin(np.linalg.norm(grid - point, axis=1))]
 
 
+_SETTING_FORM: contextvars.ContextVar[Callable[[str, str], str | None] | None] = contextvars.ContextVar(
+    "setting_form", default=None
+)
+"""How the caller gives a setting (a command: its flag, or ``--set KEY=VALUE``), for advice in errors."""
+
+
+@contextlib.contextmanager
+def setting_forms(form: Callable[[str, str], str | None]) -> Iterator[None]:
+    """Inside the block, advice names a setting (``sim.resolution``, ``arm.radius_mm``, ``pinch``,
+    ``allow_infeasible_pinch``) as ``form(key, value)`` says it is given (e.g. ``--resolution 12``, ``--set
+    sim.resolution=12``), or leaves it out where ``form`` returns None (the caller has no such setting)."""
+    token = _SETTING_FORM.set(form)
+    try:
+        yield
+    finally:
+        _SETTING_FORM.reset(token)
+
+
+def _given(key: str, value: str) -> str | None:
+    """The setting ``key`` with ``value`` as the caller gives it (:func:`setting_forms`; by default
+    ``key=value``), or None where the caller has no such setting."""
+    form = _SETTING_FORM.get()
+    return f"{key}={value}" if form is None else form(key, value)
+
+
+def _own_pinch() -> str:
+    """The advice to pinch a point of the user's choosing, where the caller can, else nothing."""
+    pinch, allow = _given("pinch", "X,Y"), _given("allow_infeasible_pinch", "true")
+    return f", or pinch an infeasible point of your choosing ({pinch} {allow})" if pinch and allow else ""
+
+
 def no_pinch_error(
     contour: Contour,
     config: SimConfig,
@@ -326,10 +366,13 @@ def no_pinch_error(
 
     coarse = min(config.nx, config.ny)  # no coarser than the grid given along either side
     if pinchable(config):  # rejection sampling missed a feasible region this small
+        pinch = _given("pinch", "X,Y")
         return ValueError(
             f"contour {contour.name!r}: the feasible pinch region is too small to sample candidates "
-            "from; give a pinch point explicitly (simulate/train --pinch), or move the contour to leave the "
-            "gripper room"
+            "from; "
+            + (f"give a pinch point explicitly ({pinch}), or " if pinch else "")
+            + "move the contour "
+            "to leave the gripper room"
         )
     if coarse < RESOLUTION_RANGE[1] and pinchable(square(RESOLUTION_RANGE[1])):
         lo, hi = coarse, RESOLUTION_RANGE[1]  # pinchable at hi, not at lo (or so the search assumes)
@@ -337,20 +380,35 @@ def no_pinch_error(
             mid = (lo + hi) // 2
             lo, hi = (lo, mid) if pinchable(square(mid)) else (mid, hi)
         spacing = max(config.spacing_mm)
+        finer = _given("sim.resolution", str(hi))
         return ValueError(
             f"resolution: {config.resolution!r} is too coarse to pinch the sheet for contour "
             f"{contour.name!r}: with {spacing:.3g} mm between vertices, the grasp radius "
             f"({config.grasp_radius:.3g} mm) and the cut radius ({config.cut_radius:.3g} mm) leave no point "
             "clear of the sheet's edges, corners, fixture and the contour, nor under the cutting arm; use "
-            f"resolution {hi} or finer (--resolution {hi}), or pinch an infeasible point of your choosing "
-            "(--pinch X,Y --set allow_infeasible_pinch=true)"
+            f"resolution {hi} or finer" + (f" ({finer})" if finer else "") + _own_pinch()
         )
+    points = _sheet_points(config)
+    rules = pinch_rules(points, contour, config, segments, arm)
+    if not (
+        rules["edges"] & rules["corners"] & rules["fixture"]
+    ).any():  # the sheet alone: no contour, no arm
+        larger = [g for g in (_given("sim.width_mm", "W"), _given("sim.height_mm", "H")) if g]
+        return ValueError(
+            f"sheet: {config.width_mm:g} x {config.height_mm:g} mm is too small to grasp: no point of it is "
+            f"a grasp radius ({config.grasp_radius:.3g} mm) inside its edges and fixture and "
+            f"{CORNER_MARGIN_MM:g} mm from its corners, whatever the contour and the arm; use a larger sheet"
+            + (f" ({' '.join(larger)})" if larger else "")
+            + _own_pinch()
+        )
+    thinner = [g for g in (_given("arm.radius_mm", "R"), _given("arm.length_mm", "L")) if g]
     return ValueError(
         f"contour {contour.name!r}: no feasible pinch point on the sheet: no point is clear of its "
         f"edges, corners, fixture and the contour, nor under the cutting arm (arm.radius_mm "
-        f"{arm.radius_mm:g}); use a thinner arm (--arm-radius) or a shorter footprint (--arm-length), move "
-        "the contour to leave the gripper room, or pinch an infeasible point of your choosing (--pinch X,Y "
-        "--set allow_infeasible_pinch=true)"
+        f"{arm.radius_mm:g}); "
+        + (f"use a thinner arm or a shorter footprint ({' or '.join(thinner)}), " if thinner else "")
+        + "move the contour to leave the gripper room"
+        + _own_pinch()
     )
 
 
