@@ -280,6 +280,14 @@ def test_a_run_directory_is_locked_while_a_process_writes_it(tmp_path):
         code, output = invoke(["evaluate", "--contours", "circle-small", "--methods", "none", "--trials", "1",
                                "--resume", "--out", str(out)])  # fmt: skip
         assert code == 2 and f"in use by warpcut process {holder.pid}" in output
+        start = time.perf_counter()  # said at once, before the checks that plan and load (seconds)
+        for args in (
+            ["run", "--contour", "fls-circle", "--out", str(out), "--resume"],
+            ["train", "--resume", str(out)],
+        ):
+            code, output = invoke(args)
+            assert code == 2 and f"in use by warpcut process {holder.pid}" in output, output
+        assert time.perf_counter() - start < 2
     finally:
         holder.kill()
         holder.wait()

@@ -304,6 +304,15 @@ def _lock(path: Path, option: str = "--out") -> int:
     return fd
 
 
+def check_not_busy(path: str | os.PathLike, option: str = "--out") -> None:
+    """Refuse at once, before any work, a run directory ``path`` that another process holds (as
+    :func:`claim_run_dir` would, after the work that precedes it); nothing is written or kept locked."""
+    path = Path(path)
+    if path.is_dir() and _holder(path) is None:
+        with contextlib.suppress(FileNotFoundError, NotADirectoryError):
+            os.close(_lock(path, option))
+
+
 def _delete_written(path: Path, files: list[str]) -> tuple[list[str], list[str]]:
     """Delete what a run wrote in ``path``: the files its marker lists (and their temporary files), then the
     folders that held them where they are left empty. Returns what was deleted and what was kept (the

@@ -529,10 +529,15 @@ class Command(click.Command):
             ) from None
 
     def invoke(self, ctx: click.Context):
-        """Run the command with the library's advice in errors naming settings as this command gives them
+        """Run the command, after refusing a run directory another process holds (``--out``,
+        ``--resume``), with the library's advice in errors naming settings as the command gives them
         (:func:`setting_form`)."""
+        from warpcut.io import check_not_busy
         from warpcut.planning.feasibility import setting_forms
 
+        for name in ("out", "resume"):  # a run another process holds: said at once, not after the checks
+            if isinstance(ctx.params.get(name), Path):
+                check_not_busy(ctx.params[name], f"--{name}")
         with setting_forms(lambda key, value: setting_form(self, key, value)):
             return super().invoke(ctx)
 
