@@ -65,6 +65,11 @@ def generalist_dir(source: str | Path | None) -> Path:
             f"generalist: {path}: {what}; give a run directory of 'warpcut generalist', or 'generalist' for "
             "the shipped one"
         )
+    if not any(path.glob("*.pt")):
+        raise ValueError(
+            f"generalist: {path}: holds {GENERALIST_FILE} but no policy (best.pt); restore it, or train one "
+            "(warpcut generalist)"
+        )
     return path
 
 

@@ -275,6 +275,10 @@ def test_a_generalist_that_is_not_one_is_named(tmp_path, capfd):
     line = refused(["simulate", "--contour", "fls-circle", "--policy", "generalist", "--generalist",
                     str(tmp_path)], capfd)  # fmt: skip
     assert f"{tmp_path}" in line and GENERALIST_FILE in line
+    (tmp_path / GENERALIST_FILE).write_bytes((SHIPPED_DIR / GENERALIST_FILE).read_bytes())  # no best.pt
+    line = refused(["simulate", "--contour", "fls-circle", "--policy", "generalist", "--generalist",
+                    str(tmp_path)], capfd)  # fmt: skip
+    assert "but no policy (best.pt)" in line and "warpcut generalist" in line and "warpcut train" not in line
 
 
 def test_warpcut_ships_a_small_generalist_with_its_command_and_figures():
