@@ -4,6 +4,7 @@ onnxruntime on the env as Gymnasium makes it."""
 
 import json
 import shutil
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -27,7 +28,7 @@ from warpcut.sim.config import SimConfig
 
 SMALL = SimConfig(resolution=13)
 TINY = TrainConfig(algo="es", num_envs=4, iterations=1, validation_trials=0, es=EsConfig(population=4))
-"""The default learner (es) on 4 envs for one iteration."""
+"""es on 4 envs for one iteration."""
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
@@ -39,7 +40,7 @@ def invoke(args):
 
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory):
-    """A tiny run of the default training (es, the env's defaults) on a small sheet, exported."""
+    """A tiny run of es on the env's defaults on a small sheet, exported."""
     run = tmp_path_factory.mktemp("export") / "run"
     invoke(
         ["train", "--contour", "circle-small", "--set", "sim.resolution=13", "--num-envs", "8"]
@@ -120,6 +121,19 @@ def test_the_default_trainings_policy_runs_on_the_default_env(trained):
     assert session.get_inputs()[0].shape[1] == 47 and session.get_outputs()[0].shape[1] == 3
     steps, info = play(env, act)
     assert steps > 0 and np.isfinite(info["error_vertices"])
+
+
+def test_the_readmes_lines_play_an_exported_policy_on_the_env_its_metadata_makes(trained, capsys):
+    """The README's snippet, as written (the run's path put in), loads the ONNX file, builds the env from
+    its metadata and cuts with it."""
+    import re
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    (snippet,) = [b for b in re.findall(r"```python\n(.*?)```", readme, re.S) if "InferenceSession" in b]
+    path = trained / "exported" / "policy.onnx"
+    exec(compile(snippet.replace("RUN/exported/policy.onnx", str(path)), "README.md", "exec"), {})
+    printed = capsys.readouterr().out.strip()
+    assert re.fullmatch(r"\d+\.\d vertices", printed), printed
 
 
 def test_a_finished_run_exports_without_a_note_and_says_so_in_the_metadata(trained):
