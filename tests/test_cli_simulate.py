@@ -293,3 +293,24 @@ def test_the_commands_without_a_job_keep_at_most_15_options(name):
     command = main.commands[name]
     assert len([p for p in command.params if p.opts[0].startswith("--")]) <= 15
     assert type(command).__name__ == "Command"  # an option given twice is refused
+
+
+def test_an_improvement_over_no_error_is_said_to_mean_nothing(monkeypatch):
+    """Where no tension's error is zero within float precision, simulate prints n/a and says why instead of
+    an improvement of +45.2% over 0.0."""
+    import agents.evaluation
+
+    def row(error, improvement):
+        return {"error_vertices": error, "error_mm2": error * 17.4, "improvement_pct": improvement,
+                "ci95_pct": 0.0, "pinch": None, "pinch_feasible": True, "pinch_problem": None}  # fmt: skip
+
+    report = {"results": {"none": row(3e-5, 0.0), "fixed": row(1.6e-5, float("nan"))}}
+    monkeypatch.setattr(agents.evaluation, "compare_policies", lambda *args, **kwargs: report)
+    code, stdout, _ = invoke(
+        ["simulate", "--contour", "circle-small", "--policy", "fixed", "--set", "plots=false"]
+    )
+    assert code == 0 and "+45" not in stdout and "nan" not in stdout, stdout
+    assert (
+        "n/a" in stdout
+        and "improvement n/a: no tension's error (3e-05 vertices) is zero within float" in stdout
+    )

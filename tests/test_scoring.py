@@ -244,6 +244,13 @@ def test_separation_scores_premade_masks_as_symmetric_difference_does():
     assert made.error_vertices[2] < 0.2 * intended.sum()
 
 
+def test_an_improvement_over_an_error_that_is_zero_within_float_precision_is_undefined():
+    """Without gravity or noise a cut can be exact: no tension's error is then float round-off (5e-4 mm^2),
+    and an improvement over it (+45%) would mean nothing: it is NaN, as over an error of 0."""
+    improvement = paired_improvement([5e-4, 2e-3, 10.0], [2.7e-4, 1e-3, 5.0])
+    assert np.isnan(improvement[0]) and improvement[1] == 50.0 and improvement[2] == 50.0
+
+
 def test_paired_improvement_and_its_mean_leave_undefined_trials_out():
     improvement = paired_improvement([10.0, 0.0, 20.0], [5.0, 1.0, 10.0])
     assert improvement[0] == 50.0 and np.isnan(improvement[1]) and improvement[2] == 50.0

@@ -358,13 +358,20 @@ def improvement_pct(e_none: np.ndarray | float, e_method: np.ndarray | float) ->
     return 100.0 * (e_none - e_method) / e_none
 
 
+NEGLIGIBLE_ERROR = 1e-3
+"""An error (vertices or mm^2) below which no tension's error is zero within the geometry's float precision
+(its round-off leaves errors of ~1e-4 mm^2 where the cut is exact; a cut's real errors are tenths of a mm^2
+and up): an improvement over it means nothing, and is undefined (NaN), as over an error of 0."""
+
+
 def paired_improvement(e_none: np.ndarray, e_method: np.ndarray) -> np.ndarray:
-    """Per-trial :func:`improvement_pct` of paired trials; NaN where no tension scored 0 (undefined)."""
+    """Per-trial :func:`improvement_pct` of paired trials; NaN where no tension's error is zero within float
+    precision (:data:`NEGLIGIBLE_ERROR`): undefined."""
     e_none, e_method = np.broadcast_arrays(
         np.asarray(e_none, dtype=np.float64), np.asarray(e_method, np.float64)
     )
     out = np.full(e_none.shape, np.nan)
-    defined = e_none > 0
+    defined = e_none >= NEGLIGIBLE_ERROR
     out[defined] = improvement_pct(e_none[defined], e_method[defined])
     return out
 

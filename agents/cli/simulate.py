@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import contextlib
+import math
 import time
 from pathlib import Path
 
@@ -12,6 +13,7 @@ import click
 from agents.cli import common
 from agents.cli.video import video_option, videos, with_videos
 from agents.methods import BASELINES, point_text
+from warpcut.scoring import NEGLIGIBLE_ERROR
 
 FLAGS = {
     "contour": "contour",
@@ -136,13 +138,22 @@ def command(
             f"{'policy':<10} {'error (vertices)':>16} {'error (mm^2)':>13} {'improvement':>12} "
             f"{'pinch (mm)':>16}"
         )
+        undefined = False
+        none_error = report["results"].get("none", {}).get("error_vertices", math.nan)
         for name, r in report["results"].items():
             ci = f" ±{r['ci95_pct']:.1f}" if job.trials > 1 else ""
             pinch_txt = "-" if r["pinch"] is None else point_text(r["pinch"])
+            improvement = f"{r['improvement_pct']:>+11.1f}%{ci}"
+            if not math.isfinite(r["improvement_pct"]):
+                improvement, undefined = f"{'n/a':>12}", undefined or none_error < NEGLIGIBLE_ERROR
             click.echo(
                 f"{name:<10} {r['error_vertices']:>16.1f} {r['error_mm2']:>13.1f} "
-                f"{r['improvement_pct']:>+11.1f}%{ci} {pinch_txt:>16}"
-                f"{common.infeasible_mark(r['pinch_feasible'])}"
+                f"{improvement} {pinch_txt:>16}{common.infeasible_mark(r['pinch_feasible'])}"
+            )
+        if undefined:
+            click.echo(
+                f"improvement n/a: no tension's error ({none_error:.2g} vertices) is zero within float "
+                f"precision (under {NEGLIGIBLE_ERROR}): there is nothing to improve on"
             )
         common.echo_infeasible({name: r["pinch_problem"] for name, r in report["results"].items()})
         if json_path:
