@@ -4,6 +4,7 @@ the last final error and return, elapsed time and ETA) and a pipeline's stages (
 from __future__ import annotations
 
 import contextlib
+import sys
 import time
 from collections.abc import Callable, Iterator
 
@@ -17,6 +18,15 @@ from rich.progress import (
     TimeElapsedColumn,
     TimeRemainingColumn,
 )
+
+FILE_WIDTH = 200
+"""Columns of a progress line written to a file or a pipe (a terminal's own width elsewhere): rich's default
+of 80 cut a training's line to its first words."""
+
+
+def _console() -> Console:
+    """The bars' console: stderr, as wide as the terminal, or :data:`FILE_WIDTH` where it is no terminal."""
+    return Console(stderr=True, width=None if sys.stderr.isatty() else FILE_WIDTH)
 
 
 @contextlib.contextmanager
@@ -42,7 +52,7 @@ def training_progress(
     )
     start = time.monotonic()
     # stderr: rsl-rl's report is swallowed by redirecting stdout, which must not catch the bar's redraws.
-    with Progress(*columns, console=Console(stderr=True)) as bar:
+    with Progress(*columns, console=_console()) as bar:
         task = bar.add_task(
             "train", total=total, completed=completed, steps_per_s="-", final_error="-", mean_return="-"
         )
@@ -73,7 +83,7 @@ def stage_bars(enabled: bool = True):
         TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
         TextColumn("ETA"), TimeRemainingColumn(),
     )  # fmt: skip
-    bars = Progress(*columns, console=Console(stderr=True), transient=False)
+    bars = Progress(*columns, console=_console(), transient=False)
     tasks: dict[str, int] = {}
 
     def stages(stage: str, done: int, total: int) -> None:

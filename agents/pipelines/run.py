@@ -18,7 +18,14 @@ from agents.config import VALIDATION_TRIALS
 from agents.evaluation import Method, MethodResult, evaluate_suite, run_method
 from agents.jobs import RunJob, job_contour
 from agents.methods import StepCallbacks, point_text
-from agents.pipelines.common import analytic_pinches, claims_out, policy_job, record_job, train_policy
+from agents.pipelines.common import (
+    analytic_pinches,
+    claims_out,
+    policy_job,
+    policy_kept,
+    record_job,
+    train_policy,
+)
 from agents.policies import nominal_validation_error, rollout_errors
 from envs.options import ENV_FIELDS, PatternCutOptions
 from warpcut.contours import Contour
@@ -343,15 +350,23 @@ def _train_candidates(
         candidate["run"] = str(runs[k].relative_to(out))
         candidate["ran_on"], candidate["unit_seconds"] = unit.ran_on, round(unit.seconds, 3)
         nominal = ", nominal sheet" if "rl_training_validation_error" in candidate else ""
+        kept = KEPT_WORDS.get(candidate.get("rl_kept"), "")
         log(
             f"      candidate {point_text(candidate['pinch'])}: "
             f"fixed {candidate['fixed_error_vertices']:.1f}, "
-            f"rl {candidate['rl_validation_error_vertices']:.1f} vertices (validation{nominal})"
+            f"rl {candidate['rl_validation_error_vertices']:.1f} vertices (validation{nominal}){kept}"
         )
 
     cluster.map(functools.partial(_candidate_unit, seed=job.seed), units, dirs=runs, done=done)
     chosen = min(range(len(listed)), key=lambda k: (listed[k]["rl_validation_error_vertices"], k))
     return out / listed[chosen]["run"], chosen, runs
+
+
+KEPT_WORDS = {
+    "still": "; rl kept the still grasp (fixed tension): no trained policy validated better",
+    "plan": "; rl kept its teacher's plan, played open loop: no correction validated better",
+}
+"""What a candidate's progress line adds where model selection kept no trained policy."""
 
 
 def _candidate_unit(unit: dict, run_dir: Path, seed: int) -> dict:
@@ -361,7 +376,7 @@ def _candidate_unit(unit: dict, run_dir: Path, seed: int) -> dict:
         unit["train"], run_dir, device=unit["device"], progress=unit["progress"], resume=unit["resume"],
         label=unit["label"],
     )  # fmt: skip
-    best, scores = summary["best"], {}
+    best, scores = summary["best"], {"rl_kept": policy_kept(run_dir)}
     scores["rl_best_iteration"] = best["iterations"] if best else summary["iterations"]
     if best is not None:
         scores["rl_validation_error_vertices"] = best["validation_error"]
