@@ -164,3 +164,21 @@ def test_a_batch_of_path_regions_is_each_env_alone():
             one = shapely.make_valid(shapely.Polygon(p), method="structure", keep_collapsed=False)
             assert region.equals(one)
     assert batch[2].area > 0 and batch[3].is_empty and batch[4].is_empty
+
+
+def test_an_open_contour_that_halves_the_sheet_keeps_its_side_on_a_tie():
+    """A row of vertices halving the sheet: its two pieces are equal, so the intended side is the one on the
+    contour's left, and a shift by round-off (1e-9 mm either way) keeps it; the cut path is closed on that
+    same piece, never on the other half (an error of the whole sheet, 575.5 vertices)."""
+    from warpcut.scoring import path_errors
+    from warpcut.sim.config import SheetGrid
+
+    grid = SheetGrid.from_config(SimConfig())
+    path = np.array([[0.0, 50.0], [25.0, 50.0], [50.0, 50.0], [75.0, 50.0], [100.0, 50.0]])
+    for dy in (0.0, 1e-9, -1e-9):
+        contour = validate("half", False, [[0, 50 + dy], [50, 50 + dy], [100, 50 + dy]])
+        assert contour.intended_region().bounds[1] == pytest.approx(50.0) and contour.area_mm2 > 4999
+        error_mm2, error_vertices, _ = path_errors([path], [contour], grid)
+        assert error_mm2[0] < 1e-6 and error_vertices[0] < 1e-6
+    backwards = validate("half", False, [[100, 50], [50, 50], [0, 50]])  # its left: the lower half
+    assert backwards.intended_region().bounds[3] == pytest.approx(50.0)

@@ -679,4 +679,5 @@ def _intended_side_ccw(contour) -> bool:
         _perimeter(stop, width, height), _perimeter(start, width, height), True, width, height
     )
     ccw = shapely.Polygon(np.vstack([pts, *chain]) if chain else pts)
-    return abs(abs(ccw.area) - contour.area_mm2) <= 1e-6 * width * height
+    # The same piece, not one of the same area: a contour that halves the sheet has two.
+    return shapely.area(shapely.symmetric_difference(ccw, contour.intended_region())) <= 1e-6 * width * height
