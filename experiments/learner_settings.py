@@ -37,8 +37,14 @@ from warpcut.planning import Plan, plan_cut
 
 PPO = {"train.algo": "ppo"}
 VARIANTS: dict[str, dict] = {
-    "es": {},
-    "es-no-feedback": {"train.es.feedback": False, "train.es.sigma": 0.05, "train.es.learning_rate": 0.01},
+    "gps": {"train.algo": "gps"},
+    "es": {"train.algo": "es"},
+    "es-no-feedback": {
+        "train.algo": "es",
+        "train.es.feedback": False,
+        "train.es.sigma": 0.05,
+        "train.es.learning_rate": 0.01,
+    },
     "ppo": PPO,
     "ppo-entropy-0.01": {**PPO, "train.ppo.entropy_coef": 0.01},
     "ppo-entropy-0.1": {**PPO, "train.ppo.entropy_coef": 0.1},
@@ -50,7 +56,7 @@ VARIANTS: dict[str, dict] = {
     "apg": {"train.algo": "apg"},
     "paper": flatten(read_file("paper")),
 }
-"""The built-in variants: the default learner (es), es without its feedback path (with the step sizes its
+"""The built-in variants: the default learner (gps), es, es without its feedback path (with the step sizes its
 docstring names), PPO with its defaults and with one changed, APG, and the paper's preset."""
 
 PLAN_KEYS = ("sim.", "candidates", "arm.", "seed", "contours")

@@ -41,7 +41,7 @@ def _rows(path: Path) -> list[dict]:
     return [same_results(r) for r in json.loads(path.read_text())["rows"]]
 
 
-def measure(contours: str, workers: list[int], rounds: int, out: Path, seed: int) -> dict:
+def measure(contours: str, workers: list[int], rounds: int, out: Path, seed: int, algo: str) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     variants = [None, *workers]
     runs: list[dict] = []
@@ -49,7 +49,7 @@ def measure(contours: str, workers: list[int], rounds: int, out: Path, seed: int
         for k in variants if r % 2 == 0 else reversed(variants):
             name = "serial" if k is None else f"ray-local-{k}"
             where = Path(tempfile.mkdtemp(dir=out, prefix=f"{name}-r{r}-"))
-            command = [sys.executable, "-m", "warpcut", "evaluate", "--contours", contours,
+            command = [sys.executable, "-m", "warpcut", "evaluate", "--contours", contours, "--algo", algo,
                        "--seed", str(seed), "--set", "plots=false", "--out", str(where / "run")]  # fmt: skip
             if k is not None:
                 command += ["--ray", f"local:{k}"]
@@ -165,6 +165,7 @@ def main() -> None:
     m.add_argument("--workers", default="1,2")
     m.add_argument("--rounds", type=int, default=2)
     m.add_argument("--seed", type=int, default=0)
+    m.add_argument("--algo", default="gps", help="the rl column's learner (docs/cluster.md measured es)")
     m.add_argument("--out", type=Path, default=Path("logs/cluster-scaling"))
     o = sub.add_parser("overheads")
     o.add_argument("--units", type=int, default=200)
@@ -179,7 +180,8 @@ def main() -> None:
                    help="a unit's seconds on a one-CPU worker over those in the results")  # fmt: skip
     args = parser.parse_args()
     if args.what == "measure":
-        measure(args.contours, [int(k) for k in args.workers.split(",")], args.rounds, args.out, args.seed)
+        workers = [int(k) for k in args.workers.split(",")]
+        measure(args.contours, workers, args.rounds, args.out, args.seed, args.algo)
     elif args.what == "overheads":
         overheads(args.units, args.cpus)
     else:

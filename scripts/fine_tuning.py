@@ -39,6 +39,7 @@ def _reached(curve: list[tuple[float, float]], level: float) -> float | None:
 
 
 def main() -> None:
+    from agents.config import TrainConfig
     from agents.jobs import TrainJob, job_contour
     from agents.training import train_contour
     from warpcut.planning.generate import resolve_specs
@@ -59,6 +60,7 @@ def main() -> None:
             pinch=[float(v) for v in plan.chosen["pinch"]],
             segments=[s.tolist() for s in plan.ordered_segments()],
             seed=args.seed,
+            train=TrainConfig(algo="es"),  # fine-tuning is es's: the scratch run is es's too
             plots=False,
         )
         job_contour(base.contour, base.sim)  # a bad name: now

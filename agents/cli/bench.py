@@ -26,7 +26,7 @@ from warpcut import bench
     default=",".join(map(str, bench.ENV_STEP_ENVS)),
     show_default=True,
     help="Comma-separated batch sizes of the tensioned env-step measurement and of training beside it (the "
-    "default learner and PPO; es needs multiples of its population, es.population).",
+    "default learner and PPO; gps and es need multiples of es's population, 64).",
 )
 @common.json_option
 def command(

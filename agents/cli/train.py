@@ -73,7 +73,7 @@ def command(
     overrides: tuple[str, ...],
     print_config: bool,
 ) -> None:
-    """Train a tensioning policy for one contour (the default learner, es, or --algo ppo|apg).
+    """Train a tensioning policy for one contour (the default learner, gps, or --algo es|ppo|apg).
 
     Everything but the flags is set with --config FILE and --set KEY=VALUE (the env's observations, actions
     and reward: env.*; the physics and noise: sim.*; the learner: train.*; fine-tuning from a generalist:
