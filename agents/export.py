@@ -28,6 +28,7 @@ from warpcut.io import (
     claim_run_dir,
     enclosing_run,
     note_written,
+    read_run_marker,
     temp_file,
     write_atomic,
     written_by_warpcut,
@@ -46,6 +47,13 @@ def export_run(source: str | Path, out_dir: str | Path | None = None) -> list[di
     if out_dir is not None and enclosing_run(out_dir) is None:  # a folder of its own: marked as warpcut's
         with claim_run_dir(out_dir, command="export", reuse=True):
             return _export_runs(source, out_dir)
+    inside, own = (None, None) if out_dir is None else (enclosing_run(out_dir), enclosing_run(source))
+    exports = inside is not None and (read_run_marker(inside) or {}).get("command") == "export"
+    if inside is not None and not exports and (own is None or Path(inside).resolve() != Path(own).resolve()):
+        raise ValueError(
+            f"{out_dir}: lies in the run in {inside}, not the one exported from, so warpcut never writes "
+            "there; choose a folder outside it (or leave --out out: the run's own exported/)"
+        )
     return _export_runs(source, out_dir)
 
 

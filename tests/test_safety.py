@@ -823,6 +823,12 @@ def test_export_never_replaces_a_file_warpcut_did_not_write(tmp_path):
         (fresh / ".policy.onnx.tmp").write_text("the user's")  # a name like a temporary file's: kept
     assert {"policy.pt", "policy.onnx"} <= set(read_run_marker(fresh)["files"])
     assert (fresh / ".policy.onnx.tmp").read_text() == "the user's"
+    other = tmp_path / "other"  # another run: never written into, even where its folder is new
+    with claim_run_dir(other, command="evaluate"):
+        write_json(other / "results.json", {})
+    code, output = invoke(["export", str(run), "--out", str(other / "deploy")])
+    assert code == 2 and "not the one exported from, so warpcut never writes there" in output, output
+    assert sorted(p.name for p in other.iterdir()) == [RUN_MARKER, "results.json"]
 
 
 @pytest.mark.parametrize("mode", ["resume", "overwrite", "reuse"])
