@@ -91,8 +91,10 @@ def test_every_size_a_user_sets_is_checked_before_it_is_allocated(tmp_path, monk
         (["generalist", "--set", "train.actor_hidden_dims=[100000,100000]"], "train.actor_hidden_dims"),
         (["evaluate", "--contours", "gen-test-0:1000000"], "at most 10000 contours of a split"),
         (["generalist", "--set", "generated=1000000"], "generated: at most 10000 contours"),
+        (["plan", "--contour", "circle-small", "--candidates", "2000000000"], "the planner's batch"),
     ]:  # fmt: skip
-        error = refused([*args, "--device", "cpu", "--out", str(tmp_path / "out")], capfd)
+        out = ["--out", str(tmp_path / "out")] if args[0] != "plan" else []
+        error = refused([*args, "--device", "cpu", *out], capfd)
         assert said in error and not (tmp_path / "out").exists(), error
     assert time.perf_counter() - start < 60
 

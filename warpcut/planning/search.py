@@ -32,7 +32,7 @@ from warpcut.planning.feasibility import (
 )
 from warpcut.planning.segmentation import ORDER_LIMIT, Segment, segment_contour, segment_orders
 from warpcut.sim.config import PINCH_CANDIDATES, SEGMENT_TOLERANCE_MM, SimConfig
-from warpcut.sim.memory import batch_named
+from warpcut.sim.memory import batch_named, check_batch_memory
 from warpcut.task import CuttingTask, divergence_error
 
 
@@ -319,12 +319,13 @@ def plan_cut(
         raise ValueError(f"arm: expected an ArmModel, got {type(arm).__name__}")
     segments = segment_contour(contour, tolerance_mm=tolerance_mm)
     rng = np.random.default_rng(seed)
-    points = pinch_candidates(contour, config, segments, num_candidates, rng, arm)
     with batch_named(
         "the planner's batch (pinch candidates x segment orders)",
         "plan fewer pinch candidates (the candidates setting; plan: --candidates) or lower the resolution",
         default=True,  # a caller without a candidates setting names its own fix
     ):
+        check_batch_memory(num_candidates + 1, config.nx * config.ny)  # one order each at least: first
+        points = pinch_candidates(contour, config, segments, num_candidates, rng, arm)
         orders, errors = search_orders(contour, config, segments, points, device=device, seed=seed, arm=arm)
     if not np.all(np.isfinite(errors)):  # diverged simulations: no candidate may be chosen by a NaN
         raise divergence_error([contour], ~np.isfinite(errors.reshape(1, -1)), config)
