@@ -258,6 +258,9 @@ PROMISES = {
         "test_safety.py::test_a_run_never_replaces_a_file_its_marker_does_not_list",
         "test_safety.py::test_implicit_outputs_go_only_into_a_folder_warpcut_marks",
         "test_safety.py::test_export_never_replaces_a_file_warpcut_did_not_write",
+        "test_safety.py::test_a_json_output_never_replaces_a_users_file_or_writes_into_another_run",
+        "test_safety.py::test_a_run_never_writes_or_deletes_through_a_link_out_of_it",
+        "test_safety.py::test_a_link_made_during_a_run_is_never_written_through",
     ],
     "`--resume` continues only a run of the same command": [
         "test_safety.py::test_a_run_resumes_only_as_the_command_that_made_it",
@@ -267,7 +270,8 @@ PROMISES = {
     ],
     "`--overwrite` deletes only the files the run wrote": [
         "test_safety.py::test_an_existing_run_is_refused_unless_resumed_or_overwritten",
-        "test_safety.py::test_overwrite_never_follows_a_link_out_of_the_run",
+        "test_safety.py::test_a_run_never_writes_or_deletes_through_a_link_out_of_it",
+        "test_safety.py::test_overwrite_deletes_only_warpcuts_own_temporary_files",
     ],
     "A second process on the same directory": [
         "test_safety.py::test_a_run_directory_is_locked_while_a_process_writes_it",
@@ -287,6 +291,11 @@ PROMISES = {
         "test_safety.py::test_an_unwritable_working_folder_is_named_before_any_work",
         "test_pinch_feasibility.py::test_simulate_refuses_an_infeasible_pinch_in_one_line",
         "test_pinch_feasibility.py::test_train_refuses_an_infeasible_pinch_before_any_work",
+        "test_safety.py::test_deeply_nested_or_huge_inputs_are_one_line_before_any_work",
+        "test_cli.py::test_a_setting_given_twice_in_one_file_or_value_is_refused",
+        "test_error_causes.py::test_every_size_a_user_sets_is_checked_before_it_is_allocated",
+        "test_contours.py::test_a_contour_too_dense_to_plan_is_refused_in_seconds",
+        "test_contours.py::test_svg_use_bombs_are_refused_before_they_expand",
     ],
     "`docs/usage.md` has the details": [],
 }

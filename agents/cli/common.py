@@ -330,38 +330,9 @@ def check_outputs(
                     f"{path} is an input (a contour file); choose another file", param_hint=option
                 )
         if option == "--json":
-            _check_named_file(path, own, option)
+            from agents.cli.checks import check_named_file
 
-
-def _check_named_file(path: Path, own: tuple[Path, str] | None, option: str) -> None:
-    """Refuse the file ``path`` a user named for ``option`` where writing it would replace a file warpcut
-    did not write (one in no run directory: warpcut cannot tell it wrote it), or land in a run directory
-    other than ``own`` (another run's ``config.json``: that run could no longer be resumed)."""
-    from warpcut.io import enclosing_run, read_run_marker, written_by_warpcut
-
-    run = enclosing_run(path)
-    if run is not None:
-        marker = read_run_marker(run) or {}
-        mine = own is not None and run.resolve() == own[0].resolve()
-        if not mine or marker.get("command") not in (own[1], None):
-            command = marker.get("command") or "COMMAND"
-            raise click.BadParameter(
-                f"{path} lies in the run of 'warpcut {command}' in {run}, which this command does not own, "
-                "so it never writes there; choose a file outside it",
-                param_hint=option,
-            )
-        if path.exists() and not written_by_warpcut(path):
-            raise click.BadParameter(
-                f"{path} exists, and warpcut did not write it, so it never replaces it; move it, or choose "
-                "another file",
-                param_hint=option,
-            )
-    elif path.exists() or path.is_symlink():
-        raise click.BadParameter(
-            f"{path} exists, and lies in no run directory of warpcut's, so warpcut never replaces it; move "
-            "it, or choose another file",
-            param_hint=option,
-        )
+            check_named_file(path, own, option)
 
 
 def _unwritable(path: Path) -> str | None:
@@ -532,6 +503,7 @@ class Command(click.Command):
         """Run the command, after refusing a run directory another process holds (``--out``,
         ``--resume``), with the library's advice in errors naming settings as the command gives them
         (:func:`setting_form`)."""
+        from agents.cli.checks import setting_form
         from warpcut.io import check_not_busy
         from warpcut.planning.feasibility import setting_forms
 
@@ -578,25 +550,6 @@ def setting_of(command: str | None, option: str) -> str | None:
     keys = flatten(to_plain(getattr(agents.jobs, COMMAND_JOBS[command])()))
     found = [key for key in keys if key == name or key.endswith(f".{name}")]
     return found[0] if len(found) == 1 or name in found else None
-
-
-def setting_form(command: click.Command, key: str, value: str) -> str | None:
-    """How ``command`` gives the setting ``key`` the value ``value``: its own flag (``--resolution 12``,
-    from its module's ``FLAGS``), else ``--set KEY=VALUE`` where its job has the setting, else None (it
-    has no such setting: advice leaves it out)."""
-    import sys
-
-    flags = getattr(sys.modules.get(command.callback.__module__), "FLAGS", {})
-    for param in command.params:
-        if flags.get(param.name) == key and isinstance(param, click.Option):
-            return f"{param.opts[0]} {value}"
-    if command.name not in COMMAND_JOBS:
-        return None
-    import agents.jobs
-    from agents.config_io import flatten, to_plain
-
-    keys = flatten(to_plain(getattr(agents.jobs, COMMAND_JOBS[command.name])()))
-    return f"--set {key}={value}" if key in keys else None
 
 
 def config_options(command):
@@ -839,23 +792,6 @@ def check_learner(job) -> None:
     fixed_sheet = algorithm(job.train.algo).fixed_sheet
     if fixed_sheet is not None and (job.env.randomize or job.env.relative_reward):
         raise ValueError(fixed_sheet)
+    from agents.cli.checks import check_network_memory
+
     check_network_memory(job.train)
-
-
-def check_network_memory(train) -> None:
-    """``ValueError`` naming ``train.actor_hidden_dims`` where the actor's weights alone, with the copies
-    training keeps of them (gradients, Adam's moments, an es population's perturbations, as float64), would
-    not fit in the memory a batch may take (:func:`warpcut.sim.memory.memory_limit`): torch's allocator would
-    fail mid-run, or the kernel kill the process."""
-    from warpcut.sim.memory import memory_limit
-
-    dims = [1, *train.actor_hidden_dims, 1]  # the narrowest input and output: a lower bound
-    weights = sum(a * b + b for a, b in zip(dims, dims[1:], strict=False))
-    copies = 4 + getattr(train.learner, "population", 0)
-    needed, (limit, source) = 8 * weights * copies, memory_limit()
-    if needed > limit:
-        raise ValueError(
-            f"train.actor_hidden_dims: {list(train.actor_hidden_dims)} make an actor of at least {weights:,} "
-            f"weights, which training would need about {needed / 1e9:.3g} GB for, more than the "
-            f"{limit / 1e9:.3g} GB allowed ({source}); use narrower layers"
-        )

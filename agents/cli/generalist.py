@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from agents.cli import common
+from agents.cli.checks import check_network_memory
 from agents.config import GENERALIST_CONTOURS, GENERALIST_ITERATIONS, GENERALIST_VALIDATION_CONTOURS
 
 FLAGS = {
@@ -71,7 +72,7 @@ def command(
     """
     from agents.cluster import executor
     from agents.jobs import GeneralistJob
-    from agents.pipelines.generalist import train_generalist
+    from warpcut.planning.generate import resolve_specs
 
     base = common.resumed_job(GeneralistJob, out, resume, "generalist")
     job = common.resolve(GeneralistJob, config_file, overrides, FLAGS, base)
@@ -81,7 +82,7 @@ def command(
     if print_config:
         common.print_config(job)
         return
-    common.check_network_memory(job.train)
+    check_network_memory(job.train)
     from warpcut.planning.generate import MAX_CONTOURS
 
     for name in ("generated", "validation_contours"):
@@ -89,7 +90,11 @@ def command(
             raise ValueError(
                 f"{name}: at most {MAX_CONTOURS} contours (got {getattr(job, name)}); give fewer"
             )
+    if job.contours:  # a bad name or file: now
+        resolve_specs(job.contours, job.sim.validated())
     out, claim = common.claim(out, "generalist", resume, overwrite, "generalist")
+    from agents.pipelines.generalist import train_generalist  # torch: after every check
+
     try:
         with claim, executor(ray, device, common.log) as units:
             click.echo(f"training a generalist into {out} ({device})")
