@@ -9,8 +9,6 @@ from pathlib import Path
 
 import click
 
-from agents.cli import common
-
 
 def check_named_file(path: Path, own: tuple[Path, str] | None, option: str) -> None:
     """Refuse the file ``path`` a user named for ``option`` where writing it would replace a file warpcut
@@ -62,18 +60,18 @@ def check_network_memory(train) -> None:
         )
 
 
-def setting_form(command: click.Command, key: str, value: str) -> str | None:
+def setting_form(command: click.Command, job: str | None, key: str, value: str) -> str | None:
     """How ``command`` gives the setting ``key`` the value ``value``: its own flag (``--resolution 12``,
-    from its module's ``FLAGS``), else ``--set KEY=VALUE`` where its job has the setting, else None (it
-    has no such setting: advice leaves it out)."""
+    from its module's ``FLAGS``), else ``--set KEY=VALUE`` where its ``job`` (a class of
+    :mod:`agents.jobs`, by name; None: it has none) has the setting, else None (advice leaves it out)."""
     flags = getattr(sys.modules.get(command.callback.__module__), "FLAGS", {})
     for param in command.params:
         if flags.get(param.name) == key and isinstance(param, click.Option):
             return f"{param.opts[0]} {value}"
-    if command.name not in common.COMMAND_JOBS:
+    if job is None:
         return None
     import agents.jobs
     from agents.config_io import flatten, to_plain
 
-    keys = flatten(to_plain(getattr(agents.jobs, common.COMMAND_JOBS[command.name])()))
+    keys = flatten(to_plain(getattr(agents.jobs, job)()))
     return f"--set {key}={value}" if key in keys else None

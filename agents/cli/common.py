@@ -510,7 +510,7 @@ class Command(click.Command):
         for name in ("out", "resume"):  # a run another process holds: said at once, not after the checks
             if isinstance(ctx.params.get(name), Path):
                 check_not_busy(ctx.params[name], f"--{name}")
-        with setting_forms(lambda key, value: setting_form(self, key, value)):
+        with setting_forms(lambda key, value: setting_form(self, COMMAND_JOBS.get(self.name), key, value)):
             return super().invoke(ctx)
 
     def _parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
