@@ -752,3 +752,37 @@ def test_advice_names_each_setting_as_the_command_gives_it(tmp_path, capfd):
     assert "(--set sim.width_mm=W --set sim.height_mm=H)" in error
     message = str(no_pinch_error(load_contour("fls-circle"), SimConfig(resolution=5)))
     assert "(sim.resolution=12), or pinch an infeasible point of your choosing (pinch=X,Y " in message
+
+
+REFUSED_BEFORE_TORCH = """
+import sys
+from agents.cli import main
+try:
+    main.main(args=sys.argv[1:], prog_name="warpcut")
+except SystemExit as stop:
+    print(stop.code, "torch" in sys.modules)
+"""
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["run", "--contour", "kidny"],
+        ["run", "--set", "train.es.sigam=0.01"],
+        ["evaluate", "--methods", "none,fixd"],
+        ["train"],
+        ["train", "--contour", "kidny"],
+        ["optimize", "--contour", "kidny"],
+        ["robustness", "--contour", "kidny"],
+        ["generalist", "--contours", "kidny"],
+        ["simulate", "--contour", "kidny"],
+    ],
+)
+def test_a_mistyped_setting_is_refused_before_torch_loads(args, tmp_path):
+    """Settings and names are checked before torch is imported (several seconds on a busy machine): a
+    refusal comes as fast as a mistyped flag's."""
+    done = subprocess.run(
+        [sys.executable, "-c", REFUSED_BEFORE_TORCH, *args], capture_output=True, text=True, cwd=tmp_path
+    )
+    last = (done.stdout.strip().splitlines() or [""])[-1]  # after anything a library prints as it starts
+    assert last.split() == ["2", "False"], (done.stdout, done.stderr[-500:])
