@@ -309,7 +309,7 @@ def check_not_busy(path: str | os.PathLike, option: str = "--out") -> None:
     :func:`claim_run_dir` would, after the work that precedes it); nothing is written or kept locked."""
     path = Path(path)
     if path.is_dir() and _holder(path) is None:
-        with contextlib.suppress(FileNotFoundError, NotADirectoryError):
+        with contextlib.suppress(OSError):  # a folder it cannot open: the claim says why, later
             os.close(_lock(path, option))
 
 
