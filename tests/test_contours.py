@@ -447,6 +447,12 @@ def test_a_contour_too_dense_to_plan_is_refused_in_seconds(tmp_path):
         load_contour(path)
     assert time.perf_counter() - start < 10
     assert len(validate("ok", True, circle(MAX_POINTS)).points) == MAX_POINTS
+    lines = " ".join(f"L{x:.3f},{y:.3f}" for x, y in circle(100_000)[1:])  # 2.6 MB: seconds of parsing
+    svg = write(tmp_path, "dense.svg", f'<svg><path d="M70,50 {lines} Z"/></svg>')
+    start = time.perf_counter()
+    with pytest.raises(ContourError, match=r"a <path> holds 200,000 numbers, more than 10,000 points' worth"):
+        load_contour(svg)
+    assert time.perf_counter() - start < 2
 
 
 def test_svg_sizes_it_cannot_read_are_named_not_misread(tmp_path):

@@ -39,7 +39,14 @@ from pathlib import Path
 
 import numpy as np
 
-from warpcut.contours.contour import DEFAULT_SHEET_MM, Contour, ContourError, check_sheet_size, validate
+from warpcut.contours.contour import (
+    DEFAULT_SHEET_MM,
+    MAX_POINTS,
+    Contour,
+    ContourError,
+    check_sheet_size,
+    validate,
+)
 from warpcut.contours.suite import builtin_contours, builtin_names
 from warpcut.io import safe_name
 
@@ -216,6 +223,7 @@ def _load_svg(path: Path, sheet_size: tuple[float, float]) -> Contour:
         root.attrib.pop(name, None)
     viewport = None if box is None else box[2:]
     _check_expanded_size(where, root)
+    _check_point_count(where, root)
     for element in root.iter():
         if _local_tag(element.tag) == "path" and element.get("d"):
             _check_path_data(where, element.get("d"))
@@ -444,6 +452,21 @@ def _check_expanded_size(where: str, root: ET.Element) -> None:
                 f"{where}: its <use> references expand to more than {MAX_SVG_ELEMENTS:,} elements; draw the "
                 "contour as one shape"
             )
+
+
+def _check_point_count(where: str, root: ET.Element) -> None:
+    """Refuse, before the parser reads them, path data and point lists whose numbers alone make more than
+    :data:`~warpcut.contours.contour.MAX_POINTS` points (each point takes at most six numbers, a cubic
+    curve's): the contour would be refused after seconds of parsing and flattening."""
+    for element in root.iter():
+        for name in ("d", "points"):
+            numbers = sum(1 for _ in re.finditer(_NUMBER, element.get(name) or ""))
+            if numbers > 6 * MAX_POINTS:
+                raise ContourError(
+                    f"{where}: a <{_local_tag(element.tag)}> holds {numbers:,} numbers, more than "
+                    f"{MAX_POINTS:,} points' worth (the most warpcut plans); resample the contour (e.g. a "
+                    "point every 0.5 mm)"
+                )
 
 
 def _first_shape(where: str, root: ET.Element, ppi: float, viewport: tuple[float, float] | None):
