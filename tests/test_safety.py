@@ -968,7 +968,7 @@ def test_a_refusal_names_the_option_that_gave_the_path(tmp_path, monkeypatch):
     run = tmp_path / "run"
     settings = [*TINY_FLAGS, "--set", "eval_trials=1", "--set", "plots=false", "--out", str(run)]
     code, output = invoke(["train", "--contour", "circle-small", "--iterations", "1", *settings])
-    assert code == 0, output
+    assert code == 0 and "improvement" in output and "±" not in output, output  # no CI of one trial
     import agents.export
     import warpcut.io
 

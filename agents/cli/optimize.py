@@ -112,7 +112,8 @@ def command(
     )
     click.echo(f"{'method':<8} {'error (vertices)':>16} {'improvement':>12}")
     for name, row in report["evaluation"].items():
-        improvement = f"{row['improvement_pct']:>+11.1f}% ±{row['ci95_pct']:.1f}"
+        ci = f" ±{row['ci95_pct']:.1f}" if job.trials > 1 else ""  # no CI of one sample
+        improvement = f"{row['improvement_pct']:>+11.1f}%{ci}"
         mark = common.infeasible_mark(row["pinch_feasible"])
         click.echo(f"{name:<8} {row['error_vertices']:>16.1f} {improvement}{mark}")
     common.echo_infeasible({"fixed, grad": report["pinch_problem"]})

@@ -148,7 +148,8 @@ def command(
         p = row[f"{m}_pinch"]
         p_txt = "-" if p is None else point_text(p)
         imp = row[f"{m}_improvement_pct"]
-        imp_txt = f"{imp:+.1f}% ±{row[f'{m}_ci95']:.1f}" if np.isfinite(imp) else "n/a"
+        ci = f" ±{row[f'{m}_ci95']:.1f}" if report.table["trials"] > 1 else ""  # no CI of one sample
+        imp_txt = f"{imp:+.1f}%{ci}" if np.isfinite(imp) else "n/a"
         mark = common.infeasible_mark(row.get(f"{m}_pinch_feasible"))
         click.echo(f"{m:<10} {row[f'{m}_error_vertices']:>16.1f} {imp_txt:>14} {p_txt:>16}{mark}")
     common.echo_infeasible({m: row.get(f"{m}_pinch_problem") for m in report.methods})

@@ -148,8 +148,9 @@ def command(
     )
     click.echo(
         f"evaluation ({e['trials']} trials): no tension {e['none_error_vertices']:.1f} vertices, "
-        f"rl {e['rl_error_vertices']:.1f} vertices, improvement {e['rl_improvement_pct']:+.1f}% "
-        f"± {e['rl_ci95']:.1f}{common.infeasible_mark(e['pinch_feasible'])}"
+        f"rl {e['rl_error_vertices']:.1f} vertices, improvement {e['rl_improvement_pct']:+.1f}%"
+        + (f" ± {e['rl_ci95']:.1f}" if e["trials"] > 1 else "")  # no CI of one sample
+        + common.infeasible_mark(e["pinch_feasible"])
     )
     common.echo_infeasible({"rl": e["pinch_problem"]})
     if job.plots:
