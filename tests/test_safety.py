@@ -98,10 +98,11 @@ def test_an_existing_run_is_refused_unless_resumed_or_overwritten(tmp_path):
     assert invoke(args)[0] == 0
     before = (out / "results.json").read_bytes()
     code, output = invoke(args)
-    assert code == 2 and "holds a warpcut evaluate run" in output and "--resume" in output
+    assert code == 2 and "holds a run of 'warpcut evaluate'" in output and "--resume" in output
     assert "--overwrite" in output and (out / "results.json").read_bytes() == before
     (out / "notes.txt").write_text("the user's, written into the run directory")
-    (out / "results.json").with_name(".results.json.abc.tmp").write_text("a write the run never finished")
+    unfinished = out / ".results.json.abcd1234.warpcut.tmp"  # warpcut's own form of a temporary file
+    unfinished.write_text("a write the run never finished")
     code, output = invoke([*args, "--overwrite"])
     assert code == 0, output
     assert "--overwrite: deleted" in output and "kept what warpcut did not write: notes.txt" in output
@@ -233,7 +234,7 @@ def test_bad_inputs_are_refused_before_any_work_and_leave_no_run_behind(tmp_path
             "APG differentiates one fixed sheet",
         ),  # fmt: skip
         (["run", "--set", "train.num_envs=2"], "64 must divide num_envs (2)"),
-        (["evaluate", "--set", "train.num_envs=96"], "e.g. train.es.population=48"),
+        (["evaluate", "--set", "train.num_envs=96"], "e.g. train.gps.refine.population=48"),
         (
             ["train", "--contour", "circle-small", "--algo", "apg", "--set", "env.action_type=discrete"],
             "algo: apg",
@@ -412,7 +413,7 @@ def test_evaluate_resumes_after_an_interruption_keeping_finished_policies(tmp_pa
     with pytest.raises(TrainingInterrupted) as stopped:
         evaluate_table(job, out)
     assert stopped.value.run_dir == out / "policies" / "wave-1"
-    with pytest.raises(ValueError, match="holds a warpcut evaluate run"):
+    with pytest.raises(ValueError, match="holds a run of 'warpcut evaluate'"):
         evaluate_table(job, out)
     with pytest.raises(ValueError, match=r"trials: 1 then, 2 now.*--config .*config.json"):
         evaluate_table(dataclasses.replace(job, trials=2), out, resume=True)
@@ -608,7 +609,7 @@ def test_train_refuses_an_existing_run_and_stops_on_sigterm_with_a_checkpoint(tm
     assert summary["status"] == "interrupted" and (run / "latest.pt").is_file()
 
     code, output = invoke([*args, "--iterations", "2"])
-    assert code == 2 and "holds a warpcut train run" in output
+    assert code == 2 and "holds a run of 'warpcut train'" in output
     code, output = invoke(["train", "--resume", str(run), "--set", "train.es.sigma=0.5"])
     assert code == 2 and "train.es.sigma" in output and "keeps its settings" in output
     code, output = invoke(["train", "--resume", str(run), "--iterations", str(summary["iterations"] + 1),
@@ -743,7 +744,7 @@ def test_a_run_killed_before_its_summary_resumes_with_its_own_settings(tmp_path,
         (["simulate", "--contour", "circle-small", "--policy", "none"], "SimulateJob(policy=['none'])"),
         (["run", "--policy", "fixed"], "RunJob(policy='fixed')"),
         (["evaluate", "--methods", "none,fixed"], "EvaluateJob(methods=['none', 'fixed'])"),
-        (["optimize", "--contour", "circle-small", "--estimator", "tape"], "OptimizeJob()"),
+        (["optimize", "--contour", "circle-small", "--estimator", "es"], "OptimizeJob()"),
         (["train", "--contour", "circle-small"], "TrainJob()"),
         (["robustness", "--contour", "circle-small", "--methods", "none,fixed"], "RobustnessJob()"),
     ],

@@ -43,16 +43,23 @@ class GpsRunner(Runner):
             return
         from agents.config import grad_config
         from agents.gradient import cached_plan
+        from warpcut.io import WriteFailed
 
         options = self.env.cfg
         contours, points, cuts = options.per_env(1)
         config = options.config()
         settings = grad_config("es", iterations=self.cfg["gps"]["teacher_iterations"])
         folder = None if self.logger.log_dir is None else Path(self.logger.log_dir) / TEACHER_DIR
-        self.teacher = cached_plan(
-            contours[0], points[0], None if cuts is None else cuts[0], config, settings, options.device,
-            self.seed, folder, arm=options.arm, allow_infeasible_pinch=True,
-        )  # fmt: skip
+        try:
+            self.teacher = cached_plan(
+                contours[0], points[0], None if cuts is None else cuts[0], config, settings, options.device,
+                self.seed, folder, arm=options.arm, allow_infeasible_pinch=True,
+            )  # fmt: skip
+        except WriteFailed as exc:  # the optimiser's state so far is whole: the run resumes from it
+            raise ValueError(
+                f"{exc.path}: not written, {exc.reason}; the teacher's state so far is intact: {exc.fix}, "
+                f"then resume from {self.logger.log_dir}"
+            ) from exc.__cause__
         moves = np.asarray(self.teacher.plan, dtype=np.float32) / np.float32(config.max_step_mm)
         self.alg.actor.set_plan(torch.as_tensor(moves))
         self.own_summary["teacher"] = {
