@@ -197,3 +197,21 @@ def test_evaluate_table_reports_each_stage_as_it_advances(tmp_path):
     )
     evaluate_table(job, tmp_path / "b", stages=stages)
     assert [done for stage, done, _ in seen if stage == "evaluating"] == [0, 1, 2, 3]
+
+
+@pytest.mark.parametrize(
+    ("methods", "trials"), [(["none"], 2), (["none", "fixed"], 1), (["none", "fixed"], 2)]
+)
+def test_the_markdown_table_is_well_formed_and_shows_a_ci_only_over_two_or_more_values(
+    tmp_path, methods, trials
+):
+    """Every line has the header's columns (with none alone too); a per-contour cell has a CI only over two
+    or more trials, and the mean of one contour has none (a CI of one sample does not exist)."""
+    job = EvaluateJob(contours=["circle-small"], methods=methods, trials=trials, candidates=2, sim=SMALL)
+    table = evaluate_table(job, tmp_path / "t").markdown()
+    lines = table.splitlines()
+    assert len({line.count("|") for line in lines}) == 1, table
+    assert lines[1] == "|" + "---|" * (2 + len(methods) - 1)
+    body, mean = lines[2], lines[-1]
+    assert ("±" in body) == (trials >= 2 and "fixed" in methods) and "±" not in mean, table
+    assert (tmp_path / "t" / "results.md").read_text().strip().endswith(mean)

@@ -61,22 +61,25 @@ class TableReport:
 
     def markdown(self) -> str:
         """The table as Markdown: per contour the no-tension error and each method's improvement ± CI (a
-        cell at a pinch point the gripper could not hold says so)."""
+        cell at a pinch point the gripper could not hold says so). A CI is shown only over two or more
+        values (trials, or contours for the mean), and an improvement over an error that is zero within
+        float precision is ``n/a``."""
         shown, rows = [m for m in self.methods if m != "none"], self.table["rows"]
-        head = "| contour | no tension (vertices) | " + " | ".join(f"{m} (%)" for m in shown) + " |"
-        lines = [head, "|---|---|" + "---|" * len(shown)]
+        columns = ["contour", "no tension (vertices)", *(f"{m} (%)" for m in shown)]
+        lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+        trials = self.table.get("trials", 0)
         for row in rows:
             cells = [
-                f"{row[f'{m}_improvement_pct']:+.1f} ± {row[f'{m}_ci95']:.1f}"
+                _percent(row[f"{m}_improvement_pct"], row[f"{m}_ci95"], trials)
                 + (" (infeasible pinch)" if row.get(f"{m}_pinch_feasible") is False else "")
                 for m in shown
             ]
             lines.append(
-                f"| {row['contour']} | {row['none_error_vertices']:.1f} | " + " | ".join(cells) + " |"
+                "| " + " | ".join([row["contour"], f"{row['none_error_vertices']:.1f}", *cells]) + " |"
             )
         mean = self.table["mean"]
         cells = [
-            f"{mean[f'{m}_improvement_pct']:+.1f} ± {mean[f'{m}_ci95']:.1f}"
+            _percent(mean[f"{m}_improvement_pct"], mean[f"{m}_ci95"], len(rows))
             + (
                 " (infeasible pinches in it)"
                 if any(r.get(f"{m}_pinch_feasible") is False for r in rows)
@@ -84,8 +87,16 @@ class TableReport:
             )
             for m in shown
         ]
-        lines.append("| **mean** | | " + " | ".join(cells) + " |")
+        lines.append("| " + " | ".join(["**mean**", "", *cells]) + " |")
         return "\n".join(lines)
+
+
+def _percent(value: float, ci: float, count: int) -> str:
+    """An improvement cell: ``+x.x ± c.c``; without a CI over fewer than two values (one sample has
+    none); ``n/a`` where the improvement is undefined (no tension's error zero within float precision)."""
+    if value is None or not np.isfinite(value):
+        return "n/a"
+    return f"{value:+.1f} ± {ci:.1f}" if count >= 2 else f"{value:+.1f}"
 
 
 @claims_out("evaluate")
