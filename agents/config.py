@@ -34,6 +34,11 @@ from warpcut.validation import (
     is_number,
 )
 
+SEED_RANGE = (0, 2**31 - 1 - 2**16)
+"""``--seed``'s (and ``seed``'s) range: the seed and those derived from it (the seed plus an offset under
+65536, e.g. validation's) stay distinct noise seeds (:data:`warpcut.sim.simulator.NOISE_SEEDS`: a larger one
+would replay a small one's noise bit for bit), within the 32 bits NumPy's and torch's generators take."""
+
 EVALUATION_TRIALS = 10
 """Seeded trials per method of an evaluation (the paper's Table I: 10)."""
 

@@ -29,6 +29,7 @@ from agents.config import (
     GENERALIST_VALIDATION_CONTOURS,
     GRAD_CONFIG,
     GRAD_CONFIGS,
+    SEED_RANGE,
     GradConfig,
     TrainConfig,
     generalist_train_config,
@@ -36,6 +37,7 @@ from agents.config import (
 from agents.methods import BASELINES, SELECTORS, SIMULATED, TABLE_METHODS, check_methods
 from envs.options import ENV_FIELDS, EnvConfig, PatternCutOptions
 from warpcut.planning.feasibility import ArmModel
+from warpcut.planning.generate import MAX_CONTOURS
 from warpcut.sim.config import SimConfig
 from warpcut.validation import (
     ConfigError,
@@ -92,7 +94,7 @@ _FIELD_CHECKS = {
     "plots": check_flag,
     "arm": lambda w, v: check_instance(w, v, ArmModel, "an ArmModel (length_mm, width_mm, ...)"),
     "segments": lambda w, v: check_instance(w, v, (list, tuple, type(None)), "a list of polylines, or None"),
-    "seed": lambda w, v: check_integer(w, v, 0),
+    "seed": lambda w, v: check_integer(w, v, *SEED_RANGE),
     "eval_trials": _counted,
     "sim": lambda w, v: check_instance(w, v, SimConfig, "a SimConfig (the sim section)"),
     "env": lambda w, v: check_instance(w, v, EnvConfig, "an EnvConfig (the env section)"),
@@ -694,8 +696,7 @@ class SimulateJob:
             raise ValueError("contour: give the contour to cut (--contour)")
         check_methods(self.policy, "policy", SIMULATED)
         _count("trials", self.trials)
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
-            raise ValueError(f"seed: must be an integer >= 0 (got {self.seed!r})")
+        check_integer("seed", self.seed, *SEED_RANGE)
         if self.pinch is not None and (len(self.pinch) != 2 or not all(math.isfinite(v) for v in self.pinch)):
             raise ValueError(f"pinch: give [x, y], finite numbers in mm (got {self.pinch!r})")
         for name in ("record", "video"):
@@ -755,8 +756,8 @@ class GeneralistJob:
 
     def __post_init__(self) -> None:
         _check_fields(self)
-        check_integer("GeneralistJob.generated", self.generated, 0)
-        check_integer("GeneralistJob.validation_contours", self.validation_contours, 1)
+        check_integer("GeneralistJob.generated", self.generated, 0, MAX_CONTOURS)
+        check_integer("GeneralistJob.validation_contours", self.validation_contours, 1, MAX_CONTOURS)
         _counted("GeneralistJob.candidates", self.candidates)
 
     def check(self) -> GeneralistJob:

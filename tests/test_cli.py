@@ -699,7 +699,7 @@ def test_a_seed_is_refused_where_its_noise_would_repeat_a_smaller_seeds(capfd):
         assert f"not in the range 0<=x<={top}" in refused([*simulate, *args], capfd)
     for value in (top + 1, 2_147_483_647):
         error = refused([*simulate, "--set", f"seed={value}"], capfd)
-        assert error == f"error: seed: an integer in [0, {top}] (got {value}), as --seed takes"
+        assert error == f"error: --set: seed: an integer in [0, {top}] (got {value})"
     code, stdout, _ = invoke([*simulate, "--seed", str(top), "--print-config"])
     assert code == 0 and f"seed: {top}" in stdout
 

@@ -85,6 +85,9 @@ def is_integer(value: Any) -> bool:
 
 
 def _bound(value: float) -> str:
+    """A bound in words: an integer in full (a seed's 2147418111, not 2.14742e+09), a float as ``%g``."""
+    if isinstance(value, int) and not isinstance(value, bool):
+        return str(value)
     return f"{value:g}"
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import click
 
+from agents.config import SEED_RANGE
 from warpcut.sim.config import ARM_LENGTH_MM, RESOLUTION_RANGE, SimConfig
 from warpcut.viz.process import RecordingError
 
@@ -175,12 +176,6 @@ class FloatRange(click.FloatRange):
         if math.isnan(number) or (math.isinf(number) and not self.allow_inf):
             self.fail(f"{number} is not a finite number.", param, ctx)
         return number
-
-
-SEED_RANGE = (0, 2**31 - 1 - 2**16)
-"""``--seed``'s (and ``seed``'s) range: the seed and those derived from it (the seed plus an offset under
-65536, e.g. validation's) stay distinct noise seeds (:data:`warpcut.sim.simulator.NOISE_SEEDS`: a larger one
-would replay a small one's noise bit for bit), within the 32 bits NumPy's and torch's generators take."""
 
 
 device_option = click.option(
@@ -618,11 +613,7 @@ def resolve(job_class, config_file: str | None, overrides: tuple[str, ...], flag
     explicit |= set(sets) | set(given)
     if base is not None:  # a resumed run's own settings count as given
         explicit |= set(flatten(to_plain(base)))
-    seed = getattr(job, "seed", None)
-    if isinstance(seed, int) and not SEED_RANGE[0] <= seed <= SEED_RANGE[1]:
-        low, high = SEED_RANGE
-        raise ValueError(f"seed: an integer in [{low}, {high}] (got {seed}), as --seed takes")
-    return with_dependent_defaults(job, explicit)
+    return with_dependent_defaults(job, explicit)  # a job checks its seed's range itself (SEED_RANGE)
 
 
 NOT_SETTINGS = ("out", "json_path", "overwrite", "no_progress", "device")
