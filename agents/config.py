@@ -39,6 +39,10 @@ SEED_RANGE = (0, 2**31 - 1 - 2**16)
 65536, e.g. validation's) stay distinct noise seeds (:data:`warpcut.sim.simulator.NOISE_SEEDS`: a larger one
 would replay a small one's noise bit for bit), within the 32 bits NumPy's and torch's generators take."""
 
+MAX_COUNT = 2**31 - 1
+"""The largest count (envs, iterations, trials) a learner takes: beyond it a count overflows where it reaches
+NumPy, torch or the logger, after the work has started."""
+
 EVALUATION_TRIALS = 10
 """Seeded trials per method of an evaluation (the paper's Table I: 10)."""
 
@@ -100,10 +104,14 @@ class _TrainSettings:
         if self.algo not in ALGORITHMS:
             fail(where + "algo", f"choose one of {', '.join(ALGORITHMS)}", self.algo)
         for name in ("num_envs", "iterations"):
-            check_integer(where + name, getattr(self, name), 1, optional=True, note="the learner's")
-        check_integer(where + "validation_trials", self.validation_trials, 0, note="0: no validation")
+            check_integer(
+                where + name, getattr(self, name), 1, MAX_COUNT, optional=True, note="the learner's"
+            )
+        check_integer(
+            where + "validation_trials", self.validation_trials, 0, MAX_COUNT, note="0: no validation"
+        )
         for name in ("validation_interval", "save_interval"):
-            check_integer(where + name, getattr(self, name), 1)
+            check_integer(where + name, getattr(self, name), 1, MAX_COUNT)
         check_number(where + "selection_margin", self.selection_margin, 0, note="standard errors")
         dims = self.actor_hidden_dims
         if not (isinstance(dims, list | tuple) and dims and all(is_integer(d) and d >= 1 for d in dims)):

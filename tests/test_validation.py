@@ -342,8 +342,9 @@ def test_agent_configs_and_jobs_check_each_field_as_they_are_made():
     from agents.jobs import EvaluateJob, OptimizeJob, RobustnessJob, RunJob, SimulateJob, TrainJob
 
     for make, message in [
-        (lambda: TrainConfig(num_envs=True), "TrainConfig.num_envs: an integer >= 1"),
-        (lambda: TrainConfig(iterations=1.5), "TrainConfig.iterations: an integer >= 1"),
+        (lambda: TrainConfig(num_envs=True), "TrainConfig.num_envs: an integer in [1, 2147483647]"),
+        (lambda: TrainConfig(iterations=1.5), "TrainConfig.iterations: an integer in [1, 2147483647]"),
+        (lambda: TrainConfig(iterations=10**20), "TrainConfig.iterations: an integer in [1, 2147483647]"),
         (lambda: TrainConfig(activation="nope"), "TrainConfig.activation: one of 'elu'"),
         (lambda: TrainConfig(algo="x"), "TrainConfig.algo: choose one of gps, es, ppo, apg"),
         (lambda: TrainConfig(actor_hidden_dims=[]), "TrainConfig.actor_hidden_dims: a non-empty list"),
