@@ -138,9 +138,11 @@ def command(
             step_callbacks=common.step_callbacks(rec, cuts),
             cluster=units,
         )
-    name, pinch, row = report.contour.name, report.plan.chosen["pinch"], report.row
+    name, row = report.contour.name, report.row
+    chosen = report.candidates[report.chosen_candidate] if report.candidates else report.plan.chosen
+    by = "planned" if job.policy in ("fixed", "analytic") else f"chosen by {job.policy}"
     click.echo(
-        f"{name}: planned order {list(report.plan.order)}, pinch {point_text(pinch)}; "
+        f"{name}: {by}: order {list(chosen['order'])}, pinch {point_text(chosen['pinch'])}; "
         f"{report.table['trials']} trials, {report.seconds:.0f} s"
     )
     click.echo(f"{'method':<10} {'error (vertices)':>16} {'improvement':>14} {'pinch (mm)':>16}")
@@ -150,6 +152,8 @@ def command(
         imp = row[f"{m}_improvement_pct"]
         ci = f" ±{row[f'{m}_ci95']:.1f}" if report.table["trials"] > 1 else ""  # no CI of one sample
         imp_txt = f"{imp:+.1f}%{ci}" if np.isfinite(imp) else "n/a"
+        if m == "none":  # the reference the others improve on
+            imp_txt = "reference"
         mark = common.infeasible_mark(row.get(f"{m}_pinch_feasible"))
         click.echo(f"{m:<10} {row[f'{m}_error_vertices']:>16.1f} {imp_txt:>14} {p_txt:>16}{mark}")
     common.echo_infeasible({m: row.get(f"{m}_pinch_problem") for m in report.methods})
