@@ -91,7 +91,7 @@ def test_every_size_a_user_sets_is_checked_before_it_is_allocated(tmp_path, monk
          "train.actor_hidden_dims: [99999, 99999]"),
         (["generalist", "--set", "train.actor_hidden_dims=[100000,100000]"], "train.actor_hidden_dims"),
         (["evaluate", "--contours", "gen-test-0:1000000"], "at most 10000 contours of a split"),
-        (["generalist", "--set", "generated=1000000"], "generated: at most 10000 contours"),
+        (["generalist", "--set", "generated=1000000"], "generated: an integer in [0, 10000]"),
         (["plan", "--contour", "circle-small", "--candidates", "2000000000"], "the planner's batch"),
     ]:  # fmt: skip
         out = ["--out", str(tmp_path / "out")] if args[0] != "plan" else []

@@ -83,13 +83,6 @@ def command(
         common.print_config(job)
         return
     check_network_memory(job.train)
-    from warpcut.planning.generate import MAX_CONTOURS
-
-    for name in ("generated", "validation_contours"):
-        if getattr(job, name) > MAX_CONTOURS:
-            raise ValueError(
-                f"{name}: at most {MAX_CONTOURS} contours (got {getattr(job, name)}); give fewer"
-            )
     if job.contours:  # a bad name or file: now
         resolve_specs(job.contours, job.sim.validated())
     out, claim = common.claim(out, "generalist", resume, overwrite, "generalist")
