@@ -228,13 +228,13 @@ def _share_teachers(
     where the grad column reads a plan found there instead of optimising it again; only where the
     teacher's settings and pinch point are the column's, and the policies trained on the nominal sheet."""
     from agents.gps.runner import TEACHER_DIR
-    from agents.gradient import GradConfig, plan_settings
+    from agents.gradient import plan_settings
 
     env = {name: getattr(job.env, name) for name in ENV_FIELDS}
     options = PatternCutOptions(sim_config=job.sim, arm=job.arm, **env)
     if not runs or plans is None or options.config() != job.sim.validated() or options.randomize:
         return
-    wanted = dataclasses.asdict(job.grad if isinstance(job.grad, GradConfig) else GradConfig())
+    wanted = dataclasses.asdict(job.grad)
     for run, contour, plan in zip(runs, contours, plans, strict=True):
         name = f"{safe_name(contour.name)}.json"
         teacher, kept = Path(run) / TEACHER_DIR / name, out / "grad" / name
