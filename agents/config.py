@@ -277,6 +277,9 @@ GENERALIST_POPULATION = 32
 GENERALIST_LOOKAHEAD = 8
 """Look-ahead points a generalist observes (``env.lookahead``; :mod:`envs.observations`)."""
 
+TEACHER_CONTOURS = 200
+"""Generated contours ``warpcut teachers`` optimises a teacher for where no count is given."""
+
 
 GRAD_ESTIMATORS = ("es", "tape")
 """How the plan optimiser may estimate its gradient (``GradConfig.estimator``): "es" (the default) or

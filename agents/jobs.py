@@ -30,6 +30,7 @@ from agents.config import (
     GRAD_CONFIG,
     GRAD_CONFIGS,
     SEED_RANGE,
+    TEACHER_CONTOURS,
     GradConfig,
     TrainConfig,
     generalist_train_config,
@@ -37,7 +38,7 @@ from agents.config import (
 from agents.methods import BASELINES, SELECTORS, SIMULATED, TABLE_METHODS, check_methods
 from envs.options import ENV_FIELDS, EnvConfig, PatternCutOptions
 from warpcut.planning.feasibility import ArmModel
-from warpcut.planning.generate import MAX_CONTOURS
+from warpcut.planning.generate import EXTRA_KINDS, KINDS, MAX_CONTOURS
 from warpcut.sim.config import SimConfig
 from warpcut.validation import (
     ConfigError,
@@ -790,3 +791,45 @@ class GeneralistJob:
     def unused_keys(self) -> dict[str, str]:
         """Keys this job would not use: the other learners' sections."""
         return other_learners(self.train)
+
+
+@dataclass
+class TeachersJob:
+    """``warpcut teachers``: a teacher for each of many generated contours, kept as a dataset that a
+    generalist learns from (:func:`agents.pipelines.teachers.make_teachers`). A dataset's ``config.json`` is
+    this job."""
+
+    count: int = TEACHER_CONTOURS
+    """Generated contours (the ``train`` split of :func:`warpcut.planning.generate_contours`, seeded
+    ``seed``), each planned and given a teacher."""
+    kinds: list[str] = field(default_factory=lambda: list(KINDS + EXTRA_KINDS))
+    """The kinds drawn in turn (:data:`warpcut.planning.generate.KINDS` and ``EXTRA_KINDS``)."""
+    candidates: int = EVALUATION_CANDIDATES
+    """Pinch candidates the planner searches per contour (as ``warpcut evaluate`` plans)."""
+    seed: int = 0
+    """Seed of the generated contours and of the teachers' optimiser."""
+    arm: ArmModel = field(default_factory=ArmModel)
+    """The cutting arm's footprint, for pinch feasibility."""
+    sim: SimConfig = field(default_factory=SimConfig)
+    """The physics and the protocol the teachers are optimised under."""
+    grad: GradConfig = field(default_factory=lambda: GRAD_CONFIGS["es"])
+    """The teacher: the plan optimiser's settings (``warpcut optimize``'s, the es estimator)."""
+
+    def __post_init__(self) -> None:
+        _check_fields(self)
+        check_integer("TeachersJob.count", self.count, 1, MAX_CONTOURS)
+        _counted("TeachersJob.candidates", self.candidates)
+        if (
+            not isinstance(self.kinds, list | tuple)
+            or not self.kinds
+            or any(k not in KINDS + EXTRA_KINDS for k in self.kinds)
+        ):
+            fail("TeachersJob.kinds", f"a non-empty list of {', '.join(KINDS + EXTRA_KINDS)}", self.kinds)
+
+    def check(self) -> TeachersJob:
+        """Itself (every field is checked as it is set)."""
+        return self
+
+    def unused_keys(self) -> dict[str, str]:
+        """Keys this job would not use: none."""
+        return {}

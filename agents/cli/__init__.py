@@ -24,6 +24,7 @@ from agents.cli import (
     robustness,
     run,
     simulate,
+    teachers,
     train,
 )
 from agents.cli.common import CleanErrors
@@ -59,6 +60,7 @@ for _module in (
     simulate,
     train,
     generalist,
+    teachers,
     optimize,
     robustness,
     export,

@@ -529,6 +529,7 @@ COMMAND_JOBS = {
     "robustness": "RobustnessJob",
     "simulate": "SimulateJob",
     "generalist": "GeneralistJob",
+    "teachers": "TeachersJob",
 }
 """Each command's job (:mod:`agents.jobs`): the settings ``--set`` reaches."""
 

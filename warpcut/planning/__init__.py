@@ -17,7 +17,7 @@ from warpcut.planning.feasibility import (
     pinch_rules,
     under_arm,
 )
-from warpcut.planning.generate import KINDS, SPLITS, generate_contours
+from warpcut.planning.generate import EXTRA_KINDS, KINDS, SPLITS, generate_contours
 from warpcut.planning.search import Plan, pinch_candidates, plan_cut, search_orders
 from warpcut.planning.segmentation import ORDER_LIMIT, Segment, is_monotone, segment_contour, segment_orders
 
@@ -26,6 +26,7 @@ __all__ = [
     "ORDER_LIMIT",
     "ArmModel",
     "InfeasiblePinch",
+    "EXTRA_KINDS",
     "KINDS",
     "Plan",
     "SPLITS",

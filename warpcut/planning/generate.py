@@ -9,6 +9,14 @@ Four kinds, drawn on the sheet at random sizes, places and turns (:data:`KINDS`)
 - ``open``: a smooth curve that enters through one edge of the sheet and leaves through another (or the
   same one), as the built-in open contours do.
 
+Two more are drawn only where asked (:data:`EXTRA_KINDS`, e.g. by ``warpcut teachers``), so the default
+streams stay as they are:
+
+- ``elongated``: a long, thin blob (2.2 to 4.5 times as long as it is wide) at any tilt, like the suite's
+  tilted ellipse;
+- ``edge``: a blob or polygon that hugs one edge of the sheet (3 to 6 mm from it), like the suite's cuts near
+  the clips.
+
 Contour ``i`` of split ``s`` under ``seed`` is drawn from its own random stream, seeded by
 ``(seed, s, i)``: the same triple gives the same contour on any machine, contours of different splits never
 share a stream, and asking for more contours of a split keeps the first ones. A draw the simulator would not
@@ -38,6 +46,13 @@ SPLITS = ("train", "validation", "test")
 
 KINDS = ("blob", "polygon", "notched", "open")
 """The kinds of generated contour, drawn in turn (contour ``i`` is of kind ``KINDS[i % 4]``)."""
+
+EXTRA_KINDS = ("elongated", "edge")
+"""Kinds drawn only where ``kinds`` names them (module docstring); contour ``i`` of a stream drawn with
+``kinds`` is of kind ``kinds[i % len(kinds)]``, and its name says which."""
+
+EDGE_MARGIN_MM = (3.0, 6.0)
+"""How far an ``edge`` contour keeps from the edge it hugs (mm, drawn in this range)."""
 
 MARGIN_MM = 10.0
 """Closed shapes keep at least this far from the sheet's edges (the built-in ones keep >= 8 mm)."""
@@ -89,9 +104,9 @@ def generate_contours(
     if count > MAX_CONTOURS:
         raise ValueError(f"count: at most {MAX_CONTOURS} contours of a split (got {count}); give fewer")
     kinds = list(kinds)
-    unknown = [k for k in kinds if k not in KINDS]
+    unknown = [k for k in kinds if k not in KINDS + EXTRA_KINDS]
     if not kinds or unknown:
-        raise ValueError(f"kinds: a non-empty list of {', '.join(KINDS)} (got {kinds!r})")
+        raise ValueError(f"kinds: a non-empty list of {', '.join(KINDS + EXTRA_KINDS)} (got {kinds!r})")
     config = SimConfig() if config is None else config
     return [_contour(i, split, int(seed), config, kinds[i % len(kinds)]) for i in range(int(count))]
 
@@ -189,6 +204,35 @@ def _notched(rng: np.random.Generator, width: float, height: float) -> tuple[boo
     return True, _closed(rng, _rounded(body - notch, float(rng.uniform(3, 5))), width, height)
 
 
+def _elongated(rng: np.random.Generator, width: float, height: float) -> tuple[bool, np.ndarray]:
+    scale = min(width, height) / 100
+    r0 = scale * float(rng.uniform(20, 38))
+    terms = [(k, float(rng.uniform(0, 0.06)) * r0, float(rng.uniform(0, 2 * np.pi))) for k in range(2, 5)]
+    t = np.linspace(0, 2 * np.pi, _DENSE, endpoint=False)
+    r = r0 + sum(a * np.cos(k * t + phase) for k, a, phase in terms)
+    aspect = 1.0 / float(rng.uniform(2.2, 4.5))
+    shape = Polygon(np.stack([r * np.cos(t), aspect * r * np.sin(t)], axis=1))
+    return True, _closed(rng, shape, width, height)
+
+
+def _edge(rng: np.random.Generator, width: float, height: float) -> tuple[bool, np.ndarray]:
+    scale = min(width, height) / 100
+    body = _blob_shape(rng, 0.8 * scale) if rng.random() < 0.5 else _polygon_shape(rng, 0.8 * scale)
+    outline = _outline(body)
+    placed = None if outline is None else _place(rng, Polygon(outline), width, height)
+    if placed is None:
+        raise ContourError("does not fit")
+    x0, y0, x1, y1 = placed.bounds
+    gap = float(rng.uniform(*EDGE_MARGIN_MM))
+    side = int(rng.integers(4))  # bottom, right, top, left
+    dx = (0.0, width - gap - x1, 0.0, gap - x0)[side]
+    dy = (gap - y0, 0.0, height - gap - y1, 0.0)[side]
+    points = _outline(shapely.affinity.translate(placed, dx, dy))
+    if points is None:
+        raise ContourError("does not fit")
+    return True, points
+
+
 def _closed(rng: np.random.Generator, shape, width: float, height: float) -> np.ndarray:
     outline = _outline(shape)
     placed = None if outline is None else _place(rng, Polygon(outline), width, height)
@@ -225,7 +269,10 @@ def _open(rng: np.random.Generator, width: float, height: float) -> tuple[bool, 
     return False, curve
 
 
-_DRAW = {"blob": _blob, "polygon": _polygon, "notched": _notched, "open": _open}
+_DRAW = {
+    "blob": _blob, "polygon": _polygon, "notched": _notched, "open": _open, "elongated": _elongated,
+    "edge": _edge,
+}  # fmt: skip
 
 
 def generated(spec: str, config: SimConfig | None = None) -> list[Contour] | None:
@@ -250,6 +297,8 @@ def generated(spec: str, config: SimConfig | None = None) -> list[Contour] | Non
             )
         return generate_contours(int(match["count"]), split, seed, config)
     index, kind = int(match["index"]), match["kind"]
+    if kind in EXTRA_KINDS:  # drawn where asked: any index
+        return [_contour(index, split, seed, config, kind)]
     if kind != KINDS[index % len(KINDS)]:
         raise ValueError(
             f"contour {spec!r}: contour {index} of a split is a {KINDS[index % len(KINDS)]} "

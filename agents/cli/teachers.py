@@ -1,0 +1,69 @@
+"""``warpcut teachers``: optimise a teacher for each of many generated contours, the dataset a generalist
+learns from (:func:`agents.pipelines.teachers.make_teachers`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from agents.cli import common
+from agents.config import TEACHER_CONTOURS
+
+FLAGS = {"count": "count", "seed": "seed"}
+"""Each flag's key in the job (:class:`agents.jobs.TeachersJob`)."""
+
+
+@click.command("teachers", cls=common.Command)
+@common.count_option("count", None, f"Generated contours, a teacher each (default {TEACHER_CONTOURS}).")
+@common.seed_option
+@common.device_option
+@common.ray_option("the contours (a contour's plan and teacher a unit)")
+@common.out_option("logs/teachers-TIMESTAMP")
+@common.run_dir_options
+@common.config_options
+def command(
+    count: int | None,
+    seed: int,
+    device: str | None,
+    ray: str | None,
+    out: Path | None,
+    resume: bool,
+    overwrite: bool,
+    config_file: str | None,
+    overrides: tuple[str, ...],
+    print_config: bool,
+) -> None:
+    """Optimise a teacher for each of many generated contours: each contour is planned as evaluate plans it,
+    and its teacher is the open-loop plan 'warpcut optimize' finds there. The dataset trains a generalist
+    (warpcut generalist --teachers DIR). --resume continues an interrupted dataset, or grows it with a larger
+    --count.
+
+    Everything but the flags is set with --config FILE and --set KEY=VALUE (the kinds of contour: kinds; the
+    teacher's optimiser: grad.*; the physics: sim.*); --print-config shows them all.
+    """
+    from agents.cluster import executor
+    from agents.jobs import TeachersJob
+
+    base = common.resumed_job(TeachersJob, out, resume, "teachers")
+    job = common.resolve(TeachersJob, config_file, overrides, FLAGS, base)
+    job.check()
+    if print_config:
+        common.print_config(job)
+        return
+    out, claim = common.claim(out, "teachers", resume, overwrite, "teachers")
+    from agents.pipelines.teachers import make_teachers  # torch: after every check
+
+    try:
+        with claim, executor(ray, device, common.log) as units:
+            click.echo(f"optimising {job.count} teacher(s) into {out} ({device})")
+            index = make_teachers(job, out, resume=resume, device=device, log=common.log, cluster=units)
+    except KeyboardInterrupt as stop:
+        raise common.RunInterrupted(out) from stop
+    click.echo(
+        f"done: {index['count']} teachers in {index['seconds']:.0f} s; their mean validation error "
+        f"{index['mean_error_vertices']:.1f} vertices, a still grasp's "
+        f"{index['mean_still_error_vertices']:.1f}"
+    )
+    click.echo(f"learn from them: warpcut generalist --teachers {out}")
+    click.echo(f"wrote {out}")

@@ -1,0 +1,223 @@
+"""Teachers at scale (:func:`make_teachers`, ``warpcut teachers``): the dataset a generalist learns from by
+supervised learning (guided policy search; :mod:`agents.dagger`).
+
+For each of ``count`` generated contours (the ``train`` split, every kind in turn, the suite-like ones too:
+:data:`warpcut.planning.generate.EXTRA_KINDS`) it plans the cut as ``warpcut evaluate`` plans it (pinch point,
+segments and order: :func:`warpcut.planning.plan_cut`) and optimises the teacher there, the open-loop plan
+``warpcut optimize --estimator es`` finds (:func:`agents.gradient.cached_plan`). A contour is a unit of work:
+on ``--ray`` the units run on the cluster's workers.
+
+A dataset directory holds ``config.json`` (the job), ``teachers/NAME/`` per contour (``cut.json``: the
+contour's points, pinch point and ordered segments; ``NAME.json``: the teacher's plan, its optimiser's history
+and settings) and, once every unit is done, ``teachers.json``: the index, one row per contour with its kind,
+its teacher's and the still grasp's validation errors (vertices, on the optimiser's held-out episodes) and the
+seconds it took. An interrupted dataset resumes where it stopped (``--resume``): finished contours are read
+back, a teacher stopped mid-optimisation continues from its state file; a resume with a larger ``count``
+grows the dataset (the first contours are the same).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from agents.cluster import Done, Executor, Serial
+from agents.config_io import to_plain
+from agents.jobs import CONFIG_FILE
+from warpcut.contours import Contour
+from warpcut.io import claim_run_dir, read_json, safe_name, write_json
+
+if TYPE_CHECKING:
+    from agents.jobs import TeachersJob
+
+INDEX_FILE = "teachers.json"
+"""A finished dataset's index (module docstring)."""
+
+CUT_FILE = "cut.json"
+"""A contour's cut in its unit folder: points, pinch point, ordered segments."""
+
+UNITS = "teachers"
+"""The dataset's folder of unit folders, one per contour."""
+
+FORMAT = 1
+"""The layout of ``teachers.json``."""
+
+
+@dataclass
+class Teacher:
+    """One contour of a dataset: how it is cut and its teacher's moves."""
+
+    contour: Contour
+    pinch: np.ndarray
+    """(2,) the pinch point (material mm)."""
+    segments: list[np.ndarray]
+    """The polylines cut, in order."""
+    plan: np.ndarray
+    """(T, 3) the teacher's grasp moves (mm), one per env step of the contour cut alone."""
+    error: float
+    """The teacher's validation error (vertices, on its optimiser's held-out episodes)."""
+    still_error: float
+    """The still grasp's on the same episodes."""
+
+
+def make_teachers(
+    job: TeachersJob,
+    out: str | Path,
+    *,
+    resume: bool = False,
+    device: str | None = None,
+    log: Callable[[str], None] = lambda _: None,
+    cluster: Executor | None = None,
+) -> dict:
+    """Build ``job``'s dataset into ``out`` (module docstring; claimed: :func:`warpcut.io.claim_run_dir`).
+
+    Returns:
+        The index (``teachers.json``).
+    """
+    with claim_run_dir(out, command="teachers", resume=resume):
+        return _make_teachers(job.check(), Path(out), resume, device, log, cluster or Serial())
+
+
+def _make_teachers(
+    job: TeachersJob,
+    out: Path,
+    resume: bool,
+    device: str | None,
+    log: Callable[[str], None],
+    cluster: Executor,
+) -> dict:
+    from agents.training import check_resumed_job
+    from warpcut.planning.generate import generate_contours
+
+    if resume and (out / CONFIG_FILE).is_file():  # its settings, but a dataset may grow (count)
+        check_resumed_job(out, dataclasses.replace(job, count=read_json(out / CONFIG_FILE).get("count")))
+    config = job.sim.validated()
+    write_json(out / CONFIG_FILE, to_plain(job))
+    started = time.perf_counter()
+    contours = generate_contours(job.count, "train", job.seed, config, job.kinds)
+    dirs = [out / UNITS / safe_name(c.name) for c in contours]
+    for folder in dirs:
+        folder.mkdir(parents=True, exist_ok=True)
+    unit = functools.partial(
+        _teacher_unit, config=config, candidates=job.candidates, seed=job.seed, arm=job.arm, grad=job.grad,
+        device=device,
+    )  # fmt: skip
+    count, finished = len(contours), iter(range(1, len(contours) + 1))
+    if cluster.address is not None:
+        log(f"  {count} teacher(s) on {cluster.workers} worker(s)")
+
+    def start(k: int) -> None:
+        log(f"  [{k + 1}/{count}] {contours[k].name}")
+
+    def done(k: int, result: Done) -> None:
+        row = result.value
+        log(
+            f"  [{next(finished)}/{count}] {row['contour']}: teacher {row['error_vertices']:.1f} vertices, "
+            f"still grasp {row['still_error_vertices']:.1f} ({result.seconds:.0f} s on {result.ran_on})"
+        )
+
+    made = cluster.map(unit, contours, dirs=dirs, done=done, start=start)
+    rows = [{**m.value, "ran_on": m.ran_on, "unit_seconds": round(m.seconds, 2)} for m in made]
+    index = {
+        "format": FORMAT,
+        "count": count,
+        "seconds": round(time.perf_counter() - started, 1),
+        "teacher_seconds": round(sum(r["seconds"] for r in rows), 1),
+        "mean_error_vertices": float(np.mean([r["error_vertices"] for r in rows])),
+        "mean_still_error_vertices": float(np.mean([r["still_error_vertices"] for r in rows])),
+        "contours": rows,
+    }
+    write_json(out / INDEX_FILE, index)
+    return index
+
+
+def _teacher_unit(
+    contour: Contour, folder: Path | None, *, config, candidates: int, seed: int, arm, grad, device
+) -> dict:
+    """One contour's cut and teacher, kept in ``folder`` (a unit of :func:`make_teachers`): its index row."""
+    from agents.gradient import cached_plan
+    from warpcut.planning import plan_cut
+
+    cut_file = folder / CUT_FILE
+    if cut_file.is_file():
+        cut = read_json(cut_file)
+    else:
+        plan = plan_cut(contour, config, num_candidates=candidates, seed=seed, device=device, arm=arm)
+        cut = {
+            "contour": {
+                "name": contour.name, "closed": bool(contour.closed),
+                "points": np.asarray(contour.points).tolist(),
+            },
+            "pinch": [float(v) for v in plan.chosen["pinch"]],
+            "segments": [np.asarray(s).tolist() for s in plan.ordered_segments()],
+        }  # fmt: skip
+        write_json(cut_file, cut)
+    segments = [np.asarray(s, dtype=np.float64) for s in cut["segments"]]
+    result = cached_plan(
+        contour, np.asarray(cut["pinch"]), segments, config, grad, device, seed, folder, arm=arm
+    )
+    history = result.history
+    return {
+        "contour": contour.name,
+        "kind": contour.name.rsplit("-", 1)[-1],
+        "pinch": cut["pinch"],
+        "segments": len(segments),
+        "steps": len(result.plan),
+        "error_vertices": float(history[result.best_iteration]["validation_error_vertices"]),
+        "still_error_vertices": float(history[0]["validation_error_vertices"]),
+        "best_iteration": result.best_iteration,
+        "seconds": round(result.seconds, 2),
+    }
+
+
+def load_teachers(source: str | Path, config=None) -> list[Teacher]:
+    """The teachers of the dataset in ``source`` (a finished ``warpcut teachers`` directory).
+
+    Raises:
+        ValueError: ``source`` is not a finished dataset, or one of its files cannot be read (named).
+    """
+    from agents.gradient import PlanResult
+    from warpcut.contours import validate
+
+    source = Path(source)
+    index_file = source / INDEX_FILE
+    if not index_file.is_file():
+        what = "no such directory" if not source.is_dir() else f"holds no {INDEX_FILE} (not finished?)"
+        raise ValueError(
+            f"teachers: {source}: {what}; give a finished directory of 'warpcut teachers' (or --resume it)"
+        )
+    try:
+        index = read_json(index_file)
+        teachers = []
+        for row in index["contours"]:
+            folder = source / UNITS / safe_name(row["contour"])
+            cut = read_json(folder / CUT_FILE)
+            shape = cut["contour"]
+            size = (100.0, 100.0) if config is None else (config.width_mm, config.height_mm)
+            contour = validate(shape["name"], shape["closed"], np.asarray(shape["points"], float), size)
+            plan = PlanResult.from_json(read_json(folder / f"{safe_name(row['contour'])}.json")).plan
+            teachers.append(
+                Teacher(
+                    contour,
+                    np.asarray(cut["pinch"], float),
+                    [np.asarray(s, float) for s in cut["segments"]],
+                    np.asarray(plan, np.float32),
+                    float(row["error_vertices"]),
+                    float(row["still_error_vertices"]),
+                )  # fmt: skip
+            )
+    except (OSError, KeyError, TypeError, ValueError) as exc:
+        raise ValueError(
+            f"teachers: {source} cannot be read ({exc}); build it again (warpcut teachers)"
+        ) from None
+    return teachers
+
+
+__all__ = ["INDEX_FILE", "Teacher", "load_teachers", "make_teachers"]
