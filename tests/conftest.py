@@ -26,6 +26,17 @@ def device(request) -> str:
     return request.param
 
 
+@pytest.fixture
+def unbounded_noise(monkeypatch):
+    """Process noise beyond :data:`warpcut.sim.config.NOISE_STD_MAX_MM` accepted: how a test blows a sheet up
+    (the bound refuses it from users)."""
+    import math
+
+    import warpcut.sim.config
+
+    monkeypatch.setattr(warpcut.sim.config, "NOISE_STD_MAX_MM", math.inf)
+
+
 @pytest.fixture(scope="module")
 def one_torch_thread():
     """Tiny MLPs gain nothing from threads, and threads slow to a crawl on a busy 2-core machine (use it

@@ -42,6 +42,7 @@ def test_next_step_autoreset_ends_with_the_score_and_restarts_on_the_next_step()
     np.testing.assert_allclose(vec.task.sim.displacements()[0], [-1, 0, 0], atol=1e-6)
 
 
+@pytest.mark.usefixtures("unbounded_noise")
 def test_a_diverged_env_under_next_step_reports_once_then_idles_to_the_batch_end():
     vec = PatternCutVecEnv(3, autoreset_mode=AutoresetMode.NEXT_STEP, noise_std=[0.03, 1e30, 0.03], **SMALL)
     vec.reset(seed=0)
@@ -57,6 +58,7 @@ def test_a_diverged_env_under_next_step_reports_once_then_idles_to_the_batch_end
     assert not terminated.any() and np.isfinite(obs).all() and not vec.scene.diverged.any()
 
 
+@pytest.mark.usefixtures("unbounded_noise")
 @pytest.mark.parametrize("mode", ["same_step", "next_step"])
 def test_an_env_that_diverged_is_terminated_at_a_truncated_batch_end_not_truncated(mode):
     """Diverging before the batch's episode is cut short, or on the step that cuts it short, ends that env

@@ -64,6 +64,7 @@ def test_rgb_array_shows_the_sheet_contour_grasp_and_the_cut_so_far():
     assert other.render().shape == (96, 160, 3)
 
 
+@pytest.mark.usefixtures("unbounded_noise")
 def test_renderer_options_and_diverged_sheets():
     task = CuttingTask(SimConfig(resolution=9, noise_std=[0.0, 1e30]), load_contour("circle-small"), 2)
     task.reset()

@@ -73,6 +73,7 @@ def test_truncated_continuous_episodes_are_flagged_for_bootstrapping():
     assert np.all(obs[:, 0] == 0.0)
 
 
+@pytest.mark.usefixtures("unbounded_noise")
 def test_a_diverged_env_ends_alone_then_idles_until_the_batch_ends():
     env = PatternCutSB3Env(
         PatternCutVecEnv(3, autoreset_mode="same_step", noise_std=[0.03, 1e30, 0.03], **SMALL)

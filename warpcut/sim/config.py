@@ -61,6 +61,10 @@ DT_MAX_S = 1.0
 update; beyond some mm per update the springs no longer hold it (see :data:`SETTLED_REACH_SHEETS`)."""
 GRAVITY_MAX_MM_S2 = 1.0e5
 """Largest ``gravity`` accepted (mm/s^2), about 10 g (the default is the authors' 521 mm/s^2)."""
+NOISE_STD_MAX_MM = 1.0
+"""Largest ``noise_std`` accepted (mm per update): 33 times the default 0.03 mm, almost 4 times the top of the
+Fig. 5 noise sweep (0.27 mm), a quarter of the default grid's spacing. Beyond it the sheet is noise, not
+gauze, and its scores mean nothing."""
 RUNAWAY_SHEETS = 10.0
 """A vertex farther than this many sheet sizes (``max(width_mm, height_mm)``, plus
 ``max_displacement_mm``) beyond the sheet's rest outline in x or y, or above it, has run away: its env
@@ -331,7 +335,9 @@ _FIELD_RULES: dict[str, Callable[[str, Any], Any]] = {
     "elasticity": lambda w, v: check_numbers(
         w, v, 0, 2, low_open=True, high_open=True, note="1 is plain Gauss-Seidel, above 1 over-relaxes"
     ),
-    "noise_std": lambda w, v: check_numbers(w, v, 0, unit="mm", note="0: no process noise"),
+    "noise_std": lambda w, v: check_numbers(
+        w, v, 0, NOISE_STD_MAX_MM, unit="mm", note="per update; 0: no process noise, default 0.03"
+    ),
     "sweeps": lambda w, v: check_integer(w, v, 1, 200),
     "chebyshev_rho": lambda w, v: check_number(
         w, v, 0, CHEBYSHEV_RHO_MAX, high_open=True, note="0 is plain Gauss-Seidel; default 0.94"
