@@ -146,6 +146,8 @@ class RayCluster:
             _check_reachable(address)
         settings = {"runtime_env": {"env_vars": env}, "log_to_driver": True, "configure_logging": False}
         handlers = _signal_handlers()
+        if local:  # Ray's own default for a new local instance (a token), said once in the docs, not each run
+            os.environ.setdefault("RAY_AUTH_MODE", "token")
         try:
             if local:
                 ray.init(num_cpus=cpus, include_dashboard=False, **settings)
