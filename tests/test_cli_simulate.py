@@ -32,7 +32,8 @@ def test_contours_lists_the_suite_and_writes_json(tmp_path):
     assert circle["closed"] is True and circle["length_mm"] == pytest.approx(157.08, abs=0.1)
 
 
-def test_simulate_writes_results_json(tmp_path):
+def test_simulate_writes_results_json(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
     out = tmp_path / "results.json"
     code, stdout, _ = invoke(
         ["simulate", "--contour", "fls-circle", "--policy", "none,fixed,analytic", "--pinch", "83,83"]
@@ -49,7 +50,9 @@ def test_simulate_writes_results_json(tmp_path):
     assert report["results"]["none"]["error_vertices"] > 0
     assert report["results"]["fixed"]["pinch"] == pytest.approx([83.0, 83.0])
     assert "improvement" in stdout and "analytic" in stdout and "13x13" in stdout
-    assert (tmp_path / "regions.png").is_file()  # plots: on by default, next to --json
+    # plots: on by default, in a run folder of their own (not beside the file the user named), said
+    (figure,) = (tmp_path / "logs").glob("simulate-*/regions.png")
+    assert str(figure.relative_to(tmp_path)) in stdout and not (tmp_path / "regions.png").exists()
 
 
 def test_simulate_accepts_a_contour_file(tmp_path):

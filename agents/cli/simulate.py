@@ -50,7 +50,7 @@ FLAGS = {
 @common.seed_option
 @common.device_option
 @common.json_option
-@common.record_flag("next to --json, or in logs/simulate-TIMESTAMP")
+@common.record_flag("in logs/simulate-TIMESTAMP")
 @video_option
 @common.config_options
 def command(
@@ -94,9 +94,10 @@ def command(
         check_pinch(job.pinch, contour, job.sim.validated(), allow=job.allow_infeasible_pinch)
     mesh_dir = None if job.export_mesh is None else Path(job.export_mesh)
     inputs = [job.contour] if isinstance(job.contour, str) else []
-    out = json_path.parent if json_path else common.run_dir(None, "simulate")
-    writes_out = job.plots or job.record is not None or job.video is not None  # the figures, .rrd, .mp4
-    out_option = "--json's folder" if json_path else "the output folder"
+    # the figures, .rrd and .mp4 go into a run folder of their own, never beside a file the user named
+    out = common.run_dir(None, "simulate")
+    writes_out = job.plots or job.record is not None or job.video is not None
+    out_option = "the output folder"
     outputs = {"--json": json_path, "export_mesh": mesh_dir, out_option: out if writes_out else None}
     # before the simulation: a folder it could not write, a file it did not write
     common.check_outputs(outputs, inputs, own=(out, "simulate"))
