@@ -12,7 +12,9 @@ Each learner has its folder (``agents/NAME/``) with its settings dataclass (the 
 - ``ppo`` (:mod:`agents.ppo`): rsl-rl's PPO with warpcut's speed-ups and a categorical policy that starts
   by holding still;
 - ``apg`` (:mod:`agents.apg`): analytic policy gradients through the differentiable simulator, on a runner
-  of its own (its episodes run under ``wp.Tape``, not through the env's step).
+  of its own (its episodes run under ``wp.Tape``, not through the env's step);
+- ``dagger`` (:mod:`agents.dagger`): supervised learning from a dataset of teachers (``warpcut teachers``) on
+  the student's own states, the learner of a generalist (``warpcut generalist --teachers DIR``).
 
 A settings class (``Algorithm.settings``) is a dataclass whose fields have defaults, with:
 
@@ -112,6 +114,17 @@ ALGORITHMS = {
         runner="agents.apg.runner:ApgRunner",
         settings="agents.apg.config:ApgConfig",
         fixed_sheet="env.randomize: APG differentiates one fixed sheet; train with es or ppo (--algo)",
+    ),
+    "dagger": Algorithm(
+        "dagger",
+        "DAgger from a teacher dataset (warpcut teachers): the student regresses onto its teachers' moves on "
+        "its own states",
+        num_envs=16,
+        iterations=20,
+        action_type="continuous",
+        continuous_only=True,
+        runner="agents.training:Runner",
+        settings="agents.dagger.config:DaggerConfig",
     ),
 }
 """Every learner, the default first."""

@@ -725,6 +725,10 @@ class SimulateJob:
         return unused
 
 
+GENERALIST_LEARNERS = ("es", "dagger")
+"""The learners a generalist trains with."""
+
+
 @dataclass
 class GeneralistJob:
     """``warpcut generalist``: one tensioning policy for every contour, trained over many contours at once
@@ -763,13 +767,15 @@ class GeneralistJob:
 
     def check(self) -> GeneralistJob:
         """Itself, or ``ValueError`` naming what cannot train."""
-        if self.generated == 0 and not self.contours:
-            raise ValueError("generated: give training contours (generated > 0, or contours)")
-        if self.train.algo != "es":
+        if self.train.algo not in GENERALIST_LEARNERS:
             raise ValueError(
-                f"train.algo: a generalist trains with es (each perturbed policy cuts every contour), not "
-                f"{self.train.algo}"
+                f"train.algo: a generalist trains with {' or '.join(GENERALIST_LEARNERS)} (each of es's "
+                f"perturbed policies cuts every contour; dagger learns from teachers), not {self.train.algo}"
             )
+        if self.train.algo == "dagger":
+            self.train.dagger.dataset()
+        elif self.generated == 0 and not self.contours:
+            raise ValueError("generated: give training contours (generated > 0, or contours)")
         if not self.env.lookahead:
             raise ValueError(
                 "env.lookahead: a generalist must see what lies ahead of the scissors; give 1 or more "
@@ -778,19 +784,29 @@ class GeneralistJob:
         return self
 
     def training_config(self, count: int) -> TrainConfig:
-        """The learner's settings for ``count`` training contours: ``num_envs`` = population x contours."""
-        population = self.train.es.population
-        num_envs = population * count
+        """The learner's settings for ``count`` training contours: ``num_envs`` = es's population x contours,
+        or dagger's one env a contour."""
+        num_envs = self.train.es.population * count if self.train.algo == "es" else count
         if self.train.num_envs is not None and self.train.num_envs != num_envs:
+            why = (
+                f"every contour with each of es's {self.train.es.population} policies"
+                if self.train.algo == "es"
+                else "each teacher's contour once an iteration"
+            )
             raise ValueError(
-                f"train.num_envs: a generalist cuts every contour with each of es's {population} policies: "
-                f"{num_envs} envs for {count} contours; leave it unset"
+                f"train.num_envs: a generalist cuts {why}: {num_envs} envs for {count} contours; leave it "
+                "unset"
             )
         return dataclasses.replace(self.train, num_envs=num_envs).check(False)
 
     def unused_keys(self) -> dict[str, str]:
-        """Keys this job would not use: the other learners' sections."""
-        return other_learners(self.train)
+        """Keys this job would not use: the other learners' sections, and with dagger the generated and
+        built-in training contours (it trains on its teachers' contours)."""
+        unused = other_learners(self.train)
+        if self.train.algo == "dagger":
+            why = "read by es generalists only (dagger trains on its teachers' contours)"
+            unused |= {"generated": why, "contours": why}
+        return unused
 
 
 @dataclass

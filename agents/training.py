@@ -341,7 +341,8 @@ class Runner(OnPolicyRunner):
         iterations_done: Learning iterations completed, including those before a resume.
         metrics: Last iteration's ``final_error`` (the mean over the cuts that ended of their path error over
             the intended area), ``mean_return``, ``mean_episode_length`` (None until an episode ends),
-            ``iteration_steps_per_s`` and the learner's own (e.g. es's ``population_cost``).
+            ``iteration_steps_per_s`` and the learner's own, every metric its update returns (e.g. es's
+            ``population_cost``, dagger's ``imitation_loss``).
         checkpoint: Newest checkpoint written, or None.
         on_iteration: Called with ``(iterations_done, metrics)`` after each iteration.
     """
@@ -599,7 +600,7 @@ class _QuietLogger(Logger):
         with contextlib.redirect_stdout(io.StringIO()):
             super().log(it, start_it, total_it, collect_time, learn_time, **kwargs)
         steps = self.cfg["num_steps_per_env"] * self.num_envs * self.gpu_world_size
-        own = {k: float(v) for k, v in (kwargs.get("loss_dict") or {}).items() if k in OWN_METRICS}
+        own = {k: float(v) for k, v in (kwargs.get("loss_dict") or {}).items()}  # the learner's own
         self.on_iteration(
             it,
             {
@@ -614,11 +615,6 @@ class _QuietLogger(Logger):
 
     def _store_code_state(self) -> list[str]:
         return []
-
-
-OWN_METRICS = ("population_cost", "best_cost", "step_norm")
-"""The learners' own metrics that the history keeps (es's: its population's mean and best cost, on the same
-scale as ``final_error``, and the length of its step)."""
 
 
 def seed_everything(seed: int) -> None:

@@ -17,6 +17,7 @@ FLAGS = {
     "validation_contours": "validation_contours",
     "iterations": "train.iterations",
     "seed": "seed",
+    "teachers": "train.dagger.teachers",
 }
 """Each flag's key in the job (:class:`agents.jobs.GeneralistJob`)."""
 
@@ -31,6 +32,12 @@ FLAGS = {
     ),
     help="Built-in contours to train on as well: 'all' (the suite), or comma-separated names and files "
     "(default: none, so the suite measures the generalist zero-shot).",
+)
+@click.option(
+    "--teachers",
+    default=None,
+    help="Learn from this teacher dataset (a directory of 'warpcut teachers'), by DAgger on its contours "
+    "(default: es on generated contours).",
 )
 @common.count_option(
     "validation-contours",
@@ -50,6 +57,7 @@ FLAGS = {
 def command(
     generated: int | None,
     contours: list[str] | None,
+    teachers: str | None,
     validation_contours: int | None,
     iterations: int | None,
     seed: int,
@@ -75,6 +83,8 @@ def command(
     from warpcut.planning.generate import resolve_specs
 
     base = common.resumed_job(GeneralistJob, out, resume, "generalist")
+    if teachers is not None and not any(o.split("=", 1)[0].strip() == "train.algo" for o in overrides):
+        overrides = ("train.algo=dagger", *overrides)  # the learner that learns from teachers
     job = common.resolve(GeneralistJob, config_file, overrides, FLAGS, base)
     if base is None:
         common.refuse_unused_settings(job, overrides, FLAGS)

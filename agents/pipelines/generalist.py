@@ -29,10 +29,10 @@ from agents.cluster import Executor
 from agents.config_io import to_plain
 from agents.generalist import ES_FIELDS, FORMAT, GENERALIST_FILE, POLICY_FIELDS
 from agents.jobs import CONFIG_FILE
+from agents.teachers import load_teachers
 from envs.options import ENV_FIELDS, PatternCutOptions
 from warpcut.contours import Contour
 from warpcut.io import claim_run_dir, read_json, write_json
-from warpcut.planning import Plan
 
 if TYPE_CHECKING:
     from agents.jobs import GeneralistJob
@@ -98,28 +98,43 @@ def _train_generalist(
     if resume:  # the run's own settings, but for train.iterations (train for longer)
         check_resumed_job(out, job)
     config = job.sim.validated()
-    train_set, validation = training_contours(job)
-    log(f"  {len(train_set)} training contours, {len(validation)} validation contours")
     settings = dict(num_candidates=job.candidates, seed=job.seed, device=device, arm=job.arm)
     stages = lambda *_: None  # noqa: E731
-    plans, _ = _table_plans(True, train_set + validation, config, settings, out, log, stages, resume, cluster)
+    if job.train.algo == "dagger":  # the teachers' contours, cut as their teachers cut them
+        from warpcut.planning.generate import generate_contours
+
+        teachers_dir = job.train.dagger.dataset()
+        teachers = load_teachers(teachers_dir, config)
+        train_set = [t.contour for t in teachers]
+        cuts = [(t.pinch, t.segments) for t in teachers]
+        validation = generate_contours(job.validation_contours, "validation", job.seed, config)
+        log(f"  {len(train_set)} teachers ({teachers_dir}), {len(validation)} validation contours")
+        plans, _ = _table_plans(True, validation, config, settings, out, log, stages, resume, cluster)
+        cuts += [(p.chosen["pinch"], p.ordered_segments()) for p in plans]
+    else:
+        train_set, validation = training_contours(job)
+        log(f"  {len(train_set)} training contours, {len(validation)} validation contours")
+        plans, _ = _table_plans(
+            True, train_set + validation, config, settings, out, log, stages, resume, cluster
+        )
+        cuts = [(p.chosen["pinch"], p.ordered_segments()) for p in plans]
     write_json(out / CONFIG_FILE, to_plain(job))
     cfg = job.training_config(len(train_set))
     count = len(train_set)
     population = cfg.batch_size // count
     order = [e % count for e in range(cfg.batch_size)]  # policy p cuts every contour: envs p*C .. p*C+C-1
-    options = _options(job, [train_set[k] for k in order], [plans[k] for k in order], device)
+    options = _options(job, [train_set[k] for k in order], [cuts[k] for k in order], device)
     write_json(out / GENERALIST_FILE, _settings(job, train_set, validation))
-    log(f"  es: {population} perturbed policies x {count} contours = {cfg.batch_size} envs an iteration")
-    if cluster is None or cluster.address is None:
+    if cfg.algo == "es":
+        log(f"  es: {population} perturbed policies x {count} contours = {cfg.batch_size} envs an iteration")
+    if cluster is None or cluster.address is None or cfg.algo != "es":  # dagger: a contour an env, here
         env = training_env(options, cfg, job.seed)
     else:  # each worker steps whole perturbed policies' envs
         from agents.shards import ShardedEnv
 
         env = ShardedEnv(options, cfg.batch_size, cluster, count, cfg.torch_device, job.seed)
         log(f"  es: the batch in {len(env.parts)} part(s), on {', '.join(env.ran_on)}")
-    val_plans = plans[count:]
-    val_options = _options(job, validation, val_plans, device)
+    val_options = _options(job, validation, cuts[count:], device)
     with batch_named("validation_contours", "set validation_contours to at most {fits}"):
         validation_env = PatternCutVecEnv(len(validation), val_options)
     area = validation_env.scene.area_mm2
@@ -141,12 +156,18 @@ def _train_generalist(
             env.close()
 
 
-def _options(job: GeneralistJob, contours: list[Contour], plans: list[Plan], device: str | None):
-    """Options of envs cutting ``contours`` as ``plans`` planned them, with the job's env settings."""
+def _options(
+    job: GeneralistJob,
+    contours: list[Contour],
+    cuts: list[tuple[np.ndarray, list[np.ndarray]]],
+    device: str | None,
+):
+    """Options of envs cutting ``contours`` at ``cuts`` (each a pinch point and the segments in order), with
+    the job's env settings."""
     return PatternCutOptions(
         contour=list(contours),
-        pinch_point=np.array([np.asarray(p.chosen["pinch"], dtype=np.float64) for p in plans]),
-        segments=[[s.tolist() for s in p.ordered_segments()] for p in plans],
+        pinch_point=np.array([np.asarray(pinch, dtype=np.float64) for pinch, _ in cuts]),
+        segments=[[np.asarray(s).tolist() for s in segments] for _, segments in cuts],
         sim_config=job.sim,
         device=device,
         arm=job.arm,
@@ -157,7 +178,9 @@ def _options(job: GeneralistJob, contours: list[Contour], plans: list[Plan], dev
 def _policy(job: GeneralistJob) -> dict:
     """The network's settings that fine-tuning takes (:data:`agents.generalist.POLICY_FIELDS`)."""
     own = {name: to_plain(getattr(job.train, name)) for name in POLICY_FIELDS}
-    return own | {name: getattr(job.train.es, name) for name in ES_FIELDS}
+    learner = getattr(job.train, job.train.algo)  # its network: the feedback path, scheduled gains
+    es = {name: getattr(job.train.es, name) for name in ES_FIELDS}  # what fine-tuning with es steps by
+    return own | es | {"feedback": learner.feedback, "scheduled": learner.scheduled}
 
 
 def _settings(job: GeneralistJob, train_set: list[Contour], validation: list[Contour]) -> dict:
