@@ -93,6 +93,11 @@ def test_every_size_a_user_sets_is_checked_before_it_is_allocated(tmp_path, monk
         (["evaluate", "--contours", "gen-test-0:1000000"], "at most 10000 contours of a split"),
         (["generalist", "--set", "generated=1000000"], "generated: an integer in [0, 10000]"),
         (["plan", "--contour", "circle-small", "--candidates", "2000000000"], "the planner's batch"),
+        (["evaluate", "--contours", "circle-small", "--set", "candidates=100000000"],
+         "candidates: 100000001"),
+        (["run", "--contour", "circle-small", "--policy", "fixed", "--set", "candidates=100000000"],
+         "candidates: 100000001"),
+        (["teachers", "--set", "candidates=100000000"], "candidates: 100000001"),
     ]:  # fmt: skip
         out = ["--out", str(tmp_path / "out")] if args[0] != "plan" else []
         error = refused([*args, "--device", "cpu", *out], capfd)

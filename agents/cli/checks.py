@@ -75,3 +75,16 @@ def setting_form(command: click.Command, job: str | None, key: str, value: str) 
 
     keys = flatten(to_plain(getattr(agents.jobs, job)()))
     return f"--set {key}={value}" if key in keys else None
+
+
+def check_planner_memory(candidates: int, sim, key: str = "candidates") -> None:
+    """``ValueError`` naming ``key`` where the planner's batch for ``candidates`` pinch points (and the
+    centroid; one segment order at least) on ``sim``'s sheet would not fit in memory: said before the command
+    claims its run directory, not once it has planned its way there."""
+    from warpcut.sim.memory import check_batch_memory
+
+    config = sim.validated()
+    check_batch_memory(
+        candidates + 1, config.nx * config.ny, name=key,
+        fix=f"plan fewer pinch candidates (the {key} setting) or lower the resolution",
+    )  # fmt: skip

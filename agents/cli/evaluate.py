@@ -9,6 +9,7 @@ import click
 from agents import cluster
 from agents.algorithms import ALGORITHMS, DEFAULT_ALGORITHM
 from agents.cli import common
+from agents.cli.checks import check_planner_memory
 from agents.cli.video import videos, with_videos
 from agents.config import EVALUATION_TRIALS
 from agents.methods import METHODS, TABLE_METHODS
@@ -109,6 +110,8 @@ def command(
     if print_config:
         common.print_config(job)
         return
+    if job.plan:
+        check_planner_memory(job.candidates, job.sim)
     record = _first_contour_envs("record", job.record, job.trials, "recording")
     video = _first_contour_envs("video", job.video, job.trials, "filming")
     out, claim = common.claim(out, "evaluate", resume, overwrite, "evaluate")

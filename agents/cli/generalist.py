@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from agents.cli import common
-from agents.cli.checks import check_network_memory
+from agents.cli.checks import check_network_memory, check_planner_memory
 from agents.config import GENERALIST_CONTOURS, GENERALIST_ITERATIONS, GENERALIST_VALIDATION_CONTOURS
 
 FLAGS = {
@@ -93,6 +93,7 @@ def command(
         common.print_config(job)
         return
     check_network_memory(job.train)
+    check_planner_memory(job.candidates, job.sim)
     if job.contours:  # a bad name or file: now
         resolve_specs(job.contours, job.sim.validated())
     out, claim = common.claim(out, "generalist", resume, overwrite, "generalist")

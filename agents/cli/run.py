@@ -8,6 +8,7 @@ import click
 
 from agents.algorithms import ALGORITHMS, DEFAULT_ALGORITHM
 from agents.cli import common
+from agents.cli.checks import check_planner_memory
 from agents.config import BUDGETS, DEFAULT_BUDGET, DEFAULT_CONTOUR, DEFAULT_SELECTOR
 from agents.methods import SELECTORS, point_text
 
@@ -118,6 +119,7 @@ def command(
     if print_config:
         common.print_config(job)
         return
+    check_planner_memory(job.settings()["candidates"], job.sim)
     inputs = [job.contour] if isinstance(job.contour, str) else []
     out, claim = common.claim(out, f"run-{safe_name(contour_name)}", resume, overwrite, "run")
     common.check_outputs({"--json": json_path}, inputs, own=(out, "run"))

@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from agents.cli import common
+from agents.cli.checks import check_planner_memory
 from agents.config import TEACHER_CONTOURS
 
 FLAGS = {"count": "count", "seed": "seed"}
@@ -51,6 +52,7 @@ def command(
     if print_config:
         common.print_config(job)
         return
+    check_planner_memory(job.candidates, job.sim)
     out, claim = common.claim(out, "teachers", resume, overwrite, "teachers")
     from agents.pipelines.teachers import make_teachers  # torch: after every check
 
