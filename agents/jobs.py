@@ -30,6 +30,7 @@ from agents.config import (
     GRAD_CONFIG,
     GRAD_CONFIGS,
     SEED_RANGE,
+    STUDENT_DEFAULTS,
     TEACHER_CONTOURS,
     GradConfig,
     TrainConfig,
@@ -456,13 +457,19 @@ def with_dependent_defaults(job: Any, explicit: set[str]) -> Any:
 
     - the env's action type is the learner's (``agents.algorithms``): PPO trains discrete moves;
     - the gradient optimiser's steps and step size are its estimator's (:data:`agents.config.GRAD_CONFIGS`);
-    - a policy started from a generalist (``init``) observes and acts as the generalist does.
+    - a policy started from a generalist (``init``) observes and acts as the generalist does;
+    - a generalist learned from teachers (dagger) has its own observation and network
+      (:data:`agents.config.STUDENT_DEFAULTS`).
     """
     from agents.algorithms import algorithm
+    from agents.config_io import apply
 
     if hasattr(job, "train") and hasattr(job, "env") and "env.action_type" not in explicit:
         actions = algorithm(job.train.algo).action_type
         job = dataclasses.replace(job, env=dataclasses.replace(job.env, action_type=actions))
+    if isinstance(job, GeneralistJob) and job.train.algo == "dagger":
+        given = {key: value for key, value in STUDENT_DEFAULTS.items() if key not in explicit}
+        job = apply(job, given, "a dagger generalist's defaults")
     if getattr(job, "init", None) is not None:  # fine-tuning observes and acts as the generalist does
         from agents.generalist import fine_tuning_defaults
 

@@ -116,7 +116,7 @@ def _labeller(teachers, options, num_envs):
     Env.num_envs = num_envs
     shell = DAgger.__new__(DAgger)
     shell._path, shell._steps = DAgger._teacher_paths(Env(), teachers)
-    shell.max_step, shell.max_displacement = 1.0, 10.0
+    shell.max_step, shell.max_displacement, shell.horizon = 1.0, 10.0, 1
     return shell
 
 
@@ -157,6 +157,9 @@ def test_dagger_labels_replay_the_teacher_on_its_states_and_lead_back_off_them(d
     back = labeller.teacher_moves(raw.repeat(len(teachers), 1))[-1].numpy()
     t = round(0.5 * (len(path) - 1))
     assert np.allclose(back, np.clip(path[t + 1] - raw[0, 1:4].numpy() * 10.0, -1, 1), atol=1e-5)
+    labeller.horizon = 4  # a horizon aims 4 steps on, a quarter of the way a step
+    ahead = labeller.teacher_moves(raw.repeat(len(teachers), 1))[-1].numpy()
+    assert np.allclose(ahead, np.clip((path[t + 4] - raw[0, 1:4].numpy() * 10.0) / 4, -1, 1), atol=1e-5)
 
 
 def test_dagger_needs_teachers_for_its_contours(dataset, tmp_path, capfd):
@@ -201,3 +204,24 @@ def test_a_dagger_generalist_trains_resumes_exactly_and_plays_everywhere(student
     a = read_checkpoint(out / "latest.pt")["actor_state_dict"]
     b = read_checkpoint(again / "latest.pt")["actor_state_dict"]
     assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_a_dagger_generalist_has_its_own_observation_and_network_unless_given(dataset):
+    import yaml
+
+    from agents.config import STUDENT_DEFAULTS
+
+    base = ["generalist", "--teachers", str(dataset[0]), "--print-config"]
+    code, printed, _ = invoke(base)
+    assert code == 0, printed
+    config = yaml.safe_load(printed)
+    assert config["train"]["algo"] == "dagger" and config["train"]["dagger"]["teachers"] == str(dataset[0])
+    assert config["env"]["num_fiducials"] == STUDENT_DEFAULTS["env.num_fiducials"]
+    assert config["train"]["actor_hidden_dims"] == STUDENT_DEFAULTS["train.actor_hidden_dims"]
+    code, printed, _ = invoke([*base, "--set", "env.num_fiducials=12"])
+    assert code == 0 and yaml.safe_load(printed)["env"]["num_fiducials"] == 12
+    code, printed, _ = invoke(["generalist", "--print-config"])  # es's generalist is as it was
+    assert (
+        yaml.safe_load(printed)["train"]["algo"] == "es"
+        and yaml.safe_load(printed)["env"]["num_fiducials"] == 12
+    )

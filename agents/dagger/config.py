@@ -29,7 +29,7 @@ class DaggerConfig:
     (behaviour cloning), then the student's own states (0: the student's alone after the first)."""
     learning_rate: float = 0.001
     """Adam's step for the student's weights."""
-    updates: int = 200
+    updates: int = 500
     """Adam steps an iteration, each on ``minibatch`` labelled states drawn from the aggregated dataset."""
     minibatch: int = 1024
     """Labelled states per Adam step."""
