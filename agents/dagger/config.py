@@ -38,10 +38,12 @@ class DaggerConfig:
     exactly (4 bytes x ~100 numbers each)."""
     stride: int = 2
     """Keep every ``stride``-th step of a cut (neighbouring steps are nearly the same state)."""
-    horizon: int = 1
+    horizon: int = 8
     """Steps ahead the label aims at: the move that takes the grasp to the teacher's ``horizon`` steps on, a
-    ``horizon``-th of the way a step (1: the teacher's next move; more: its moves averaged, smoother to learn
-    from what the student observes)."""
+    ``horizon``-th of the way a step (1: the teacher's next move; more: its moves averaged). An es plan's
+    moves jitter from step to step (0.45 mm a step on average, about as much as they move the grasp), which
+    nothing the student observes predicts; 8 steps (8 mm of cut) measured best of 1, 8 and 16
+    (docs/results.md)."""
     feedback: bool = True
     """Give the student the linear feedback path on the tracking error (:class:`agents.models.FeedbackMLP`),
     as es's generalist has: fine-tuning from it with es takes the same network."""
