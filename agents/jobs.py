@@ -765,6 +765,9 @@ class GeneralistJob:
     train: TrainConfig = field(default_factory=generalist_train_config)
     """The learner: es, its population each cutting every contour; ``num_envs`` follows (population x
     contours)."""
+    init: str | None = None
+    """A generalist (a run directory, or ``generalist`` for the shipped one) whose policy es starts from
+    instead of "hold still": es on the path score, refining a generalist learned from teachers."""
 
     def __post_init__(self) -> None:
         _check_fields(self)

@@ -148,7 +148,7 @@ def _train_generalist(
     try:
         return train(
             env, cfg, out, seed=job.seed, resume=latest, progress=progress, validate=validate,
-            label=f"{cfg.algo.upper()} generalist",
+            label=f"{cfg.algo.upper()} generalist", init=None if latest is not None else job.init,
             marks={"contours": count, "validation_contours": len(validation)},
         )  # fmt: skip
     finally:
