@@ -50,6 +50,10 @@ CONNECT_TIMEOUT_S = 5.0
 WAIT_S = 0.5
 """How long the driver waits for a unit before it looks at its signals (Ctrl-C, SIGTERM) again."""
 
+RAY_AUTH_LOGGER = "ray._private.authentication.authentication_token_setup"
+"""The logger of Ray's notice that a new local instance uses token authentication, its default: a
+``--ray local`` command keeps the default and does not print the notice (docs/cluster.md)."""
+
 RUN_KEYS = ("ran_on", "unit_seconds")
 """A result row's fields that say where and how long its units ran: the rest of a row is the same in every
 run of the job at its seed, here or on a cluster."""
@@ -146,8 +150,10 @@ class RayCluster:
             _check_reachable(address)
         settings = {"runtime_env": {"env_vars": env}, "log_to_driver": True, "configure_logging": False}
         handlers = _signal_handlers()
-        if local:  # Ray's own default for a new local instance (a token), said once in the docs, not each run
-            os.environ.setdefault("RAY_AUTH_MODE", "token")
+        if local:  # Ray's default for a new local instance (a token) is said once in the docs, not each run
+            import logging
+
+            logging.getLogger(RAY_AUTH_LOGGER).setLevel(logging.ERROR)
         try:
             if local:
                 ray.init(num_cpus=cpus, include_dashboard=False, **settings)
