@@ -161,6 +161,11 @@ class RayCluster:
                 ray.init(address=address, **settings)
         except ConnectionError as exc:
             raise ValueError(f"--ray {address}: {_first_line(exc)}; {_START_HINT}") from None
+        except (RuntimeError, ray.exceptions.RayError) as exc:  # a head that failed to start, a refused token
+            raise ValueError(
+                f"--ray {address}: Ray did not start ({type(exc).__name__}: {_first_line(exc)}); see Ray's "
+                "logs under /tmp/ray, or run without --ray"
+            ) from None
         finally:  # Ray's core puts its own in (SIGTERM: a stack dump, then abort): stop as the command does
             for signum, handler in handlers.items():
                 signal.signal(signum, handler)

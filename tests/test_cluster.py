@@ -341,3 +341,18 @@ def test_sigterm_stops_a_fanned_out_evaluate_and_its_ray_instance(tmp_path):
     time.sleep(1)
     assert raylets() <= before, "the command's Ray instance outlived it"
     assert (out / "plans.json").is_file() and (out / ".warpcut-run.json").is_file()  # resumable
+
+
+def test_a_ray_that_does_not_start_is_one_line(monkeypatch):
+    """A head that fails to start, or refuses the driver's token, is said in one line, not Ray's traceback."""
+    ray = pytest.importorskip("ray")
+
+    def fail(**_):
+        raise RuntimeError("Failed to start GCS.  Last 0 lines of error files:\n\nmore")
+
+    monkeypatch.setattr(ray, "init", fail)
+    with pytest.raises(
+        ValueError, match=r"^--ray local: Ray did not start \(RuntimeError: Failed to start GCS"
+    ) as e:
+        RayCluster("local", 2, "cpu", lambda _: None)
+    assert "\n" not in str(e.value)
