@@ -51,6 +51,8 @@ def one_torch_thread():
 
 SLOW_TESTS = frozenset(
     (
+        "tests/test_dagger.py::test_a_dagger_generalist_trains_resumes_exactly_and_plays_everywhere",
+        "tests/test_dagger.py::test_a_dataset_resumes_and_grows_keeping_its_teachers",
         "1",
         "tests/test_checkpoints.py::test_a_checkpoint_describes_its_own_policy",
         "tests/test_cli.py::test_advice_names_each_setting_as_the_command_gives_it",
