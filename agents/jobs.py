@@ -181,7 +181,7 @@ class TrainJob:
         if self.contour is None:
             raise ValueError("contour: give the contour to train on (--contour), or --resume a run")
         return PatternCutOptions(
-            contour=contour_spec(self.contour, self.sim),
+            contour=self.contour,
             pinch_point=self.pinch,
             segments=self.segments,
             sim_config=self.sim,
@@ -217,37 +217,6 @@ class TrainJob:
         sections, the recording's colours without a recording, and ``allow_infeasible_pinch`` without a
         ``pinch``."""
         return {**other_learners(self.train), **_recording_keys(self), **_pinch_keys(self.pinch is None)}
-
-
-def job_contour(spec: Any, config: SimConfig | None = None):
-    """A job's ``contour`` loaded (:func:`contour_spec`, then a name or file read)."""
-    from warpcut.contours import Contour, load_contour
-
-    loaded = contour_spec(spec, config)
-    return loaded if isinstance(loaded, Contour) else load_contour(loaded)
-
-
-def contour_spec(spec: Any, config: SimConfig | None = None) -> Any:
-    """A job's ``contour`` as :class:`~envs.options.PatternCutOptions` takes it: a name or file as is, an
-    inline contour ``{name, closed, points}`` loaded, a generated contour's name
-    (:data:`warpcut.planning.generate.GENERATED_SPEC`) drawn on ``config``'s sheet (default: the default
-    sheet)."""
-    if isinstance(spec, dict):
-        from warpcut.contours import contour_from_json
-
-        sheet = spec.get("sheet_size")
-        return contour_from_json(spec, "contour", tuple(float(v) for v in sheet) if sheet else (100.0, 100.0))
-    if isinstance(spec, str) and spec.startswith("gen-"):
-        from warpcut.planning.generate import generated
-
-        drawn = generated(spec, config)
-        if drawn is not None:
-            if len(drawn) != 1:
-                raise ValueError(
-                    f"contour: {spec!r} names {len(drawn)} contours; give one (gen-SPLIT-SEED-INDEX-KIND)"
-                )
-            return drawn[0]
-    return spec
 
 
 @dataclass

@@ -32,7 +32,7 @@ from agents.methods import StepCallbacks
 from envs.observations import observation_bounds
 from envs.options import ContourSpec, PatternCutOptions, plain
 from envs.vector import PatternCutVecEnv
-from warpcut.contours import Contour, load_contour
+from warpcut.contours import Contour
 from warpcut.io import read_json
 from warpcut.task import StepCallback
 
@@ -322,8 +322,7 @@ def _single_contour(options: PatternCutOptions, what: str) -> Contour:
     specs = options.contour if isinstance(options.contour, list | tuple) else [options.contour]
     if len(specs) != 1:
         raise ValueError(f"{what}: {len(specs)} contours (one per env); a policy run is checked for one")
-    spec = specs[0]
-    return spec if isinstance(spec, Contour) else load_contour(spec)
+    return options.contours(1)[0]
 
 
 def same_contour(a: Contour, b: Contour) -> bool:

@@ -750,10 +750,12 @@ def check_resumed_job(resume: str | Path, job: TrainJob | GeneralistJob) -> None
     if "pinch" in saved and job.pinch is None:  # the run's own pinch point, found when it started
         given["pinch"] = saved["pinch"]
     if isinstance(saved.get("contour"), dict) or isinstance(given.get("contour"), dict):
-        from agents.jobs import contour_spec
+        from warpcut.planning import resolve_contour
 
-        saved_contour = _loaded(contour_spec(saved.get("contour")))
-        if saved_contour is not None and same_contour(saved_contour, _loaded(contour_spec(job.contour))):
+        saved_contour = None if saved.get("contour") is None else resolve_contour(saved["contour"])
+        if None not in (saved_contour, job.contour) and same_contour(
+            saved_contour, resolve_contour(job.contour)
+        ):
             given["contour"] = saved.get("contour")
     defaults = flatten(to_plain(type(job)()))
     for key in sorted(set(saved) | set(given)):
@@ -763,14 +765,6 @@ def check_resumed_job(resume: str | Path, job: TrainJob | GeneralistJob) -> None
             f"{key}: the resumed run {run} has {saved.get(key)!r} (its {CONFIG_FILE}), this job "
             f"{given.get(key)!r}; a resumed run keeps its settings: drop the change, or start a new run"
         )
-
-
-def _loaded(spec):
-    from warpcut.contours import Contour, load_contour
-
-    if spec is None:
-        return None
-    return spec if isinstance(spec, Contour) else load_contour(spec)
 
 
 TRAIN_BATCH_FIX = "set train.num_envs (train: --num-envs) to at most {fits}"

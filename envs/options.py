@@ -14,9 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from warpcut.contours import Contour, builtin_names, contour_from_json, load_contour
+from warpcut.contours import Contour, builtin_names
 from warpcut.fiducials import NUM_FIDUCIALS, SHAFT_RADIUS_MM
-from warpcut.planning import ArmModel, check_pinch, default_pinch
+from warpcut.planning import ArmModel, check_pinch, default_pinch, resolve_contour
 from warpcut.sim.config import (
     PHYSICAL_PARAMETERS,
     RANDOMIZE_ALIASES,
@@ -186,7 +186,9 @@ class PatternCutOptions(EnvConfig):
     """
 
     contour: ContourSpec | Sequence[ContourSpec] = "fls-circle"
-    """Contour to cut: a built-in name, a ``.json``/``.svg`` path or a ``Contour``; or a list, one per env."""
+    """Contour to cut: a built-in name, a ``.json``/``.svg`` path, a generated contour's name
+    (``gen-test-0-0003-open``), a ``Contour`` or its JSON object; or a list, one per env
+    (:func:`warpcut.planning.resolve_contour` reads each)."""
     pinch_point: Sequence[float] | np.ndarray | None = None
     """Material point (mm) the tensioning arm pinches, ``(2,)`` or ``(B, 2)``. Default: each contour's
     centroid, or the feasible point nearest to it (:func:`warpcut.planning.default_pinch`)."""
@@ -246,8 +248,12 @@ class PatternCutOptions(EnvConfig):
                 "points}, or a list of them, one per env",
                 self.contour,
             )
-        if any(isinstance(c, dict) for c in specs):
-            self.contour = _read_contours(self.contour, self.sim_config, f"{owner}.")
+        if any(isinstance(c, dict) for c in specs):  # read now: a bad one is named as it is given
+            read = [
+                resolve_contour(c, self.sim_config, f"{owner}.contour") if isinstance(c, dict) else c
+                for c in specs
+            ]
+            self.contour = read if isinstance(self.contour, list | tuple) else read[0]
         super().__post_init__()
 
     def _check_fields(self) -> None:
@@ -336,7 +342,8 @@ class PatternCutOptions(EnvConfig):
             raise ValueError(
                 f"contour: got {len(specs)} for {num_envs} envs; give one contour or one per env"
             )
-        loaded = [c if isinstance(c, Contour) else load_contour(c) for c in specs]
+        config = self.config()
+        loaded = [resolve_contour(c, config) for c in specs]
         return loaded * num_envs if len(loaded) == 1 else loaded
 
     def per_env(self, num_envs: int) -> tuple[list[Contour], np.ndarray, list[list[np.ndarray]] | None]:
@@ -373,9 +380,9 @@ class PatternCutOptions(EnvConfig):
             value = getattr(self, f.name)
             if f.name == "contour":
                 value = (
-                    [_contour_spec(c) for c in value]
+                    [self._stored_contour(c) for c in value]
                     if isinstance(value, list | tuple)
-                    else _contour_spec(value)
+                    else self._stored_contour(value)
                 )
             elif f.name == "sim_config":
                 value = dataclasses.asdict(value)
@@ -383,6 +390,16 @@ class PatternCutOptions(EnvConfig):
                 value = value.to_json()
             out[f.name] = plain(value)
         return out
+
+    def _stored_contour(self, contour: ContourSpec) -> str | dict:
+        """A contour as :meth:`to_dict` stores it: a built-in's name, or else the contour itself (a file read,
+        a generated one drawn, as :meth:`contours` resolves them)."""
+        if not isinstance(contour, Contour):
+            spec = os.fspath(contour)
+            if spec in builtin_names():
+                return spec
+            contour = resolve_contour(spec, self.config())
+        return {**contour.to_json(), "sheet_size": [float(v) for v in contour.sheet_size]}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> PatternCutOptions:
@@ -410,21 +427,6 @@ class PatternCutOptions(EnvConfig):
             message = str(exc).removeprefix(f"{cls.__name__}.")
             raise ValueError(message if message.startswith("options: ") else f"options: {message}") from None
         return options
-
-
-def _read_contours(spec: Any, sim: SimConfig, prefix: str = "") -> Any:
-    """The contours ``{name, closed, points[, sheet_size]}`` in ``spec`` (one, or a list) as ``Contour``s;
-    names and files as they are."""
-
-    def read(item: Any) -> Any:
-        if not isinstance(item, dict):
-            return item
-        sheet = item.get("sheet_size", (sim.width_mm, sim.height_mm))
-        if not (isinstance(sheet, list | tuple) and len(sheet) == 2 and all(is_number(v) for v in sheet)):
-            raise ValueError(f"{prefix}contour: sheet_size: give [width_mm, height_mm] (got {sheet!r})")
-        return contour_from_json(item, f"{prefix}contour", tuple(float(v) for v in sheet))
-
-    return [read(s) for s in spec] if isinstance(spec, list | tuple) else read(spec)
 
 
 def sim_config_from_dict(data: dict[str, Any], where: str) -> SimConfig:
@@ -462,17 +464,6 @@ def _check_pinch_point(where: str, value: Any) -> None:
 
 
 _FLAGS = ("resample_fiducials", "contour_features", "allow_z", "dense_reward", "relative_reward")
-
-
-def _contour_spec(contour: ContourSpec) -> str | dict:
-    """A contour as :meth:`PatternCutOptions.to_dict` stores it: a built-in's name, or else the contour
-    itself (a file is read, as :meth:`PatternCutOptions.contours` reads it)."""
-    if not isinstance(contour, Contour):
-        spec = os.fspath(contour)
-        if spec in builtin_names():
-            return spec
-        contour = load_contour(spec)
-    return {**contour.to_json(), "sheet_size": [float(v) for v in contour.sheet_size]}
 
 
 def plain(value: Any) -> Any:

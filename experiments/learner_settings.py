@@ -31,9 +31,8 @@ import torch
 from agents.config_io import apply, flatten, parse_override, read_file
 from agents.jobs import EvaluateJob, with_dependent_defaults
 from agents.pipelines import evaluate_table
-from warpcut.contours import resolve_contours
 from warpcut.io import read_json, write_json
-from warpcut.planning import Plan, plan_cut
+from warpcut.planning import Plan, plan_cut, resolve_specs
 
 PPO = {"train.algo": "ppo"}
 VARIANTS: dict[str, dict] = {
@@ -88,7 +87,7 @@ def variant_job(base: EvaluateJob, common: dict, changes: dict, name: str) -> Ev
 def suite_plans(job: EvaluateJob, out: Path) -> list[Plan]:
     """The plans of ``job``'s contours as ``warpcut evaluate`` makes them, made once into
     ``out/plans.json``."""
-    contours = [c for _, c in resolve_contours(job.contours)]
+    contours = [c for _, c in resolve_specs(job.contours)]
     config = job.sim.validated().replace(noise_std=0.0)
     path = out / "plans.json"
     saved = read_json(path) if path.is_file() else {}

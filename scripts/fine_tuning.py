@@ -40,9 +40,9 @@ def _reached(curve: list[tuple[float, float]], level: float) -> float | None:
 
 def main() -> None:
     from agents.config import TrainConfig
-    from agents.jobs import TrainJob, job_contour
+    from agents.jobs import TrainJob
     from agents.training import train_contour
-    from warpcut.planning.generate import resolve_specs
+    from warpcut.planning import resolve_contour, resolve_specs
     from warpcut.sim.config import SimConfig
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -63,7 +63,7 @@ def main() -> None:
             train=TrainConfig(algo="es"),  # fine-tuning is es's: the scratch run is es's too
             plots=False,
         )
-        job_contour(base.contour, base.sim)  # a bad name: now
+        resolve_contour(base.contour, base.sim)  # a bad name: now
         runs = {}
         for label, job in (("scratch", base), ("generalist", _fine_tuning(base, args.generalist))):
             out = args.out / name / label

@@ -60,6 +60,23 @@ def test_make_and_make_vec_build_the_registered_envs():
         gym.make(ENV_ID, contuor="fls-circle")
 
 
+def test_a_generated_contour_is_made_by_its_name():
+    """``gym.make`` takes every way a contour is named, a generated one's name too: the env cuts the same
+    contour the generator draws on its sheet, and stores it whole."""
+    from warpcut.planning import generate_contours
+
+    env = gym.make(ENV_ID, device="cpu", contour="gen-test-0-0003-open", resolution=13)
+    env.reset(seed=0)
+    (drawn,) = [
+        c for c in generate_contours(4, "test", 0, SimConfig(resolution=13)) if c.name.endswith("open")
+    ]
+    cut = env.unwrapped.task.contours[0]
+    assert cut.name == "gen-test-0-0003-open" and np.array_equal(cut.points, drawn.points)
+    assert env.unwrapped.options.to_dict()["contour"]["name"] == "gen-test-0-0003-open"
+    with pytest.raises(ValueError, match="names 2 contours; give one"):
+        gym.make(ENV_ID, device="cpu", contour="gen-test-0:2", resolution=13)
+
+
 STEP_INFO = ["cut_deviation_mm", "running_path_error_mm2"]
 
 

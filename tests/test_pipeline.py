@@ -14,7 +14,8 @@ from agents.config_io import apply, read_file, to_plain
 from agents.jobs import EvaluateJob, RunJob, with_dependent_defaults
 from agents.pipelines import evaluate_table, run_pipeline
 from agents.pipelines.common import analytic_pinches
-from warpcut.contours import builtin_names, load_contour, resolve_contours
+from warpcut.contours import builtin_names, load_contour
+from warpcut.planning import resolve_specs
 from warpcut.sim.config import SimConfig
 
 SMALL = SimConfig(resolution=13)
@@ -86,14 +87,14 @@ def test_the_budgets_leave_the_iterations_to_the_learner():
     assert RunJob().train.iterations is None
 
 
-def test_resolve_contours_expands_all_after_the_named_ones():
-    named = resolve_contours(["wave-3,fls-circle", "all"])
+def test_resolve_specs_expands_all_after_the_named_ones():
+    named = resolve_specs(["wave-3,fls-circle", "all"])
     names = [c.name for _, c in named]
     assert names[:2] == ["wave-3", "fls-circle"] and sorted(names) == sorted(builtin_names())
     with pytest.raises(ValueError, match="contours: give at least one"):
-        resolve_contours([" , "])
+        resolve_specs([" , "])
     with pytest.raises(ValueError, match="both named 'wave-3' .*; give it once"):
-        resolve_contours("wave-3,fls-circle,wave-3")
+        resolve_specs("wave-3,fls-circle,wave-3")
 
 
 def test_evaluate_table_without_a_plan_pairs_every_method_with_no_tension(tmp_path):

@@ -81,15 +81,16 @@ def command(
     grad.learning_rate, grad.es_population, grad.es_feedback_phases, grad.es_randomize; the physics and
     noise: sim.*; candidates, arm.length_mm); --print-config shows them all.
     """
-    from agents.jobs import OptimizeJob, job_contour
+    from agents.jobs import OptimizeJob
     from agents.pipelines import optimize_contour
     from warpcut.io import safe_name, write_json
+    from warpcut.planning import resolve_contour
 
     base = common.resumed_job(OptimizeJob, out, resume, "optimize")
     job = common.resolve(OptimizeJob, config_file, overrides, FLAGS, base).check()
     if base is None:  # a resumed run's config.json holds every setting it was started with
         common.refuse_unused_settings(job, overrides, FLAGS)
-    contour = job_contour(job.contour, job.sim)  # a bad name or file: now
+    contour = resolve_contour(job.contour, job.sim)  # a bad name or file: now
     contour_name = contour.name
     if print_config:
         common.print_config(job)

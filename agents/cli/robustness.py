@@ -134,18 +134,18 @@ def command(
     sheet and noise without --run: sim.*; grad's optimiser: grad.*; plots); --print-config shows them all.
     """
     from agents.cluster import executor
-    from agents.jobs import RobustnessJob, contour_spec
+    from agents.jobs import RobustnessJob
     from agents.pipelines import robustness
     from agents.pipelines.robustness import check_job, robustness_table
-    from warpcut.contours import load_contour
     from warpcut.io import safe_name, write_json
+    from warpcut.planning import resolve_contour
 
     base = common.resumed_job(RobustnessJob, out, resume, "robustness")
     job = common.resolve(RobustnessJob, config_file, overrides, FLAGS, base)
     if base is None:  # a resumed run's config.json holds every setting it was started with
         common.refuse_unused_settings(job, overrides, FLAGS)
     job = check_job(job)
-    name = "run" if job.contour is None else load_contour(contour_spec(job.contour)).name  # a bad one: now
+    name = "run" if job.contour is None else resolve_contour(job.contour).name  # a bad one: now
     if print_config:
         common.print_config(job)
         return

@@ -100,15 +100,16 @@ def command(
     import numpy as np
 
     from agents.cluster import executor
-    from agents.jobs import RunJob, job_contour
+    from agents.jobs import RunJob
     from warpcut.io import safe_name, write_json
+    from warpcut.planning import resolve_contour
 
     base = common.resumed_job(RunJob, out, resume, "run")
     job = common.resolve(RunJob, config_file, overrides, FLAGS, base)
     job.settings()
     if base is None:  # a resumed run's config.json holds every setting it was started with
         common.refuse_unused_settings(job, overrides, FLAGS)
-    contour_name = job_contour(job.contour, job.sim).name
+    contour_name = resolve_contour(job.contour, job.sim).name
     if job.policy == "rl":
         common.check_learner(job)
     elif ray is not None:

@@ -75,12 +75,13 @@ def command(
     --print-config shows them all.
     """
     from agents.evaluation import compare_policies
-    from agents.jobs import SimulateJob, job_contour
+    from agents.jobs import SimulateJob
     from warpcut.io import claim_run_dir
+    from warpcut.planning import resolve_contour
 
     job = common.resolve(SimulateJob, config_file, overrides, FLAGS).check()
     common.refuse_unused_settings(job, overrides, FLAGS)
-    contour = job_contour(job.contour, job.sim)  # a bad name or file: now
+    contour = resolve_contour(job.contour, job.sim)  # a bad name or file: now
     if print_config:
         common.print_config(job)
         return

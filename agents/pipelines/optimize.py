@@ -13,10 +13,10 @@ import numpy as np
 
 from agents.evaluation import Method, evaluate_suite
 from agents.gradient import grad_result
-from agents.jobs import OptimizeJob, job_contour
+from agents.jobs import OptimizeJob
 from agents.pipelines.common import claims_out, record_job
 from warpcut.io import write_json
-from warpcut.planning import check_pinch, plan_cut
+from warpcut.planning import check_pinch, plan_cut, resolve_contour
 
 RESULTS_FILE = "results.json"
 """The run directory's report (:func:`optimize_contour`'s)."""
@@ -62,7 +62,7 @@ def optimize_contour(
     job = job.check()
     out = Path(out)
     config = job.sim.validated()
-    contour = job_contour(job.contour, job.sim)
+    contour = resolve_contour(job.contour, job.sim)
     if job.pinch is not None:  # the arm sweeps the same footprint however the plan splits the cut
         check_pinch(job.pinch, contour, config, None, job.arm, allow=job.allow_infeasible_pinch)
     record_job(out, job, resume)

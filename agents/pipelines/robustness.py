@@ -38,11 +38,11 @@ from agents.cluster import Executor, Serial
 from agents.config import EVALUATION_TRIALS, GRAD_CONFIG, GradConfig
 from agents.evaluation import run_method
 from agents.gradient import PlanResult
-from agents.jobs import RobustnessJob, contour_spec
+from agents.jobs import RobustnessJob
 from agents.methods import BASELINES, check_methods, tensioner
 from agents.pipelines.common import claims_out, record_job
-from warpcut.contours import Contour, ContourError, load_contour
-from warpcut.planning import ArmModel, InfeasiblePinch, check_pinch
+from warpcut.contours import Contour, ContourError
+from warpcut.planning import ArmModel, InfeasiblePinch, check_pinch, resolve_contour
 from warpcut.scoring import bootstrap_ci, paired_improvement
 from warpcut.sim.config import GRAVITY_MM_S2, SimConfig
 from warpcut.sim.memory import batch_named
@@ -415,7 +415,7 @@ def _scenario(contour, runs: dict[str, Path], config, device, seed, log) -> dict
 
         given = None
         if contour is not None:
-            given = load_contour(contour) if not isinstance(contour, Contour) else contour
+            given = resolve_contour(contour)
         first, cuts, pinches = None, {}, {}
         for label, run in runs.items():
             # judged on the nominal sheet with the others (_infeasible_pinches): refused there unless allowed
@@ -443,7 +443,7 @@ def _scenario(contour, runs: dict[str, Path], config, device, seed, log) -> dict
 
     if contour is None:
         raise ValueError("contour: give a contour (or a run, whose contour is used)")
-    contour = load_contour(contour) if not isinstance(contour, Contour) else contour
+    contour = resolve_contour(contour)
     config = (config or SimConfig()).validated()
     log(f"  planning {contour.name}")
     with batch_named(  # the planner's own advice names a candidates setting this job lacks
@@ -659,14 +659,13 @@ def robustness(
 
     job = check_job(job)  # before the job is recorded: bad settings leave no run behind
     out = Path(out)
-    contour = None if job.contour is None else contour_spec(job.contour)
+    contour = None if job.contour is None else resolve_contour(job.contour)
     if not job.allow_infeasible_pinch and (job.runs or job.plans):  # before any work, too
         runs = check_runs(job.runs)
         if runs:
             scenario = _scenario(contour, runs, job.sim, device, job.seed, log)
         else:
-            loaded = contour if isinstance(contour, Contour) else load_contour(contour)
-            scenario = {"contour": loaded, "config": job.sim.validated(), "pinch": None, "segments": None}
+            scenario = {"contour": contour, "config": job.sim.validated(), "pinch": None, "segments": None}
         _infeasible_pinches(scenario, job.methods, job.plans, runs, allow=False)
     if "generalist" in job.methods:  # before any work: a generalist to play
         from agents.generalist import generalist_settings

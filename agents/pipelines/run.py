@@ -16,7 +16,7 @@ from agents.baselines import AnalyticTension
 from agents.cluster import Done, Executor, Serial, ran_here
 from agents.config import VALIDATION_TRIALS
 from agents.evaluation import Method, MethodResult, evaluate_suite, run_method
-from agents.jobs import RunJob, job_contour
+from agents.jobs import RunJob
 from agents.methods import StepCallbacks, point_text
 from agents.pipelines.common import (
     analytic_pinches,
@@ -30,7 +30,7 @@ from agents.policies import nominal_validation_error, rollout_errors
 from envs.options import ENV_FIELDS, PatternCutOptions
 from warpcut.contours import Contour
 from warpcut.io import write_json
-from warpcut.planning import ArmModel, Plan, plan_cut
+from warpcut.planning import ArmModel, Plan, plan_cut, resolve_contour
 from warpcut.sim.config import SimConfig
 
 
@@ -112,7 +112,7 @@ def run_pipeline(
 
         generalist_settings(job.generalist)
     out = Path(out)
-    loaded = job_contour(job.contour, job.sim)
+    loaded = resolve_contour(job.contour, job.sim)
     record_job(out, job, resume)
     start = time.perf_counter()
 

@@ -14,7 +14,7 @@ from warpcut.contours.contour import (
     check_resolution,
     validate,
 )
-from warpcut.contours.loaders import SVG_CHORD_MM, contour_from_json, load_contour, resolve_contours
+from warpcut.contours.loaders import SVG_CHORD_MM, contour_from_json, load_contour
 from warpcut.contours.polyline import arc_lengths, polyline_length, resample_polyline, ring
 from warpcut.contours.suite import BUILTIN_SPACING_MM, builtin_contours, builtin_names
 
@@ -33,7 +33,6 @@ __all__ = [
     "load_contour",
     "polyline_length",
     "resample_polyline",
-    "resolve_contours",
     "ring",
     "validate",
 ]

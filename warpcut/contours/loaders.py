@@ -34,7 +34,6 @@ import os
 import re
 import stat
 import xml.etree.ElementTree as ET
-from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -48,7 +47,6 @@ from warpcut.contours.contour import (
     validate,
 )
 from warpcut.contours.suite import builtin_contours, builtin_names
-from warpcut.io import safe_name
 
 SVG_CHORD_MM = 0.5
 """Longest segment an SVG curve is flattened into (mm)."""
@@ -589,26 +587,3 @@ def _bezier_at(control: np.ndarray, t: np.ndarray) -> np.ndarray:
     t = t[:, None]
     weights = [math.comb(degree, k) * t**k * (1 - t) ** (degree - k) for k in range(degree + 1)]
     return sum(w * c for w, c in zip(weights, control, strict=True))
-
-
-def resolve_contours(specs: str | Sequence[str]) -> list[tuple[str, Contour]]:
-    """``(spec, contour)`` for each name or file in ``specs`` (one string or several, comma-separated
-    allowed); ``all``: the built-in suite (after any other given)."""
-    specs = [specs] if isinstance(specs, str) else specs
-    names = [s.strip() for arg in specs for s in arg.split(",") if s.strip()]
-    if "all" in names:
-        names = [s for s in names if s != "all"] + [n for n in builtin_names() if n not in names]
-    if not names:
-        raise ValueError("contours: give at least one contour name or file, or 'all'")
-    named = [(s, load_contour(s)) for s in names]
-    seen: dict[str, str] = {}
-    for spec, contour in named:
-        key = safe_name(contour.name)
-        if key in seen:
-            fix = "give it once" if spec == seen[key] else "rename one in its file"
-            raise ValueError(
-                f"contours: {seen[key]!r} and {spec!r} are both named {contour.name!r} (their runs and plots "
-                f"would share files); {fix}"
-            )
-        seen[key] = spec
-    return named

@@ -1,7 +1,8 @@
 """Cut planning: segments the cutting arm can cut (:mod:`~warpcut.planning.segmentation`), where the
 gripper may pinch the sheet (:mod:`~warpcut.planning.feasibility`), and the search for the best pinch point
 and cutting order (:mod:`~warpcut.planning.search`, :func:`plan_cut`), and seeded random contours it can plan
-(:mod:`~warpcut.planning.generate`, :func:`generate_contours`).
+(:mod:`~warpcut.planning.generate`, :func:`generate_contours`), beside the one resolver of every way a
+contour is named (:func:`resolve_contour`, :func:`resolve_specs`).
 """
 
 from warpcut.planning.feasibility import (
@@ -17,7 +18,14 @@ from warpcut.planning.feasibility import (
     pinch_rules,
     under_arm,
 )
-from warpcut.planning.generate import EXTRA_KINDS, KINDS, SPLITS, generate_contours
+from warpcut.planning.generate import (
+    EXTRA_KINDS,
+    KINDS,
+    SPLITS,
+    generate_contours,
+    resolve_contour,
+    resolve_specs,
+)
 from warpcut.planning.search import Plan, pinch_candidates, plan_cut, search_orders
 from warpcut.planning.segmentation import ORDER_LIMIT, Segment, is_monotone, segment_contour, segment_orders
 
@@ -42,6 +50,8 @@ __all__ = [
     "pinch_problems",
     "pinch_rules",
     "plan_cut",
+    "resolve_contour",
+    "resolve_specs",
     "search_orders",
     "segment_contour",
     "segment_orders",

@@ -30,16 +30,28 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import shapely
 from shapely.geometry import LineString, Point, Polygon
 
-from warpcut.contours import BUILTIN_SPACING_MM, Contour, ContourError, check_resolution, validate
+from warpcut.contours import (
+    BUILTIN_SPACING_MM,
+    Contour,
+    ContourError,
+    builtin_names,
+    check_resolution,
+    contour_from_json,
+    load_contour,
+    validate,
+)
 from warpcut.contours.polyline import arc_lengths, resample_polyline
+from warpcut.io import safe_name
 from warpcut.planning.feasibility import default_pinch
 from warpcut.planning.segmentation import ORDER_LIMIT, segment_contour
 from warpcut.sim.config import SimConfig
+from warpcut.validation import is_number
 
 SPLITS = ("train", "validation", "test")
 """The streams of generated contours, never mixed: each draws from seeds of its own."""
@@ -307,24 +319,75 @@ def generated(spec: str, config: SimConfig | None = None) -> list[Contour] | Non
     return [_contour(index, split, seed, config, kind)]
 
 
-def resolve_specs(specs: str | Sequence[str], config: SimConfig | None = None) -> list[tuple[str, Contour]]:
-    """:func:`warpcut.contours.resolve_contours` that also takes generated specs (:data:`GENERATED_SPEC`):
-    ``(spec, contour)`` for each contour, in order."""
-    from warpcut.contours import resolve_contours
+def resolve_contour(spec: Any, config: SimConfig | None = None, where: str = "contour") -> Contour:
+    """The one contour ``spec`` names, wherever a contour is given (a job, the env's options, a run's saved
+    settings):
 
+    - a :class:`~warpcut.contours.Contour`: itself;
+    - its JSON object ``{name, closed, points[, sheet_size]}``: read (its sheet: ``sheet_size``, else
+      ``config``'s; errors name ``where``);
+    - a generated contour's name (:data:`GENERATED_SPEC`, one contour): drawn on ``config``'s sheet;
+    - a built-in name or a ``.json``/``.svg`` file: :func:`~warpcut.contours.load_contour`.
+
+    ``config`` defaults to the default sheet.
+    """
+    if isinstance(spec, Contour):
+        return spec
+    if isinstance(spec, dict):
+        config = config or SimConfig()
+        sheet = spec.get("sheet_size", (config.width_mm, config.height_mm))
+        if not (isinstance(sheet, list | tuple) and len(sheet) == 2 and all(is_number(v) for v in sheet)):
+            raise ValueError(f"{where}: sheet_size: give [width_mm, height_mm] (got {sheet!r})")
+        return contour_from_json(spec, where, tuple(float(v) for v in sheet))
+    drawn = generated(spec, config)
+    if drawn is None:
+        return load_contour(spec)
+    if len(drawn) != 1:
+        raise ValueError(
+            f"{where}: {spec!r} names {len(drawn)} contours; give one (gen-SPLIT-SEED-INDEX-KIND)"
+        )
+    return drawn[0]
+
+
+def resolve_specs(specs: str | Sequence[str], config: SimConfig | None = None) -> list[tuple[str, Contour]]:
+    """``(spec, contour)`` for each contour that ``specs`` names (one string or several, comma-separated
+    allowed), in order: built-in names, contour files, ``all`` (the built-in suite, after any other given) and
+    generated specs (:data:`GENERATED_SPEC`: one contour, or the first N of a split, drawn on ``config``'s
+    sheet). Two contours of one name are refused: their runs and plots would share files."""
     specs = [specs] if isinstance(specs, str) else specs
     names = [s.strip() for arg in specs for s in arg.split(",") if s.strip()]
     if not names:
         raise ValueError("contours: give at least one contour name or file, or 'all'")
     drawn = {name: generated(name, config) for name in names}
     if not any(drawn.values()):
-        return resolve_contours(names)  # its own checks: 'all', two contours of one name
+        return _named_contours(names)  # its own checks: 'all', two contours of one name
     out: list[tuple[str, Contour]] = []
     for name in names:
-        out += [(c.name, c) for c in drawn[name]] if drawn[name] is not None else resolve_contours([name])
+        out += [(c.name, c) for c in drawn[name]] if drawn[name] is not None else _named_contours([name])
     seen: set[str] = set()
     for _, contour in out:
         if contour.name in seen:
             raise ValueError(f"contours: {contour.name!r} is given twice; give it once")
         seen.add(contour.name)
     return out
+
+
+def _named_contours(names: list[str]) -> list[tuple[str, Contour]]:
+    """``(name, contour)`` for built-in names and contour files; ``all``: the built-in suite (after any
+    other given)."""
+    if "all" in names:
+        names = [s for s in names if s != "all"] + [n for n in builtin_names() if n not in names]
+    if not names:
+        raise ValueError("contours: give at least one contour name or file, or 'all'")
+    named = [(s, load_contour(s)) for s in names]
+    seen: dict[str, str] = {}
+    for spec, contour in named:
+        key = safe_name(contour.name)
+        if key in seen:
+            fix = "give it once" if spec == seen[key] else "rename one in its file"
+            raise ValueError(
+                f"contours: {seen[key]!r} and {spec!r} are both named {contour.name!r} (their runs and plots "
+                f"would share files); {fix}"
+            )
+        seen[key] = spec
+    return named
