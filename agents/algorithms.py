@@ -51,7 +51,7 @@ class Algorithm:
     continuous_only: bool
     """Whether it can train only continuous actions."""
     runner: str
-    """``"module:Class"`` of its runner: warpcut's rsl-rl runner (:class:`agents.training.Runner`) or its
+    """``"module:Class"`` of its runner: warpcut's rsl-rl runner (:class:`agents.runner.Runner`) or its
     own."""
     settings: str
     """``"module:Class"`` of its settings dataclass (a torch-free module): ``TrainConfig``'s section named
@@ -90,7 +90,7 @@ ALGORITHMS = {
         iterations=None,
         action_type="continuous",
         continuous_only=True,
-        runner="agents.training:Runner",
+        runner="agents.runner:Runner",
         settings="agents.es.config:EsConfig",
         fine_tunes=True,
     ),
@@ -101,7 +101,7 @@ ALGORITHMS = {
         iterations=150,
         action_type="discrete",
         continuous_only=False,
-        runner="agents.training:Runner",
+        runner="agents.runner:Runner",
         settings="agents.ppo.config:PpoConfig",
     ),
     "apg": Algorithm(
@@ -123,7 +123,7 @@ ALGORITHMS = {
         iterations=20,
         action_type="continuous",
         continuous_only=True,
-        runner="agents.training:Runner",
+        runner="agents.runner:Runner",
         settings="agents.dagger.config:DaggerConfig",
     ),
 }

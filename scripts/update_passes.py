@@ -29,7 +29,8 @@ def main() -> None:
     import torch
 
     from agents.config import TrainConfig
-    from agents.training import Runner, training_env
+    from agents.runner import Runner
+    from agents.training import training_env
     from envs.options import PatternCutOptions
 
     cfg = TrainConfig(algo="ppo", num_envs=args.envs, save_interval=10**6)

@@ -166,13 +166,13 @@ def test_a_first_best_checkpoint_not_written_says_there_was_none(monkeypatch, tm
 
     import torch
 
-    from agents import training
+    from agents import runner as runner_module
     from warpcut.io import WriteFailed
 
     def full(path, data):
         raise WriteFailed(path, OSError(errno.ENOSPC, "No space left on device"))
 
-    monkeypatch.setattr(training, "write_atomic", full)
+    monkeypatch.setattr(runner_module, "write_atomic", full)
     runner = SimpleNamespace(
         alg=SimpleNamespace(get_policy=lambda: torch.nn.Linear(1, 1)),
         _selection_score=lambda errors: (1.0, 1.0),
@@ -185,10 +185,10 @@ def test_a_first_best_checkpoint_not_written_says_there_was_none(monkeypatch, tm
         _state_bytes=lambda: b"state",
     )
     with pytest.raises(ValueError, match=r"best\.pt: not written, the disk is full; none was saved before"):
-        training.Runner.validate(runner, lambda actor: 1.0)
+        runner_module.Runner.validate(runner, lambda actor: 1.0)
     (tmp_path / "best.pt").write_bytes(b"earlier")
     with pytest.raises(ValueError, match=r"the previous best\.pt is intact"):
-        training.Runner.validate(runner, lambda actor: 1.0)
+        runner_module.Runner.validate(runner, lambda actor: 1.0)
 
 
 def test_a_recording_cut_short_by_the_file_size_limit_names_it(monkeypatch, tmp_path):

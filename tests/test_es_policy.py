@@ -20,7 +20,8 @@ from agents.es.algorithm import ES
 from agents.es.config import EsConfig
 from agents.models import feedback_inputs
 from agents.ppo.config import PpoConfig
-from agents.training import Runner, train, training_env
+from agents.runner import Runner
+from agents.training import train, training_env
 from envs.options import PatternCutOptions
 from warpcut import load_contour
 from warpcut.sim.config import SimConfig

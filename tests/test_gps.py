@@ -177,7 +177,7 @@ import __main__
 __main__.ToyConfig = ToyConfig
 registry.ALGORITHMS["toy"] = registry.Algorithm(
     "toy", "a learner of one entry", num_envs=8, iterations=3, action_type="continuous",
-    continuous_only=True, runner="agents.training:Runner", settings="__main__:ToyConfig")
+    continuous_only=True, runner="agents.runner:Runner", settings="__main__:ToyConfig")
 
 from agents.config import TrainConfig
 from agents.config_io import apply, to_plain

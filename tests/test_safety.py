@@ -717,11 +717,11 @@ def test_a_run_killed_before_its_summary_resumes_with_its_own_settings(tmp_path,
     patch = (
         f"agents.training.train = lambda *a, **k: {kill}"
         if when == "before its first checkpoint"
-        else "save = agents.training.Runner.save\n"
-        f"agents.training.Runner.save = lambda self, *a, **k: (save(self, *a, **k), {kill})"
+        else "save = agents.runner.Runner.save\n"
+        f"agents.runner.Runner.save = lambda self, *a, **k: (save(self, *a, **k), {kill})"
     )
     script = (
-        "import os, signal, sys\nimport agents.training\n"
+        "import os, signal, sys\nimport agents.runner, agents.training\n"
         f"{patch}\n"
         "from agents.cli import main\n"
         "sys.argv = ['warpcut', 'train', '--contour', 'circle-small', '--iterations', '3', '--no-progress',"

@@ -19,8 +19,9 @@ from agents.export import export_policy
 from agents.policies import load_policy
 from agents.ppo.config import PpoConfig
 from agents.ppo.distributions import Categorical
-from agents.training import FINAL_ERROR_KEY as TRAIN_FINAL_ERROR_KEY
-from agents.training import Runner, train
+from agents.runner import FINAL_ERROR_KEY as TRAIN_FINAL_ERROR_KEY
+from agents.runner import Runner
+from agents.training import train
 
 NUM_ENVS = 32
 

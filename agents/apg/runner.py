@@ -30,11 +30,11 @@ from rsl_rl.env import VecEnv
 
 from agents.algorithms import algorithm
 from agents.checkpoints import read_checkpoint
-from agents.training import Runner
+from agents.runner import Runner
 
 
 class EpisodeRunner(Runner):
-    """:class:`~agents.training.Runner` whose learning iteration is :meth:`_iteration`. Subclasses set
+    """:class:`~agents.runner.Runner` whose learning iteration is :meth:`_iteration`. Subclasses set
     :attr:`name` (the ``--algo``) and :attr:`scalars` (metrics logged to TensorBoard under ``Name/``), and
     keep their own state in :meth:`_extra_state` / :meth:`_load_extra`."""
 

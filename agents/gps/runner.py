@@ -1,4 +1,4 @@
-"""gps's runner: warpcut's rsl-rl runner (:class:`agents.training.Runner`) that first finds the teacher and
+"""gps's runner: warpcut's rsl-rl runner (:class:`agents.runner.Runner`) that first finds the teacher and
 scores it.
 
 Before the first validation or iteration it optimises the teacher's plan for the env's contour, pinch point
@@ -18,14 +18,14 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from agents.training import Runner
+from agents.runner import Runner
 
 TEACHER_DIR = "teacher"
 """The run directory's folder of the teacher's plan (``CONTOUR.json``, as ``cached_plan`` keeps it)."""
 
 
 class GpsRunner(Runner):
-    """:class:`agents.training.Runner` with a teacher (module docstring).
+    """:class:`agents.runner.Runner` with a teacher (module docstring).
 
     Attributes:
         teacher: The teacher's :class:`agents.gradient.PlanResult` once found (None on a resumed run, whose
