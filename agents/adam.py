@@ -1,5 +1,5 @@
 """Adam on NumPy arrays: the optimiser of es (:mod:`agents.es.algorithm`) and of the open-loop plans
-(:mod:`agents.gradient`), whose gradients are estimated outside torch."""
+(:mod:`agents.plan_optimizer`), whose gradients are estimated outside torch."""
 
 from __future__ import annotations
 

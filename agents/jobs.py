@@ -27,16 +27,14 @@ from agents.config import (
     GENERALIST_CONTOURS,
     GENERALIST_LOOKAHEAD,
     GENERALIST_VALIDATION_CONTOURS,
-    GRAD_CONFIG,
-    GRAD_CONFIGS,
     SEED_RANGE,
     STUDENT_DEFAULTS,
     TEACHER_CONTOURS,
-    GradConfig,
     TrainConfig,
     generalist_train_config,
 )
 from agents.methods import BASELINES, SELECTORS, SIMULATED, TABLE_METHODS, check_methods
+from agents.plan_optimizer.config import GRAD_CONFIG, GRAD_CONFIGS, GradConfig
 from envs.options import ENV_FIELDS, EnvConfig, PatternCutOptions
 from warpcut.planning.feasibility import ArmModel
 from warpcut.planning.generate import EXTRA_KINDS, KINDS, MAX_CONTOURS
@@ -425,7 +423,8 @@ def with_dependent_defaults(job: Any, explicit: set[str]) -> Any:
     keys given by a file, ``--set`` or a flag):
 
     - the env's action type is the learner's (``agents.algorithms``): PPO trains discrete moves;
-    - the gradient optimiser's steps and step size are its estimator's (:data:`agents.config.GRAD_CONFIGS`);
+    - the gradient optimiser's steps and step size are its estimator's
+      (:data:`agents.plan_optimizer.config.GRAD_CONFIGS`);
     - a policy started from a generalist (``init``) observes and acts as the generalist does;
     - a generalist learned from teachers (dagger) has its own observation and network
       (:data:`agents.config.STUDENT_DEFAULTS`).
@@ -538,8 +537,8 @@ class OptimizeJob:
 
 
 TAPE_ONLY = ("trials", "window", "pinch_learning_rate")
-"""The :class:`~agents.config.GradConfig` fields only the tape estimator reads (``optimize_pinch`` refuses es
-itself, as the closed-loop ``es_*`` fields refuse tape)."""
+"""The :class:`~agents.plan_optimizer.config.GradConfig` fields only the tape estimator reads
+(``optimize_pinch`` refuses es itself, as the closed-loop ``es_*`` fields refuse tape)."""
 
 
 @dataclass

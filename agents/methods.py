@@ -17,7 +17,7 @@ METHODS = {
     "generalist": "one policy for every contour, played zero-shot with no training: the shipped one, or "
     "another that 'warpcut generalist' trained (agents.pipelines.generalist)",
     "grad": "an open-loop plan of grasp moves optimised by Adam through the differentiable simulator, at "
-    "fixed's pinch point (agents.gradient)",
+    "fixed's pinch point (agents.plan_optimizer)",
 }
 """Every method, in the order tables show them, with what it does."""
 

@@ -48,7 +48,7 @@ def load_teachers(source: str | Path, config=None) -> list[Teacher]:
     Raises:
         ValueError: ``source`` is not a finished dataset, or one of its files cannot be read (named).
     """
-    from agents.gradient import PlanResult
+    from agents.plan_optimizer.plan import PlanResult
     from warpcut.contours import validate
 
     source = Path(source)

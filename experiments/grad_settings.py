@@ -1,7 +1,7 @@
-"""Settings of the gradient optimiser (agents.gradient.optimize_plan) side by side on a few contours: why
-``grad.*`` defaults are what they are. Each contour is planned once (noise-free), then every setting
-optimises a plan at the planned pinch and order and is evaluated on the default protocol (``--trials`` paired
-noisy trials, seed 0) against no tension; fixed tension at the same pinch is the reference.
+"""Settings of the gradient optimiser (agents.plan_optimizer.optimizer.optimize_plan) side by side on a few
+contours: why ``grad.*`` defaults are what they are. Each contour is planned once (noise-free), then every
+setting optimises a plan at the planned pinch and order and is evaluated on the default protocol (``--trials``
+paired noisy trials, seed 0) against no tension; fixed tension at the same pinch is the reference.
 
 Run: python experiments/grad_settings.py --contours fls-circle,kidney,crescent,arc-top,s-curve,e-shape
      [--settings "learning_rate=0.1;learning_rate=0.2,window=5;estimator=es"] [--trials 10] [--out FILE]
@@ -18,9 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.config import GradConfig, grad_config
 from agents.config_io import apply, parse_override
-from agents.gradient import PlanResult, optimize_plan
+from agents.plan_optimizer.config import GradConfig, grad_config
+from agents.plan_optimizer.optimizer import optimize_plan
+from agents.plan_optimizer.plan import PlanResult
 from warpcut import SimConfig, load_contour, plan_cut
 from warpcut.scoring import paired_improvement
 from warpcut.task import CuttingTask

@@ -18,8 +18,8 @@ import numpy as np
 
 from agents.config_io import apply, read_file
 from agents.evaluation import run_method
-from agents.gradient import PlanResult
 from agents.jobs import EvaluateJob
+from agents.plan_optimizer.plan import PlanResult
 from warpcut.contours import load_contour
 from warpcut.io import read_json, safe_name
 from warpcut.planning import Plan

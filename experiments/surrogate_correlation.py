@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from agents.gradient import PlanPolicy
+from agents.plan_optimizer.plan import PlanPolicy
 from warpcut import SimConfig, plan_cut
 from warpcut.contours import builtin_contours, load_contour
 from warpcut.gradients import path_surrogate

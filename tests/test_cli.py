@@ -391,15 +391,10 @@ def test_cli_defaults_are_the_library_defaults():
     GradConfig), whose env defaults are the default learner's."""
     from agents.algorithms import DEFAULT_ALGORITHM, algorithm
     from agents.cli import evaluate, run, train
-    from agents.config import (
-        EVALUATION_CANDIDATES,
-        EVALUATION_TRIALS,
-        GRAD_CONFIG,
-        VALIDATION_TRIALS,
-        TrainConfig,
-    )
+    from agents.config import EVALUATION_CANDIDATES, EVALUATION_TRIALS, VALIDATION_TRIALS, TrainConfig
     from agents.config_io import flatten, to_plain
     from agents.jobs import EvaluateJob, RunJob, TrainJob
+    from agents.plan_optimizer.config import GRAD_CONFIG
     from envs.options import EnvConfig, PatternCutOptions
 
     seen = set()

@@ -10,7 +10,7 @@ import yaml
 from click.testing import CliRunner
 
 from agents.cli import main
-from agents.config import GRAD_CONFIGS
+from agents.plan_optimizer.config import GRAD_CONFIGS
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 

@@ -240,9 +240,9 @@ def test_evaluates_grad_column_plays_the_teachers_plans_as_it_would_have_found_t
     """With gps in the rl column, the grad column reads each contour's plan from its teacher (the same
     optimiser, settings, pinch point, order and seed) instead of optimising it again, and its row is the row
     the grad column gives alone."""
-    from agents.config import grad_config
     from agents.jobs import EvaluateJob
     from agents.pipelines import evaluate_table
+    from agents.plan_optimizer.config import grad_config
 
     grad = grad_config("es", iterations=2)
     job = EvaluateJob(
@@ -268,20 +268,20 @@ def test_evaluates_grad_column_plays_the_teachers_plans_as_it_would_have_found_t
 def test_a_run_stopped_while_its_teacher_is_optimised_resumes_with_its_teacher(tmp_path, monkeypatch):
     """Ctrl-C in the teacher's optimisation saves a checkpoint without a plan; the resumed run optimises the
     teacher (from its state file) and trains on it, ending as a run never stopped."""
-    import agents.gradient
+    import agents.plan_optimizer.optimizer
 
     cfg = gps_config(iterations=1)
     check = validation(cfg, 5)
     straight = train(gps_env(cfg, 5), cfg, tmp_path / "b", seed=5, progress=False, validate=check)
-    optimize = agents.gradient.optimize_plan
+    optimize = agents.plan_optimizer.optimizer.optimize_plan
 
     def stopped(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(agents.gradient, "optimize_plan", stopped)
+    monkeypatch.setattr(agents.plan_optimizer.optimizer, "optimize_plan", stopped)
     with pytest.raises(KeyboardInterrupt):
         train(gps_env(cfg, 5), cfg, tmp_path / "a", seed=5, progress=False, validate=validation(cfg, 5))
-    monkeypatch.setattr(agents.gradient, "optimize_plan", optimize)
+    monkeypatch.setattr(agents.plan_optimizer.optimizer, "optimize_plan", optimize)
     resumed = train(
         gps_env(cfg, 5), cfg, tmp_path / "a", seed=5, resume=tmp_path / "a", progress=False,
         validate=validation(cfg, 5),

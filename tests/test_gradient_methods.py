@@ -1,4 +1,4 @@
-"""Gradient-based tensioning: the plan optimiser (agents.gradient) and APG training (agents.apg)."""
+"""Gradient-based tensioning: the plan optimiser (agents.plan_optimizer) and APG training (agents.apg)."""
 
 import dataclasses
 import json
@@ -7,15 +7,11 @@ import types
 import numpy as np
 import pytest
 
-from agents.config import GRAD_CONFIGS, GradConfig, TrainConfig, grad_config
-from agents.gradient import (
-    PlanPolicy,
-    PlanResult,
-    SmoothedGradient,
-    cached_plan,
-    grad_result,
-    optimize_plan,
-)
+from agents.config import TrainConfig
+from agents.plan_optimizer.config import GRAD_CONFIGS, GradConfig, grad_config
+from agents.plan_optimizer.estimators import SmoothedGradient
+from agents.plan_optimizer.optimizer import cached_plan, grad_result, optimize_plan
+from agents.plan_optimizer.plan import PlanPolicy, PlanResult
 from warpcut import CuttingTask, load_contour
 from warpcut.sim.config import SimConfig
 
@@ -340,7 +336,7 @@ def test_gains_scheduled_on_the_sag_act_on_the_error_and_on_it_times_the_sag():
     """``es_feedback_sag``: 3 x 4 matrices on ``[e, s e]``, ``s`` the settled sheet's mean depth over
     SAG_SCALE_MM (0 without gravity); a 3 x 2 plan beside a 3 x 4 one gets zero sag gains; the JSON keeps
     the width, and another width is refused by name."""
-    from agents.gradient import SAG_SCALE_MM, feedback_features, sheet_sag
+    from agents.plan_optimizer.plan import SAG_SCALE_MM, feedback_features, sheet_sag
 
     task = CuttingTask(SMALL, [load_contour("circle-small")] * 2, pinch_points=[PINCH] * 2, seed=0)
     task.sim.set_params(gravity=np.array([0.0, SMALL.gravity], np.float32))
@@ -442,7 +438,7 @@ def test_es_with_feedback_under_randomisation_keeps_its_gains_and_resumes_bit_fo
 def test_randomised_episodes_are_weighed_by_their_sheets_no_tension_error():
     """Under es_randomize each episode's error is weighed by the nominal sheet's no-tension error over its
     own sheet's: 1 on the nominal sheet, more on a flatter one; held-out episodes draw their sheets once."""
-    from agents.gradient import HeldOut, RelativeWeights
+    from agents.plan_optimizer.estimators import HeldOut, RelativeWeights
 
     contour = load_contour("circle-small")
     task = CuttingTask(SMALL, [contour] * 2, pinch_points=[PINCH] * 2, seed=0)

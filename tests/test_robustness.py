@@ -9,7 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from agents.cli import main
-from agents.config import GradConfig, TrainConfig
+from agents.config import TrainConfig
 from agents.jobs import RobustnessJob, TrainJob
 from agents.pipelines import robustness
 from agents.pipelines.robustness import (
@@ -21,6 +21,7 @@ from agents.pipelines.robustness import (
     robustness_table,
 )
 from agents.pipelines.robustness_target import robustness_target
+from agents.plan_optimizer.config import GradConfig
 from envs.options import EnvConfig, PatternCutOptions
 from envs.vector import PatternCutVecEnv
 from warpcut.contours import load_contour
@@ -411,7 +412,7 @@ def test_apg_refuses_randomised_sheets_in_the_library_and_on_the_command_line(tm
 
 
 def test_optimised_plans_are_played_as_methods_closed_loop_included(tmp_path):
-    from agents.gradient import optimize_plan
+    from agents.plan_optimizer.optimizer import optimize_plan
     from warpcut.io import write_json
     from warpcut.planning import plan_cut
 

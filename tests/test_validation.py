@@ -337,9 +337,10 @@ def test_the_memory_limit_names_what_simulate_controls(monkeypatch):
 def test_agent_configs_and_jobs_check_each_field_as_they_are_made():
     """The learners' configs, the optimiser's and every job refuse a field of the wrong kind at
     construction, in one line naming ``Class.field``; GradConfig's own checks name its own keys."""
-    from agents.config import GradConfig, TrainConfig
+    from agents.config import TrainConfig
     from agents.es.config import EsConfig
     from agents.jobs import EvaluateJob, OptimizeJob, RobustnessJob, RunJob, SimulateJob, TrainJob
+    from agents.plan_optimizer.config import GradConfig
 
     for make, message in [
         (lambda: TrainConfig(num_envs=True), "TrainConfig.num_envs: an integer in [1, 2147483647]"),

@@ -8,8 +8,9 @@ from pathlib import Path
 import click
 
 from agents.cli import common
-from agents.config import EVALUATION_TRIALS, GRAD_CONFIG, GRAD_CONFIGS, GRAD_ESTIMATORS
+from agents.config import EVALUATION_TRIALS
 from agents.methods import point_text
+from agents.plan_optimizer.config import GRAD_CONFIG, GRAD_CONFIGS, GRAD_ESTIMATORS
 
 FLAGS = {
     "contour": "contour",

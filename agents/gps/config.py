@@ -20,7 +20,7 @@ class GpsConfig:
 
     teacher_iterations: int | None = None
     """Steps of the teacher's plan optimiser; None: the optimiser's own default for the es estimator
-    (``warpcut optimize --estimator es``, :data:`agents.config.GRAD_CONFIGS`)."""
+    (``warpcut optimize --estimator es``, :data:`agents.plan_optimizer.config.GRAD_CONFIGS`)."""
     refine: EsConfig = field(default_factory=EsConfig)
     """es's settings for the correction on top of the plan (:class:`~agents.es.config.EsConfig`; its
     ``feedback`` and ``scheduled`` shape the correction's network)."""

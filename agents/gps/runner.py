@@ -2,12 +2,12 @@
 scores it.
 
 Before the first validation or iteration it optimises the teacher's plan for the env's contour, pinch point
-and segments (:func:`agents.gradient.cached_plan`, the es estimator: what ``warpcut optimize --estimator es``
-finds with the run's seed), kept in the run directory's ``teacher/`` (an interrupted optimisation continues
-there), and sets it as the student's feed-forward. Its first validation then scores, on the same held-out
-episodes, the still grasp (the plan zeroed: fixed tension) and the plan played open loop (the student before
-any correction); later validations score the student. Model selection keeps the best of the three
-(``best.pt``), so the student never ships worse than its teacher or a still grasp on those episodes.
+and segments (:func:`agents.plan_optimizer.optimizer.cached_plan`, the es estimator: what ``warpcut optimize
+--estimator es`` finds with the run's seed), kept in the run directory's ``teacher/`` (an interrupted
+optimisation continues there), and sets it as the student's feed-forward. Its first validation then scores, on
+the same held-out episodes, the still grasp (the plan zeroed: fixed tension) and the plan played open loop
+(the student before any correction); later validations score the student. Model selection keeps the best of
+the three (``best.pt``), so the student never ships worse than its teacher or a still grasp on those episodes.
 """
 
 from __future__ import annotations
@@ -28,8 +28,8 @@ class GpsRunner(Runner):
     """:class:`agents.runner.Runner` with a teacher (module docstring).
 
     Attributes:
-        teacher: The teacher's :class:`agents.gradient.PlanResult` once found (None on a resumed run, whose
-            checkpoint carries the plan inside the actor).
+        teacher: The teacher's :class:`agents.plan_optimizer.plan.PlanResult` once found (None on a resumed
+            run, whose checkpoint carries the plan inside the actor).
     """
 
     def __init__(self, env, train_cfg: dict, log_dir: str | Path | None, device: str = "cpu") -> None:
@@ -41,8 +41,8 @@ class GpsRunner(Runner):
         """Find the teacher's plan (once) and make it the actor's feed-forward."""
         if self._taught:
             return
-        from agents.config import grad_config
-        from agents.gradient import cached_plan
+        from agents.plan_optimizer.config import grad_config
+        from agents.plan_optimizer.optimizer import cached_plan
         from warpcut.io import WriteFailed
 
         options = self.env.cfg

@@ -1,6 +1,7 @@
 """One contour's optimised plan, :func:`optimize_contour` (``warpcut optimize``): plan the cut, optimise
-a plan of grasp moves at the chosen pinch point through the simulator (:func:`agents.gradient.optimize_plan`),
-and evaluate it against no tension and fixed tension there."""
+a plan of grasp moves at the chosen pinch point through the simulator
+(:func:`agents.plan_optimizer.optimizer.optimize_plan`), and evaluate it against no tension and fixed tension
+there."""
 
 from __future__ import annotations
 
@@ -12,9 +13,9 @@ from pathlib import Path
 import numpy as np
 
 from agents.evaluation import Method, evaluate_suite
-from agents.gradient import grad_result
 from agents.jobs import OptimizeJob
 from agents.pipelines.common import claims_out, record_job
+from agents.plan_optimizer.optimizer import grad_result
 from warpcut.io import write_json
 from warpcut.planning import check_pinch, plan_cut, resolve_contour
 

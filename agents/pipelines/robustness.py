@@ -35,12 +35,13 @@ from pathlib import Path
 import numpy as np
 
 from agents.cluster import Executor, Serial
-from agents.config import EVALUATION_TRIALS, GRAD_CONFIG, GradConfig
+from agents.config import EVALUATION_TRIALS
 from agents.evaluation import run_method
-from agents.gradient import PlanResult
 from agents.jobs import RobustnessJob
 from agents.methods import BASELINES, check_methods, tensioner
 from agents.pipelines.common import claims_out, record_job
+from agents.plan_optimizer.config import GRAD_CONFIG, GradConfig
+from agents.plan_optimizer.plan import PlanResult
 from warpcut.contours import Contour, ContourError
 from warpcut.planning import ArmModel, InfeasiblePinch, check_pinch, resolve_contour
 from warpcut.scoring import bootstrap_ci, paired_improvement
@@ -64,8 +65,8 @@ was 0.21 mm), and gravity (mm/s^2; 0 to twice the nominal 521 in quarters)."""
 
 STUDY_METHODS = (*BASELINES, "generalist", "grad")
 """The methods a study can run besides trained policies: the baselines, and ``grad``, an open-loop plan
-optimised through the simulator on the nominal sheet (:func:`agents.gradient.optimize_plan`) and played
-unchanged at every value."""
+optimised through the simulator on the nominal sheet (:func:`agents.plan_optimizer.optimizer.optimize_plan`)
+and played unchanged at every value."""
 
 REPORT_FIELDS = (
     "study", "values", "unit", "metric", "contour", "trials", "nominal", "pinch", "runs", "methods",
@@ -307,7 +308,7 @@ def _methods(methods, runs, plans, scenario, grad, device, seed, out, log) -> tu
     played = check_plans(plans, scenario["contour"], runs)
     chosen = ["none", *[m for m in baselines if m != "none"], *runs, *played]
     if "grad" in chosen:
-        from agents.gradient import cached_plan
+        from agents.plan_optimizer.optimizer import cached_plan
 
         folder = None if out is None else Path(out) / "grad"
         contour, config, pinch, segments = (scenario[k] for k in ("contour", "config", "pinch", "segments"))

@@ -14,7 +14,6 @@ import numpy as np
 
 from agents.cluster import Done, Executor, Serial, ran_here
 from agents.evaluation import Method, MethodResult, evaluate_suite
-from agents.gradient import grad_column
 from agents.jobs import EvaluateJob
 from agents.methods import StepCallbacks
 from agents.pipelines.common import (
@@ -27,6 +26,7 @@ from agents.pipelines.common import (
     record_job,
     train_policy,
 )
+from agents.plan_optimizer.optimizer import grad_column
 from agents.policies import check_policy_run, is_run, rollout_errors
 from envs.options import ENV_FIELDS, PatternCutOptions
 from warpcut.contours import Contour
@@ -228,7 +228,7 @@ def _share_teachers(
     where the grad column reads a plan found there instead of optimising it again; only where the
     teacher's settings and pinch point are the column's, and the policies trained on the nominal sheet."""
     from agents.gps.runner import TEACHER_DIR
-    from agents.gradient import plan_settings
+    from agents.plan_optimizer.optimizer import plan_settings
 
     env = {name: getattr(job.env, name) for name in ENV_FIELDS}
     options = PatternCutOptions(sim_config=job.sim, arm=job.arm, **env)

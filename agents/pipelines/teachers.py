@@ -4,8 +4,8 @@ supervised learning (guided policy search; :mod:`agents.dagger`).
 For each of ``count`` generated contours (the ``train`` split, every kind in turn, the suite-like ones too:
 :data:`warpcut.planning.generate.EXTRA_KINDS`) it plans the cut as ``warpcut evaluate`` plans it (pinch point,
 segments and order: :func:`warpcut.planning.plan_cut`) and optimises the teacher there, the open-loop plan
-``warpcut optimize --estimator es`` finds (:func:`agents.gradient.cached_plan`). A contour is a unit of work:
-on ``--ray`` the units run on the cluster's workers.
+``warpcut optimize --estimator es`` finds (:func:`agents.plan_optimizer.optimizer.cached_plan`). A contour is
+a unit of work: on ``--ray`` the units run on the cluster's workers.
 
 A dataset directory holds ``config.json`` (the job), ``teachers/NAME/`` per contour (``cut.json``: the
 contour's points, pinch point and ordered segments; ``NAME.json``: the teacher's plan, its optimiser's history
@@ -113,7 +113,7 @@ def _teacher_unit(
     contour: Contour, folder: Path | None, *, config, candidates: int, seed: int, arm, grad, device
 ) -> dict:
     """One contour's cut and teacher, kept in ``folder`` (a unit of :func:`make_teachers`): its index row."""
-    from agents.gradient import cached_plan
+    from agents.plan_optimizer.optimizer import cached_plan
     from warpcut.planning import plan_cut
 
     cut_file = folder / CUT_FILE
