@@ -211,7 +211,7 @@ class TrainJob:
 
     def unused_keys(self) -> dict[str, str]:
         """The keys this job would not use, ``{key: when it applies}`` (a setting given for nothing is
-        refused, not ignored: :func:`agents.cli.common.refuse_unused_settings`): the other learners'
+        refused, not ignored: :func:`agents.cli.settings.refuse_unused_settings`): the other learners'
         sections, the recording's colours without a recording, and ``allow_infeasible_pinch`` without a
         ``pinch``."""
         return {**other_learners(self.train), **_recording_keys(self), **_pinch_keys(self.pinch is None)}
@@ -527,7 +527,7 @@ class OptimizeJob:
 
     def unused_keys(self) -> dict[str, str]:
         """The keys this job would not use, ``{key: when it applies}``: the optimiser's settings of the other
-        estimator (:func:`agents.cli.common.refuse_unused_settings`)."""
+        estimator (:func:`agents.cli.settings.refuse_unused_settings`)."""
         es = [f.name for f in dataclasses.fields(GradConfig) if f.name.startswith("es_")]
         if self.grad.estimator == "es":
             unused = {f"grad.{k}": "read by estimator tape only (--estimator tape)" for k in TAPE_ONLY}
@@ -608,7 +608,7 @@ class RobustnessJob:
 
     def unused_keys(self) -> dict[str, str]:
         """The keys this job would not use, ``{key: when it applies}``: ``grad`` without the grad method,
-        ``sim`` with runs (:func:`agents.cli.common.refuse_unused_settings`)."""
+        ``sim`` with runs (:func:`agents.cli.settings.refuse_unused_settings`)."""
         unused = {}
         if "grad" not in self.methods:
             unused["grad"] = "read by the grad method only (--methods ...,grad)"
@@ -685,7 +685,7 @@ class SimulateJob:
 
     def unused_keys(self) -> dict[str, str]:
         """The keys this job would not use, ``{key: when it applies}``: a setting given for nothing is
-        refused, not ignored (:func:`agents.cli.common.refuse_unused_settings`)."""
+        refused, not ignored (:func:`agents.cli.settings.refuse_unused_settings`)."""
         unused = {}
         if not {"fixed", "analytic", "generalist"} & set(self.policy):
             runs = ",".join(self.policy)

@@ -391,6 +391,7 @@ def test_cli_defaults_are_the_library_defaults():
     GradConfig), whose env defaults are the default learner's."""
     from agents.algorithms import DEFAULT_ALGORITHM, algorithm
     from agents.cli import evaluate, run, train
+    from agents.cli.options import setting_keys
     from agents.config import EVALUATION_CANDIDATES, EVALUATION_TRIALS, VALIDATION_TRIALS, TrainConfig
     from agents.config_io import flatten, to_plain
     from agents.jobs import EvaluateJob, RunJob, TrainJob
@@ -401,7 +402,7 @@ def test_cli_defaults_are_the_library_defaults():
     for module, job_class in ((train, TrainJob), (run, RunJob), (evaluate, EvaluateJob)):
         plain = flatten(to_plain(job_class()))
         for param in module.command.params:
-            key = module.FLAGS.get(param.name)
+            key = setting_keys(module.command).get(param.name)
             if key is None or param.default is None:
                 continue
             default = param.default.split(",") if isinstance(plain[key], list) else param.default
@@ -687,7 +688,7 @@ def test_a_seed_is_refused_where_its_noise_would_repeat_a_smaller_seeds(capfd):
     the range ``--seed`` takes."""
     from cli_runner import refused
 
-    from agents.cli.common import SEED_RANGE
+    from agents.config import SEED_RANGE
 
     top, simulate = SEED_RANGE[1], ["simulate", "--contour", "circle-small"]
     for args in (["--seed", "2147483647"], ["--seed", str(top + 1)]):

@@ -154,7 +154,7 @@ def test_a_temporary_folder_refused_under_a_file_size_limit_names_the_limit(monk
 def test_an_output_folder_where_files_cannot_be_made_says_so():
     import click
 
-    from agents.cli.common import check_outputs
+    from agents.cli.outputs import check_outputs
 
     with pytest.raises(click.BadParameter, match=r"/proc/1: files cannot be created there"):
         check_outputs({"--out": __import__("pathlib").Path("/proc/1")})

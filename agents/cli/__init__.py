@@ -2,7 +2,7 @@
 makes one library call and prints or writes what it returns.
 
 Every command has ``--help``; bad input exits with status 2 and a one-line ``error: ...`` naming what
-to fix, never a traceback (:class:`agents.cli.common.CleanErrors`). Heavy modules (torch, Warp, rerun)
+to fix, never a traceback (:class:`agents.cli.errors.CleanErrors`). Heavy modules (torch, Warp, rerun)
 load inside the commands, so ``warpcut --help`` starts fast.
 """
 
@@ -27,7 +27,7 @@ from agents.cli import (
     teachers,
     train,
 )
-from agents.cli.common import CleanErrors
+from agents.cli.errors import CleanErrors
 
 
 class Main(CleanErrors):

@@ -7,20 +7,20 @@ from pathlib import Path
 import click
 
 from agents.algorithms import DEFAULT_ALGORITHM
-from agents.cli import common
+from agents.cli import options, outputs, settings
 from warpcut import bench
 
 
-@click.command("bench", cls=common.Command)
-@common.device_option
-@common.count_option("repeats", bench.REPEATS, "Timed repeats (median).")
+@click.command("bench", cls=settings.Command)
+@options.device_option
+@options.count_option("repeats", bench.REPEATS, "Timed repeats (median).")
 @click.option(
     "--batch-sizes",
     default=",".join(map(str, bench.BATCH_SIZES)),
     show_default=True,
     help="Comma-separated batch sizes.",
 )
-@common.count_option("rollout-envs", bench.ROLLOUT_ENVS, "Batch size of the fls-circle rollout measurement.")
+@options.count_option("rollout-envs", bench.ROLLOUT_ENVS, "Batch size of the fls-circle rollout measurement.")
 @click.option(
     "--train-envs",
     default=",".join(map(str, bench.ENV_STEP_ENVS)),
@@ -28,7 +28,7 @@ from warpcut import bench
     help="Comma-separated batch sizes of the tensioned env-step measurement and of training beside it (the "
     "default learner and PPO; gps and es need multiples of es's population, 64).",
 )
-@common.json_option
+@options.json_option
 def command(
     device: str | None,
     repeats: int,
@@ -44,7 +44,7 @@ def command(
 
     from agents.benchmarks import benchmark_training
 
-    common.check_outputs({"--json": json_path})
+    outputs.check_outputs({"--json": json_path})
     train_envs_sizes = _sizes(train_envs, "--train-envs")
     learners = list(dict.fromkeys([DEFAULT_ALGORITHM, "ppo"]))
     _check_batches(learners, train_envs_sizes)

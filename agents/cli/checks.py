@@ -4,7 +4,6 @@ advice in errors."""
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import click
@@ -62,11 +61,12 @@ def check_network_memory(train) -> None:
 
 def setting_form(command: click.Command, job: str | None, key: str, value: str) -> str | None:
     """How ``command`` gives the setting ``key`` the value ``value``: its own flag (``--resolution 12``,
-    from its module's ``FLAGS``), else ``--set KEY=VALUE`` where its ``job`` (a class of
+    a :class:`~agents.cli.options.Setting` option), else ``--set KEY=VALUE`` where its ``job`` (a class of
     :mod:`agents.jobs`, by name; None: it has none) has the setting, else None (advice leaves it out)."""
-    flags = getattr(sys.modules.get(command.callback.__module__), "FLAGS", {})
+    from agents.cli.options import Setting
+
     for param in command.params:
-        if flags.get(param.name) == key and isinstance(param, click.Option):
+        if isinstance(param, Setting) and param.key == key:
             return f"{param.opts[0]} {value}"
     if job is None:
         return None

@@ -6,10 +6,10 @@ from pathlib import Path
 
 import click
 
-from agents.cli import common
+from agents.cli import outputs, settings
 
 
-@click.command("contours", cls=common.Command)
+@click.command("contours", cls=settings.Command)
 @click.option(
     "--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the list here."
 )
@@ -17,7 +17,7 @@ def command(json_path: Path | None) -> None:
     """List the built-in contours (name, closed/open, length, area)."""
     from warpcut.contours import builtin_contours
 
-    common.check_outputs({"--json": json_path})
+    outputs.check_outputs({"--json": json_path})
     rows = [
         {
             "name": c.name,

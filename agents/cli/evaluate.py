@@ -8,27 +8,18 @@ import click
 
 from agents import cluster
 from agents.algorithms import ALGORITHMS, DEFAULT_ALGORITHM
-from agents.cli import common
+from agents.cli import options, outputs, settings
 from agents.cli.checks import check_planner_memory
 from agents.cli.video import videos, with_videos
 from agents.config import EVALUATION_TRIALS
 from agents.methods import METHODS, TABLE_METHODS
 
-FLAGS = {
-    "contours": "contours",
-    "methods": "methods",
-    "algo": "train.algo",
-    "checkpoints": "checkpoints",
-    "trials": "trials",
-    "seed": "seed",
-    "generalist_source": "generalist",
-}
-"""Each flag's key in the job (:class:`agents.jobs.EvaluateJob`)."""
 
-
-@click.command("evaluate", cls=common.Command)
+@click.command("evaluate", cls=settings.Command)
 @click.option(
     "--contours",
+    cls=options.Setting,
+    key="contours",
     default="all",
     show_default=True,
     callback=lambda ctx, param, value: [v.strip() for v in value.split(",") if v.strip()],
@@ -36,6 +27,8 @@ FLAGS = {
 )
 @click.option(
     "--methods",
+    cls=options.Setting,
+    key="methods",
     default=",".join(TABLE_METHODS),
     show_default=True,
     callback=lambda ctx, param, value: [v.strip() for v in value.split(",") if v.strip()],
@@ -45,6 +38,8 @@ FLAGS = {
 )
 @click.option(
     "--algo",
+    cls=options.Setting,
+    key="train.algo",
     type=click.Choice(list(ALGORITHMS)),
     default=DEFAULT_ALGORITHM,
     show_default=True,
@@ -52,20 +47,22 @@ FLAGS = {
 )
 @click.option(
     "--checkpoints",
+    cls=options.Setting,
+    key="checkpoints",
     type=click.Path(exists=True, file_okay=False),
     default=None,
     help="Directory of trained runs, one per contour (CHECKPOINTS/NAME, as 'warpcut train' writes); "
     "without it the rl column trains a policy per contour.",
 )
-@common.generalist_option
-@common.count_option("trials", EVALUATION_TRIALS, "Trials per contour and method.")
-@common.seed_option
-@common.device_option
-@common.ray_option("each contour's plan and rl policy")
-@common.out_option("logs/evaluate-TIMESTAMP; results.json, results.md, plans and trained policies")
-@common.run_dir_options
-@common.json_option
-@common.config_options
+@options.generalist_option
+@options.count_option("trials", EVALUATION_TRIALS, "Trials per contour and method.", key="trials")
+@options.seed_option
+@options.device_option
+@options.ray_option("each contour's plan and rl policy")
+@options.out_option("logs/evaluate-TIMESTAMP; results.json, results.md, plans and trained policies")
+@options.run_dir_options
+@options.json_option
+@options.config_options
 def command(
     contours: list[str],
     methods: list[str],
@@ -94,13 +91,13 @@ def command(
     from warpcut.io import safe_name, write_json
     from warpcut.planning.generate import resolve_specs
 
-    base = common.resumed_job(EvaluateJob, out, resume, "evaluate")
-    job = common.resolve(EvaluateJob, config_file, overrides, FLAGS, base)
+    base = settings.resumed_job(EvaluateJob, out, resume, "evaluate")
+    job = settings.resolve(EvaluateJob, config_file, overrides, base)
     if base is None:  # a resumed run's config.json holds every setting it was started with
-        common.refuse_unused_settings(job, overrides, FLAGS)
+        settings.refuse_unused_settings(job, overrides)
     job = job.check()
     if "rl" in job.methods and job.checkpoints is None:
-        common.check_learner(job)
+        settings.check_learner(job)
     resolve_specs(job.contours, job.sim.validated())  # a bad name or file: now
     if ray is not None and not job.plan and ("rl" not in job.methods or job.checkpoints is not None):
         raise click.UsageError(
@@ -108,22 +105,22 @@ def command(
             "(--methods with rl, without --checkpoints); leave out --ray"
         )
     if print_config:
-        common.print_config(job)
+        settings.print_config(job)
         return
     if job.plan:
         check_planner_memory(job.candidates, job.sim)
     record = _first_contour_envs("record", job.record, job.trials, "recording")
     video = _first_contour_envs("video", job.video, job.trials, "filming")
-    out, claim = common.claim(out, "evaluate", resume, overwrite, "evaluate")
-    common.check_outputs({"--json": json_path}, list(job.contours), own=(out, "evaluate"))
-    cuts = common.final_cuts(not job.plots)
+    out, claim = outputs.claim(out, "evaluate", resume, overwrite, "evaluate")
+    outputs.check_outputs({"--json": json_path}, list(job.contours), own=(out, "evaluate"))
+    cuts = outputs.final_cuts(not job.plots)
     from agents.pipelines import evaluate_table  # torch: after every check, so that a refusal is quick
 
     with (
         claim,
-        cluster.executor(ray, device, common.log) as units,
+        cluster.executor(ray, device, outputs.log) as units,
         stage_bars() as stages,
-        common.recorder(out, record, job.colour_by) as rec,
+        outputs.recorder(out, record, job.colour_by) as rec,
         videos(out, video) as vid,
     ):
         report = evaluate_table(
@@ -131,14 +128,14 @@ def command(
             out,
             resume=resume,
             device=device,
-            log=common.log,
+            log=outputs.log,
             stages=stages,
-            step_callbacks=with_videos(common.step_callbacks(rec, cuts), vid),
+            step_callbacks=with_videos(outputs.step_callbacks(rec, cuts), vid),
             cluster=units,
         )
     click.echo(report.markdown())
     rows = report.table["rows"]
-    common.echo_infeasible(
+    outputs.echo_infeasible(
         {f"{r['contour']} {m}": r.get(f"{m}_pinch_problem") for r in rows for m in job.methods}
     )
     click.echo(f"({len(report.contours)} contours x {job.trials} trials in {report.seconds:.0f} s)")
@@ -156,15 +153,15 @@ def command(
     if cuts is not None:
         from warpcut.viz.plots import plot_improvements, plot_pinch_candidates
 
-        common.echo_written(plot_improvements(report.to_json(), job.methods, out))
+        outputs.echo_written(plot_improvements(report.to_json(), job.methods, out))
         shown = ["none"] + [m for m in job.methods if m != "none"]
-        common.echo_written(cuts.plot(out / "regions", shown, [c.name for c in report.contours]))
+        outputs.echo_written(cuts.plot(out / "regions", shown, [c.name for c in report.contours]))
         for p in report.plans or []:
-            common.echo_written(
+            outputs.echo_written(
                 plot_pinch_candidates(p, report.config, out / "plans", name=safe_name(p.contour.name))
             )
-        common.plot_learning_curves({run: run.name for run in report.policy_runs})
-    common.echo_recording(rec)
+        outputs.plot_learning_curves({run: run.name for run in report.policy_runs})
+    outputs.echo_recording(rec)
     click.echo(f"wrote {out}")
 
 

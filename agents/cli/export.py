@@ -6,10 +6,10 @@ from pathlib import Path
 
 import click
 
-from agents.cli import common
+from agents.cli import outputs, settings
 
 
-@click.command("export", cls=common.Command)
+@click.command("export", cls=settings.Command)
 @click.argument("run_dir", type=click.Path(exists=True, path_type=Path))
 @click.option(
     "--out",
@@ -29,11 +29,11 @@ def command(run_dir: Path, out: Path | None) -> None:
     same, with a note saying so, also in the metadata (warpcut.training)."""
     from agents.export import export_run
 
-    common.check_outputs({"--out": out})
+    outputs.check_outputs({"--out": out})
     for exported in export_run(run_dir, out):
         click.echo(f"exported {exported['policy']}")
         for kind in ("torchscript", "onnx"):
             click.echo(f"  {kind}: {exported[kind]}")
         if exported["unfinished"]:
             click.echo(f"note: {exported['unfinished']}")
-        common.echo_infeasible({"policy": exported["pinch_problem"]})
+        outputs.echo_infeasible({"policy": exported["pinch_problem"]})

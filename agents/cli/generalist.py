@@ -7,25 +7,19 @@ from pathlib import Path
 
 import click
 
-from agents.cli import common
+from agents.cli import errors, options, outputs, settings
 from agents.cli.checks import check_network_memory, check_planner_memory
 from agents.config import GENERALIST_CONTOURS, GENERALIST_ITERATIONS, GENERALIST_VALIDATION_CONTOURS
 
-FLAGS = {
-    "generated": "generated",
-    "contours": "contours",
-    "validation_contours": "validation_contours",
-    "iterations": "train.iterations",
-    "seed": "seed",
-    "teachers": "train.dagger.teachers",
-}
-"""Each flag's key in the job (:class:`agents.jobs.GeneralistJob`)."""
 
-
-@click.command("generalist", cls=common.Command)
-@common.count_option("generated", None, f"Generated training contours (default {GENERALIST_CONTOURS}).")
+@click.command("generalist", cls=settings.Command)
+@options.count_option(
+    "generated", None, f"Generated training contours (default {GENERALIST_CONTOURS}).", key="generated"
+)
 @click.option(
     "--contours",
+    cls=options.Setting,
+    key="contours",
     default=None,
     callback=lambda ctx, param, value: (
         None if value is None else [v.strip() for v in value.split(",") if v.strip()]
@@ -35,25 +29,31 @@ FLAGS = {
 )
 @click.option(
     "--teachers",
+    cls=options.Setting,
+    key="train.dagger.teachers",
     default=None,
     help="Learn from this teacher dataset (a directory of 'warpcut teachers'), by DAgger on its contours "
     "(default: es on generated contours).",
 )
-@common.count_option(
+@options.count_option(
     "validation-contours",
     None,
     f"Generated held-out contours that choose the policy kept (default {GENERALIST_VALIDATION_CONTOURS}).",
+    key="validation_contours",
 )
-@common.count_option(
-    "iterations", None, f"es iterations in total, a resumed run's included (default {GENERALIST_ITERATIONS})."
+@options.count_option(
+    "iterations",
+    None,
+    f"es iterations in total, a resumed run's included (default {GENERALIST_ITERATIONS}).",
+    key="train.iterations",
 )
-@common.seed_option
-@common.device_option
-@common.ray_option("the contours' plans and es's perturbed policies (the envs of whole policies a worker)")
-@common.out_option("logs/generalist-TIMESTAMP")
-@common.run_dir_options
+@options.seed_option
+@options.device_option
+@options.ray_option("the contours' plans and es's perturbed policies (the envs of whole policies a worker)")
+@options.out_option("logs/generalist-TIMESTAMP")
+@options.run_dir_options
 @click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
-@common.config_options
+@options.config_options
 def command(
     generated: int | None,
     contours: list[str] | None,
@@ -82,34 +82,34 @@ def command(
     from agents.jobs import GeneralistJob
     from warpcut.planning.generate import resolve_specs
 
-    base = common.resumed_job(GeneralistJob, out, resume, "generalist")
+    base = settings.resumed_job(GeneralistJob, out, resume, "generalist")
     if teachers is not None and not any(o.split("=", 1)[0].strip() == "train.algo" for o in overrides):
         overrides = ("train.algo=dagger", *overrides)  # the learner that learns from teachers
-    job = common.resolve(GeneralistJob, config_file, overrides, FLAGS, base)
+    job = settings.resolve(GeneralistJob, config_file, overrides, base)
     if base is None:
-        common.refuse_unused_settings(job, overrides, FLAGS)
+        settings.refuse_unused_settings(job, overrides)
     job.check()
     if print_config:
-        common.print_config(job)
+        settings.print_config(job)
         return
     check_network_memory(job.train)
     check_planner_memory(job.candidates, job.sim)
     if job.contours:  # a bad name or file: now
         resolve_specs(job.contours, job.sim.validated())
-    out, claim = common.claim(out, "generalist", resume, overwrite, "generalist")
+    out, claim = outputs.claim(out, "generalist", resume, overwrite, "generalist")
     from agents.pipelines.generalist import train_generalist  # torch: after every check
 
     try:
-        with claim, executor(ray, device, common.log) as units:
+        with claim, executor(ray, device, outputs.log) as units:
             click.echo(f"training a generalist into {out} ({device})")
             summary = train_generalist(
-                job, out, resume=resume, device=device, progress=not no_progress, log=common.log,
+                job, out, resume=resume, device=device, progress=not no_progress, log=outputs.log,
                 cluster=units,
             )  # fmt: skip
     except KeyboardInterrupt as stop:  # Ctrl-C, SIGTERM, SIGHUP: the checkpoint is saved
         if not (out / "summary.json").is_file():
             raise
-        raise common.RunInterrupted(out) from stop
+        raise errors.RunInterrupted(out) from stop
     best = summary.get("best") or {}
     click.echo(
         f"done: {summary['iterations']} iterations, {summary['env_steps']:,} env steps in "

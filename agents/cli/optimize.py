@@ -7,32 +7,32 @@ from pathlib import Path
 
 import click
 
-from agents.cli import common
+from agents.cli import options, outputs, settings
 from agents.config import EVALUATION_TRIALS
 from agents.methods import point_text
 from agents.plan_optimizer.config import GRAD_CONFIG, GRAD_CONFIGS, GRAD_ESTIMATORS
 
-FLAGS = {
-    "contour": "contour",
-    "pinch": "pinch",
-    "estimator": "grad.estimator",
-    "iterations": "grad.iterations",
-    "trials": "trials",
-    "seed": "seed",
-}
-"""Each flag's key in the job (:class:`agents.jobs.OptimizeJob`)."""
 
-
-@click.command("optimize", cls=common.Command)
-@click.option("--contour", default=None, help="Built-in name or a .json/.svg contour file.")
+@click.command("optimize", cls=settings.Command)
+@click.option(
+    "--contour",
+    cls=options.Setting,
+    key="contour",
+    default=None,
+    help="Built-in name or a .json/.svg contour file.",
+)
 @click.option(
     "--pinch",
+    cls=options.Setting,
+    key="pinch",
     default=None,
-    callback=common.point_callback,
+    callback=options.point_callback,
     help="Pinch point X,Y (mm); default: the plan's (fixed tension's best candidate).",
 )
 @click.option(
     "--estimator",
+    cls=options.Setting,
+    key="grad.estimator",
     type=click.Choice(GRAD_ESTIMATORS),
     default=GRAD_CONFIG.estimator,
     show_default=True,
@@ -40,25 +40,28 @@ FLAGS = {
     "(perturbed plans cut in one batch; with grad.es_feedback_phases, feedback gains too); 'tape', the path "
     "surrogate's through wp.Tape (weaker on the suite: docs/results.md).",
 )
-@common.count_option(
+@options.count_option(
     "iterations",
     None,
     f"Optimiser steps; default the estimator's: {GRAD_CONFIGS['es'].iterations} (es: one batch of perturbed "
     f"plans each), {GRAD_CONFIGS['tape'].iterations} (tape: a forward and a backward pass each).",
+    key="grad.iterations",
 )
-@common.count_option("trials", EVALUATION_TRIALS, "Evaluation trials (none, fixed and grad, paired).")
-@common.seed_option
-@common.device_option
-@common.out_option("logs/optimize-CONTOUR-TIMESTAMP; the plan, the optimiser's state and results.json")
+@options.count_option(
+    "trials", EVALUATION_TRIALS, "Evaluation trials (none, fixed and grad, paired).", key="trials"
+)
+@options.seed_option
+@options.device_option
+@options.out_option("logs/optimize-CONTOUR-TIMESTAMP; the plan, the optimiser's state and results.json")
 @click.option(
     "--resume",
     is_flag=True,
     help="Continue the run in --out (interrupted, or to finish it): a finished plan is kept, an interrupted "
     "optimisation continues from its state; the settings must be the run's (its config.json).",
 )
-@common.overwrite_option
-@common.json_option
-@common.config_options
+@options.overwrite_option
+@options.json_option
+@options.config_options
 def command(
     contour: str | None,
     pinch: list[float] | None,
@@ -87,25 +90,25 @@ def command(
     from warpcut.io import safe_name, write_json
     from warpcut.planning import resolve_contour
 
-    base = common.resumed_job(OptimizeJob, out, resume, "optimize")
-    job = common.resolve(OptimizeJob, config_file, overrides, FLAGS, base).check()
+    base = settings.resumed_job(OptimizeJob, out, resume, "optimize")
+    job = settings.resolve(OptimizeJob, config_file, overrides, base).check()
     if base is None:  # a resumed run's config.json holds every setting it was started with
-        common.refuse_unused_settings(job, overrides, FLAGS)
+        settings.refuse_unused_settings(job, overrides)
     contour = resolve_contour(job.contour, job.sim)  # a bad name or file: now
     contour_name = contour.name
     if print_config:
-        common.print_config(job)
+        settings.print_config(job)
         return
     if job.pinch is not None:  # an infeasible pinch point: now
         from warpcut.planning import check_pinch
 
         check_pinch(job.pinch, contour, job.sim.validated(), None, job.arm, allow=job.allow_infeasible_pinch)
-    out, claim = common.claim(out, f"optimize-{safe_name(contour_name)}", resume, overwrite, "optimize")
-    common.check_outputs(
+    out, claim = outputs.claim(out, f"optimize-{safe_name(contour_name)}", resume, overwrite, "optimize")
+    outputs.check_outputs(
         {"--json": json_path}, [job.contour] if isinstance(job.contour, str) else [], own=(out, "optimize")
     )
     with claim:
-        report = optimize_contour(job, out, resume=resume, device=device, log=common.log)
+        report = optimize_contour(job, out, resume=resume, device=device, log=outputs.log)
     optimized = report["optimized"]
     click.echo(
         f"{report['contour']}: pinch {point_text(optimized['pinch'])}, kept iteration "
@@ -116,9 +119,9 @@ def command(
     for name, row in report["evaluation"].items():
         ci = f" ±{row['ci95_pct']:.1f}" if job.trials > 1 else ""  # no CI of one sample
         improvement = f"{row['improvement_pct']:>+11.1f}%{ci}"
-        mark = common.infeasible_mark(row["pinch_feasible"])
+        mark = outputs.infeasible_mark(row["pinch_feasible"])
         click.echo(f"{name:<8} {row['error_vertices']:>16.1f} {improvement}{mark}")
-    common.echo_infeasible({"fixed, grad": report["pinch_problem"]})
+    outputs.echo_infeasible({"fixed, grad": report["pinch_problem"]})
     if json_path:
         write_json(json_path, report)
     click.echo(f"wrote {out}")

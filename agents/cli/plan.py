@@ -7,41 +7,40 @@ from pathlib import Path
 
 import click
 
-from agents.cli import common
+from agents.cli import options, outputs, settings
 from agents.config import EVALUATION_CANDIDATES
 from agents.methods import point_text
 from warpcut.sim.config import ARM_RADIUS_MM, SEGMENT_TOLERANCE_MM, SimConfig
 
-FLAGS = {"resolution": "sim.resolution", "arm_radius": "arm.radius_mm", "arm_length": "arm.length_mm"}
-"""The settings plan's flags give (plan has no --set): advice in its errors names these flags."""
 
-
-@click.command("plan", cls=common.Command)
-@common.contour_option
-@common.count_option(
+@click.command("plan", cls=settings.Command)
+@options.contour_option
+@options.count_option(
     "candidates",
     EVALUATION_CANDIDATES,
     "Pinch points sampled from the feasible region (paper: 30; the centroid is added if feasible).",
 )
 @click.option(
     "--arm-radius",
+    cls=options.Setting,
+    key="arm.radius_mm",
     default=ARM_RADIUS_MM,
     show_default=True,
-    type=common.FloatRange(min=0.0),
+    type=options.FloatRange(min=0.0),
     help="Radius of the cutting arm (mm) whose sweep pinch points must avoid.",
 )
-@common.arm_length_option
+@options.arm_length_option
 @click.option(
     "--tolerance",
     default=SEGMENT_TOLERANCE_MM,
     show_default=True,
-    type=common.FloatRange(min=0.0, min_open=True),
+    type=options.FloatRange(min=0.0, min_open=True),
     help="Segmentation tolerance (mm): x reversals smaller than this are ignored.",
 )
-@common.resolution_option
-@common.device_option
-@common.seed_option
-@common.json_option
+@options.resolution_option
+@options.device_option
+@options.seed_option
+@options.json_option
 def command(
     contour_name: str,
     candidates: int,
@@ -59,7 +58,7 @@ def command(
     from warpcut.contours import load_contour
     from warpcut.planning import ArmModel, plan_cut
 
-    common.check_outputs({"--json": json_path}, [contour_name])
+    outputs.check_outputs({"--json": json_path}, [contour_name])
     contour = load_contour(contour_name)
     config = SimConfig(resolution=resolution).validated()
     start = time.perf_counter()

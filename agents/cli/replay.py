@@ -15,7 +15,7 @@ from urllib.parse import quote
 
 import click
 
-from agents.cli import common
+from agents.cli import settings
 
 VIEWER = [sys.executable, "-m", "rerun_cli"]
 """The rerun viewer (rerun-sdk's ``rerun`` command), as ``replay`` runs it."""
@@ -40,7 +40,7 @@ def web_url(web_port: int = WEB_PORT, grpc_port: int = GRPC_PORT) -> str:
     return f"http://127.0.0.1:{web_port}/?url={source}"
 
 
-@click.command("replay", cls=common.Command)
+@click.command("replay", cls=settings.Command)
 @click.argument("path", type=click.Path(dir_okay=False, path_type=Path))
 @click.option(
     "--web",
@@ -121,7 +121,7 @@ def serve_web(path: Path, viewer: list[str]) -> int:
     status.
 
     The viewer runs in its own process group (rerun's ``rerun`` command is a Python wrapper that starts
-    the server binary), and Ctrl-C, SIGTERM and SIGHUP (which :class:`~agents.cli.common.CleanErrors`
+    the server binary), and Ctrl-C, SIGTERM and SIGHUP (which :class:`~agents.cli.errors.CleanErrors`
     raises as ``KeyboardInterrupt``) stop the whole group before the interrupt goes on: no server is left
     holding the ports.
     """

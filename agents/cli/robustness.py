@@ -7,20 +7,9 @@ from pathlib import Path
 
 import click
 
-from agents.cli import common
+from agents.cli import options, outputs, settings
 from agents.config import EVALUATION_TRIALS
 from agents.methods import BASELINES
-
-FLAGS = {
-    "contour": "contour",
-    "study": "study",
-    "methods": "methods",
-    "runs": "runs",
-    "plans": "plans",
-    "trials": "trials",
-    "seed": "seed",
-}
-"""Each flag's key in the job (:class:`agents.jobs.RobustnessJob`)."""
 
 
 def _labelled(items: tuple[str, ...], flag: str, default) -> dict[str, str]:
@@ -52,14 +41,18 @@ def _listed(ctx: click.Context, param: click.Parameter, value: str | None) -> li
     return None if value is None else [v.strip() for v in value.split(",") if v.strip()]
 
 
-@click.command("robustness", cls=common.Command)
+@click.command("robustness", cls=settings.Command)
 @click.option(
     "--contour",
+    cls=options.Setting,
+    key="contour",
     default=None,
     help="Built-in name or a .json/.svg contour file (default with --run: the run's).",
 )
 @click.option(
     "--study",
+    cls=options.Setting,
+    key="study",
     default=None,
     callback=_listed,
     help="resolution (vertices per side), noise (process noise, mm) or force (gravity, mm/s^2); several "
@@ -67,6 +60,8 @@ def _listed(ctx: click.Context, param: click.Parameter, value: str | None) -> li
 )
 @click.option(
     "--methods",
+    cls=options.Setting,
+    key="methods",
     default=",".join(BASELINES),
     show_default=True,
     callback=_listed,
@@ -78,6 +73,8 @@ def _listed(ctx: click.Context, param: click.Parameter, value: str | None) -> li
 @click.option(
     "--run",
     "runs",
+    cls=options.Setting,
+    key="runs",
     multiple=True,
     metavar="[LABEL=]DIR",
     callback=lambda ctx, param, value: _labelled_runs(value),
@@ -88,6 +85,8 @@ def _listed(ctx: click.Context, param: click.Parameter, value: str | None) -> li
 @click.option(
     "--plan",
     "plans",
+    cls=options.Setting,
+    key="plans",
     multiple=True,
     metavar="[LABEL=]FILE",
     callback=lambda ctx, param, value: _labelled_plans(value),
@@ -95,20 +94,20 @@ def _listed(ctx: click.Context, param: click.Parameter, value: str | None) -> li
     "grad/NAME.json), repeatable: each is a method named LABEL (default: the file's name), played as it was "
     "optimised at its own pinch point at every value.",
 )
-@common.count_option("trials", EVALUATION_TRIALS, "Seeded noisy trials per value and method.")
-@common.seed_option
-@common.device_option
-@common.ray_option("each method's batch of values")
-@common.out_option("logs/robustness-CONTOUR-TIMESTAMP; robustness-STUDY.json and the figure")
+@options.count_option("trials", EVALUATION_TRIALS, "Seeded noisy trials per value and method.", key="trials")
+@options.seed_option
+@options.device_option
+@options.ray_option("each method's batch of values")
+@options.out_option("logs/robustness-CONTOUR-TIMESTAMP; robustness-STUDY.json and the figure")
 @click.option(
     "--resume",
     is_flag=True,
     help="Continue the run in --out (interrupted, or to finish it): the studies it finished are read back, "
     "grad's plan is kept or continues from its state; the settings must be the run's (its config.json).",
 )
-@common.overwrite_option
-@common.json_option
-@common.config_options
+@options.overwrite_option
+@options.json_option
+@options.config_options
 def command(
     contour: str | None,
     study: list[str] | None,
@@ -140,24 +139,24 @@ def command(
     from warpcut.io import safe_name, write_json
     from warpcut.planning import resolve_contour
 
-    base = common.resumed_job(RobustnessJob, out, resume, "robustness")
-    job = common.resolve(RobustnessJob, config_file, overrides, FLAGS, base)
+    base = settings.resumed_job(RobustnessJob, out, resume, "robustness")
+    job = settings.resolve(RobustnessJob, config_file, overrides, base)
     if base is None:  # a resumed run's config.json holds every setting it was started with
-        common.refuse_unused_settings(job, overrides, FLAGS)
+        settings.refuse_unused_settings(job, overrides)
     job = check_job(job)
     name = "run" if job.contour is None else resolve_contour(job.contour).name  # a bad one: now
     if print_config:
-        common.print_config(job)
+        settings.print_config(job)
         return
-    out, claim = common.claim(out, f"robustness-{safe_name(name)}", resume, overwrite, "robustness")
-    common.check_outputs(
+    out, claim = outputs.claim(out, f"robustness-{safe_name(name)}", resume, overwrite, "robustness")
+    outputs.check_outputs(
         {"--json": json_path}, [job.contour] if isinstance(job.contour, str) else [], own=(out, "robustness")
     )
-    with claim, executor(ray, device, common.log) as units:
-        reports = robustness(job, out, resume=resume, device=device, log=common.log, cluster=units)
+    with claim, executor(ray, device, outputs.log) as units:
+        reports = robustness(job, out, resume=resume, device=device, log=outputs.log, cluster=units)
     for report in reports:
         click.echo("\n".join(robustness_table(report)))
-        common.echo_infeasible(report.get("infeasible_pinches") or {})
+        outputs.echo_infeasible(report.get("infeasible_pinches") or {})
         if report["skipped"]:
             click.echo(f"skipped (mesh too coarse): {', '.join(f'{v:g}' for v in report['skipped'])}")
     if json_path:
@@ -167,5 +166,5 @@ def command(
     if job.plots:
         from warpcut.viz.plots import plot_robustness
 
-        common.echo_written(plot_robustness(reports, out))
+        outputs.echo_written(plot_robustness(reports, out))
     click.echo(f"wrote {out}")

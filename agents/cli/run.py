@@ -7,32 +7,25 @@ from pathlib import Path
 import click
 
 from agents.algorithms import ALGORITHMS, DEFAULT_ALGORITHM
-from agents.cli import common
+from agents.cli import options, outputs, settings
 from agents.cli.checks import check_planner_memory
 from agents.config import BUDGETS, DEFAULT_BUDGET, DEFAULT_CONTOUR, DEFAULT_SELECTOR
 from agents.methods import SELECTORS, point_text
 
-FLAGS = {
-    "contour": "contour",
-    "budget": "budget",
-    "run_policy": "policy",
-    "algo": "train.algo",
-    "seed": "seed",
-    "record_envs": "record",
-    "generalist_source": "generalist",
-}
-"""Each flag's key in the job (:class:`agents.jobs.RunJob`)."""
 
-
-@click.command("run", cls=common.Command)
+@click.command("run", cls=settings.Command)
 @click.option(
     "--contour",
+    cls=options.Setting,
+    key="contour",
     default=DEFAULT_CONTOUR,
     show_default=True,
     help="Built-in name or a .json/.svg contour file.",
 )
 @click.option(
     "--budget",
+    cls=options.Setting,
+    key="budget",
     default=DEFAULT_BUDGET,
     show_default=True,
     type=click.Choice(list(BUDGETS)),
@@ -49,6 +42,8 @@ FLAGS = {
 @click.option(
     "--policy",
     "run_policy",
+    cls=options.Setting,
+    key="policy",
     default=DEFAULT_SELECTOR,
     show_default=True,
     type=click.Choice(SELECTORS),
@@ -56,22 +51,24 @@ FLAGS = {
     "validates best wins); generalist (one policy for every contour, no training: seconds); fixed or "
     "analytic for a quick plan.",
 )
-@common.generalist_option
+@options.generalist_option
 @click.option(
     "--algo",
+    cls=options.Setting,
+    key="train.algo",
     type=click.Choice(list(ALGORITHMS)),
     default=DEFAULT_ALGORITHM,
     show_default=True,
     help="The learner of --policy rl.",
 )
-@common.seed_option
-@common.device_option
-@common.ray_option("rl's pinch candidates (a policy each)")
-@common.out_option("logs/run-CONTOUR-TIMESTAMP")
-@common.run_dir_options
-@common.json_option
-@common.record_flag("in the run directory")
-@common.config_options
+@options.seed_option
+@options.device_option
+@options.ray_option("rl's pinch candidates (a policy each)")
+@options.out_option("logs/run-CONTOUR-TIMESTAMP")
+@options.run_dir_options
+@options.json_option
+@options.record_flag("in the run directory")
+@options.config_options
 def command(
     contour: str,
     budget: str,
@@ -104,41 +101,41 @@ def command(
     from warpcut.io import safe_name, write_json
     from warpcut.planning import resolve_contour
 
-    base = common.resumed_job(RunJob, out, resume, "run")
-    job = common.resolve(RunJob, config_file, overrides, FLAGS, base)
+    base = settings.resumed_job(RunJob, out, resume, "run")
+    job = settings.resolve(RunJob, config_file, overrides, base)
     job.settings()
     if base is None:  # a resumed run's config.json holds every setting it was started with
-        common.refuse_unused_settings(job, overrides, FLAGS)
+        settings.refuse_unused_settings(job, overrides)
     contour_name = resolve_contour(job.contour, job.sim).name
     if job.policy == "rl":
-        common.check_learner(job)
+        settings.check_learner(job)
     elif ray is not None:
         raise click.UsageError(
             f"--ray: --policy {job.policy} trains nothing to fan out (--policy rl trains a policy per pinch "
             "candidate); leave out --ray"
         )
     if print_config:
-        common.print_config(job)
+        settings.print_config(job)
         return
     check_planner_memory(job.settings()["candidates"], job.sim)
     inputs = [job.contour] if isinstance(job.contour, str) else []
-    out, claim = common.claim(out, f"run-{safe_name(contour_name)}", resume, overwrite, "run")
-    common.check_outputs({"--json": json_path}, inputs, own=(out, "run"))
-    cuts = common.final_cuts(not job.plots)
+    out, claim = outputs.claim(out, f"run-{safe_name(contour_name)}", resume, overwrite, "run")
+    outputs.check_outputs({"--json": json_path}, inputs, own=(out, "run"))
+    cuts = outputs.final_cuts(not job.plots)
     from agents.pipelines import run_pipeline  # torch: after every check, so that a refusal is quick
 
     with (
         claim,
-        executor(ray, device, common.log) as units,
-        common.recorder(out, job.record, job.colour_by) as rec,
+        executor(ray, device, outputs.log) as units,
+        outputs.recorder(out, job.record, job.colour_by) as rec,
     ):
         report = run_pipeline(
             job,
             out,
             resume=resume,
             device=device,
-            log=common.log,
-            step_callbacks=common.step_callbacks(rec, cuts),
+            log=outputs.log,
+            step_callbacks=outputs.step_callbacks(rec, cuts),
             cluster=units,
         )
     name, row = report.contour.name, report.row
@@ -157,9 +154,9 @@ def command(
         imp_txt = f"{imp:+.1f}%{ci}" if np.isfinite(imp) else "n/a"
         if m == "none":  # the reference the others improve on
             imp_txt = "reference"
-        mark = common.infeasible_mark(row.get(f"{m}_pinch_feasible"))
+        mark = outputs.infeasible_mark(row.get(f"{m}_pinch_feasible"))
         click.echo(f"{m:<10} {row[f'{m}_error_vertices']:>16.1f} {imp_txt:>14} {p_txt:>16}{mark}")
-    common.echo_infeasible({m: row.get(f"{m}_pinch_problem") for m in report.methods})
+    outputs.echo_infeasible({m: row.get(f"{m}_pinch_problem") for m in report.methods})
     if json_path:
         write_json(json_path, report.to_json())
     if cuts is not None:
@@ -170,9 +167,9 @@ def command(
             for c in report.candidates
             if (run := out / c.get("run", "")) in report.policy_runs
         }
-        common.plot_learning_curves(titles)
-        common.echo_written(plot_regions(cuts.of(name, report.methods), out))
-        common.echo_written(plot_improvements(report.to_json(), report.methods[1:], out))
-        common.echo_written(plot_pinch_candidates(report.plan, report.config, out))
-    common.echo_recording(rec)
+        outputs.plot_learning_curves(titles)
+        outputs.echo_written(plot_regions(cuts.of(name, report.methods), out))
+        outputs.echo_written(plot_improvements(report.to_json(), report.methods[1:], out))
+        outputs.echo_written(plot_pinch_candidates(report.plan, report.config, out))
+    outputs.echo_recording(rec)
     click.echo(f"wrote {out}")

@@ -10,49 +10,49 @@ from pathlib import Path
 
 import click
 
-from agents.cli import common
+from agents.cli import options, outputs, settings
 from agents.cli.video import video_option, videos, with_videos
 from agents.methods import BASELINES, point_text
 from warpcut.scoring import NEGLIGIBLE_ERROR
 
-FLAGS = {
-    "contour": "contour",
-    "policy": "policy",
-    "generalist_source": "generalist",
-    "pinch": "pinch",
-    "trials": "trials",
-    "seed": "seed",
-    "record_envs": "record",
-    "video_envs": "video",
-}
-"""Each flag's key in the job (:class:`agents.jobs.SimulateJob`)."""
 
-
-@click.command("simulate", cls=common.Command)
-@click.option("--contour", default=None, help="Built-in name or a .json/.svg contour file.")
+@click.command("simulate", cls=settings.Command)
+@click.option(
+    "--contour",
+    cls=options.Setting,
+    key="contour",
+    default=None,
+    help="Built-in name or a .json/.svg contour file.",
+)
 @click.option(
     "--policy",
+    cls=options.Setting,
+    key="policy",
     default=",".join(BASELINES),
     show_default=True,
     callback=lambda ctx, param, value: [v.strip() for v in value.split(",") if v.strip()],
     help="Comma-separated tensioners, of none,fixed,analytic,generalist (generalist: one policy for every "
     "contour, no training).",
 )
-@common.generalist_option
+@options.generalist_option
 @click.option(
     "--pinch",
+    cls=options.Setting,
+    key="pinch",
     default=None,
-    callback=common.point_callback,
+    callback=options.point_callback,
     help="Pinch point X,Y (mm, material) of fixed and analytic; default: fixed's best by random search, "
     "analytic's feasible centroid.",
 )
-@common.count_option("trials", None, "Seeded trials per tensioner, differing by noise (default: one).")
-@common.seed_option
-@common.device_option
-@common.json_option
-@common.record_flag("in logs/simulate-TIMESTAMP")
+@options.count_option(
+    "trials", None, "Seeded trials per tensioner, differing by noise (default: one).", key="trials"
+)
+@options.seed_option
+@options.device_option
+@options.json_option
+@options.record_flag("in logs/simulate-TIMESTAMP")
 @video_option
-@common.config_options
+@options.config_options
 def command(
     contour: str | None,
     policy: list[str],
@@ -79,11 +79,11 @@ def command(
     from warpcut.io import claim_run_dir
     from warpcut.planning import resolve_contour
 
-    job = common.resolve(SimulateJob, config_file, overrides, FLAGS).check()
-    common.refuse_unused_settings(job, overrides, FLAGS)
+    job = settings.resolve(SimulateJob, config_file, overrides).check()
+    settings.refuse_unused_settings(job, overrides)
     contour = resolve_contour(job.contour, job.sim)  # a bad name or file: now
     if print_config:
-        common.print_config(job)
+        settings.print_config(job)
         return
     if "generalist" in job.policy:  # a generalist to play: now
         from agents.generalist import generalist_settings
@@ -96,12 +96,12 @@ def command(
     mesh_dir = None if job.export_mesh is None else Path(job.export_mesh)
     inputs = [job.contour] if isinstance(job.contour, str) else []
     # the figures, .rrd and .mp4 go into a run folder of their own, never beside a file the user named
-    out = common.run_dir(None, "simulate")
+    out = outputs.run_dir(None, "simulate")
     writes_out = job.plots or job.record is not None or job.video is not None
     out_option = "the output folder"
-    outputs = {"--json": json_path, "export_mesh": mesh_dir, out_option: out if writes_out else None}
+    paths = {"--json": json_path, "export_mesh": mesh_dir, out_option: out if writes_out else None}
     # before the simulation: a folder it could not write, a file it did not write
-    common.check_outputs(outputs, inputs, own=(out, "simulate"))
+    outputs.check_outputs(paths, inputs, own=(out, "simulate"))
     with contextlib.ExitStack() as claims:  # the folders of its implicit outputs: warpcut's own, or new
         if writes_out:
             claims.enter_context(claim_run_dir(out, command="simulate", reuse=True, option=out_option))
@@ -113,7 +113,7 @@ def command(
             from warpcut.viz.process import start_recorder_process
 
             start_recorder_process()  # its start-up overlaps the simulation's
-        cuts = common.final_cuts(not job.plots)
+        cuts = outputs.final_cuts(not job.plots)
         meshes = None
         if mesh_dir is not None:
             from warpcut.viz.mesh_export import MeshExports
@@ -121,8 +121,8 @@ def command(
             meshes = MeshExports(mesh_dir)
         config = job.sim.validated()
         start = time.perf_counter()
-        with common.recorder(out, job.record, job.colour_by) as rec, videos(out, job.video) as vid:
-            callbacks = with_videos(common.step_callbacks(rec, cuts, meshes), vid)
+        with outputs.recorder(out, job.record, job.colour_by) as rec, videos(out, job.video) as vid:
+            callbacks = with_videos(outputs.step_callbacks(rec, cuts, meshes), vid)
             given = {}
             if "generalist" in job.policy:
                 given["generalist"] = _generalist(job, contour, config, device, callbacks)
@@ -150,14 +150,14 @@ def command(
                 improvement, undefined = f"{'n/a':>12}", undefined or none_error < NEGLIGIBLE_ERROR
             click.echo(
                 f"{name:<10} {r['error_vertices']:>16.1f} {r['error_mm2']:>13.1f} "
-                f"{improvement} {pinch_txt:>16}{common.infeasible_mark(r['pinch_feasible'])}"
+                f"{improvement} {pinch_txt:>16}{outputs.infeasible_mark(r['pinch_feasible'])}"
             )
         if undefined:
             click.echo(
                 f"improvement n/a: no tension's error ({none_error:.2g} vertices) is zero within float "
                 f"precision (under {NEGLIGIBLE_ERROR}): there is nothing to improve on"
             )
-        common.echo_infeasible({name: r["pinch_problem"] for name, r in report["results"].items()})
+        outputs.echo_infeasible({name: r["pinch_problem"] for name, r in report["results"].items()})
         if json_path:
             from warpcut.io import write_json
 
@@ -166,9 +166,9 @@ def command(
         if cuts is not None:
             from warpcut.viz.plots import plot_regions
 
-            common.echo_written(plot_regions(cuts.of(contour.name), out))
-        common.echo_written(meshes.written if meshes is not None else [])
-        common.echo_recording(rec)
+            outputs.echo_written(plot_regions(cuts.of(contour.name), out))
+        outputs.echo_written(meshes.written if meshes is not None else [])
+        outputs.echo_recording(rec)
 
 
 def _generalist(job, contour, config, device, callbacks):

@@ -7,22 +7,21 @@ from pathlib import Path
 
 import click
 
-from agents.cli import common
+from agents.cli import errors, options, outputs, settings
 from agents.cli.checks import check_planner_memory
 from agents.config import TEACHER_CONTOURS
 
-FLAGS = {"count": "count", "seed": "seed"}
-"""Each flag's key in the job (:class:`agents.jobs.TeachersJob`)."""
 
-
-@click.command("teachers", cls=common.Command)
-@common.count_option("count", None, f"Generated contours, a teacher each (default {TEACHER_CONTOURS}).")
-@common.seed_option
-@common.device_option
-@common.ray_option("the contours (a contour's plan and teacher a unit)")
-@common.out_option("logs/teachers-TIMESTAMP")
-@common.run_dir_options
-@common.config_options
+@click.command("teachers", cls=settings.Command)
+@options.count_option(
+    "count", None, f"Generated contours, a teacher each (default {TEACHER_CONTOURS}).", key="count"
+)
+@options.seed_option
+@options.device_option
+@options.ray_option("the contours (a contour's plan and teacher a unit)")
+@options.out_option("logs/teachers-TIMESTAMP")
+@options.run_dir_options
+@options.config_options
 def command(
     count: int | None,
     seed: int,
@@ -46,22 +45,22 @@ def command(
     from agents.cluster import executor
     from agents.jobs import TeachersJob
 
-    base = common.resumed_job(TeachersJob, out, resume, "teachers")
-    job = common.resolve(TeachersJob, config_file, overrides, FLAGS, base)
+    base = settings.resumed_job(TeachersJob, out, resume, "teachers")
+    job = settings.resolve(TeachersJob, config_file, overrides, base)
     job.check()
     if print_config:
-        common.print_config(job)
+        settings.print_config(job)
         return
     check_planner_memory(job.candidates, job.sim)
-    out, claim = common.claim(out, "teachers", resume, overwrite, "teachers")
+    out, claim = outputs.claim(out, "teachers", resume, overwrite, "teachers")
     from agents.pipelines.teachers import make_teachers  # torch: after every check
 
     try:
-        with claim, executor(ray, device, common.log) as units:
+        with claim, executor(ray, device, outputs.log) as units:
             click.echo(f"optimising {job.count} teacher(s) into {out} ({device})")
-            index = make_teachers(job, out, resume=resume, device=device, log=common.log, cluster=units)
+            index = make_teachers(job, out, resume=resume, device=device, log=outputs.log, cluster=units)
     except KeyboardInterrupt as stop:
-        raise common.RunInterrupted(out) from stop
+        raise errors.RunInterrupted(out) from stop
     click.echo(
         f"done: {index['count']} teachers in {index['seconds']:.0f} s; their mean validation error "
         f"{index['mean_error_vertices']:.1f} vertices, a still grasp's "

@@ -8,43 +8,47 @@ from pathlib import Path
 import click
 
 from agents.algorithms import ALGORITHMS, DEFAULT_ALGORITHM
-from agents.cli import common
+from agents.cli import errors, options, outputs, settings
 from agents.cli.video import videos, with_videos
 
-FLAGS = {
-    "contour": "contour",
-    "pinch": "pinch",
-    "algo": "train.algo",
-    "num_envs": "train.num_envs",
-    "iterations": "train.iterations",
-    "seed": "seed",
-    "record_envs": "record",
-}
-"""Each flag's key in the job (:class:`agents.jobs.TrainJob`)."""
 
-
-@click.command("train", cls=common.Command)
-@click.option("--contour", default=None, help="Built-in name or a .json/.svg contour file.")
+@click.command("train", cls=settings.Command)
+@click.option(
+    "--contour",
+    cls=options.Setting,
+    key="contour",
+    default=None,
+    help="Built-in name or a .json/.svg contour file.",
+)
 @click.option(
     "--pinch",
+    cls=options.Setting,
+    key="pinch",
     default=None,
-    callback=common.point_callback,
+    callback=options.point_callback,
     help="Pinch point X,Y (mm); default: the centroid, or the feasible point nearest it.",
 )
 @click.option(
     "--algo",
+    cls=options.Setting,
+    key="train.algo",
     type=click.Choice(list(ALGORITHMS)),
     default=DEFAULT_ALGORITHM,
     show_default=True,
     help="The learner: " + "; ".join(f"{a.name}: {a.summary}" for a in ALGORITHMS.values()) + ".",
 )
-@common.count_option("num-envs", None, "Parallel envs (default: the learner's, 256 for es and ppo).")
-@common.count_option(
-    "iterations", None, "Iterations in total, a resumed run's included (default: the learner's)."
+@options.count_option(
+    "num-envs", None, "Parallel envs (default: the learner's, 256 for es and ppo).", key="train.num_envs"
 )
-@common.seed_option
-@common.device_option
-@common.out_option("logs/train-CONTOUR-TIMESTAMP")
+@options.count_option(
+    "iterations",
+    None,
+    "Iterations in total, a resumed run's included (default: the learner's).",
+    key="train.iterations",
+)
+@options.seed_option
+@options.device_option
+@options.out_option("logs/train-CONTOUR-TIMESTAMP")
 @click.option(
     "--resume",
     type=click.Path(exists=True, path_type=Path),
@@ -52,10 +56,10 @@ FLAGS = {
     help="Run directory (or checkpoint) to continue, with the run's own settings (its config.json); only "
     "--iterations, to train longer, may change.",
 )
-@common.overwrite_option
-@common.record_flag("of the final evaluation, in the run directory")
+@options.overwrite_option
+@options.record_flag("of the final evaluation, in the run directory")
 @click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
-@common.config_options
+@options.config_options
 def command(
     contour: str | None,
     pinch: list[float] | None,
@@ -97,27 +101,27 @@ def command(
                 param_hint="--resume",
             )
         check_run_dir(run, command="train", resume=True)  # before its settings are read
-        base = common.saved_job(TrainJob, run / CONFIG_FILE)
-    job = common.resolve(TrainJob, config_file, overrides, FLAGS, base)
+        base = settings.saved_job(TrainJob, run / CONFIG_FILE)
+    job = settings.resolve(TrainJob, config_file, overrides, base)
     if run is not None:
         from agents.training import check_resumed_job
 
         check_resumed_job(run, job)
     else:  # a resumed run's config.json holds every setting it was started with
-        common.refuse_unused_settings(job, overrides, FLAGS)
-    options = job.options(device)
-    common.check_learner(job)
-    contour_name = options.per_env(1)[0][0].name  # a bad contour or an infeasible default pinch: now
+        settings.refuse_unused_settings(job, overrides)
+    scenario = job.options(device)
+    settings.check_learner(job)
+    contour_name = scenario.per_env(1)[0][0].name  # a bad contour or an infeasible default pinch: now
     if print_config:
-        common.print_config(job)
+        settings.print_config(job)
         return
-    out = out or (run if run is not None else common.run_dir(None, f"train-{safe_name(contour_name)}"))
-    out, claim = common.claim(out, "train", resume is not None, overwrite, "train")
+    out = out or (run if run is not None else outputs.run_dir(None, f"train-{safe_name(contour_name)}"))
+    out, claim = outputs.claim(out, "train", resume is not None, overwrite, "train")
     from agents.checkpoints import resume_checkpoint, saved_nothing  # torch: after every check
     from agents.training import train_contour
 
     try:
-        with claim, common.recorder(out, job.record, job.colour_by) as rec, videos(out, job.video) as vid:
+        with claim, outputs.recorder(out, job.record, job.colour_by) as rec, videos(out, job.video) as vid:
             if run is not None and saved_nothing(run):
                 click.echo(f"{run} saved no checkpoint before it stopped: training it from the start")
             elif run is not None:
@@ -135,12 +139,12 @@ def command(
                 resume=resume,
                 device=device,
                 progress=not no_progress,
-                step_callbacks=with_videos(common.step_callbacks(rec, None), vid),
+                step_callbacks=with_videos(outputs.step_callbacks(rec, None), vid),
             )
     except KeyboardInterrupt as stop:  # Ctrl-C, SIGTERM, SIGHUP: the checkpoint is saved
         if not (out / "summary.json").is_file():
             raise
-        raise common.RunInterrupted(out) from stop
+        raise errors.RunInterrupted(out) from stop
     s, e = result["summary"], result["evaluation"]
     click.echo(
         f"done: {s['iterations']} iterations, {s['env_steps']:,} env steps in {s['wall_time_s']:.0f} s "
@@ -150,12 +154,12 @@ def command(
         f"evaluation ({e['trials']} trials): no tension {e['none_error_vertices']:.1f} vertices, "
         f"rl {e['rl_error_vertices']:.1f} vertices, improvement {e['rl_improvement_pct']:+.1f}%"
         + (f" ± {e['rl_ci95']:.1f}" if e["trials"] > 1 else "")  # no CI of one sample
-        + common.infeasible_mark(e["pinch_feasible"])
+        + outputs.infeasible_mark(e["pinch_feasible"])
     )
-    common.echo_infeasible({"rl": e["pinch_problem"]})
+    outputs.echo_infeasible({"rl": e["pinch_problem"]})
     if job.plots:
         from warpcut.viz.plots import plot_learning_curve
 
-        common.echo_written(plot_learning_curve(s["history"], s["validation"], out, title=contour_name))
-    common.echo_recording(rec)
+        outputs.echo_written(plot_learning_curve(s["history"], s["validation"], out, title=contour_name))
+    outputs.echo_recording(rec)
     click.echo(f"wrote {out}")

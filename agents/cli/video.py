@@ -10,11 +10,14 @@ from pathlib import Path
 
 import click
 
-from agents.cli.common import echo_written
+from agents.cli.options import Setting
+from agents.cli.outputs import echo_written
 
 video_option = click.option(
     "--video",
     "video_envs",
+    cls=Setting,
+    key="video",
     type=click.IntRange(min=1),
     default=None,
     metavar="N",
@@ -38,7 +41,7 @@ def videos(out: Path, video_envs: int | None) -> Iterator:
 
 
 def with_videos(step_callbacks: Callable | None, recorder) -> Callable | None:
-    """``step_callbacks`` (what :func:`agents.cli.common.step_callbacks` returns: ``(method, first_contour)
+    """``step_callbacks`` (what :func:`agents.cli.outputs.step_callbacks` returns: ``(method, first_contour)
     -> on_step`` or None) plus ``recorder``'s step callback for the batches that start at the first
     contour (they film its first envs, as ``--record`` records them)."""
     if recorder is None:
