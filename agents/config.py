@@ -11,7 +11,6 @@ directory's ``config.json`` all read them from there.
 from __future__ import annotations
 
 import dataclasses
-import math
 import re
 from dataclasses import dataclass, field
 
@@ -124,26 +123,10 @@ class _TrainSettings:
             check_instance(where + name, getattr(self, name), kind, f"a {kind.__name__}")
 
     def check(self, discrete: bool | None = None) -> TrainConfig:
-        """Itself, or ``ValueError`` naming the first field out of range (``discrete``: whether the env's
-        actions are discrete, where known)."""
-        entry = algorithm(self.algo)
-        for name in ("num_envs", "iterations"):
-            value = getattr(self, name)
-            if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
-                raise ValueError(
-                    f"train.{name}: must be an integer >= 1, or null for the learner's (got {value!r})"
-                )
-        for name in ("validation_interval", "save_interval"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"train.{name}: must be an integer >= 1 (got {value!r})")
-        trials = self.validation_trials
-        if isinstance(trials, bool) or not isinstance(trials, int) or trials < 0:
-            raise ValueError(f"train.validation_trials: must be an integer >= 0, 0 for none (got {trials!r})")
-        margin = self.selection_margin
-        if isinstance(margin, bool) or not isinstance(margin, int | float) or not 0 <= margin < math.inf:
-            raise ValueError(f"train.selection_margin: must be a finite number >= 0 (got {margin!r})")
-        if discrete and entry.continuous_only:
+        """Itself, or ``ValueError`` naming what depends on several settings (each field on its own is
+        checked as it is given, :meth:`__post_init__`): the learner in its env (``discrete``: whether the
+        env's actions are discrete, where known) and the learner's section in the batch."""
+        if discrete and algorithm(self.algo).continuous_only:
             raise ValueError(
                 f"train.algo: {self.algo} plays continuous moves; set env.action_type=continuous "
                 "(or train with ppo)"

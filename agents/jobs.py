@@ -272,14 +272,7 @@ class RunJob:
 
     def settings(self) -> dict:
         """The budget's ``candidates``, ``rl_candidates`` and ``trials``, with this job's where given."""
-        if self.budget not in BUDGETS:
-            raise ValueError(f"budget: choose one of {', '.join(BUDGETS)} (got {self.budget!r})")
-        if self.policy not in SELECTORS:
-            raise ValueError(f"policy: choose one of {', '.join(SELECTORS)} (got {self.policy!r})")
         given = {"candidates": self.candidates, "rl_candidates": self.rl_candidates, "trials": self.trials}
-        for name, value in given.items():
-            if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
-                raise ValueError(f"{name}: must be an integer >= 1, or null for the budget's (got {value!r})")
         return {**BUDGETS[self.budget], **{k: v for k, v in given.items() if v is not None}}
 
     def unused_keys(self) -> dict[str, str]:
@@ -352,16 +345,9 @@ class EvaluateJob:
             _counted(f"EvaluateJob.{name}", getattr(self, name))
 
     def check(self) -> EvaluateJob:
-        """Itself, or ``ValueError`` naming a field out of range."""
+        """Itself, or ``ValueError`` naming what its fields do not say alone (each is checked as it is
+        given): the methods, the physics, the optimiser's ranges."""
         check_methods(self.methods, "methods")
-        for name in ("trials", "candidates"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"{name}: must be an integer >= 1 (got {value!r})")
-        if self.analytic_pinch not in ANALYTIC_PINCHES:
-            raise ValueError(
-                f"analytic_pinch: choose one of {', '.join(ANALYTIC_PINCHES)} (got {self.analytic_pinch!r})"
-            )
         _sim_validated(self.sim)
         self.grad.validated()
         return self
@@ -454,12 +440,6 @@ def with_dependent_defaults(job: Any, explicit: set[str]) -> Any:
     return job
 
 
-def _count(name: str, value: Any) -> None:
-    """``ValueError`` naming ``name`` unless ``value`` is an integer >= 1."""
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ValueError(f"{name}: must be an integer >= 1 (got {value!r})")
-
-
 def _sim_validated(sim: SimConfig) -> SimConfig:
     """``sim`` validated, or ``ValueError`` naming the ``sim.`` key (``sim.elasticity: ...``)."""
     try:
@@ -518,10 +498,6 @@ class OptimizeJob:
         range."""
         if self.contour is None:
             raise ValueError("contour: give the contour to optimise for (--contour)")
-        for name in ("candidates", "trials"):
-            _count(name, getattr(self, name))
-        if self.pinch is not None and (len(self.pinch) != 2 or not all(math.isfinite(v) for v in self.pinch)):
-            raise ValueError(f"pinch: give [x, y], finite numbers in mm (got {self.pinch!r})")
         _sim_validated(self.sim)
         return dataclasses.replace(self, grad=_grad_validated(self.grad))
 
@@ -599,7 +575,6 @@ class RobustnessJob:
         """Itself (its ``grad`` ranges in their one spelling), or ``ValueError`` naming a field out of range;
         the studies, their values, runs and plans are the pipeline's to check
         (:func:`agents.pipelines.robustness.check_job`)."""
-        _count("trials", self.trials)
         for name in ("runs", "plans"):
             if not all(isinstance(v, str) and v for v in getattr(self, name).values()):
                 raise ValueError(f"{name}: give {{label: path}}, each path a directory or file")
@@ -667,19 +642,11 @@ class SimulateJob:
         _counted("SimulateJob.trials", self.trials)
 
     def check(self) -> SimulateJob:
-        """Itself, or ``ValueError`` naming a field out of range."""
+        """Itself, or ``ValueError`` naming what its fields do not say alone (each is checked as it is
+        given): a contour, the tensioners, the physics."""
         if self.contour is None:
             raise ValueError("contour: give the contour to cut (--contour)")
         check_methods(self.policy, "policy", SIMULATED)
-        _count("trials", self.trials)
-        check_integer("seed", self.seed, *SEED_RANGE)
-        if self.pinch is not None and (len(self.pinch) != 2 or not all(math.isfinite(v) for v in self.pinch)):
-            raise ValueError(f"pinch: give [x, y], finite numbers in mm (got {self.pinch!r})")
-        for name in ("record", "video"):
-            if getattr(self, name) is not None:
-                _count(name, getattr(self, name))
-        if self.colour_by not in COLOUR_FIELDS:
-            raise ValueError(f"colour_by: choose one of {', '.join(COLOUR_FIELDS)} (got {self.colour_by!r})")
         _sim_validated(self.sim)
         return self
 
