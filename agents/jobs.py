@@ -551,7 +551,7 @@ class RobustnessJob:
     (``infeasible_pinches``)."""
     values: list[float] | None = None
     """The sweep of the one study given (vertices per side, mm or mm/s^2); None: each study's own
-    (:data:`agents.pipelines.robustness.STUDY_VALUES`)."""
+    (:data:`agents.pipelines.robustness_studies.STUDY_VALUES`)."""
     trials: int = EVALUATION_TRIALS
     """Seeded noisy trials per value and method (paired: trial k has the same noise in every method)."""
     seed: int = 0

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from agents.evaluation import run_method
-from agents.pipelines.robustness import STUDY_VALUES
+from agents.pipelines.robustness_studies import STUDY_VALUES
 from warpcut import SimConfig, plan_cut
 from warpcut.contours import load_contour
 from warpcut.scoring import paired_improvement

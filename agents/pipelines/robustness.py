@@ -21,8 +21,9 @@ centroid), no tension none.
 
 A trial whose simulation diverges (at large noise, say) is not refused: its error is undefined, so it is
 left out of its pair (a method's trial k and no tension's), and every method's count of diverged trials per
-value is in the report (``diverged``) and in its table. The robustness target (``agents.pipelines.
-robustness_target``) counts a value where the policy diverged in more trials than no tension against it.
+value is in the report (``diverged``) and in its table. The robustness target
+(``scripts/robustness_tables.py``) counts a value where the policy diverged in more trials than no tension
+against it.
 """
 
 from __future__ import annotations
@@ -40,47 +41,26 @@ from agents.evaluation import run_method
 from agents.jobs import RobustnessJob
 from agents.methods import BASELINES, check_methods, tensioner
 from agents.pipelines.common import claims_out, record_job
+from agents.pipelines.robustness_studies import (
+    STUDY_FIELDS,
+    STUDY_METHODS,
+    STUDY_UNITS,
+    check_label,
+    check_plans,
+    check_runs,
+    check_study,
+    infeasible_pinches,
+    nominal_scenario,
+    parse_studies,
+    read_plan,
+)
 from agents.plan_optimizer.config import GRAD_CONFIG, GradConfig
 from agents.plan_optimizer.plan import PlanResult
 from warpcut.contours import Contour, ContourError
-from warpcut.planning import ArmModel, InfeasiblePinch, check_pinch, resolve_contour
+from warpcut.planning import resolve_contour
 from warpcut.scoring import bootstrap_ci, paired_improvement
-from warpcut.sim.config import GRAVITY_MM_S2, SimConfig
-from warpcut.sim.memory import batch_named
+from warpcut.sim.config import SimConfig
 from warpcut.task import segments_key
-from warpcut.validation import ConfigError
-
-STUDIES = ("resolution", "noise", "force")
-"""The studies, in the paper's order (Fig. 5a-c)."""
-
-STUDY_VALUES: dict[str, tuple[float, ...]] = {
-    "resolution": (12, 16, 20, 25, 35, 50),
-    "noise": tuple(round(0.03 * k, 2) for k in range(10)),
-    "force": tuple(GRAVITY_MM_S2 * k / 4 for k in range(9)),
-}
-"""Each study's default sweep: vertices per side (the paper's 400, 625 and 2500 vertices; 144 for its 100,
-as 10 x 10 leaves no room for the default grasp beside most contours; 256 and 1225 between), process noise
-(mm; ten values, the paper's count, 0 to nine times the default 0.03 in its steps: the paper's largest sigma
-was 0.21 mm), and gravity (mm/s^2; 0 to twice the nominal 521 in quarters)."""
-
-STUDY_METHODS = (*BASELINES, "generalist", "grad")
-"""The methods a study can run besides trained policies: the baselines, and ``grad``, an open-loop plan
-optimised through the simulator on the nominal sheet (:func:`agents.plan_optimizer.optimizer.optimize_plan`)
-and played unchanged at every value."""
-
-REPORT_FIELDS = (
-    "study", "values", "unit", "metric", "contour", "trials", "nominal", "pinch", "runs", "methods",
-    "seconds", "skipped", "none_error_mm2", "own_order_none", "plans", "diverged",
-)  # fmt: skip
-"""The keys of a study's report besides its methods' (:func:`robustness_study`)."""
-RESERVED_LABELS = (*STUDY_METHODS, *REPORT_FIELDS)
-"""Names a run's label may not take: a method's, or a report field's."""
-
-STUDY_FIELDS = {"resolution": "resolution", "noise": "noise_std", "force": "gravity"}
-"""The :class:`~warpcut.sim.config.SimConfig` field each study sweeps."""
-
-STUDY_UNITS = {"resolution": "vertices per side", "noise": "noise_std (mm)", "force": "gravity (mm/s^2)"}
-"""What a study's values are, in words (plots, tables)."""
 
 
 def _override(study: str, values: Sequence[float], trials: int) -> dict:
@@ -106,25 +86,6 @@ def _stats(values: np.ndarray) -> dict[str, list]:
         out["median_ci95"].append(None if interval is None else list(interval))
         out["per_trial"].append([float(v) if np.isfinite(v) else None for v in row])
     return out
-
-
-def check_study(study: str, values: Sequence[float] | None) -> list[float]:
-    """``study``'s values (default :data:`STUDY_VALUES`), checked; ``ValueError`` naming the field."""
-    if study not in STUDIES:
-        raise ValueError(f"study: choose one of {', '.join(STUDIES)} (got {study!r})")
-    values = list(STUDY_VALUES[study] if values is None else values)
-    if not values:
-        raise ValueError("values: give at least one value")
-    if study == "resolution":
-        if not all(float(v).is_integer() and v >= 2 for v in values):
-            raise ValueError(f"values: resolutions are whole numbers of vertices per side (got {values})")
-        values = [int(v) for v in values]
-    for v in values:  # each value must be one SimConfig accepts
-        try:
-            SimConfig(**{STUDY_FIELDS[study]: v}).validated()
-        except ConfigError as error:  # the field as the study sweeps it: "values: force -1.0: gravity: ..."
-            raise ValueError(f"values: {study} {v}: {error.field}: {error.requirement}") from None
-    return values
 
 
 def robustness_study(
@@ -169,7 +130,7 @@ def robustness_study(
         config: The nominal simulation without a run (default ``SimConfig()``).
         grad: The ``grad`` method's optimiser settings.
         device, seed: Warp device; seed of the process noise (and of the plan).
-        allow_infeasible_pinch: Accept infeasible pinch points (:func:`_infeasible_pinches`), not refuse them.
+        allow_infeasible_pinch: Accept infeasible pinch points (:func:`infeasible_pinches`), not refuse them.
         generalist: The ``generalist`` method's (None: the shipped one), at fixed's pinch point and order.
         cluster: Where each method's batches run (:mod:`agents.cluster`, a unit per method and batch of
             values); default: here, one after another. The report is the same either way.
@@ -186,8 +147,8 @@ def robustness_study(
     if not isinstance(trials, int) or trials < 1:
         raise ValueError(f"trials: must be a positive integer (got {trials!r})")
     runs = check_runs(runs)
-    scenario = _scenario(contour, runs, config, device, seed, log)
-    infeasible = _infeasible_pinches(scenario, methods, plans, runs, allow_infeasible_pinch)
+    scenario = nominal_scenario(contour, runs, config, device, seed, log)
+    infeasible = infeasible_pinches(scenario, methods, plans, runs, allow_infeasible_pinch)
     contour, config, pinch, segments = (scenario[k] for k in ("contour", "config", "pinch", "segments"))
     own_order = {  # a run cut in another order than the first: against no tension cut in its own order
         label: cut
@@ -273,34 +234,6 @@ def _study_errors(
     return errors, own_none, skipped, ran_on
 
 
-def _infeasible_pinches(
-    scenario: dict, methods: Sequence[str] | None, plans: Mapping | None, runs: Mapping, allow: bool
-) -> dict[str, str]:
-    """The report's ``infeasible_pinches``, ``{method: why}``, for the methods whose pinch point on the
-    nominal sheet the gripper could not hold (:func:`warpcut.planning.pinch_problems`): each run and plan
-    at its own, fixed and grad at the scenario's (None: not known yet, planned later); an
-    :class:`InfeasiblePinch` naming the first unless ``allow``. They are judged on the nominal sheet: a
-    sweep keeps every pinch point where it is, as the paper's Fig. 5 does, though a coarser mesh's wider
-    grasp may reach the cut."""
-    contour, config, segments = scenario["contour"], scenario["config"], scenario["segments"]
-    arm = scenario.get("arm", ArmModel())
-    pinches = dict(scenario.get("run_pinches", {}))
-    for label, plan in check_plans(plans, contour, runs).items():
-        pinches[label] = (np.asarray(plan.pinch), segments)
-    for method in ("fixed", "grad") if scenario["pinch"] is not None else ():
-        if method in (methods or BASELINES):
-            pinches[method] = (scenario["pinch"], segments)
-    found = {}
-    for method, (point, cut) in pinches.items():
-        problem = check_pinch(point, contour, config, cut, arm, allow=True)
-        if problem is not None and not allow:
-            fix = "give runs and plans made at feasible pinch points (without --pinch)"
-            raise InfeasiblePinch(point, contour, f"{problem} ({method}'s)", fix)
-        if problem is not None:
-            found[method] = problem
-    return found
-
-
 def _methods(methods, runs, plans, scenario, grad, device, seed, out, log) -> tuple[list, dict]:
     """The methods a study runs, in order, and the plans it plays: ``plans``' and grad's (optimised at the
     scenario's pinch point and order, or read back from ``out/grad``)."""
@@ -314,7 +247,7 @@ def _methods(methods, runs, plans, scenario, grad, device, seed, out, log) -> tu
         contour, config, pinch, segments = (scenario[k] for k in ("contour", "config", "pinch", "segments"))
         played["grad"] = cached_plan(
             contour, pinch, segments, config, grad, device, seed, folder, log, allow_infeasible_pinch=True
-        )  # its pinch point is judged with the others' (_infeasible_pinches)
+        )  # its pinch point is judged with the others' (infeasible_pinches)
     return chosen, played
 
 
@@ -340,124 +273,6 @@ def _nominal(study: str, config: SimConfig) -> float:
         return float(config.nx)
     value = np.asarray(getattr(config, STUDY_FIELDS[study]), dtype=np.float64)
     return float(value.reshape(-1)[0])
-
-
-def _check_label(field: str, label, taken: Mapping = ()) -> None:
-    """``ValueError`` naming ``field`` unless ``label`` is a plain name that no method, report field or
-    ``taken`` label (another method's) already has."""
-    import re
-
-    if label in RESERVED_LABELS or label in taken or not re.fullmatch(r"[A-Za-z][\w.-]*", str(label)):
-        also = ", a run's" if taken else ""
-        raise ValueError(
-            f"{field}: label {label!r} must be a plain name (letters, digits, - _ .) other than a method's"
-            f"{also} or a report field's ({', '.join(RESERVED_LABELS)})"
-        )
-
-
-def check_runs(runs: Mapping[str, str | Path] | str | Path | None) -> dict[str, Path]:
-    """``runs`` as ``{label: run directory}`` (one run: ``{"rl": run}``), each a trained run; ``ValueError``
-    naming ``runs`` for a label that is a baseline's, or not a plain name."""
-    from agents.policies import is_run, policy_runs
-
-    if runs is None:
-        return {}
-    if isinstance(runs, str | Path):
-        runs = {"rl": runs}
-    checked = {}
-    for label, run in dict(runs).items():
-        _check_label("runs", label)
-        try:
-            found = policy_runs(run) if Path(run).is_dir() else []
-        except ValueError:  # holds no policy
-            found = []
-        if len(found) != 1 or not is_run(found[0][0]):
-            raise ValueError(
-                f"runs: {run} is not one trained policy's run; give a directory of 'warpcut train' or "
-                "'warpcut run' (or one contour's policies/NAME of 'warpcut evaluate')"
-            )
-        checked[str(label)] = found[0][0]
-    return checked
-
-
-def check_plans(
-    plans: Mapping[str, str | Path] | None, contour: Contour, runs: Mapping[str, Path]
-) -> dict[str, PlanResult]:
-    """``plans`` (``{label: plan file}``) read, each checked to be ``contour``'s; ``ValueError`` naming
-    ``plans`` for a label taken by a method, a run or a report field, a file that is not an optimised plan,
-    or a plan of another contour."""
-    checked = {}
-    for label, path in dict(plans or {}).items():
-        _check_label("plans", label, taken=runs)
-        result = _read_plan(path)
-        if result.contour != contour.name:
-            raise ValueError(f"plans: {path} is a plan for {result.contour!r}, not {contour.name!r}")
-        checked[str(label)] = result
-    return checked
-
-
-def _read_plan(path: str | Path) -> PlanResult:
-    """The optimised plan in ``path``; ``ValueError`` naming ``plans`` for a file that is not one."""
-    from warpcut.io import read_json
-
-    try:
-        return PlanResult.from_json(read_json(path))
-    except (OSError, ValueError, KeyError, TypeError) as error:
-        raise ValueError(
-            f"plans: {path} is not an optimised plan ({error}); give a NAME.json of 'warpcut optimize' "
-            "(or a grad/NAME.json of 'warpcut evaluate')"
-        ) from None
-
-
-def _scenario(contour, runs: dict[str, Path], config, device, seed, log) -> dict:
-    """The contour, nominal simulation, pinch point and segments: the first run's, or planned."""
-    if runs:
-        from agents.policies import policy_options, same_contour
-
-        given = None
-        if contour is not None:
-            given = resolve_contour(contour)
-        first, cuts, pinches = None, {}, {}
-        for label, run in runs.items():
-            # judged on the nominal sheet with the others (_infeasible_pinches): refused there unless allowed
-            options = dataclasses.replace(policy_options(run, device), allow_infeasible_pinch=True)
-            trained = options.contours(1)[0]
-            given = given or trained
-            if not same_contour(given, trained):
-                raise ValueError(
-                    f"runs: {label} ({run}) was trained on {trained.name!r}, not {given.name!r}; give runs "
-                    "of one contour (and leave the contour out, or give that one)"
-                )
-            first = first or options
-            cuts[label] = None if options.segments is None else [np.asarray(s) for s in options.segments]
-            pinches[label] = (np.asarray(options.per_env(1)[1][0], dtype=np.float64), cuts[label])
-        return {
-            "contour": first.contours(1)[0],
-            "config": first.config(),
-            "pinch": np.asarray(first.per_env(1)[1][0], dtype=np.float64),
-            "segments": next(iter(cuts.values())),
-            "run_segments": cuts,
-            "run_pinches": pinches,
-            "arm": first.arm,
-        }
-    from warpcut.planning import plan_cut
-
-    if contour is None:
-        raise ValueError("contour: give a contour (or a run, whose contour is used)")
-    contour = resolve_contour(contour)
-    config = (config or SimConfig()).validated()
-    log(f"  planning {contour.name}")
-    with batch_named(  # the planner's own advice names a candidates setting this job lacks
-        "the planner's batch (pinch candidates x segment orders)",
-        "lower sim.resolution, or give a trained run (--run LABEL=DIR) whose pinch point and order are used",
-    ):
-        plan = plan_cut(contour, config.replace(noise_std=0.0), seed=seed, device=device)
-    return {
-        "contour": contour,
-        "config": config,
-        "pinch": np.asarray(plan.chosen["pinch"], dtype=np.float64),
-        "segments": plan.ordered_segments(),
-    }
 
 
 def _method_errors(
@@ -574,36 +389,7 @@ def robustness_table(report: dict) -> list[str]:
     return lines
 
 
-__all__ = [
-    "STUDIES",
-    "REPORT_FIELDS",
-    "STUDY_FIELDS",
-    "STUDY_METHODS",
-    "STUDY_UNITS",
-    "STUDY_VALUES",
-    "check_job",
-    "check_runs",
-    "check_study",
-    "parse_studies",
-    "robustness",
-    "robustness_study",
-    "robustness_table",
-]
-
-
-def parse_studies(value: str | Sequence[str]) -> list[str]:
-    """Study names from a list or a comma-separated string (``all``: every study); ``ValueError`` naming
-    ``study`` for an unknown one."""
-    names = [value] if isinstance(value, str) else list(value)
-    names = [n.strip() for arg in names for n in str(arg).split(",") if n.strip()]
-    if "all" in names:
-        names = list(STUDIES)
-    unknown = [n for n in names if n not in STUDIES]
-    if not names or unknown:
-        raise ValueError(
-            f"study: choose from {', '.join(STUDIES)} or all (got {', '.join(unknown) or 'none'})"
-        )
-    return list(dict.fromkeys(names))
+__all__ = ["check_job", "robustness", "robustness_study", "robustness_table"]
 
 
 def check_job(job: RobustnessJob) -> RobustnessJob:
@@ -622,8 +408,8 @@ def check_job(job: RobustnessJob) -> RobustnessJob:
         raise ValueError("contour: give the contour (--contour), or trained runs of it (--run)")
     check_runs(job.runs)
     for label, path in job.plans.items():
-        _check_label("plans", label, taken=job.runs)
-        _read_plan(path)
+        check_label("plans", label, taken=job.runs)
+        read_plan(path)
     return dataclasses.replace(job, study=studies)
 
 
@@ -664,10 +450,10 @@ def robustness(
     if not job.allow_infeasible_pinch and (job.runs or job.plans):  # before any work, too
         runs = check_runs(job.runs)
         if runs:
-            scenario = _scenario(contour, runs, job.sim, device, job.seed, log)
+            scenario = nominal_scenario(contour, runs, job.sim, device, job.seed, log)
         else:
             scenario = {"contour": contour, "config": job.sim.validated(), "pinch": None, "segments": None}
-        _infeasible_pinches(scenario, job.methods, job.plans, runs, allow=False)
+        infeasible_pinches(scenario, job.methods, job.plans, runs, allow=False)
     if "generalist" in job.methods:  # before any work: a generalist to play
         from agents.generalist import generalist_settings
 
