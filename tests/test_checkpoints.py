@@ -329,7 +329,7 @@ def test_a_full_disk_at_the_summary_is_named_and_never_hides_the_first_error(tmp
 
 
 def test_a_full_disk_while_plotting_is_one_line(tmp_path, monkeypatch):
-    from warpcut.viz.plots import plot_learning_curve
+    from agents.plots import plot_learning_curve
 
     full_disk(monkeypatch, "warpcut.viz.plots", {"learning_curve.svg"})
     history = [{"iteration": 1, "final_error": 0.5, "iteration_steps_per_s": 100.0}]

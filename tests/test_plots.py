@@ -13,21 +13,23 @@ from matplotlib.image import imread
 from matplotlib.lines import Line2D
 from scipy import stats
 
+from agents.plots import (
+    aggregate_improvements,
+    improvement_figure,
+    learning_curve_figure,
+    plot_improvements,
+    plot_learning_curve,
+)
 from warpcut.contours import load_contour
 from warpcut.planning import ArmModel, Plan, pinch_feasible, plan_cut
 from warpcut.sim.config import SimConfig
 from warpcut.task import CuttingTask
 from warpcut.viz.plots import (
     FinalCuts,
-    aggregate_improvements,
     candidate_counts,
     candidate_summary,
     feasible_grid,
-    improvement_figure,
-    learning_curve_figure,
     pinch_candidates_figure,
-    plot_improvements,
-    plot_learning_curve,
     plot_pinch_candidates,
     plot_regions,
 )

@@ -151,7 +151,8 @@ def command(
         write_json(json_path, report.to_json())
         click.echo(f"wrote {json_path}")
     if cuts is not None:
-        from warpcut.viz.plots import plot_improvements, plot_pinch_candidates
+        from agents.plots import plot_improvements
+        from warpcut.viz.plots import plot_pinch_candidates
 
         outputs.echo_written(plot_improvements(report.to_json(), job.methods, out))
         shown = ["none"] + [m for m in job.methods if m != "none"]

@@ -177,8 +177,8 @@ def log(line: str) -> None:
 
 def plot_learning_curves(runs: dict[Path, str]) -> list[Path]:
     """Each training run's learning curve (``learning_curve.png/svg`` in it), titled as given."""
+    from agents.plots import plot_learning_curve
     from warpcut.io import read_json
-    from warpcut.viz.plots import plot_learning_curve
 
     written = []
     for run, title in runs.items():

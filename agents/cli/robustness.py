@@ -164,7 +164,7 @@ def command(
             json_path, reports[0] if len(reports) == 1 else {"studies": {r["study"]: r for r in reports}}
         )
     if job.plots:
-        from warpcut.viz.plots import plot_robustness
+        from agents.plots import plot_robustness
 
         outputs.echo_written(plot_robustness(reports, out))
     click.echo(f"wrote {out}")

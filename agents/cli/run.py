@@ -160,7 +160,8 @@ def command(
     if json_path:
         write_json(json_path, report.to_json())
     if cuts is not None:
-        from warpcut.viz.plots import plot_improvements, plot_pinch_candidates, plot_regions
+        from agents.plots import plot_improvements
+        from warpcut.viz.plots import plot_pinch_candidates, plot_regions
 
         titles = {
             run: f"{name}, pinch {point_text(c['pinch'])}"

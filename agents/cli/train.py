@@ -158,7 +158,7 @@ def command(
     )
     outputs.echo_infeasible({"rl": e["pinch_problem"]})
     if job.plots:
-        from warpcut.viz.plots import plot_learning_curve
+        from agents.plots import plot_learning_curve
 
         outputs.echo_written(plot_learning_curve(s["history"], s["validation"], out, title=contour_name))
     outputs.echo_recording(rec)

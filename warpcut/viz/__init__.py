@@ -15,7 +15,7 @@ Recording (a step callback of :meth:`warpcut.task.CuttingTask.run` writes one ``
 * :mod:`~warpcut.viz.colours`: vertex colours (strain, height) and the fixed colours;
 * :mod:`~warpcut.viz.readback`: what a recording holds, read back (``warpcut replay``).
 
-Figures: :mod:`~warpcut.viz.plots` (Table I, the cut regions, a learning curve, pinch candidates).
+Figures: :mod:`~warpcut.viz.plots` (the cut regions of each method, a plan's pinch candidates).
 
 The names below load their module on first use, so that ``import warpcut.viz`` imports neither rerun nor
 pyarrow nor matplotlib.
@@ -32,8 +32,6 @@ _LAZY = {
     "read_summary": "warpcut.viz.readback",
     "FinalCut": "warpcut.viz.plots",
     "FinalCuts": "warpcut.viz.plots",
-    "plot_improvements": "warpcut.viz.plots",
-    "plot_learning_curve": "warpcut.viz.plots",
     "plot_pinch_candidates": "warpcut.viz.plots",
     "plot_regions": "warpcut.viz.plots",
 }
