@@ -13,9 +13,9 @@ from agents.config import EVALUATION_TRIALS
 from agents.methods import BASELINES, StepCallbacks, tensioner
 from warpcut.contours import Contour
 from warpcut.planning import ArmModel, check_pinch, default_pinch
-from warpcut.scoring import mean_ci95, paired_improvement
 from warpcut.sim.config import SimConfig
 from warpcut.sim.memory import check_batch_memory
+from warpcut.stats import mean_ci95, paired_improvement
 from warpcut.task import (
     CuttingTask,
     SimulationDiverged,

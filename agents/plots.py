@@ -15,7 +15,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 from matplotlib.ticker import MaxNLocator
 
-from warpcut.scoring import BOOTSTRAP_RESAMPLES, bootstrap_ci, paired_improvement
+from warpcut.stats import BOOTSTRAP_RESAMPLES, bootstrap_ci, paired_improvement
 from warpcut.viz.plots import save_figure
 
 

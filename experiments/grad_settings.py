@@ -23,7 +23,7 @@ from agents.plan_optimizer.config import GradConfig, grad_config
 from agents.plan_optimizer.optimizer import optimize_plan
 from agents.plan_optimizer.plan import PlanResult
 from warpcut import SimConfig, load_contour, plan_cut
-from warpcut.scoring import paired_improvement
+from warpcut.stats import paired_improvement
 from warpcut.task import CuttingTask
 
 DEFAULT_SETTINGS = (

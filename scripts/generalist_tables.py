@@ -15,7 +15,7 @@ import json
 
 import numpy as np
 
-from warpcut.scoring import mean_ci95, paired_improvement
+from warpcut.stats import mean_ci95, paired_improvement
 
 
 def _trials(row: dict, method: str) -> np.ndarray:

@@ -17,7 +17,7 @@ import numpy as np
 from warpcut import SimConfig
 from warpcut.contours import builtin_contours
 from warpcut.planning import default_pinch
-from warpcut.scoring import ci95
+from warpcut.stats import ci95
 from warpcut.task import CuttingTask
 
 SIGMAS = "0,0.01,0.02,0.03,0.05"

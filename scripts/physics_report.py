@@ -15,8 +15,8 @@ import numpy as np
 
 from warpcut import SimConfig, Simulator
 from warpcut.contours import builtin_contours
-from warpcut.scoring import ci95
 from warpcut.sim.checks import settled_figures
+from warpcut.stats import ci95
 from warpcut.task import CuttingTask
 
 

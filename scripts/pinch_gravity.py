@@ -23,7 +23,7 @@ from agents.evaluation import run_method
 from agents.pipelines.robustness_studies import STUDY_VALUES
 from warpcut import SimConfig, plan_cut
 from warpcut.contours import load_contour
-from warpcut.scoring import paired_improvement
+from warpcut.stats import paired_improvement
 
 
 def paired_medians(contour, plan, config: SimConfig, gravity: float, trials: int, seed: int) -> np.ndarray:

@@ -15,7 +15,7 @@ import json
 
 import numpy as np
 
-from warpcut.scoring import mean_ci95, paired_improvement
+from warpcut.stats import mean_ci95, paired_improvement
 
 METHODS = ("fixed", "analytic", "rl", "grad", "generalist")
 """The columns, in this order, where the run has them."""

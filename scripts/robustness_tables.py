@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from warpcut.scoring import bootstrap_difference_ci
+from warpcut.stats import bootstrap_difference_ci
 
 
 def _diverged_more(report: dict, policy: str) -> list[bool]:

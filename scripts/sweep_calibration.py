@@ -23,9 +23,9 @@ import numpy as np
 from warpcut import SimConfig, Simulator
 from warpcut.bench import updates_per_second
 from warpcut.contours import builtin_contours
-from warpcut.scoring import ci95
 from warpcut.sim.checks import settled_figures
 from warpcut.sim.config import ConfigError, SimulationDiverged
+from warpcut.stats import ci95
 from warpcut.task import CuttingTask
 
 REFERENCE = {"sweeps": 20, "chebyshev_rho": 0.0}

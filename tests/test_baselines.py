@@ -8,7 +8,7 @@ from agents.evaluation import compare_policies
 from warpcut import SimConfig
 from warpcut.contours import load_contour
 from warpcut.planning import ArmModel, pinch_feasible
-from warpcut.scoring import ci95
+from warpcut.stats import ci95
 from warpcut.task import CuttingTask
 
 CONFIG = SimConfig(resolution=13)

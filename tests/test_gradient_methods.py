@@ -494,7 +494,7 @@ def test_es_learns_feedback_gains_that_beat_a_still_grasp():
     policy: zero gains hold still) cut wave-1 better than the still grasp at the same pinch on evaluation
     trials the optimiser never saw, by more than both CIs (the paired difference's too)."""
     from warpcut import plan_cut
-    from warpcut.scoring import paired_improvement
+    from warpcut.stats import paired_improvement
 
     contour = load_contour("wave-1")
     planned = plan_cut(contour, SMALL.replace(noise_std=0.0), num_candidates=8)

@@ -7,19 +7,15 @@ import numpy as np
 import pytest
 import shapely
 
-from warpcut.scoring import (
-    Separation,
-    achieved_mask,
+from warpcut.scoring import Separation, achieved_mask, intended_mask, separation, symmetric_difference
+from warpcut.sim.config import SheetGrid
+from warpcut.stats import (
     bootstrap_ci,
     bootstrap_difference_ci,
     improvement_pct,
-    intended_mask,
     mean_ci95,
     paired_improvement,
-    separation,
-    symmetric_difference,
 )
-from warpcut.sim.config import SheetGrid
 
 CENTER = np.array([50.0, 50.0])
 RADIUS = 25.0

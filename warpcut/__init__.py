@@ -26,8 +26,8 @@ _LAZY = {
     "load_contour": "warpcut.contours",
     "plan_cut": "warpcut.planning",
     "Score": "warpcut.scoring",
-    "paired_improvement": "warpcut.scoring",
-    "ci95": "warpcut.scoring",
+    "paired_improvement": "warpcut.stats",
+    "ci95": "warpcut.stats",
 }
 
 __all__ = ["ConfigError", "SheetGrid", "SimConfig", *_LAZY]

@@ -13,7 +13,7 @@ import click
 from agents.cli import options, outputs, settings
 from agents.cli.video import video_option, videos, with_videos
 from agents.methods import BASELINES, point_text
-from warpcut.scoring import NEGLIGIBLE_ERROR
+from warpcut.stats import NEGLIGIBLE_ERROR
 
 
 @click.command("simulate", cls=settings.Command)

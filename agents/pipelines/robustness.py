@@ -58,8 +58,8 @@ from agents.plan_optimizer.config import GRAD_CONFIG, GradConfig
 from agents.plan_optimizer.plan import PlanResult
 from warpcut.contours import Contour, ContourError
 from warpcut.planning import resolve_contour
-from warpcut.scoring import bootstrap_ci, paired_improvement
 from warpcut.sim.config import SimConfig
+from warpcut.stats import bootstrap_ci, paired_improvement
 from warpcut.task import segments_key
 
 
