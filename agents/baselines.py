@@ -15,7 +15,8 @@ from warpcut.contours import Contour
 from warpcut.planning import ArmModel, default_pinch, pinch_candidates
 from warpcut.sim.config import AUTHORS_UNITS_PER_MM, PINCH_CANDIDATES, SimConfig
 from warpcut.sim.memory import check_batch_memory
-from warpcut.task import CuttingTask, SimulationDiverged, estimate_horizon
+from warpcut.task import CuttingTask, SimulationDiverged
+from warpcut.trajectory import estimate_horizon
 
 
 @dataclass

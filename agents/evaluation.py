@@ -16,14 +16,8 @@ from warpcut.planning import ArmModel, check_pinch, default_pinch
 from warpcut.sim.config import SimConfig
 from warpcut.sim.memory import check_batch_memory
 from warpcut.stats import mean_ci95, paired_improvement
-from warpcut.task import (
-    CuttingTask,
-    SimulationDiverged,
-    StepCallback,
-    default_segments,
-    divergence_error,
-    estimate_horizon,
-)
+from warpcut.task import CuttingTask, SimulationDiverged, StepCallback, divergence_error
+from warpcut.trajectory import default_segments, estimate_horizon
 
 
 @dataclass

@@ -197,7 +197,7 @@ class PatternCutOptions(EnvConfig):
     )
     """Material polylines (mm) the scissors cut, in order (e.g. a plan's ``ordered_segments()``): one such
     list for every env, or a list of them, one per env; default: the whole contour as one segment
-    (``warpcut.task.default_segments``)."""
+    (``warpcut.trajectory.default_segments``)."""
     sim_config: SimConfig = field(default_factory=SimConfig)
     """Base simulation parameters (a ``SimConfig``, or a dict of its fields); the fields below override it
     when given."""

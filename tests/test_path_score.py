@@ -8,7 +8,8 @@ from warpcut import SimConfig, Simulator
 from warpcut.contours import load_contour, validate
 from warpcut.scoring import order_cut_path, order_cut_paths, path_region, path_regions
 from warpcut.sim.kernels import PATH_DROPPED, PATH_IDLE, PATH_MAPPED
-from warpcut.task import CuttingTask, default_segments
+from warpcut.task import CuttingTask
+from warpcut.trajectory import default_segments
 
 RIGID = SimConfig(gravity=0.0, noise_std=0.0)
 """No gravity, no noise: the sheet never moves, so material and world coordinates coincide."""

@@ -5,7 +5,8 @@ import pytest
 
 from warpcut import SheetGrid, SimConfig, Simulator
 from warpcut.contours import load_contour, validate
-from warpcut.task import CuttingTask, Trajectory, material_to_world
+from warpcut.task import CuttingTask, material_to_world
+from warpcut.trajectory import Trajectory
 
 
 def test_material_to_world_is_exact_on_a_flat_sheet():

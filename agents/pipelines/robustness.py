@@ -60,7 +60,7 @@ from warpcut.contours import Contour, ContourError
 from warpcut.planning import resolve_contour
 from warpcut.sim.config import SimConfig
 from warpcut.stats import bootstrap_ci, paired_improvement
-from warpcut.task import segments_key
+from warpcut.trajectory import segments_key
 
 
 def _override(study: str, values: Sequence[float], trials: int) -> dict:
