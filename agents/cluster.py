@@ -316,7 +316,7 @@ def _warm_cache(device: str | None) -> str:
     """Load (compiling where the cache lacks them) warpcut's kernel modules for ``device`` here; returns
     Warp's kernel cache folder."""
     from warpcut.sim._warp import init, load_module, wp
-    from warpcut.sim.simulator import resolve_device
+    from warpcut.sim.devices import resolve_device
 
     init()
     device = resolve_device(device)

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from warpcut import SimConfig, Simulator
-from warpcut.sim.kernels_simd import SimdModel, SimdState, simd_kernels
+from warpcut.sim.kernels_simd import simd_kernels
+from warpcut.sim.simd import SimdModel, SimdState
 
 PINCHES = np.array([[50.0, 50.0], [np.nan, np.nan], [30.0, 60.0], [60.0, 40.0], [45.0, 45.0]])
 

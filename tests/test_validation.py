@@ -292,7 +292,7 @@ if sys.argv[1] == "read-only":  # what a read-only folder gives, for a user who 
         return real(path, *args, **kwargs)
     os.makedirs = makedirs
 try:
-    from warpcut.sim.simulator import resolve_device
+    from warpcut.sim.devices import resolve_device
 
     resolve_device("cpu")
 except ValueError as error:

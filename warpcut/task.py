@@ -18,9 +18,10 @@ from warpcut.contours import Contour, check_resolution, ring
 from warpcut.scoring import Score, score_cut
 from warpcut.sim.checks import DIVERGENCE_REASONS, check_pinch_points
 from warpcut.sim.config import SimConfig, SimulationDiverged
+from warpcut.sim.devices import resolve_device
 from warpcut.sim.material import interpolate, interpolate_corners, material_cells, material_to_world
 from warpcut.sim.memory import check_batch_memory
-from warpcut.sim.simulator import BACKENDS, NOISE_SEEDS, Simulator, resolve_device
+from warpcut.sim.simulator import BACKENDS, NOISE_SEEDS, Simulator
 from warpcut.trajectory import (
     MAX_TRAJECTORY_STRETCH,
     Trajectory,

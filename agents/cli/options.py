@@ -28,7 +28,7 @@ def setting_keys(command: click.Command) -> dict[str, str]:
 
 
 def _resolve_device(ctx: click.Context, param: click.Parameter, value: str | None) -> str:
-    from warpcut.sim.simulator import resolve_device
+    from warpcut.sim.devices import resolve_device
 
     return resolve_device(value)
 

@@ -430,7 +430,7 @@ def _rl_unit(unit: dict, run: Path) -> dict:
 
 def _cuda(device: str | None) -> bool:
     """Whether ``device`` is a GPU (a unit there declares one)."""
-    from warpcut.sim.simulator import resolve_device
+    from warpcut.sim.devices import resolve_device
 
     return resolve_device(device).startswith("cuda")
 

@@ -9,11 +9,13 @@ Package map:
 - ``springs``: the springs grouped into colours (sets that share no vertex), in sweep order. Plain NumPy.
 - ``material``: material points on the sheet, and their world positions by bilinear interpolation.
   Plain NumPy.
-- ``simulator``: :class:`Simulator`, the batch on one device (settling, grasp, scissors, cut-path
-  tracing, read-back), and the device helpers.
+- ``simulator``: :class:`Simulator`, the batch on one device (settling, grasp, scissors, stepping); it
+  inherits its cut-path tracing (``tracing``) and its read-back (``reads``).
+- ``devices``: the Warp device a simulator runs on (``WARPCUT_DEVICE``, a GPU, else the CPU), checked.
 - ``kernels``: the ``colours`` backend's Warp kernels (one thread per vertex; GPUs, ``wp.Tape``) and the
   functions every backend shares (process noise, locating the tip in the deformed mesh).
-- ``kernels_simd``: the ``simd`` backend (the default on CPU: blocks of 8 envs in SIMD lanes).
+- ``kernels_simd``: the ``simd`` backend's kernels (the default on CPU: blocks of 8 envs in SIMD lanes);
+  ``simd``: its packed batch (the model every env shares, the packed state those kernels step).
 - ``reference``: the NumPy implementation of one sheet, the oracle the tests compare against.
 - ``_warp``: Warp, imported quietly; every module that uses Warp imports it from there, and launches
   through its ``launch`` (a module Warp cannot load, e.g. from a corrupt kernel cache, raises

@@ -1,6 +1,6 @@
 """Reading a :class:`~warpcut.sim.simulator.Simulator`'s sheets back to NumPy: the whole batch, a few envs,
 or a few vertices of every env, each read the cheapest way its backend allows (docs/performance.md,
-sections 5 and 6)."""
+sections 5 and 6); the grasps' displacements and which envs diverged."""
 
 from __future__ import annotations
 
@@ -12,20 +12,22 @@ import numpy as np
 if TYPE_CHECKING:
     from warpcut.sim._warp import wp
     from warpcut.sim.config import SheetGrid
-    from warpcut.sim.kernels_simd import SimdState
+    from warpcut.sim.simd import SimdState
 
 
 class StateReads:
     """The read-back methods of :class:`~warpcut.sim.simulator.Simulator`, which it inherits (one module per
     concern; the simulator's own module holds the stepping). They read the simulator's ``x`` and ``alive``
     arrays, or the ``simd`` backend's packed blocks (``_simd``) while those hold the newer state
-    (``_flat_current`` False)."""
+    (``_flat_current`` False); and the grasp displacements and the divergence flags every update sets."""
 
     num_envs: int
     device: str
     grid: SheetGrid
     x: wp.array
     alive: wp.array
+    displacement: wp.array
+    _status: wp.array
     _simd: SimdState | None
     _is_cpu: bool
     _flat_current: bool
@@ -202,3 +204,19 @@ class StateReads:
             return out
 
         return read
+
+    def displacements(self) -> np.ndarray:
+        """(B, 3) grasp displacement from where it pinched (mm)."""
+        return self.displacement.numpy().copy()
+
+    def diverged(self) -> np.ndarray:
+        """(B,) bool: envs whose state left the physical range since the last reset (a non-finite vertex
+        coordinate, or a vertex beyond :attr:`SimConfig.runaway_bounds`). Cheap: B flags set by the
+        kernels of every update; no state is read back."""
+        return self.divergence() != 0
+
+    def divergence(self) -> np.ndarray:
+        """(B,) int8 why each env diverged since the last reset: 0 it did not, 1 a non-finite vertex
+        coordinate (:data:`~warpcut.sim.checks.DIVERGENCE_REASONS`), 2 a vertex flung beyond the bounds."""
+        status = self._status.numpy()
+        return np.where(status[0] != 0, 1, np.where(status[1] != 0, 2, 0)).astype(np.int8)

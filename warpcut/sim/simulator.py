@@ -7,23 +7,22 @@ its own scissor tip. One *update* is: integrate, relax every spring colour ``swe
 
 from __future__ import annotations
 
-import math
-import os
-from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor, wait
 
 import numpy as np
 
 from warpcut.cores import cpu_cores
 from warpcut.sim import kernels
-from warpcut.sim._warp import LaunchRecords, init, launch, wp
+from warpcut.sim._warp import LaunchRecords, launch, wp
 from warpcut.sim.checks import DIVERGENCE_REASONS, check_pinch_points
 from warpcut.sim.config import PHYSICAL_PARAMETERS, SheetGrid, SimConfig, SimulationDiverged
-from warpcut.sim.kernels_simd import SimdModel, SimdState
+from warpcut.sim.devices import resolve_device
 from warpcut.sim.memory import check_batch_memory
 from warpcut.sim.reads import StateReads
 from warpcut.sim.settling import SETTLE_PARAMETERS, SettledSheets
+from warpcut.sim.simd import SimdModel, SimdState
 from warpcut.sim.springs import spring_colours
+from warpcut.sim.tracing import PathTracing
 from warpcut.validation import check_choice, check_flag, check_instance, check_integer, check_text
 
 __all__ = [
@@ -31,8 +30,6 @@ __all__ = [
     "SimulationDiverged",
     "Simulator",
     "check_pinch_points",
-    "default_device",
-    "resolve_device",
 ]
 
 NOISE_SEEDS = 2_147_483_647
@@ -43,27 +40,7 @@ one of ``0 .. NOISE_SEEDS - 1``."""
 BACKENDS = ("auto", "simd", "colours")
 
 
-def default_device() -> str:
-    """``WARPCUT_DEVICE`` if set, else ``cuda`` when Warp sees a GPU, else ``cpu``."""
-    env = os.environ.get("WARPCUT_DEVICE")
-    if env:
-        return env
-    return "cuda" if wp.is_cuda_available() else "cpu"
-
-
-def resolve_device(device: str | None) -> str:
-    """Check a device name against what Warp sees; raise ValueError naming the fix."""
-    init()
-    device = device or default_device()
-    names = [str(d) for d in wp.get_devices()]
-    if device == "cuda" and not wp.is_cuda_available():
-        raise ValueError("device: 'cuda' requested but no CUDA GPU is available; use --device cpu")
-    if device != "cuda" and device not in names:
-        raise ValueError(f"device: unknown device {device!r}; available: {', '.join(names)}")
-    return device
-
-
-class Simulator(StateReads):
+class Simulator(StateReads, PathTracing):
     """``num_envs`` sheets on one device.
 
     Args:
@@ -318,87 +295,6 @@ class Simulator(StateReads):
         self._status.zero_()
         self._counter_synced = True
         self._flat_current, self._packed_current = True, False
-
-    # ------------------------------------------------------------------ cut path
-    def trace_path(self, horizon: int | None) -> None:
-        """Map the scissor tip of each of the first ``horizon`` updates after a reset into material (rest)
-        coordinates, into :attr:`path`; ``None`` stops tracing.
-
-        After every cutting update the tip is located in the deformed mesh (two triangles per grid cell,
-        projected on x-y) and its material position interpolated barycentrically. A triangle may carry the
-        tip while each of its vertices is alive or was cut within the last :attr:`path_window` updates: the
-        tip always sits on freshly cut material, older cuts are holes. Where several layers lie under the
-        tip, the one nearest it in height is taken. The cells around the previous update's material point
-        are searched first, then :attr:`path_reach` cells around the tip's x-y read as a material point; a
-        tip over no such triangle there (off the sheet, over a hole) is dropped. Updates with ``tape_mode``
-        are not traced.
-        """
-        if horizon is None:
-            self.path = self._removed_at = None
-            return
-        if not isinstance(horizon, int) or horizon < 1:
-            raise ValueError(f"horizon: must be a positive number of updates (got {horizon!r})")
-        b, n = self.num_envs, self.grid.num_vertices
-        self._search = self.tip_search()
-        self.path = wp.full(
-            (b, horizon), wp.vec3(0.0, 0.0, kernels.PATH_IDLE), dtype=wp.vec3, device=self.device
-        )
-        self._removed_at = wp.full(b * n, -1, dtype=wp.int32, device=self.device)
-
-    @property
-    def path_window(self) -> int:
-        """Updates for which a cut vertex still carries the tip: twice the tip's travel from first touching
-        a cell's corner to leaving the cell (cut radius plus a cell diagonal)."""
-        hx, hy = self.grid.spacing_mm
-        reach_mm = self.config.cut_radius + math.hypot(hx, hy)
-        return math.ceil(2.0 * reach_mm / self.config.trajectory_spacing_mm)
-
-    @property
-    def path_reach(self) -> int:
-        """Cells around the tip searched first: the grasp's largest displacement plus the cut radius."""
-        reach_mm = self.config.max_displacement_mm + self.config.cut_radius
-        return math.ceil(reach_mm / min(self.grid.spacing_mm))
-
-    def path_reader(self, count: int) -> Callable[[int, int], np.ndarray]:
-        """A function ``read(start, stop)`` returning a copy of :attr:`path` of the first ``count`` envs for
-        updates ``start .. stop - 1``, (count, stop - start, 3): what a recorder's step callback calls every
-        step. On the CPU it copies out of a NumPy view made here, once (much cheaper than a Warp slice per
-        call); elsewhere it copies only that slice to the host."""
-        if self.path is None:
-            raise ValueError("path_reader: the path is not traced; call trace_path(horizon) first")
-        path = self.path
-        if self._is_cpu:
-            view = path.numpy()[:count]
-            return lambda start, stop: view[:, start:stop].copy()
-        return lambda start, stop: np.array(path[:count, start:stop].numpy())
-
-    def tip_search(self) -> kernels.TipSearch:
-        """What the tip search needs to know of the sheet (made once per :meth:`trace_path`)."""
-        search = kernels.TipSearch()
-        search.nx, search.ny = self.grid.nx, self.grid.ny
-        search.hx, search.hy = (float(h) for h in self.grid.spacing_mm)
-        search.window, search.reach = self.path_window, self.path_reach
-        return search
-
-    def _map_flat(self) -> None:
-        """Trace every env's tip from the env-major state."""
-        launch(
-            kernels.map_tip_kernel,
-            dim=self.num_envs,
-            inputs=[
-                self._search,
-                self.update_count,
-                self.x,
-                self.alive,
-                self.tip,
-                self._removed_at,
-            ],
-            outputs=[self.path],
-            device=self.device,
-        )
-
-    def _tracing(self) -> bool:
-        return self.path is not None and self.update_count < self.path.shape[1]
 
     # ------------------------------------------------------------------ stepping
     def move_grasp(self, action: np.ndarray) -> None:
@@ -694,23 +590,6 @@ class Simulator(StateReads):
         self.update_count = int(state["update_count"])
         self._counter_synced = False
         self._flat_current, self._packed_current = True, False
-
-    def displacements(self) -> np.ndarray:
-        """(B, 3) grasp displacement from where it pinched (mm)."""
-        return self.displacement.numpy().copy()
-
-    # ------------------------------------------------------------------ divergence
-    def diverged(self) -> np.ndarray:
-        """(B,) bool: envs whose state left the physical range since the last reset (a non-finite vertex
-        coordinate, or a vertex beyond :attr:`SimConfig.runaway_bounds`). Cheap: B flags set by the
-        kernels of every update; no state is read back."""
-        return self.divergence() != 0
-
-    def divergence(self) -> np.ndarray:
-        """(B,) int8 why each env diverged since the last reset: 0 it did not, 1 a non-finite vertex
-        coordinate (:data:`DIVERGENCE_REASONS`), 2 a vertex flung beyond the bounds."""
-        status = self._status.numpy()
-        return np.where(status[0] != 0, 1, np.where(status[1] != 0, 2, 0)).astype(np.int8)
 
 
 def _fresh(like: wp.array) -> wp.array:
