@@ -1,20 +1,12 @@
-"""What each command runs, as a dataclass: the layout of its config file (``--config``), the keys of its
-``--set`` overrides, what ``--print-config`` prints and what a run directory's ``config.json`` holds.
-
-Every job has the same sections where it has them: ``sim`` (:class:`~warpcut.sim.config.SimConfig`: the
-physics and the protocol, e.g. ``sim.noise_std``, ``sim.score``), ``env`` (:class:`~envs.options.EnvConfig`:
-what a policy observes, how it acts and is rewarded, domain randomisation) and ``train``
-(:class:`~agents.config.TrainConfig`: the learner, its batch and its own section, e.g. ``train.es.sigma``).
-The flags of a command set a few of these keys; the rest keep their defaults unless a file or ``--set``
-changes them.
-"""
+"""The jobs on one contour: ``warpcut train`` (:class:`TrainJob`), ``run`` (:class:`RunJob`, the main job),
+``optimize`` (:class:`OptimizeJob`), ``simulate`` (:class:`SimulateJob`) and ``robustness``
+(:class:`RobustnessJob`)."""
 
 from __future__ import annotations
 
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import Any
 
 from agents.config import (
     ANALYTIC_PINCHES,
@@ -24,107 +16,27 @@ from agents.config import (
     DEFAULT_SELECTOR,
     EVALUATION_CANDIDATES,
     EVALUATION_TRIALS,
-    GENERALIST_CONTOURS,
-    GENERALIST_LOOKAHEAD,
-    GENERALIST_VALIDATION_CONTOURS,
-    SEED_RANGE,
-    STUDENT_DEFAULTS,
-    TEACHER_CONTOURS,
     TrainConfig,
-    generalist_train_config,
 )
-from agents.methods import BASELINES, SELECTORS, SIMULATED, TABLE_METHODS, check_methods
-from agents.plan_optimizer.config import GRAD_CONFIG, GRAD_CONFIGS, GradConfig
+from agents.jobs.fields import (
+    _check_fields,
+    _counted,
+    _grad_validated,
+    _names,
+    _pinch_keys,
+    _recording_keys,
+    _sim_validated,
+    other_learners,
+)
+from agents.methods import BASELINES, SELECTORS, SIMULATED, check_methods
+from agents.plan_optimizer.config import GRAD_CONFIG, GradConfig
 from envs.options import ENV_FIELDS, EnvConfig, PatternCutOptions
 from warpcut.planning.feasibility import ArmModel
-from warpcut.planning.generate import EXTRA_KINDS, KINDS, MAX_CONTOURS
 from warpcut.sim.config import SimConfig
 from warpcut.validation import (
-    ConfigError,
-    check_choice,
-    check_flag,
-    check_instance,
-    check_integer,
-    check_text,
     fail,
-    is_integer,
     is_number,
 )
-from warpcut.viz.colours import COLOUR_FIELDS
-
-
-def _counted(where: str, value: Any, optional: bool = False, note: str = "the budget's") -> None:
-    """A count (trials, candidates): an integer >= 1 (None where ``optional``)."""
-    if optional and value is None:
-        return
-    if not (is_integer(value) and value >= 1):
-        fail(where, "must be an integer >= 1" + (f", or null for {note}" if optional else ""), value)
-
-
-def _names(where: str, value: Any, what: str) -> None:
-    """A list of names (methods, studies, contours): never one string, which would be read letter by
-    letter."""
-    if not (isinstance(value, list | tuple) and all(isinstance(v, str) for v in value)):
-        fail(where, f"a list of {what}", value)
-
-
-def _paths(where: str, value: Any) -> None:
-    if not (
-        isinstance(value, dict) and all(isinstance(k, str) and isinstance(v, str) for k, v in value.items())
-    ):
-        fail(where, "a mapping {label: path}", value)
-
-
-def _point(where: str, value: Any) -> None:
-    if value is None:
-        return
-    ok = isinstance(value, list | tuple) and len(value) == 2 and all(is_number(v) for v in value)
-    if not (ok and all(math.isfinite(float(v)) for v in value)):
-        fail(where, "[x, y], finite numbers in mm, or None", value)
-
-
-_FIELD_CHECKS = {
-    "contour": lambda w, v: check_instance(
-        w, v, (str, dict, type(None)), "a built-in name, a contour file, or a contour {name, closed, points}"
-    ),
-    "pinch": _point,
-    "allow_infeasible_pinch": check_flag,
-    "allow_partial": check_flag,
-    "plan": check_flag,
-    "plots": check_flag,
-    "arm": lambda w, v: check_instance(w, v, ArmModel, "an ArmModel (length_mm, width_mm, ...)"),
-    "segments": lambda w, v: check_instance(w, v, (list, tuple, type(None)), "a list of polylines, or None"),
-    "seed": lambda w, v: check_integer(w, v, *SEED_RANGE),
-    "eval_trials": _counted,
-    "sim": lambda w, v: check_instance(w, v, SimConfig, "a SimConfig (the sim section)"),
-    "env": lambda w, v: check_instance(w, v, EnvConfig, "an EnvConfig (the env section)"),
-    "train": lambda w, v: check_instance(w, v, TrainConfig, "a TrainConfig (the train section)"),
-    "grad": lambda w, v: check_instance(w, v, GradConfig, "a GradConfig (the grad section)"),
-    "record": lambda w, v: check_integer(w, v, 1, optional=True, note="no recording"),
-    "video": lambda w, v: check_integer(w, v, 1, optional=True, note="no video"),
-    "colour_by": lambda w, v: v in COLOUR_FIELDS or fail(w, f"choose one of {', '.join(COLOUR_FIELDS)}", v),
-    "export_mesh": lambda w, v: check_text(w, v, optional=True, note="no meshes"),
-    "generalist": lambda w, v: check_text(w, v),
-    "init": lambda w, v: check_text(w, v, optional=True, note="a fresh policy"),
-    "checkpoints": lambda w, v: check_text(w, v, optional=True, note="train a policy per contour"),
-    "analytic_pinch": lambda w, v: check_choice(w, v, ANALYTIC_PINCHES),
-    "methods": lambda w, v: _names(w, v, "method names"),
-    "study": lambda w, v: _names(w, v, "studies"),
-    "contours": lambda w, v: _names(w, v, "contour names or files"),
-    "runs": _paths,
-    "plans": _paths,
-}
-"""How each job's field is checked as it is given, by its name (the same name means the same in every job);
-the fields a job reads its own way are its ``__post_init__``'s."""
-
-
-def _check_fields(job: Any) -> None:
-    """``ConfigError`` naming ``Job.field`` for the first field that is not what it takes (each on its own:
-    a file and ``--set`` set one key at a time; what depends on several fields is the job's ``check``)."""
-    for f in dataclasses.fields(job):
-        check = _FIELD_CHECKS.get(f.name)
-        if check is not None:
-            check(f"{type(job).__name__}.{f.name}", getattr(job, f.name))
 
 
 @dataclass
@@ -286,174 +198,6 @@ class RunJob:
         if self.policy != "generalist":
             unused["generalist"] = "read by --policy generalist only"
         return {**unused, **_recording_keys(self)}
-
-
-@dataclass
-class EvaluateJob:
-    """``warpcut evaluate``: the paper's Table I protocol over a suite of contours: per contour the
-    no-tension error and each method's paired improvement with its 95% CI, and the mean row."""
-
-    contours: list[str] = field(default_factory=lambda: ["all"])
-    """Built-in names or contour files; ``all``: the built-in suite."""
-    methods: list[str] = field(default_factory=lambda: list(TABLE_METHODS))
-    """The methods (``none``, ``fixed``, ``analytic``, ``rl``, ``generalist``, ``grad``)."""
-    trials: int = EVALUATION_TRIALS
-    """Seeded trials per contour and method (the paper's 10)."""
-    candidates: int = EVALUATION_CANDIDATES
-    """Pinch candidates per plan (the paper's 30)."""
-    plan: bool = True
-    """Plan every cut (segments, order, pinch); false: one loop, fixed by random search, rl and analytic
-    at the feasible centroid."""
-    checkpoints: str | None = None
-    """A directory of trained runs, one per contour (``CHECKPOINTS/NAME``, as ``warpcut train`` writes):
-    the rl column plays them instead of training a policy per contour."""
-    allow_partial: bool = False
-    """Accept checkpoint runs whose training was interrupted (their last saved policy)."""
-    allow_infeasible_pinch: bool = False
-    """Accept checkpoint runs trained at a pinch point the gripper could not hold (on or near the cut line,
-    under the cutting arm: :func:`warpcut.planning.pinch_problems`); their rows are marked
-    (``rl_pinch_feasible``: false, ``rl_pinch_problem``)."""
-    analytic_pinch: str = ANALYTIC_PINCHES[0]
-    """Where the analytic controller pinches: ``feasible`` or ``centroid``."""
-    arm: ArmModel = field(default_factory=ArmModel)
-    """The cutting arm's footprint, for pinch feasibility."""
-    seed: int = 0
-    """Seed of everything random."""
-    sim: SimConfig = field(default_factory=SimConfig)
-    """The physics and the protocol (noise, score)."""
-    env: EnvConfig = field(default_factory=EnvConfig)
-    """What the rl column's policies observe, how they act and are rewarded."""
-    train: TrainConfig = field(default_factory=TrainConfig)
-    """The rl column's learner (a policy per contour)."""
-    grad: GradConfig = GRAD_CONFIG
-    """The grad column's optimiser (an open-loop plan per contour)."""
-    generalist: str = "generalist"
-    """The generalist column's policy: ``generalist`` (the one warpcut ships) or a run directory of
-    ``warpcut generalist``."""
-    record: int | None = None
-    """Write ``recording.rrd`` of the first contour's first N envs of each method; None: none."""
-    colour_by: str = "strain"
-    """What the recorded sheet's vertex colours show: ``strain`` or ``height``."""
-    video: int | None = None
-    """Write MP4 videos of the first contour's first N envs of each method; None: none."""
-    plots: bool = True
-    """Write the plots (regions, improvements, learning curves)."""
-
-    def __post_init__(self) -> None:
-        _check_fields(self)
-        for name in ("trials", "candidates"):
-            _counted(f"EvaluateJob.{name}", getattr(self, name))
-
-    def check(self) -> EvaluateJob:
-        """Itself, or ``ValueError`` naming what its fields do not say alone (each is checked as it is
-        given): the methods, the physics, the optimiser's ranges."""
-        check_methods(self.methods, "methods")
-        _sim_validated(self.sim)
-        self.grad.validated()
-        return self
-
-    def unused_keys(self) -> dict[str, str]:
-        """The keys this job would not use, ``{key: when it applies}``: the rl column's settings without rl,
-        its training settings with checkpoints, the grad column's without grad, the other learners'
-        sections, the recording's colours without a recording."""
-        unused: dict[str, str] = {}
-        if "rl" not in self.methods:
-            why = "read by the rl column only (--methods ...,rl)"
-            keys = ("train", "env", "checkpoints", "allow_partial", "allow_infeasible_pinch")
-            unused |= {key: why for key in keys}
-        elif self.checkpoints is not None:
-            unused["train"] = "with checkpoints the rl column plays trained runs; nothing is trained"
-        else:
-            unused |= other_learners(self.train)
-            unused["allow_partial"] = "read with checkpoints only"
-            unused |= _pinch_keys(True, "checkpoints (their pinch points)")
-        if "grad" not in self.methods:
-            unused["grad"] = "read by the grad column only (--methods ...,grad)"
-        if "generalist" not in self.methods:
-            unused["generalist"] = "read by the generalist column only (--methods ...,generalist)"
-        return {**unused, **_recording_keys(self)}
-
-
-def other_learners(train: TrainConfig) -> dict[str, str]:
-    """The sections of the learners ``train`` does not train with, ``{key: when it applies}``."""
-    from agents.algorithms import ALGORITHMS
-
-    return {f"train.{name}": f"read by --algo {name} only" for name in ALGORITHMS if name != train.algo}
-
-
-def _pinch_keys(no_pinch: bool, source: str = "a pinch point (--pinch)") -> dict[str, str]:
-    """``allow_infeasible_pinch`` where no pinch point is given (``source`` says what gives one): the
-    default pinch points are feasible by construction."""
-    if no_pinch:
-        return {"allow_infeasible_pinch": f"read with {source} only; the default ones are feasible"}
-    return {}
-
-
-def _recording_keys(job: Any) -> dict[str, str]:
-    """``colour_by`` without a recording."""
-    if getattr(job, "record", None) is None:
-        return {"colour_by": "colours a recording, and record is off (add --record [N])"}
-    return {}
-
-
-CONFIG_FILE = "config.json"
-"""A run directory's job (this module's dataclasses, as plain data): ``--config`` takes it back, ``--resume``
-checks it."""
-
-OUTPUT_KEYS = ("record", "colour_by", "video", "plots", "export_mesh")
-"""The keys of a job that say only what a run writes besides its results: a resumed run may change them."""
-
-
-def with_dependent_defaults(job: Any, explicit: set[str]) -> Any:
-    """``job`` with the defaults that follow from its other settings, where not set ``explicit``ly (dotted
-    keys given by a file, ``--set`` or a flag):
-
-    - the env's action type is the learner's (``agents.algorithms``): PPO trains discrete moves;
-    - the gradient optimiser's steps and step size are its estimator's
-      (:data:`agents.plan_optimizer.config.GRAD_CONFIGS`);
-    - a policy started from a generalist (``init``) observes and acts as the generalist does;
-    - a generalist learned from teachers (dagger) has its own observation and network
-      (:data:`agents.config.STUDENT_DEFAULTS`).
-    """
-    from agents.algorithms import algorithm
-    from agents.config_io import apply
-
-    if hasattr(job, "train") and hasattr(job, "env") and "env.action_type" not in explicit:
-        actions = algorithm(job.train.algo).action_type
-        job = dataclasses.replace(job, env=dataclasses.replace(job.env, action_type=actions))
-    if isinstance(job, GeneralistJob) and job.train.algo == "dagger":
-        given = {key: value for key, value in STUDENT_DEFAULTS.items() if key not in explicit}
-        job = apply(job, given, "a dagger generalist's defaults")
-    if getattr(job, "init", None) is not None:  # fine-tuning observes and acts as the generalist does
-        from agents.generalist import fine_tuning_defaults
-
-        job = fine_tuning_defaults(job, explicit)
-    if hasattr(job, "grad") and job.grad.estimator in GRAD_CONFIGS:
-        own = GRAD_CONFIGS[job.grad.estimator]
-        given = {key.split(".")[1] for key in explicit if key.startswith("grad.") and key.count(".") >= 1}
-        keep = {
-            f.name: getattr(job.grad, f.name)
-            for f in dataclasses.fields(GradConfig)
-            if f.name in given or f.name == "estimator"
-        }
-        job = dataclasses.replace(job, grad=dataclasses.replace(own, **keep))
-    return job
-
-
-def _sim_validated(sim: SimConfig) -> SimConfig:
-    """``sim`` validated, or ``ValueError`` naming the ``sim.`` key (``sim.elasticity: ...``)."""
-    try:
-        return sim.validated()
-    except ConfigError as error:
-        raise error.renamed(f"sim.{error.field}") from None
-
-
-def _grad_validated(grad: GradConfig) -> GradConfig:
-    """``grad`` validated (its one spelling of ranges), or ``ValueError`` naming the ``grad.`` key."""
-    try:
-        return grad.validated()
-    except ValueError as error:
-        raise ValueError(f"grad.{error}") from None
 
 
 @dataclass
@@ -665,132 +409,3 @@ class SimulateJob:
         if self.record is None:
             unused["colour_by"] = "colours a recording, and record is off (add --record [N])"
         return unused
-
-
-GENERALIST_LEARNERS = ("es", "dagger")
-"""The learners a generalist trains with."""
-
-
-@dataclass
-class GeneralistJob:
-    """``warpcut generalist``: one tensioning policy for every contour, trained over many contours at once
-    (:func:`agents.pipelines.generalist.train_generalist`). A run directory's ``config.json`` is this job."""
-
-    generated: int = GENERALIST_CONTOURS
-    """Generated training contours (the ``train`` split of :func:`warpcut.planning.generate_contours`,
-    seeded ``seed``)."""
-    contours: list[str] = field(default_factory=list)
-    """Contours to train on as well: built-in names, files, ``all`` (the suite) or generated names of other
-    streams or seeds (``gen-train-1:24``); by default none, so the suite stays out of training and measures
-    the generalist zero-shot."""
-    validation_contours: int = GENERALIST_VALIDATION_CONTOURS
-    """Generated ``validation`` contours that model selection scores the policy on (held out)."""
-    candidates: int = EVALUATION_CANDIDATES
-    """Pinch candidates the planner searches per contour (as ``warpcut evaluate`` plans)."""
-    seed: int = 0
-    """Seed of the generated contours and of the training."""
-    arm: ArmModel = field(default_factory=ArmModel)
-    """The cutting arm's footprint, for pinch feasibility."""
-    sim: SimConfig = field(default_factory=SimConfig)
-    """The physics and the protocol."""
-    env: EnvConfig = field(
-        default_factory=lambda: EnvConfig(lookahead=GENERALIST_LOOKAHEAD, reward_reference="no_tension")
-    )
-    """What the policy observes (the look-ahead) and how it is rewarded (relative to no tension)."""
-    train: TrainConfig = field(default_factory=generalist_train_config)
-    """The learner: es, its population each cutting every contour; ``num_envs`` follows (population x
-    contours)."""
-    init: str | None = None
-    """A generalist (a run directory, or ``generalist`` for the shipped one) whose policy es starts from
-    instead of "hold still": es on the path score, refining a generalist learned from teachers."""
-
-    def __post_init__(self) -> None:
-        _check_fields(self)
-        check_integer("GeneralistJob.generated", self.generated, 0, MAX_CONTOURS)
-        check_integer("GeneralistJob.validation_contours", self.validation_contours, 1, MAX_CONTOURS)
-        _counted("GeneralistJob.candidates", self.candidates)
-
-    def check(self) -> GeneralistJob:
-        """Itself, or ``ValueError`` naming what cannot train."""
-        if self.train.algo not in GENERALIST_LEARNERS:
-            raise ValueError(
-                f"train.algo: a generalist trains with {' or '.join(GENERALIST_LEARNERS)} (each of es's "
-                f"perturbed policies cuts every contour; dagger learns from teachers), not {self.train.algo}"
-            )
-        if self.train.algo == "dagger":
-            self.train.dagger.dataset()
-        elif self.generated == 0 and not self.contours:
-            raise ValueError("generated: give training contours (generated > 0, or contours)")
-        if not self.env.lookahead:
-            raise ValueError(
-                "env.lookahead: a generalist must see what lies ahead of the scissors; give 1 or more "
-                f"(default {GENERALIST_LOOKAHEAD})"
-            )
-        return self
-
-    def training_config(self, count: int) -> TrainConfig:
-        """The learner's settings for ``count`` training contours: ``num_envs`` = es's population x contours,
-        or dagger's one env a contour."""
-        num_envs = self.train.es.population * count if self.train.algo == "es" else count
-        if self.train.num_envs is not None and self.train.num_envs != num_envs:
-            why = (
-                f"every contour with each of es's {self.train.es.population} policies"
-                if self.train.algo == "es"
-                else "each teacher's contour once an iteration"
-            )
-            raise ValueError(
-                f"train.num_envs: a generalist cuts {why}: {num_envs} envs for {count} contours; leave it "
-                "unset"
-            )
-        return dataclasses.replace(self.train, num_envs=num_envs).check(False)
-
-    def unused_keys(self) -> dict[str, str]:
-        """Keys this job would not use: the other learners' sections, and with dagger the generated and
-        built-in training contours (it trains on its teachers' contours)."""
-        unused = other_learners(self.train)
-        if self.train.algo == "dagger":
-            why = "read by es generalists only (dagger trains on its teachers' contours)"
-            unused |= {"generated": why, "contours": why}
-        return unused
-
-
-@dataclass
-class TeachersJob:
-    """``warpcut teachers``: a teacher for each of many generated contours, kept as a dataset that a
-    generalist learns from (:func:`agents.pipelines.teachers.make_teachers`). A dataset's ``config.json`` is
-    this job."""
-
-    count: int = TEACHER_CONTOURS
-    """Generated contours (the ``train`` split of :func:`warpcut.planning.generate_contours`, seeded
-    ``seed``), each planned and given a teacher."""
-    kinds: list[str] = field(default_factory=lambda: list(KINDS + EXTRA_KINDS))
-    """The kinds drawn in turn (:data:`warpcut.planning.generate.KINDS` and ``EXTRA_KINDS``)."""
-    candidates: int = EVALUATION_CANDIDATES
-    """Pinch candidates the planner searches per contour (as ``warpcut evaluate`` plans)."""
-    seed: int = 0
-    """Seed of the generated contours and of the teachers' optimiser."""
-    arm: ArmModel = field(default_factory=ArmModel)
-    """The cutting arm's footprint, for pinch feasibility."""
-    sim: SimConfig = field(default_factory=SimConfig)
-    """The physics and the protocol the teachers are optimised under."""
-    grad: GradConfig = field(default_factory=lambda: GRAD_CONFIGS["es"])
-    """The teacher: the plan optimiser's settings (``warpcut optimize``'s, the es estimator)."""
-
-    def __post_init__(self) -> None:
-        _check_fields(self)
-        check_integer("TeachersJob.count", self.count, 1, MAX_CONTOURS)
-        _counted("TeachersJob.candidates", self.candidates)
-        if (
-            not isinstance(self.kinds, list | tuple)
-            or not self.kinds
-            or any(k not in KINDS + EXTRA_KINDS for k in self.kinds)
-        ):
-            fail("TeachersJob.kinds", f"a non-empty list of {', '.join(KINDS + EXTRA_KINDS)}", self.kinds)
-
-    def check(self) -> TeachersJob:
-        """Itself (every field is checked as it is set)."""
-        return self
-
-    def unused_keys(self) -> dict[str, str]:
-        """Keys this job would not use: none."""
-        return {}
