@@ -20,3 +20,11 @@ def refused(args, capfd) -> str:
     err = [line for line in capfd.readouterr().err.strip().splitlines() if not line.startswith("Warp CUDA")]
     assert len(err) == 1 and err[0].startswith("error: "), err
     return err[0]
+
+
+def simulate_folder(cwd):
+    """The one folder of simulate's implicit outputs (figures, recording, videos) under ``cwd``."""
+    from pathlib import Path
+
+    (folder,) = Path(cwd).glob("logs/simulate-*")
+    return folder.absolute()

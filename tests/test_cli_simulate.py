@@ -72,6 +72,7 @@ def test_simulate_has_at_most_15_options_and_its_flags_set_keys_of_its_job():
     names = {p.opts[0] for p in command.params}
     assert names == {
         *("--contour", "--policy", "--pinch", "--trials", "--seed", "--device", "--json", "--record"),
+        "--out",
         *("--video", "--generalist", "--config", "--set", "--print-config"),
     }
     keys = set(to_plain(SimulateJob()))

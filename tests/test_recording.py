@@ -15,6 +15,7 @@ from click.testing import CliRunner
 
 from agents.cli import main
 from agents.evaluation import compare_policies
+from tests.cli_runner import simulate_folder
 from warpcut.contours import load_contour
 from warpcut.sim.config import SheetGrid, SimConfig
 from warpcut.sim.simulator import Simulator
@@ -61,7 +62,15 @@ def ctrl_c_interrupts():
 def simulated(tmp_path_factory):
     """One ``simulate --record 2`` run (two trials, two methods) with plots, shared by the tests."""
     out = tmp_path_factory.mktemp("simulate")
-    code, stdout = invoke(
+    with pytest.MonkeyPatch.context() as patch:  # the figures and recording go into logs/simulate-... here
+        patch.chdir(out)
+        code, stdout = _simulate_recorded(out)
+    assert code == 0, stdout
+    return simulate_folder(out), stdout
+
+
+def _simulate_recorded(out):
+    return invoke(
         [
             "simulate",
             "--contour",
@@ -84,8 +93,6 @@ def simulated(tmp_path_factory):
             "2",
         ]
     )
-    assert code == 0, stdout
-    return out, stdout
 
 
 def test_simulate_record_reads_back_per_method(simulated):
@@ -825,7 +832,8 @@ def test_columns_are_the_rerun_archetypes_columns():
             assert built.as_arrow_array().equals(reference.as_arrow_array()), reference.component_descriptor()
 
 
-def test_simulate_says_when_fewer_envs_ran_than_record_asks(tmp_path):
+def test_simulate_says_when_fewer_envs_ran_than_record_asks(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
     args = [
         "simulate",
         "--contour",
@@ -841,8 +849,9 @@ def test_simulate_says_when_fewer_envs_ran_than_record_asks(tmp_path):
     result = CliRunner().invoke(main, [*args, "--record", "2"], catch_exceptions=False)
     assert result.exit_code == 0, result.output
     assert "warning: --record 2: fewer envs ran, all of them recorded (none: 1)" in result.stderr
-    assert f"wrote {tmp_path / 'recording.rrd'}" in result.stdout
-    entities = read_summary(tmp_path / "recording.rrd").entity_paths
+    recording = simulate_folder(tmp_path) / "recording.rrd"
+    assert f"wrote {recording}" in result.stdout
+    entities = read_summary(recording).entity_paths
     assert "/none/env_0/sheet" in entities and not any(e.startswith("/none/env_1") for e in entities)
 
 

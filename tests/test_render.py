@@ -15,6 +15,7 @@ from gymnasium.wrappers.vector import RecordVideo as VectorRecordVideo
 from agents.cli import main
 from agents.cli.video import with_videos
 from envs import ENV_ID, PatternCutEnv, PatternCutVecEnv
+from tests.cli_runner import simulate_folder
 from warpcut.contours import load_contour
 from warpcut.sim.config import SimConfig
 from warpcut.task import CuttingTask
@@ -219,15 +220,17 @@ def test_with_videos_adds_the_first_contours_films_to_the_other_callbacks():
     assert with_videos(others, None) is others
 
 
-def test_simulate_video_writes_mp4s_beside_the_recording(tmp_path):
+def test_simulate_video_writes_mp4s_beside_the_recording(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
     args = ["simulate", "--contour", "circle-small", "--policy", "none,fixed", "--set", "sim.resolution=9"]
     args += ["--trials", "2", "--device", "cpu", "--set", "plots=false", "--json", str(tmp_path / "r.json")]
     result = CliRunner().invoke(main, [*args, "--video", "2"], catch_exceptions=False)
     assert result.exit_code == 0, result.output
-    videos = sorted(p.name for p in tmp_path.glob("*.mp4"))
+    folder = simulate_folder(tmp_path)  # a run folder of their own, not beside --json's file
+    videos = sorted(p.name for p in folder.glob("*.mp4"))
     assert videos == ["fixed-env_0.mp4", "fixed-env_1.mp4", "none-env_0.mp4", "none-env_1.mp4"]
-    assert f"wrote {tmp_path / 'none-env_1.mp4'}" in result.output
-    assert frames_in(tmp_path / "fixed-env_1.mp4") == STEPS + 1
+    assert f"wrote {folder / 'none-env_1.mp4'}" in result.output
+    assert frames_in(folder / "fixed-env_1.mp4") == STEPS + 1
     bad = CliRunner().invoke(main, [*args, "--video", "0"])
     assert bad.exit_code == 2 and "--video" in bad.output
     assert "--video N" in CliRunner().invoke(main, ["simulate", "--help"]).output

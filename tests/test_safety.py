@@ -368,8 +368,7 @@ def test_a_recording_on_a_full_disk_keeps_the_earlier_one(tmp_path):
         from click.testing import CliRunner
         from agents.cli import main
         args = ["simulate", "--contour", "circle-small", "--policy", "none", "--set", "sim.resolution=9",
-                "--trials", "2", "--set", "plots=false", "--record", "2",
-                "--json", sys.argv[1] + "/results.json"]
+                "--trials", "2", "--set", "plots=false", "--record", "2", "--out", sys.argv[1]]
         if sys.argv[2] == "full":
             signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
             size = int(sys.argv[3]) // 3

@@ -50,7 +50,8 @@ from warpcut.stats import NEGLIGIBLE_ERROR
 @options.seed_option
 @options.device_option
 @options.json_option
-@options.record_flag("in logs/simulate-TIMESTAMP")
+@options.record_flag("in --out")
+@options.out_option("logs/simulate-TIMESTAMP; the figures, recording and videos, a folder of simulate's own")
 @video_option
 @options.config_options
 def command(
@@ -64,6 +65,7 @@ def command(
     json_path: Path | None,
     record_envs: int | None,
     video_envs: int | None,
+    out: Path | None,
     config_file: str | None,
     overrides: tuple[str, ...],
     print_config: bool,
@@ -96,7 +98,7 @@ def command(
     mesh_dir = None if job.export_mesh is None else Path(job.export_mesh)
     inputs = [job.contour] if isinstance(job.contour, str) else []
     # the figures, .rrd and .mp4 go into a run folder of their own, never beside a file the user named
-    out = outputs.run_dir(None, "simulate")
+    out = outputs.run_dir(out, "simulate")
     writes_out = job.plots or job.record is not None or job.video is not None
     out_option = "the output folder"
     paths = {"--json": json_path, "export_mesh": mesh_dir, out_option: out if writes_out else None}
@@ -121,7 +123,8 @@ def command(
             meshes = MeshExports(mesh_dir)
         config = job.sim.validated()
         start = time.perf_counter()
-        with outputs.recorder(out, job.record, job.colour_by) as rec, videos(out, job.video) as vid:
+        here = out.absolute()  # the recorder's process starts in another folder
+        with outputs.recorder(here, job.record, job.colour_by) as rec, videos(here, job.video) as vid:
             callbacks = with_videos(outputs.step_callbacks(rec, cuts, meshes), vid)
             given = {}
             if "generalist" in job.policy:
