@@ -14,13 +14,7 @@ from agents.plan_optimizer.config import GRAD_CONFIG, GRAD_CONFIGS, GRAD_ESTIMAT
 
 
 @click.command("optimize", cls=settings.Command)
-@click.option(
-    "--contour",
-    cls=options.Setting,
-    key="contour",
-    default=None,
-    help="Built-in name or a .json/.svg contour file.",
-)
+@options.contour_setting()
 @click.option(
     "--pinch",
     cls=options.Setting,

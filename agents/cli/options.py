@@ -165,9 +165,18 @@ def count_option(name: str, default: int | None, help: str, key: str | None = No
     )
 
 
-contour_option = click.option(
-    "--contour", "contour_name", required=True, help="Built-in name or a .json/.svg contour file."
-)
+CONTOUR_HELP = "Built-in name or a .json/.svg contour file."
+
+contour_option = click.option("--contour", "contour_name", required=True, help=CONTOUR_HELP)
+
+
+def contour_setting(default: str | None = None, note: str = ""):
+    """``--contour``, the job's ``contour`` key (``default`` shown where there is one; ``note`` added to the
+    help)."""
+    return click.option(
+        "--contour", cls=Setting, key="contour", default=default, show_default=default is not None,
+        help=CONTOUR_HELP[:-1] + (f" ({note})." if note else "."),
+    )  # fmt: skip
 
 
 resolution_option = click.option(

@@ -42,13 +42,7 @@ def _listed(ctx: click.Context, param: click.Parameter, value: str | None) -> li
 
 
 @click.command("robustness", cls=settings.Command)
-@click.option(
-    "--contour",
-    cls=options.Setting,
-    key="contour",
-    default=None,
-    help="Built-in name or a .json/.svg contour file (default with --run: the run's).",
-)
+@options.contour_setting(note="default with --run: the run's")
 @click.option(
     "--study",
     cls=options.Setting,

@@ -14,14 +14,7 @@ from agents.methods import SELECTORS, point_text
 
 
 @click.command("run", cls=settings.Command)
-@click.option(
-    "--contour",
-    cls=options.Setting,
-    key="contour",
-    default=DEFAULT_CONTOUR,
-    show_default=True,
-    help="Built-in name or a .json/.svg contour file.",
-)
+@options.contour_setting(DEFAULT_CONTOUR)
 @click.option(
     "--budget",
     cls=options.Setting,

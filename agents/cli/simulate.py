@@ -17,13 +17,7 @@ from warpcut.stats import NEGLIGIBLE_ERROR
 
 
 @click.command("simulate", cls=settings.Command)
-@click.option(
-    "--contour",
-    cls=options.Setting,
-    key="contour",
-    default=None,
-    help="Built-in name or a .json/.svg contour file.",
-)
+@options.contour_setting()
 @click.option(
     "--policy",
     cls=options.Setting,

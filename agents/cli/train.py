@@ -13,13 +13,7 @@ from agents.cli.video import videos, with_videos
 
 
 @click.command("train", cls=settings.Command)
-@click.option(
-    "--contour",
-    cls=options.Setting,
-    key="contour",
-    default=None,
-    help="Built-in name or a .json/.svg contour file.",
-)
+@options.contour_setting()
 @click.option(
     "--pinch",
     cls=options.Setting,
