@@ -17,8 +17,9 @@ import numpy as np
 import torch
 from rsl_rl.env import VecEnv
 from rsl_rl.models import MLPModel
-from rsl_rl.utils import resolve_class, resolve_obs_groups
 from tensordict import TensorDict
+
+from agents.learner import ActorOnly
 
 
 def teacher_path(plan: np.ndarray, max_step: float, max_displacement: float) -> np.ndarray:
@@ -34,7 +35,7 @@ def teacher_path(plan: np.ndarray, max_step: float, max_displacement: float) -> 
     return path
 
 
-class DAgger:
+class DAgger(ActorOnly):
     """DAgger on a teacher dataset (module docstring), in rsl-rl's algorithm interface.
 
     Args:
@@ -63,15 +64,9 @@ class DAgger:
         device: str = "cpu",
         multi_gpu_cfg: dict | None = None,
     ) -> None:
-        if multi_gpu_cfg is not None:
-            raise ValueError("dagger: multi-GPU training is not supported; run it in one process")
-        self.device = device
-        self.actor = actor.to(device)
-        self.env = env
+        super().__init__(actor, env, learning_rate, "dagger", device, multi_gpu_cfg)
         self.beta, self.updates, self.minibatch = float(beta), int(updates), int(minibatch)
         self.capacity, self.stride, self.horizon = int(buffer), int(stride), int(horizon)
-        self.learning_rate = learning_rate  # what rsl-rl's logger reads
-        self.rnd = None
         self.optimizer = torch.optim.Adam(self.actor.parameters(), lr=learning_rate)
         self.rng = np.random.default_rng(seed)
         self.generator = torch.Generator().manual_seed(int(seed))
@@ -85,19 +80,6 @@ class DAgger:
         self._follow = torch.zeros(env.num_envs, dtype=torch.bool)
         self._new: list[tuple[torch.Tensor, torch.Tensor]] = []
         self._rng_start = self.rng.bit_generator.state
-        if actor.distribution is not None:  # rsl-rl's logger reads the policy's std every iteration
-            actor.distribution.update(torch.zeros(1, actor.distribution.input_dim, device=device))
-
-    @staticmethod
-    def construct_algorithm(obs: TensorDict, env: VecEnv, cfg: dict, device: str) -> DAgger:
-        """Build the student and DAgger as rsl-rl's runner asks (the seed is drawn from torch's generator,
-        which the training seeds)."""
-        alg_class, alg_cfg = resolve_class(cfg["algorithm"])
-        actor_class, actor_cfg = resolve_class(cfg["actor"])
-        cfg["obs_groups"] = resolve_obs_groups(obs, cfg["obs_groups"], ["actor", "critic"])
-        actor = actor_class(obs, cfg["obs_groups"], "actor", env.num_actions, **actor_cfg).to(device)
-        seed = int(torch.randint(0, 2**31 - 1, (1,)).item())
-        return alg_class(actor, env, **alg_cfg, seed=seed, device=device, multi_gpu_cfg=cfg.get("multi_gpu"))
 
     @staticmethod
     def _teacher_paths(env: VecEnv, source: str) -> tuple[torch.Tensor, torch.Tensor]:
@@ -209,15 +191,6 @@ class DAgger:
         out = self.actor.mlp(self.actor.obs_normalizer(raw.to(self.device)))
         return out if self.actor.distribution is None else self.actor.distribution.deterministic_output(out)
 
-    def train_mode(self) -> None:
-        self.actor.train()
-
-    def eval_mode(self) -> None:
-        self.actor.eval()
-
-    def get_policy(self) -> MLPModel:
-        return self.actor
-
     def save(self) -> dict:
         return {
             "actor_state_dict": self.actor.state_dict(),
@@ -244,6 +217,3 @@ class DAgger:
         self.generator.set_state(state["generator"])
         self.data, self.targets = state["obs"], state["labels"]
         return True
-
-    def broadcast_parameters(self) -> None:
-        """Nothing to do: one process."""

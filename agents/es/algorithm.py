@@ -32,13 +32,13 @@ import numpy as np
 import torch
 from rsl_rl.env import VecEnv
 from rsl_rl.models import MLPModel
-from rsl_rl.utils import resolve_class, resolve_obs_groups
 from tensordict import TensorDict
 
 from agents.adam import Adam
+from agents.learner import ActorOnly
 
 
-class ES:
+class ES(ActorOnly):
     """Evolution strategies on the actor's weights (module docstring), in rsl-rl's algorithm interface.
 
     Args:
@@ -66,8 +66,7 @@ class ES:
         from agents.es.config import EsConfig
 
         EsConfig(population, sigma, feedback_sigma, learning_rate, feedback_learning_rate).check(env.num_envs)
-        if multi_gpu_cfg is not None:
-            raise ValueError("es: multi-GPU training is not supported; run it in one process")
+        super().__init__(actor, env, learning_rate, "es", device, multi_gpu_cfg)
         scene = getattr(getattr(env, "env", None), "scene", None)
         if scene is not None and scene.episode_steps < scene.task.num_steps:
             raise ValueError(
@@ -76,13 +75,8 @@ class ES:
             )
         if hasattr(env, "common_sheets"):  # every perturbed policy cuts the same randomised sheets
             env.common_sheets = population
-        self.device = device
-        self.actor = actor.to(device)
-        self.env = env
         self.population = population
         self.trials = env.num_envs // population
-        self.learning_rate = learning_rate  # what rsl-rl's logger reads
-        self.rnd = None
         self.layers = [m for m in self.body.modules() if isinstance(m, torch.nn.Linear)]
         with torch.no_grad():  # start from holding still (fixed tensioning); a resume loads its weights
             self.layers[-1].weight.zero_()
@@ -90,8 +84,6 @@ class ES:
         feedback = self.feedback_layer
         if feedback is not None:  # zero at the start by construction
             self.layers.append(feedback)
-        if actor.distribution is not None:  # rsl-rl's logger reads the policy's std every iteration
-            actor.distribution.update(torch.zeros(1, actor.distribution.input_dim, device=device))
         self.params = [p for layer in self.layers for p in (layer.weight, layer.bias) if p is not None]
         self.num_params = sum(p.numel() for p in self.params)
         gains = feedback.weight.numel() if feedback is not None else 0
@@ -110,17 +102,6 @@ class ES:
         self._costs: np.ndarray | None = None
         self._warm_up = actor.obs_normalization and int(actor.obs_normalizer.count) == 0
         self._rng_start = self.rng.bit_generator.state  # before this iteration's perturbations were drawn
-
-    @staticmethod
-    def construct_algorithm(obs: TensorDict, env: VecEnv, cfg: dict, device: str) -> ES:
-        """Build the actor and es as rsl-rl's runner asks (``cfg``: its config; the perturbations' seed is
-        drawn from torch's generator, which the training seeds)."""
-        alg_class, alg_cfg = resolve_class(cfg["algorithm"])
-        actor_class, actor_cfg = resolve_class(cfg["actor"])
-        cfg["obs_groups"] = resolve_obs_groups(obs, cfg["obs_groups"], ["actor", "critic"])
-        actor = actor_class(obs, cfg["obs_groups"], "actor", env.num_actions, **actor_cfg).to(device)
-        seed = int(torch.randint(0, 2**31 - 1, (1,)).item())
-        return alg_class(actor, env, **alg_cfg, seed=seed, device=device, multi_gpu_cfg=cfg.get("multi_gpu"))
 
     @property
     def body(self) -> torch.nn.Sequential:
@@ -198,15 +179,6 @@ class ES:
             "step_norm": float(np.linalg.norm(step)),
         }
 
-    def train_mode(self) -> None:
-        self.actor.train()
-
-    def eval_mode(self) -> None:
-        self.actor.eval()
-
-    def get_policy(self) -> MLPModel:
-        return self.actor
-
     def save(self) -> dict:
         return {
             "actor_state_dict": self.actor.state_dict(),
@@ -227,9 +199,6 @@ class ES:
         # a checkpoint saved before the warm-up iteration ended (Ctrl-C) has not taught its normaliser yet
         self._warm_up = self.actor.obs_normalization and int(self.actor.obs_normalizer.count) == 0
         return True
-
-    def broadcast_parameters(self) -> None:
-        """Nothing to do: one process."""
 
     # es itself -----------------------------------------------------------------------------------------
 
