@@ -163,12 +163,9 @@ class DAgger(ActorOnly):
         self._new, self._step = [], 0
         if self.actor.obs_normalization and len(new_obs):
             self.actor.obs_normalizer.update(new_obs.to(self.device))
-        if self.data.numel() == 0:
-            self.data, self.targets = new_obs, new_labels
-        else:
-            self.data = torch.cat([self.data, new_obs])[-self.capacity :]
-            self.targets = torch.cat([self.targets, new_labels])[-self.capacity :]
-        self.data, self.targets = self.data[-self.capacity :], self.targets[-self.capacity :]
+        if self.data.numel():  # the aggregate, the oldest dropped first
+            new_obs, new_labels = torch.cat([self.data, new_obs]), torch.cat([self.targets, new_labels])
+        self.data, self.targets = new_obs[-self.capacity :], new_labels[-self.capacity :]
         self.iteration += 1
         losses = []
         for _ in range(self.updates):
