@@ -19,7 +19,7 @@ from agents.checkpoints import read_checkpoint
 from agents.config import TrainConfig
 from agents.es.config import EsConfig
 from agents.gps.config import GpsConfig
-from agents.gps.model import PlanLookup
+from agents.gps.model import NominalLookup, PlanLookup
 from agents.policies import load_policy
 from agents.training import train, training_env
 from envs.options import PatternCutOptions
@@ -69,6 +69,18 @@ def test_the_plan_lookup_plays_the_move_of_the_step_the_time_index_names():
     assert torch.equal(moves[4:], torch.zeros(2, 3))  # past the plan's end: hold still
 
 
+def test_the_nominal_lookup_records_the_mean_observation_of_each_step():
+    """Each step's mean over the cuts that met it; a step no cut met keeps the step before's."""
+    nominal = NominalLookup(4, 2)
+    assert float(nominal.centred) == 0.0
+    seen = [torch.tensor([[0.0, 1.0], [0.0, 3.0]]), torch.tensor([[0.25, 5.0], [0.25, 7.0]])]
+    seen.append(torch.tensor([[0.75, 9.0], [0.75, 11.0]]))
+    nominal.record(seen, time_index=0)
+    assert float(nominal.centred) == 1.0
+    assert nominal.obs[:, 1].tolist() == [2.0, 6.0, 6.0, 10.0]
+    assert nominal(torch.tensor([0.25, 0.75]))[:, 1].tolist() == [6.0, 10.0]
+
+
 def test_gps_trains_from_its_teacher_and_selects_among_still_plan_and_student(trained):
     """The teacher is optimised into the run's teacher/ folder and becomes the actor's feed-forward; the
     first validation scores the plan (the student as it starts) and the still grasp on the same episodes,
@@ -107,6 +119,24 @@ def test_the_student_starts_as_its_teacher_and_stays_closed_loop(trained):
     assert torch.count_nonzero(actor.mlp.feedback.weight) > 0
 
 
+def test_the_correction_is_centred_on_the_plans_own_trajectory(trained):
+    """The first iteration records the observations the plan meets; where the sheet does what the plan
+    expects the trained student plays the plan exactly, elsewhere it corrects."""
+    out, _ = trained
+    actor = load_policy(out / "latest.pt")
+    assert float(actor.nominal.centred) == 1.0
+    steps = actor.lookup.plan.shape[0]
+    nominal = actor.nominal.obs.clone()
+    assert torch.allclose(nominal[:, 0], torch.arange(steps) / steps)  # the time index of each step
+    with torch.no_grad():
+        at_nominal = actor(TensorDict({"policy": nominal}, batch_size=[steps]))
+        off = nominal.clone()
+        off[:, actor.mlp.start : actor.mlp.start + actor.mlp.size] += 0.5
+        corrected = actor(TensorDict({"policy": off}, batch_size=[steps]))
+    torch.testing.assert_close(at_nominal, actor.lookup.plan, rtol=0, atol=1e-6)
+    assert not torch.allclose(corrected, actor.lookup.plan)
+
+
 def test_a_resumed_gps_run_ends_as_an_uninterrupted_one(tmp_path):
     """One iteration, then one more on resume (the teacher read back from the run's folder, the plan from
     the checkpoint), ends with exactly the weights of two in one go."""
@@ -142,7 +172,7 @@ def test_the_exports_carry_the_plan(trained, tmp_path):
     obs[:, 0] = torch.arange(steps) / steps
     with torch.no_grad():
         expected = actor(TensorDict({"policy": obs}, batch_size=[steps])).numpy()
-    assert np.abs(actor.lookup.plan.numpy()).max() > 0
+    assert np.abs(actor.lookup.plan.numpy()).max() > 0 and float(actor.nominal.centred) == 1.0
     scripted = torch.jit.load(str(paths["torchscript"]))(obs).detach().numpy()
     session = ort.InferenceSession(str(paths["onnx"]))
     onnx = session.run(None, {"obs": obs.numpy()})[0]

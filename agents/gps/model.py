@@ -1,9 +1,20 @@
-"""The gps student's network: a teacher's plan as feed-forward, plus es's MLP and feedback path on top.
+"""The gps student's network: a teacher's plan as feed-forward, plus a correction around the plan's own
+trajectory.
 
-``move = plan[t] + mlp(x) + K x[tracking]``, with ``t = round(time_index * plan_steps)`` read from the raw
-(unnormalised) observation's time index (:mod:`envs.observations`, entry 0: ``step / num_steps``). The plan is
-a buffer in the actor's state dict, in the env's action units (moves / ``max_step_mm``), so checkpoints,
-evaluation and the TorchScript and ONNX exports carry it: an exported student needs nothing besides its file.
+``move = plan[t] + c(x) - c(x̄[t])``, with ``c(x) = mlp(x) + K x[tracking]`` (es's MLP and feedback path on
+the normalised observation), ``x̄[t]`` the observation the plan itself meets at step ``t`` (the mean over the
+sheets of the run's first iteration, which plays the plan unchanged) and ``t = round(time_index *
+plan_steps)`` read from the raw (unnormalised) observation's time index (:mod:`envs.observations`, entry 0:
+``step / num_steps``). Where the sheet does what the plan expects, the student plays the plan; it acts on how
+the sheet differs from that (time-varying feedback around a nominal trajectory, as an LQR controller acts on
+the deviation from the trajectory it linearised about). The correction cannot shift the plan itself by a
+constant bias, the move that costs most on the nominal sheet and that es's perturbations of a network make
+first.
+
+The plan and the nominal observations are buffers in the actor's state dict, in the env's units (moves in
+actions, ``max_step_mm``; raw observations), so checkpoints, evaluation and the TorchScript and ONNX exports
+carry them: an exported student needs nothing besides its file. Until the nominal observations are recorded
+(``centred`` 0), the correction is ``c(x)`` uncentred (zero for a fresh student either way).
 """
 
 from __future__ import annotations
@@ -13,7 +24,7 @@ from tensordict import TensorDict
 
 from agents.models import FeedbackMLPModel
 
-__all__ = ["PlanFeedbackModel", "PlanLookup"]
+__all__ = ["NominalLookup", "PlanFeedbackModel", "PlanLookup"]
 
 
 class PlanLookup(torch.nn.Module):
@@ -31,22 +42,55 @@ class PlanLookup(torch.nn.Module):
         return self.plan[torch.clamp(index, 0, steps - 1)] * inside
 
 
+class NominalLookup(torch.nn.Module):
+    """The raw observation the plan meets at the step a time index names (:meth:`record`), and whether it
+    has been recorded (``centred``, 1 or 0)."""
+
+    def __init__(self, steps: int, size: int) -> None:
+        super().__init__()
+        self.register_buffer("obs", torch.zeros(int(steps), int(size)))
+        self.register_buffer("centred", torch.zeros(()))
+
+    def forward(self, time: torch.Tensor) -> torch.Tensor:
+        steps = self.obs.shape[0]
+        return self.obs[torch.clamp(torch.round(time * steps).long(), 0, steps - 1)]
+
+    def record(self, seen: list[torch.Tensor], time_index: int) -> None:
+        """Record the mean of the raw observations ``seen`` ((B, size) each) at each step their time index
+        names; a step none of them reached keeps its nearest earlier step's (the last one the cut met)."""
+        steps = self.obs.shape[0]
+        raw = torch.cat(seen).to(self.obs)
+        index = torch.clamp(torch.round(raw[:, time_index] * steps).long(), 0, steps - 1)
+        sums = torch.zeros_like(self.obs).index_add_(0, index, raw)
+        counts = torch.bincount(index, minlength=steps).to(raw.dtype)
+        mean = sums / counts.clamp(min=1).unsqueeze(-1)
+        for step in range(1, steps):
+            if counts[step] == 0:
+                mean[step] = mean[step - 1]
+        with torch.no_grad():
+            self.obs.copy_(mean)
+            self.centred.fill_(1.0)
+
+
 class _WithPlan(torch.nn.Module):
     """An exported actor (rsl-rl's TorchScript or ONNX wrapper, fed the raw observation) plus the plan's
-    feed-forward."""
+    feed-forward, its correction centred on the plan's nominal observations."""
 
     is_recurrent: bool = False
 
-    def __init__(self, inner: torch.nn.Module, lookup: PlanLookup, time_index: int) -> None:
+    def __init__(self, inner: torch.nn.Module, lookup: PlanLookup, nominal: NominalLookup, time_index: int):
         super().__init__()
         self.inner = inner
         self.lookup = PlanLookup(*lookup.plan.shape)
         self.lookup.load_state_dict(lookup.state_dict())
+        self.nominal = NominalLookup(*nominal.obs.shape)
+        self.nominal.load_state_dict(nominal.state_dict())
         self.time_index = int(time_index)
         self.input_size = int(getattr(inner, "input_size", 0))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.inner(x) + self.lookup(x[:, self.time_index])
+        time = x[:, self.time_index]
+        return self.inner(x) - self.nominal.centred * self.inner(self.nominal(time)) + self.lookup(time)
 
     @torch.jit.export
     def reset(self) -> None:
@@ -81,6 +125,7 @@ class PlanFeedbackModel(FeedbackMLPModel):
         if isinstance(plan_steps, bool) or not isinstance(plan_steps, int) or plan_steps < 1:
             raise ValueError(f"plan_steps: must be an integer >= 1 (got {plan_steps!r})")
         self.lookup = PlanLookup(plan_steps, output_dim)
+        self.nominal = NominalLookup(plan_steps, self.obs_dim)
 
     def set_plan(self, moves: torch.Tensor) -> None:
         """Play ``moves`` ((steps, >= actions), in the env's action units) as the feed-forward; their first
@@ -92,16 +137,34 @@ class PlanFeedbackModel(FeedbackMLPModel):
         with torch.no_grad():
             self.lookup.plan.copy_(plan.to(self.lookup.plan.device))
 
+    def raw(self, obs: TensorDict) -> torch.Tensor:
+        """The raw (unnormalised) observation the network reads, its groups concatenated."""
+        return torch.cat([obs[group] for group in self.obs_groups], dim=-1)
+
     def feedforward(self, obs: TensorDict) -> torch.Tensor:
         """The plan's moves at each env's step, from the raw observation's time index."""
-        raw = torch.cat([obs[group] for group in self.obs_groups], dim=-1)
-        return self.lookup(raw[..., self.TIME_INDEX])
+        return self.lookup(self.raw(obs)[..., self.TIME_INDEX])
+
+    def nominal_latent(self, obs: TensorDict) -> torch.Tensor:
+        """The normalised nominal observation at each env's step (what the correction is centred on)."""
+        return self.obs_normalizer(self.nominal(self.raw(obs)[..., self.TIME_INDEX]))
+
+    def record_nominal(self, seen: list[torch.Tensor]) -> None:
+        """Centre the correction on the raw observations ``seen`` (one batch a step of cuts that played the
+        plan unchanged): their mean at each step (:class:`NominalLookup`)."""
+        self.nominal.record(seen, self.TIME_INDEX)
 
     def forward(self, obs: TensorDict, masks=None, hidden_state=None, stochastic_output: bool = False):
-        return super().forward(obs, masks, hidden_state, stochastic_output) + self.feedforward(obs)
+        correction = super().forward(obs, masks, hidden_state, stochastic_output)
+        if bool(self.nominal.centred):
+            out = self.mlp(self.nominal_latent(obs))
+            if self.distribution is not None:
+                out = self.distribution.deterministic_output(out)
+            correction = correction - out
+        return correction + self.feedforward(obs)
 
     def as_jit(self) -> torch.nn.Module:
-        return _WithPlan(super().as_jit(), self.lookup, self.TIME_INDEX)
+        return _WithPlan(super().as_jit(), self.lookup, self.nominal, self.TIME_INDEX)
 
     def as_onnx(self, verbose: bool) -> torch.nn.Module:
-        return _WithPlan(super().as_onnx(verbose), self.lookup, self.TIME_INDEX)
+        return _WithPlan(super().as_onnx(verbose), self.lookup, self.nominal, self.TIME_INDEX)
