@@ -25,7 +25,10 @@ A settings class (``Algorithm.settings``) is a dataclass whose fields have defau
 - ``rsl_rl(discrete, num_action_choices, episode_steps)``: the learner's part of rsl-rl's runner config, a
   dict with ``algorithm`` (the algorithm section), ``distribution`` (the actor's ``distribution_cfg``),
   ``num_steps_per_env``, and optionally ``critic_hidden_dims`` (default :data:`CRITIC_HIDDEN_DIMS`), ``actor``
-  (entries that replace or add to the actor's section) and ``own`` (top-level sections the runner reads).
+  (entries that replace or add to the actor's section) and ``own`` (top-level sections the runner reads);
+- optionally ``sheets(options)``: ``(training, validation)``, the env options the learner trains on and a list
+  of those its held-out episodes are drawn from (default: the job's own for both;
+  :func:`agents.training.learner_sheets`).
 """
 
 from __future__ import annotations

@@ -361,7 +361,8 @@ def _train_contour(
     pinch = [float(v) for v in points[0]]
     options = dataclasses.replace(options, pinch_point=pinch)
     problem = check_pinch(points[0], contours[0], options.config(), cuts and cuts[0], options.arm, allow=True)
-    env = training_env(options, cfg, job.seed)  # before anything is written: options the env refuses
+    trained_on, validated_on = learner_sheets(cfg, options)
+    env = training_env(trained_on, cfg, job.seed)  # before anything is written: options the env refuses
     resolved = dataclasses.replace(job, contour=options.to_dict()["contour"], pinch=pinch)
     write_json(out_dir / CONFIG_FILE, to_plain(resolved))
     write_json(out_dir / OPTIONS_FILE, dataclasses.replace(options, device=None).to_dict())
@@ -369,13 +370,18 @@ def _train_contour(
     if cfg.validation_trials > 0:
         fix = "set train.validation_trials to at most {fits} (0: none)"
         with batch_named("train.validation_trials", fix):
-            validation_env = PatternCutVecEnv(cfg.validation_trials, options)
+            validation_envs = [PatternCutVecEnv(cfg.validation_trials, sheet) for sheet in validated_on]
 
         def validate(actor: torch.nn.Module) -> np.ndarray:
-            """Validation errors (vertices), one per episode; weighed by the reward's scale with
-            ``relative_reward`` (a flat sheet's error counts as the reward counts it)."""
-            errors = policy_errors(actor, validation_env, job.seed + VALIDATION_SEED_OFFSET)["error_vertices"]
-            return errors * validation_env.scene.reward_scale if options.relative_reward else errors
+            """Validation errors (vertices), one per episode (of each set of held-out episodes in turn);
+            weighed by the reward's scale with ``relative_reward`` (a flat sheet's error counts as the reward
+            counts it)."""
+            errors = []
+            for validation_env in validation_envs:
+                seed = job.seed + VALIDATION_SEED_OFFSET
+                error = policy_errors(actor, validation_env, seed)["error_vertices"]
+                errors.append(error * validation_env.scene.reward_scale if options.relative_reward else error)
+            return np.concatenate(errors)
 
     label = label or f"{cfg.algo.upper()} {options.contours(1)[0].name}"
     marks = {"pinch_feasible": problem is None, "pinch_problem": problem}
@@ -435,6 +441,14 @@ def check_resumed_job(resume: str | Path, job: TrainJob | GeneralistJob) -> None
 
 TRAIN_BATCH_FIX = "set train.num_envs (train: --num-envs) to at most {fits}"
 """What shrinks a training batch too big for memory, as :func:`warpcut.sim.memory.batch_named` says it."""
+
+
+def learner_sheets(cfg: TrainConfig, options: PatternCutOptions):
+    """``(training, validation)``: the options of the env ``cfg``'s learner trains on and of each set of
+    held-out episodes it is validated on: the learner's own (its settings' ``sheets``, :mod:`agents.
+    algorithms`), else ``options`` for both."""
+    sheets = getattr(cfg.learner, "sheets", None)
+    return sheets(options) if sheets is not None else (options, [options])
 
 
 def training_env(

@@ -183,6 +183,8 @@ def test_the_exports_carry_the_plan(trained, tmp_path):
 def test_gps_settings_are_checked_where_they_are_given():
     with pytest.raises(ValueError, match="train.gps.teacher_iterations"):
         GpsConfig(teacher_iterations=0)
+    with pytest.raises(ValueError, match="train.gps.randomize: unknown parameter 'gravty'"):
+        GpsConfig(randomize=["gravty"])
     with pytest.raises(ValueError, match="train.gps.refine.feedback"):
         GpsConfig(refine=EsConfig(feedback=False))
 
@@ -320,3 +322,28 @@ def test_a_run_stopped_while_its_teacher_is_optimised_resumes_with_its_teacher(t
     a = read_checkpoint(tmp_path / "a" / "latest.pt")["actor_state_dict"]
     b = read_checkpoint(tmp_path / "b" / "latest.pt")["actor_state_dict"]
     assert torch.count_nonzero(a["lookup.plan"]) > 0 and all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_the_correction_trains_on_randomised_sheets_and_is_selected_on_both(tmp_path):
+    """With ``train.gps.randomize`` the correction trains on sheets drawn anew at every reset, model selection
+    scores the nominal sheet's held-out episodes and as many randomised ones, and the run's env (what it is
+    evaluated and exported on) stays the job's nominal one; a job that randomises its env keeps its own."""
+    from agents.jobs import TrainJob
+    from agents.training import learner_sheets, train_contour
+
+    options = PatternCutOptions(contour="circle-small", sim_config=SMALL)
+    gps = GpsConfig(teacher_iterations=2, refine=EsConfig(population=4), randomize=("gravity",))
+    cfg = dataclasses.replace(gps_config(), gps=gps)
+    trained_on, validated_on = learner_sheets(cfg, options)
+    assert trained_on.randomize == ("gravity",) and [o.randomize for o in validated_on] == [(), ("gravity",)]
+    own = dataclasses.replace(options, randomize=("noise",))
+    assert learner_sheets(cfg, own) == (own, [own])
+    assert learner_sheets(gps_config(), options) == (options, [options])
+
+    job = TrainJob(
+        contour="circle-small", sim=SMALL, train=dataclasses.replace(cfg, iterations=1), eval_trials=2
+    )
+    train_contour(job, tmp_path / "run", progress=False)
+    state = read_checkpoint(tmp_path / "run" / "latest.pt")
+    assert len(state["infos"]["validation_baseline"]) == 2 * cfg.validation_trials
+    assert not json.loads((tmp_path / "run" / "options.json").read_text()).get("randomize")

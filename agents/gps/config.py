@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 from agents.es.config import EsConfig
+from warpcut.sim.config import randomize_ranges
 from warpcut.validation import check_instance, check_integer
 
 
@@ -25,7 +27,16 @@ class GpsConfig:
     """es's settings for the correction on top of the plan (:class:`~agents.es.config.EsConfig`; its
     ``feedback`` and ``scheduled`` shape the correction's network)."""
 
+    randomize: tuple[str, ...] = ()
+    """Sheet parameters the correction trains on drawn anew at every reset (``env.randomize``'s names, over
+    their default ranges, :data:`warpcut.sim.config.RANDOMIZE_RANGES`), where the job's env randomises none:
+    the plan is optimised for the nominal sheet, the correction for how a sheet differs from it. Model
+    selection then scores each policy on the nominal sheet's held-out episodes and as many randomised ones
+    (:meth:`sheets`). Empty: the nominal sheet alone."""
+
     def __post_init__(self) -> None:  # each field as it is given (a file's or --set's key at a time)
+        if isinstance(self.randomize, list):
+            self.randomize = tuple(self.randomize)
         self.check()
 
     def check(self, num_envs: int | None = None) -> None:
@@ -33,6 +44,10 @@ class GpsConfig:
         divide)."""
         check_integer("train.gps.teacher_iterations", self.teacher_iterations, 1, optional=True,
                       note="the optimiser's")  # fmt: skip
+        try:
+            randomize_ranges(self.randomize)
+        except ValueError as error:
+            raise ValueError(f"train.gps.{error}") from None
         check_instance("train.gps.refine", self.refine, EsConfig, "an EsConfig")
         self.refine.check(num_envs, "train.gps.refine")
         if not self.refine.feedback:
@@ -40,6 +55,16 @@ class GpsConfig:
                 "train.gps.refine.feedback: the student's correction acts on the tracking error; leave it "
                 "true"
             )
+
+    def sheets(self, options):
+        """``(training, validation)``: the options of the env the correction trains on, and of each set of
+        held-out episodes model selection scores (their errors concatenated). With :attr:`randomize` and a
+        job whose env randomises nothing: the randomised sheet, and the nominal and randomised ones; else
+        ``options`` for both."""
+        if not self.randomize or options.randomize:
+            return options, [options]
+        randomised = dataclasses.replace(options, randomize=tuple(self.randomize))
+        return randomised, [options, randomised]
 
     @property
     def feedback(self) -> bool:
