@@ -72,10 +72,13 @@ def load_policy(source: str | Path) -> MLPModel:
         raise ValueError(
             f"{checkpoint}: its policy description cannot be read ({type(exc).__name__}: {exc}); retrain"
         ) from None
-    mismatch = layout_mismatch(state["actor_state_dict"], actor.state_dict(), "its description")
+    saved = state["actor_state_dict"]
+    if hasattr(actor, "upgrade_state"):  # a network that has grown since: the saved one as it would be now
+        saved = actor.upgrade_state(saved)
+    mismatch = layout_mismatch(saved, actor.state_dict(), "its description")
     if mismatch:
         raise ValueError(f"{checkpoint}: {mismatch}; the file is damaged: retrain, or use another checkpoint")
-    actor.load_state_dict(state["actor_state_dict"])
+    actor.load_state_dict(saved)
     return actor.eval()
 
 

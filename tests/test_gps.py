@@ -347,3 +347,20 @@ def test_the_correction_trains_on_randomised_sheets_and_is_selected_on_both(tmp_
     state = read_checkpoint(tmp_path / "run" / "latest.pt")
     assert len(state["infos"]["validation_baseline"]) == 2 * cfg.validation_trials
     assert not json.loads((tmp_path / "run" / "options.json").read_text()).get("randomize")
+
+
+def test_a_student_saved_before_its_correction_was_centred_plays_as_it_did(trained):
+    """A gps checkpoint without the nominal observations loads (:func:`agents.policies.load_policy`'s
+    upgrade) as an uncentred student: plan plus correction."""
+    out, _ = trained
+    actor = load_policy(out / "latest.pt")
+    old = {k: v for k, v in actor.state_dict().items() if not k.startswith("nominal.")}
+    actor.load_state_dict(actor.upgrade_state(old))
+    assert float(actor.nominal.centred) == 0.0
+    steps = actor.lookup.plan.shape[0]
+    obs = torch.rand(steps, actor.obs_dim) * 0.2
+    obs[:, 0] = torch.arange(steps) / steps
+    td = TensorDict({"policy": obs}, batch_size=[steps])
+    with torch.no_grad():
+        uncentred = actor.mlp(actor.obs_normalizer(obs)) + actor.lookup.plan
+        torch.testing.assert_close(actor(td), uncentred)

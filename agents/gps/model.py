@@ -137,6 +137,14 @@ class PlanFeedbackModel(FeedbackMLPModel):
         with torch.no_grad():
             self.lookup.plan.copy_(plan.to(self.lookup.plan.device))
 
+    def upgrade_state(self, state: dict) -> dict:
+        """A saved state of this network as it is now: a student saved before its correction was centred
+        (no ``nominal.*``) plays as it did, uncentred (:func:`agents.policies.load_policy`)."""
+        if "lookup.plan" not in state or "nominal.obs" in state:
+            return state
+        nominal = {"nominal.obs": torch.zeros_like(self.nominal.obs), "nominal.centred": torch.zeros(())}
+        return {**state, **nominal}
+
     def raw(self, obs: TensorDict) -> torch.Tensor:
         """The raw (unnormalised) observation the network reads, its groups concatenated."""
         return torch.cat([obs[group] for group in self.obs_groups], dim=-1)
