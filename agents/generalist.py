@@ -13,17 +13,20 @@ per-contour policies do; what it observes lets it tension any of them (:mod:`env
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from envs.options import ENV_FIELDS, EnvConfig, PatternCutOptions, sim_config_from_dict
+from envs.options import EnvConfig, PatternCutOptions, sim_config_from_dict
 from warpcut.contours import Contour
 from warpcut.io import read_json
 from warpcut.sim.config import SimConfig
 
 if TYPE_CHECKING:
+    import torch
+
     from agents.evaluation import MethodResult
     from warpcut.task import StepCallback
 
@@ -75,7 +78,12 @@ def generalist_dir(source: str | Path | None) -> Path:
 
 def generalist_settings(source: str | Path | None) -> dict:
     """``generalist.json`` of the generalist ``source`` (:func:`generalist_dir`)."""
-    path = generalist_dir(source) / GENERALIST_FILE
+    return _read_settings(generalist_dir(source))
+
+
+def _read_settings(directory: Path) -> dict:
+    """``generalist.json`` in ``directory``, its env and physics checked."""
+    path = directory / GENERALIST_FILE
     try:
         data = read_json(path)
         EnvConfig(**data["env"])
@@ -85,8 +93,44 @@ def generalist_settings(source: str | Path | None) -> dict:
     return data
 
 
+@dataclass(frozen=True)
+class Generalist:
+    """A generalist read once (:func:`load_generalist`): what :func:`generalist_result` plays."""
+
+    settings: dict
+    """Its ``generalist.json``."""
+    actor: torch.nn.Module
+    """Its policy (:func:`agents.policies.load_policy`), on the CPU, in eval mode."""
+
+    @property
+    def env(self) -> EnvConfig:
+        """What it observes and how it acts (``env`` of :attr:`settings`)."""
+        return EnvConfig(**self.settings["env"])
+
+
+def load_generalist(source: str | Path | None) -> Generalist:
+    """The generalist ``source`` names (:func:`generalist_dir`): its settings and its policy, which is
+    checked to observe and act as its settings say.
+
+    Raises:
+        ValueError: No such generalist, or its settings or policy cannot be read or do not fit each other;
+            the message names the file and the fix.
+    """
+    from agents.checkpoints import policy_checkpoint
+    from agents.policies import check_layout, load_policy
+
+    directory = generalist_dir(source)
+    settings = _read_settings(directory)
+    checkpoint = policy_checkpoint(directory)
+    actor = load_policy(checkpoint)
+    generalist = Generalist(settings, actor)
+    fix = "restore it, or train again"
+    check_layout(actor.state_dict(), checkpoint, generalist.env, GENERALIST_FILE, fix)
+    return generalist
+
+
 def generalist_options(
-    source: str | Path | None,
+    generalist: Generalist,
     contours: Sequence[Contour],
     pinches: Sequence[np.ndarray],
     segments: Sequence[Sequence[np.ndarray]] | None,
@@ -95,12 +139,10 @@ def generalist_options(
     device: str | None = None,
     **overrides,
 ) -> PatternCutOptions:
-    """The options of a batch that plays the generalist ``source`` on ``contours`` (``trials`` envs each,
-    contour by contour, at ``pinches``, cutting ``segments``), with the observations and actions it was
-    trained with and ``config``'s physics."""
-    env = generalist_settings(source)["env"]
-    env = {name: env[name] for name in ENV_FIELDS if name in env}
-    env.update(randomize=[], randomize_ranges=None)  # played on the physics given
+    """The options of a batch that plays ``generalist`` on ``contours`` (``trials`` envs each, contour by
+    contour, at ``pinches``, cutting ``segments``), with the observations and actions it was trained with and
+    ``config``'s physics."""
+    env = {**generalist.settings["env"], "randomize": [], "randomize_ranges": None}  # on the physics given
     per_env = [k for k in range(len(contours)) for _ in range(trials)]
     cut = None if segments is None else [[np.asarray(p).tolist() for p in segments[k]] for k in per_env]
     return PatternCutOptions(
@@ -113,15 +155,8 @@ def generalist_options(
     )
 
 
-def load_generalist(source: str | Path | None):
-    """The generalist ``source``'s actor (:func:`agents.policies.load_policy`), on the CPU, in eval mode."""
-    from agents.policies import load_policy
-
-    return load_policy(generalist_dir(source))
-
-
 def generalist_result(
-    source: str | Path | None,
+    generalist: Generalist,
     contours: Sequence[Contour],
     pinches: Sequence[np.ndarray],
     segments: Sequence[Sequence[np.ndarray]] | None,
@@ -132,23 +167,19 @@ def generalist_result(
     on_step: StepCallback | None = None,
     allow_infeasible_pinch: bool = False,
 ) -> MethodResult:
-    """The generalist on every (contour, trial) in one batch, zero-shot, paired with the baselines' trials
+    """``generalist`` on every (contour, trial) in one batch, zero-shot, paired with the baselines' trials
     of :func:`agents.evaluation.evaluate_suite` (seeded ``seed``: trial t of contour k sees the noise of
     their env ``k * trials + t``)."""
-    from agents.checkpoints import policy_checkpoint
     from agents.evaluation import MethodResult
-    from agents.policies import check_layout, policy_errors
+    from agents.policies import policy_errors
     from envs.vector import PatternCutVecEnv
 
     options = generalist_options(
-        source, contours, pinches, segments, config, trials, device,
+        generalist, contours, pinches, segments, config, trials, device,
         allow_infeasible_pinch=allow_infeasible_pinch,
     )  # fmt: skip
-    actor = load_generalist(source)
-    checkpoint = policy_checkpoint(generalist_dir(source))
-    check_layout(actor.state_dict(), checkpoint, options, GENERALIST_FILE, "restore it, or train again")
     env = PatternCutVecEnv(len(contours) * trials, options)
-    out = policy_errors(actor, env, seed=seed + 1, on_step=on_step, paired_noise=(seed, 0))
+    out = policy_errors(generalist.actor, env, seed=seed + 1, on_step=on_step, paired_noise=(seed, 0))
     problems = env.task.pinch_problems
     rollouts = [
         {

@@ -30,7 +30,7 @@ from agents.config import EVALUATION_TRIALS
 from agents.evaluation import Method, MethodResult, evaluate_suite
 from agents.methods import StepCallbacks
 from envs.observations import observation_bounds
-from envs.options import ContourSpec, PatternCutOptions, plain
+from envs.options import ContourSpec, EnvConfig, PatternCutOptions, plain
 from envs.vector import PatternCutVecEnv
 from warpcut.contours import Contour
 from warpcut.io import read_json
@@ -199,7 +199,7 @@ RESUME_FIX = "resume with the options the run was trained with ('warpcut train -
 OPTIONS_FIX = "its options file does not describe this policy: restore it, or retrain the run"
 
 
-def options_layout(options: PatternCutOptions) -> tuple[int, int]:
+def options_layout(options: EnvConfig) -> tuple[int, int]:
     """``(observations, outputs)`` of a policy acting in ``options``' env, as
     :func:`agents.checkpoints.policy_layout` reads them from a policy: the observation's size
     (:func:`envs.observations.observation_bounds`) and the action choices (discrete: stay and +-1 mm per
@@ -209,9 +209,7 @@ def options_layout(options: PatternCutOptions) -> tuple[int, int]:
     return int(low.size), 1 + 2 * axes if options.action_type == "discrete" else axes
 
 
-def check_layout(
-    actor_state: dict, checkpoint: Path, options: PatternCutOptions, source: str, fix: str
-) -> None:
+def check_layout(actor_state: dict, checkpoint: Path, options: EnvConfig, source: str, fix: str) -> None:
     """A ``ValueError`` naming ``checkpoint`` if its policy (``actor_state``) does not observe and act as
     ``options`` (``source``, e.g. "the env") do, with the options that differ from its run's and ``fix``."""
     difference = layout_difference(policy_layout(actor_state), options_layout(options), source)
@@ -227,7 +225,7 @@ def check_layout(
 
 
 def _differences(
-    run: PatternCutOptions, options: PatternCutOptions, fields: Sequence[str], ours: str, theirs: str
+    run: PatternCutOptions, options: EnvConfig, fields: Sequence[str], ours: str, theirs: str
 ) -> list[str]:
     """``field: VALUE in OURS, VALUE THEIRS`` for each of ``fields`` that differs between ``run`` and
     ``options``."""

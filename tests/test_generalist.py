@@ -215,7 +215,7 @@ def test_every_command_plays_a_generalist_zero_shot(generalist_run, tmp_path):
 def test_the_generalist_column_is_paired_with_the_baselines_trials(generalist_run):
     """A generalist that holds still (its policy zeroed) scores as fixed tension does, trial by trial."""
     from agents.evaluation import run_method
-    from agents.generalist import generalist_result
+    from agents.generalist import generalist_result, load_generalist
 
     contours = generate_contours(2, "test", 0, COARSE)
     pinches = [np.asarray(p) for p in PatternCutOptions(contour=contours, sim_config=COARSE).per_env(2)[1]]
@@ -228,7 +228,7 @@ def test_the_generalist_column_is_paired_with_the_baselines_trials(generalist_ru
     still.mkdir(exist_ok=True)
     torch.save(state, still / "best.pt")
     (still / GENERALIST_FILE).write_text((generalist_run[0] / GENERALIST_FILE).read_text())
-    played = generalist_result(still, contours, pinches, None, 2, COARSE, "cpu", 3)
+    played = generalist_result(load_generalist(still), contours, pinches, None, 2, COARSE, "cpu", 3)
     assert np.array_equal(played.error_mm2, held.error_mm2)
 
 
@@ -289,7 +289,7 @@ def test_warpcut_ships_a_small_generalist_with_its_command_and_figures():
     assert settings["figures"]["validation_improvement_pct"] is not None
     from agents.generalist import load_generalist
 
-    actor = load_generalist("generalist")
+    actor = load_generalist("generalist").actor
     assert policy_layout(actor.state_dict())[0] == observation_bounds(12, True, GENERALIST_LOOKAHEAD)[0].size
 
 

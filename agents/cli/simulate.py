@@ -81,10 +81,11 @@ def command(
     if print_config:
         settings.print_config(job)
         return
+    generalist = None
     if "generalist" in job.policy:  # a generalist to play: now
-        from agents.generalist import generalist_settings
+        from agents.generalist import load_generalist
 
-        generalist_settings(job.generalist)
+        generalist = load_generalist(job.generalist)
     if job.pinch is not None and {"fixed", "analytic", "generalist"} & set(job.policy):  # infeasible: now
         from warpcut.planning import check_pinch
 
@@ -122,7 +123,7 @@ def command(
             callbacks = with_videos(outputs.step_callbacks(rec, cuts, meshes), vid)
             given = {}
             if "generalist" in job.policy:
-                given["generalist"] = _generalist(job, contour, config, device, callbacks)
+                given["generalist"] = _generalist(generalist, job, contour, config, device, callbacks)
             report = compare_policies(
                 contour, job.policy, trials=job.trials, config=config, pinch=job.pinch, device=device,
                 seed=job.seed, step_callbacks=callbacks, allow_infeasible_pinch=job.allow_infeasible_pinch,
@@ -168,8 +169,8 @@ def command(
         outputs.echo_recording(rec)
 
 
-def _generalist(job, contour, config, device, callbacks):
-    """The generalist's trials (zero-shot) at ``job.pinch`` or the feasible centroid, paired with the
+def _generalist(generalist, job, contour, config, device, callbacks):
+    """``generalist``'s trials (zero-shot) at ``job.pinch`` or the feasible centroid, paired with the
     baselines' (:func:`agents.generalist.generalist_result`)."""
     import numpy as np
 
@@ -180,6 +181,6 @@ def _generalist(job, contour, config, device, callbacks):
         np.asarray(job.pinch, dtype=np.float64) if job.pinch is not None else default_pinch(contour, config)
     )
     return generalist_result(
-        job.generalist, [contour], [point], None, job.trials, config, device, job.seed,
+        generalist, [contour], [point], None, job.trials, config, device, job.seed,
         on_step=callbacks and callbacks("generalist", 0), allow_infeasible_pinch=job.allow_infeasible_pinch,
     )  # fmt: skip

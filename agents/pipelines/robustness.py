@@ -293,11 +293,11 @@ def _method_errors(
     """(settings, trials) errors (mm^2) of ``method``: one batch, env ``s * trials + k`` = setting ``s``,
     trial ``k``, with the same noise streams in every method's batch; NaN where the trial diverged."""
     if method == "generalist":
-        from agents.generalist import generalist_result
+        from agents.generalist import generalist_result, load_generalist
 
         result = generalist_result(
-            generalist, [contour] * settings, [pinch] * settings, [segments] * settings, trials, config,
-            device, seed, allow_infeasible_pinch=True,  # judged on the nominal sheet
+            load_generalist(generalist), [contour] * settings, [pinch] * settings, [segments] * settings,
+            trials, config, device, seed, allow_infeasible_pinch=True,  # judged on the nominal sheet
         )  # fmt: skip
         errors = np.asarray(result.error_mm2, dtype=np.float64)
         return np.where(np.isfinite(errors), errors, np.nan)
@@ -454,10 +454,10 @@ def robustness(
         else:
             scenario = {"contour": contour, "config": job.sim.validated(), "pinch": None, "segments": None}
         infeasible_pinches(scenario, job.methods, job.plans, runs, allow=False)
-    if "generalist" in job.methods:  # before any work: a generalist to play
-        from agents.generalist import generalist_settings
+    if "generalist" in job.methods:  # before any work: a generalist to play (each unit loads its own)
+        from agents.generalist import load_generalist
 
-        generalist_settings(job.generalist)
+        load_generalist(job.generalist)
     record_job(out, job, resume)
     reports = []
     for study in job.study:

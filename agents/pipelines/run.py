@@ -16,6 +16,7 @@ from agents.baselines import AnalyticTension
 from agents.cluster import Done, Executor, Serial, ran_here
 from agents.config import VALIDATION_TRIALS
 from agents.evaluation import Method, MethodResult, evaluate_suite, run_method
+from agents.generalist import Generalist, generalist_result, load_generalist
 from agents.jobs import RunJob
 from agents.methods import StepCallbacks, point_text
 from agents.pipelines.common import (
@@ -26,7 +27,7 @@ from agents.pipelines.common import (
     record_job,
     train_policy,
 )
-from agents.policies import nominal_validation_error, rollout_errors
+from agents.policies import VALIDATION_SEED_OFFSET, nominal_validation_error, rollout_errors
 from envs.options import ENV_FIELDS, PatternCutOptions
 from warpcut.contours import Contour
 from warpcut.io import write_json
@@ -107,10 +108,7 @@ def run_pipeline(
     config = job.sim.validated()
     if job.policy == "rl":  # before any work: the learner can train in the env
         job.train.check(job.env.action_type == "discrete")
-    if job.policy == "generalist":  # before any work: a generalist to play
-        from agents.generalist import generalist_settings
-
-        generalist_settings(job.generalist)
+    generalist = load_generalist(job.generalist) if job.policy == "generalist" else None  # before any work
     out = Path(out)
     loaded = resolve_contour(job.contour, job.sim)
     record_job(out, job, resume)
@@ -142,7 +140,7 @@ def run_pipeline(
         log("[2/3] --policy fixed: the plan's pinch and order")
     elif job.policy == "generalist":
         log(f"[2/3] scoring the generalist at {len(listed)} pinch candidate(s), zero-shot")
-        chosen, plays = _choose_by_generalist(job, loaded, plan, listed, config, device)
+        chosen, plays = _choose_by_generalist(generalist, job, loaded, plan, listed, config, device)
         if not plays:
             log("      the generalist validated no better than holding still: it holds still (fixed tension)")
     elif job.policy == "analytic":
@@ -170,7 +168,10 @@ def run_pipeline(
         specs.append(Method("rl", result=MethodResult.from_rollouts([rl])))
     if job.policy == "generalist":
         on_step = None if step_callbacks is None else step_callbacks("generalist", 0)
-        specs.append(_generalist_method(job, loaded, plan, listed[chosen], plays, settings, device, on_step))
+        played = _generalist_method(
+            generalist, job, loaded, plan, listed[chosen], plays, settings, device, on_step
+        )
+        specs.append(played)
     table = evaluate_suite(
         [loaded],
         specs,
@@ -248,7 +249,13 @@ def _choose_by_analytic(
 
 
 def _choose_by_generalist(
-    job: RunJob, contour: Contour, plan: Plan, listed: list[dict], config: SimConfig, device: str | None
+    generalist: Generalist,
+    job: RunJob,
+    contour: Contour,
+    plan: Plan,
+    listed: list[dict],
+    config: SimConfig,
+    device: str | None,
 ) -> tuple[int, bool]:
     """Score the generalist at every candidate (each in its best order) on validation episodes, as rl's
     candidates are chosen: :data:`CANDIDATE_TRIALS` noisy trials each, seeded apart from the evaluation's,
@@ -256,12 +263,9 @@ def _choose_by_generalist(
     candidate with the lowest mean error and whether the generalist plays there: it holds still instead
     (at the plan's candidate, index 0) where it validates no better, as rl's model selection keeps its
     initial, still policy."""
-    from agents.generalist import generalist_result
-    from agents.policies import VALIDATION_SEED_OFFSET
-
     seed = job.seed + VALIDATION_SEED_OFFSET
     scores = generalist_result(
-        job.generalist, [contour] * len(listed), [np.asarray(c["pinch"]) for c in listed],
+        generalist, [contour] * len(listed), [np.asarray(c["pinch"]) for c in listed],
         [plan.ordered_segments(c["order"]) for c in listed], CANDIDATE_TRIALS, config, device, seed,
     ).error_vertices.mean(axis=1)  # fmt: skip
     for c, e in zip(listed, scores, strict=True):
@@ -276,17 +280,23 @@ def _choose_by_generalist(
 
 
 def _generalist_method(
-    job: RunJob, contour: Contour, plan: Plan, chosen: dict, plays: bool, settings: dict, device, on_step
+    generalist: Generalist,
+    job: RunJob,
+    contour: Contour,
+    plan: Plan,
+    chosen: dict,
+    plays: bool,
+    settings: dict,
+    device,
+    on_step,
 ) -> Method:
     """The generalist's row of the evaluation, paired with the baselines' trials: the generalist at the
     chosen candidate, or (``plays`` False) holding still at the plan's, fixed tension trial for trial."""
-    from agents.generalist import generalist_result
-
     pinch, cut = np.asarray(chosen["pinch"]), plan.ordered_segments(chosen["order"])
     config, trials = job.sim.validated(), settings["trials"]
     if plays:
         result = generalist_result(
-            job.generalist, [contour], [pinch], [cut], trials, config, device, job.seed, on_step=on_step
+            generalist, [contour], [pinch], [cut], trials, config, device, job.seed, on_step=on_step
         )
     else:
         result = run_method(

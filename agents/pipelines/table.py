@@ -14,6 +14,7 @@ import numpy as np
 
 from agents.cluster import Done, Executor, Serial, ran_here
 from agents.evaluation import Method, MethodResult, evaluate_suite
+from agents.generalist import Generalist, generalist_result, load_generalist
 from agents.jobs import EvaluateJob
 from agents.methods import StepCallbacks
 from agents.pipelines.common import (
@@ -148,10 +149,7 @@ def evaluate_table(
         _check_checkpoints(Path(job.checkpoints), loaded, job)
     elif "rl" in methods:  # before any work: the learner can train in the env
         job.train.check(job.env.action_type == "discrete")
-    if "generalist" in methods:  # before any work: a generalist to play
-        from agents.generalist import generalist_settings
-
-        generalist_settings(job.generalist)
+    generalist = load_generalist(job.generalist) if "generalist" in methods else None  # before any work
     record_job(out, job, resume)
     start = time.perf_counter()
     settings = dict(num_candidates=job.candidates, seed=seed, device=device, arm=job.arm)
@@ -175,7 +173,7 @@ def evaluate_table(
             clock["rl"] = time.perf_counter() - started
             notes.append(functools.partial(_note_rl_iterations, kept, runs))
         elif spec.name == "generalist":
-            spec.result = _generalist_result(job, loaded, plans, device, step_callbacks, log)
+            spec.result = _generalist_result(generalist, job, loaded, plans, device, step_callbacks, log)
         elif spec.name == "grad":
             _share_teachers(job, runs, loaded, plans, out)
             spec.result, note = grad_column(
@@ -436,6 +434,7 @@ def _cuda(device: str | None) -> bool:
 
 
 def _generalist_result(
+    generalist: Generalist,
     job: EvaluateJob,
     contours: list[Contour],
     plans: list[Plan] | None,
@@ -443,10 +442,9 @@ def _generalist_result(
     step_callbacks: StepCallbacks | None,
     log: Callable[[str], None],
 ) -> MethodResult:
-    """The generalist column: ``job.generalist`` zero-shot on every contour in one batch, at the planned
-    pinch points and segments (without plans: the feasible centroid, the whole contour), paired with the
-    baselines' trials."""
-    from agents.generalist import generalist_result
+    """The generalist column: ``generalist`` (``job.generalist``'s) zero-shot on every contour in one batch,
+    at the planned pinch points and segments (without plans: the feasible centroid, the whole contour),
+    paired with the baselines' trials."""
     from warpcut.planning import default_pinch
 
     started = time.perf_counter()
@@ -457,7 +455,7 @@ def _generalist_result(
         pinches, segments = [default_pinch(c, job.sim, job.arm) for c in contours], None
     callback = None if step_callbacks is None else step_callbacks("generalist", 0)
     result = generalist_result(
-        job.generalist, contours, pinches, segments, job.trials, job.sim, device, job.seed, on_step=callback
+        generalist, contours, pinches, segments, job.trials, job.sim, device, job.seed, on_step=callback
     )
     log(f"  generalist: {len(contours)} contour(s) zero-shot in {time.perf_counter() - started:.0f} s")
     return result
