@@ -102,11 +102,6 @@ class Generalist:
     actor: torch.nn.Module
     """Its policy (:func:`agents.policies.load_policy`), on the CPU, in eval mode."""
 
-    @property
-    def env(self) -> EnvConfig:
-        """What it observes and how it acts (``env`` of :attr:`settings`)."""
-        return EnvConfig(**self.settings["env"])
-
 
 def load_generalist(source: str | Path | None) -> Generalist:
     """The generalist ``source`` names (:func:`generalist_dir`): its settings and its policy, which is
@@ -116,17 +111,12 @@ def load_generalist(source: str | Path | None) -> Generalist:
         ValueError: No such generalist, or its settings or policy cannot be read or do not fit each other;
             the message names the file and the fix.
     """
-    from agents.checkpoints import policy_checkpoint
-    from agents.policies import check_layout, load_policy
+    from agents.policies import load_policy
 
     directory = generalist_dir(source)
     settings = _read_settings(directory)
-    checkpoint = policy_checkpoint(directory)
-    actor = load_policy(checkpoint)
-    generalist = Generalist(settings, actor)
-    fix = "restore it, or train again"
-    check_layout(actor.state_dict(), checkpoint, generalist.env, GENERALIST_FILE, fix)
-    return generalist
+    env = EnvConfig(**settings["env"])
+    return Generalist(settings, load_policy(directory, env, GENERALIST_FILE, "restore it, or train again"))
 
 
 def generalist_options(

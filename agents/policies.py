@@ -44,20 +44,24 @@ VALIDATION_SEED_OFFSET = 7919
 evaluations' small seeds, so model selection never sees an evaluation episode."""
 
 
-def load_policy(source: str | Path) -> MLPModel:
+def load_policy(
+    source: str | Path, acting_in: EnvConfig | None = None, described_by: str = "", fix: str = ""
+) -> MLPModel:
     """Rebuild a trained actor on the CPU, in eval mode, from a run directory or checkpoint (a checkpoint
     describes its own policy: :mod:`agents.checkpoints`).
 
     Args:
         source: Run directory (its ``best.pt`` if training validated, else ``latest.pt``) or a checkpoint.
+        acting_in: The env the policy is to act in: it must observe and act as that env does
+            (:func:`check_layout`, with ``described_by``, what says so, and ``fix``).
 
     Returns:
         The actor; ``actor(obs_tensordict)`` returns deterministic actions.
 
     Raises:
         FileNotFoundError: No checkpoint.
-        ValueError: The checkpoint cannot be read, or its policy description does not fit its weights; the
-            message names the file and the fix.
+        ValueError: The checkpoint cannot be read, its policy description does not fit its weights, or the
+            policy does not fit ``acting_in``; the message names the file and the fix.
     """
     checkpoint = policy_checkpoint(source)
     state = read_checkpoint(checkpoint)
@@ -78,6 +82,8 @@ def load_policy(source: str | Path) -> MLPModel:
     mismatch = layout_mismatch(saved, actor.state_dict(), "its description")
     if mismatch:
         raise ValueError(f"{checkpoint}: {mismatch}; the file is damaged: retrain, or use another checkpoint")
+    if acting_in is not None:
+        check_layout(saved, checkpoint, acting_in, described_by, fix)
     actor.load_state_dict(saved)
     return actor.eval()
 
@@ -174,9 +180,7 @@ def rollout_errors(
     (e.g. per-env ``gravity``, or ``resolution``, for :mod:`agents.pipelines.robustness`).
     """
     options = dataclasses.replace(policy_options(run_dir, device), **(overrides or {}))
-    actor = load_policy(run_dir)
-    checkpoint = policy_checkpoint(run_dir)
-    check_layout(actor.state_dict(), checkpoint, options, str(Path(run_dir) / OPTIONS_FILE), OPTIONS_FIX)
+    actor = load_policy(run_dir, options, str(Path(run_dir) / OPTIONS_FILE), OPTIONS_FIX)
     env = PatternCutVecEnv(trials, options)
     return policy_errors(actor, env, seed=seed, on_step=on_step, paired_noise=paired_noise)
 
