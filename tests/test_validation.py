@@ -372,8 +372,8 @@ def test_agent_configs_and_jobs_check_each_field_as_they_are_made():
             make()
         assert str(error.value).startswith(message), str(error.value)
     grad = GradConfig()
-    object.__setattr__(grad, "validation_trials", -1)  # past the constructor: validated() names its own key
-    with pytest.raises(ValueError, match=r"^validation_trials: must be an integer >= 0"):
+    object.__setattr__(grad, "validation_trials", -1)  # past the constructor: validated() checks it again
+    with pytest.raises(ValueError, match=r"^GradConfig.validation_trials: an integer >= 0"):
         grad.validated()
 
 

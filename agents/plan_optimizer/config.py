@@ -8,7 +8,7 @@ import math
 from dataclasses import dataclass
 
 from warpcut.sim.config import RANDOMIZE_ALIASES, randomize_ranges
-from warpcut.validation import check_flag, check_integer, fail, is_integer, is_number
+from warpcut.validation import check_flag, check_integer, fail, is_number
 
 GRAD_ESTIMATORS = ("es", "tape")
 """How the plan optimiser may estimate its gradient (``GradConfig.estimator``): "es" (the default) or
@@ -81,8 +81,12 @@ class GradConfig:
     """Adam's step for the pinch point (mm)."""
 
     def __post_init__(self) -> None:
-        """What each field is, on its own, as it is given (a file and ``--set`` set one key at a time); the
-        ranges and what depends on several fields are :meth:`validated`'s."""
+        self._check_fields()
+
+    def _check_fields(self) -> None:
+        """What each field is, on its own, as it is given (a file and ``--set`` set one key at a time): a
+        :class:`~warpcut.validation.ConfigError` naming ``GradConfig.field``. The step counts' ranges and what
+        depends on several fields are :meth:`validated`'s."""
         where = "GradConfig."
         if self.estimator not in GRAD_ESTIMATORS:
             fail(where + "estimator", f"must be one of {', '.join(GRAD_ESTIMATORS)}", self.estimator)
@@ -107,10 +111,9 @@ class GradConfig:
             fail(where + "es_randomize_ranges", "a mapping {name: [low, high]}, or None", ranges)
 
     def validated(self) -> GradConfig:
-        """Itself, or ``ValueError`` naming the field and the fix."""
-        if self.estimator not in GRAD_ESTIMATORS:
-            names = ", ".join(GRAD_ESTIMATORS)
-            raise ValueError(f"estimator: must be one of {names} (got {self.estimator!r})")
+        """Itself, every field checked again (:meth:`_check_fields`), or ``ValueError`` naming the field and
+        the fix."""
+        self._check_fields()
         for name in ("iterations", "trials", "es_population", "es_trials"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
@@ -144,14 +147,6 @@ class GradConfig:
                 "validation_trials: estimator 'es' scores each iterate on held-out episodes only; give at "
                 f"least 1 (got {self.validation_trials!r})"
             )
-        if not is_integer(self.validation_trials) or self.validation_trials < 0:
-            raise ValueError(f"validation_trials: must be an integer >= 0 (got {self.validation_trials!r})")
-        if self.window is not None and (not is_integer(self.window) or self.window < 1):
-            raise ValueError(f"window: must be a positive number of steps or None (got {self.window!r})")
-        for name in ("learning_rate", "pinch_learning_rate", "es_sigma_mm"):
-            value = getattr(self, name)
-            if not (is_number(value) and 0 < value < float("inf")):
-                raise ValueError(f"{name}: must be a positive number of mm (got {value!r})")
         if self.es_randomize_ranges:  # one spelling, lists of floats, so a saved run's settings compare equal
             names = [RANDOMIZE_ALIASES.get(k, k) for k in self.es_randomize_ranges]
             canonical = {k: list(chosen[k]) for k in names}
