@@ -118,6 +118,13 @@ class PatternCut:
         self._randomized = options.randomized()
         self.options = options
         self.num_envs = num_envs
+        low, high = observation_bounds(options.num_fiducials, options.contour_features, options.lookahead)
+        self.observation_space = gym.spaces.Box(low, high, dtype=np.float32)
+        num_axes = 3 if options.allow_z else 2
+        if options.action_type == "discrete":
+            self.action_space = gym.spaces.Discrete(1 + 2 * num_axes)
+        else:
+            self.action_space = gym.spaces.Box(-1.0, 1.0, (num_axes,), dtype=np.float32)
         config = options.config()
         contours, pinch_points, segments = options.per_env(num_envs)
         self.task = CuttingTask(
@@ -130,13 +137,6 @@ class PatternCut:
         self.episode_steps = min(self.task.num_steps, options.max_episode_steps or self.task.num_steps)
         self.fiducials = Fiducials(self.task.grid, options.shaft_radius_mm)
         self.task.fiducials = self.fiducials  # what a recording of the task shows
-        low, high = observation_bounds(options.num_fiducials, options.contour_features, options.lookahead)
-        self.observation_space = gym.spaces.Box(low, high, dtype=np.float32)
-        num_axes = 3 if options.allow_z else 2
-        if options.action_type == "discrete":
-            self.action_space = gym.spaces.Discrete(1 + 2 * num_axes)
-        else:
-            self.action_space = gym.spaces.Box(-1.0, 1.0, (num_axes,), dtype=np.float32)
         self.last_moves = np.zeros((num_envs, 3), dtype=np.float32)
         self._sampled = False
         self._running_path_error = np.zeros(num_envs)
