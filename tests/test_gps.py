@@ -338,7 +338,9 @@ def test_the_correction_trains_on_randomised_sheets_and_is_selected_on_both(tmp_
     assert trained_on.randomize == ("gravity",) and [o.randomize for o in validated_on] == [(), ("gravity",)]
     own = dataclasses.replace(options, randomize=("noise",))
     assert learner_sheets(cfg, own) == (own, [own])
-    assert learner_sheets(gps_config(), options) == (options, [options])
+    nominal = dataclasses.replace(gps_config(), gps=dataclasses.replace(gps, randomize=()))
+    assert learner_sheets(nominal, options) == (options, [options])
+    assert GpsConfig().randomize == ("gravity", "noise_std")  # the default: sheets that differ
 
     job = TrainJob(
         contour="circle-small", sim=SMALL, train=dataclasses.replace(cfg, iterations=1), eval_trials=2

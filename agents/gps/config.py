@@ -27,12 +27,13 @@ class GpsConfig:
     """es's settings for the correction on top of the plan (:class:`~agents.es.config.EsConfig`; its
     ``feedback`` and ``scheduled`` shape the correction's network)."""
 
-    randomize: tuple[str, ...] = ()
+    randomize: tuple[str, ...] = ("gravity", "noise_std")
     """Sheet parameters the correction trains on drawn anew at every reset (``env.randomize``'s names, over
-    their default ranges, :data:`warpcut.sim.config.RANDOMIZE_RANGES`), where the job's env randomises none:
-    the plan is optimised for the nominal sheet, the correction for how a sheet differs from it. Model
-    selection then scores each policy on the nominal sheet's held-out episodes and as many randomised ones
-    (:meth:`sheets`). Empty: the nominal sheet alone."""
+    their default ranges, :data:`warpcut.sim.config.RANDOMIZE_RANGES`: gravity 0 to twice the default,
+    process noise 0 to five times), where the job's env randomises none: the plan is optimised for the
+    nominal sheet, the correction for how a sheet differs from it. Model selection then scores each policy
+    on the nominal sheet's held-out episodes and as many randomised ones (:meth:`sheets`). Empty: the
+    nominal sheet alone (docs/results.md measures both)."""
 
     def __post_init__(self) -> None:  # each field as it is given (a file's or --set's key at a time)
         if isinstance(self.randomize, list):
