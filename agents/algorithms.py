@@ -5,7 +5,8 @@ Each learner has its folder (``agents/NAME/``) with its settings dataclass (the 
 :class:`agents.config.TrainConfig`) and its implementation:
 
 - ``gps`` (:mod:`agents.gps`, the default): guided policy search from the contour's optimised plan: the
-  student plays the teacher's plan as its feed-forward and learns a closed-loop correction by es;
+  student plays the teacher's plan as its feed-forward and learns a closed-loop correction by es, on sheets
+  that differ from the nominal one;
 - ``es`` (:mod:`agents.es`): evolution strategies on the policy's weights, an rsl-rl algorithm
   (``class_name`` ``agents.es.algorithm:ES``) that rsl-rl's ``OnPolicyRunner`` drives, one whole cut per env
   an iteration;
@@ -76,7 +77,7 @@ ALGORITHMS = {
     "gps": Algorithm(
         "gps",
         "guided policy search: the contour's es-optimised plan as the feed-forward of a closed-loop policy "
-        "whose correction es learns",
+        "whose correction es learns on sheets that differ",
         num_envs=256,
         iterations=None,
         action_type="continuous",

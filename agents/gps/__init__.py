@@ -5,7 +5,9 @@ estimator (a move per step, found by perturbing the moves themselves). The stude
 that plays the teacher's plan as its feed-forward (:class:`agents.gps.model.PlanFeedbackModel`: the plan is a
 table inside the network, indexed by the observation's time index, so the student imitates the teacher exactly
 from the start) and learns a correction on top from what it observes: an MLP and linear feedback gains on the
-tracking error, trained by evolution strategies on whole cuts of its own rollouts
-(:class:`agents.gps.algorithm.GPS`). Model selection (:class:`agents.gps.runner.GpsRunner`) scores the still
-grasp, the plan played open loop and the student on the same held-out episodes and keeps the best.
+tracking error, centred on the observations the plan itself meets, trained by evolution strategies on whole
+cuts of its own rollouts (:class:`agents.gps.algorithm.GPS`) on sheets that differ from the nominal one
+(:attr:`agents.gps.config.GpsConfig.randomize`). Model selection (:class:`agents.gps.runner.GpsRunner`) scores
+the still grasp, the plan played open loop and the student on the same held-out episodes, of the nominal
+sheet and of randomised ones, and keeps the best.
 """

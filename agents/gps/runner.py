@@ -5,9 +5,11 @@ Before the first validation or iteration it optimises the teacher's plan for the
 and segments (:func:`agents.plan_optimizer.optimizer.cached_plan`, the es estimator: what ``warpcut optimize
 --estimator es`` finds with the run's seed), kept in the run directory's ``teacher/`` (an interrupted
 optimisation continues there), and sets it as the student's feed-forward. Its first validation then scores, on
-the same held-out episodes, the still grasp (the plan zeroed: fixed tension) and the plan played open loop
-(the student before any correction); later validations score the student. Model selection keeps the best of
-the three (``best.pt``), so the student never ships worse than its teacher or a still grasp on those episodes.
+the same held-out episodes (the nominal sheet's, and randomised ones where the correction trains on them:
+:meth:`agents.gps.config.GpsConfig.sheets`), the still grasp (the plan zeroed: fixed tension) and the plan
+played open loop (the student before any correction); later validations score the student. Model
+selection keeps the best of the three (``best.pt``), so the student never ships worse than its teacher or a
+still grasp on those episodes.
 """
 
 from __future__ import annotations
