@@ -4,6 +4,7 @@ robustness target check for a policy label: never below no tension in the force 
 
     python scripts/robustness_tables.py REPORT.json [--policy LABEL ...]
     python scripts/robustness_tables.py --summary gains4 DIR/*.json   (one row per contour)
+    python scripts/robustness_tables.py --sweep-medians DIR/robustness-*.json   (a row per contour, study)
 """
 
 from __future__ import annotations
@@ -257,12 +258,43 @@ def summary(paths: list[Path], policy: str) -> list[str]:
     return lines
 
 
+def sweep_medians(paths: list[Path]) -> list[str]:
+    """One markdown row per study of each report: every method's median over the sweep of its per-value median
+    improvement over no tension (%), and, for each method besides fixed and the first plan, the values where
+    its median is at least that plan's (of all)."""
+    lines = []
+    for path in paths:
+        for study, report in _read(path).items():
+            methods = [m for m in report["methods"] if m != "none"] + [
+                m for m in (*report.get("runs", {}), *report.get("plans", {})) if m not in report["methods"]
+            ]
+            plan = next(iter(report.get("plans", {})), None)
+            if not lines:
+                lines = ["| contour | study | " + " | ".join(methods) + " | values where ≥ the plan |", ""]
+                lines[1] = "|---" * (len(methods) + 3) + "|"
+            medians = {m: np.asarray(report[m]["median"], dtype=float) for m in methods}
+            overall = " | ".join(f"{float(np.nanmedian(medians[m])):+.1f}" for m in methods)
+            ahead = ""
+            if plan is not None:
+                ahead = ", ".join(
+                    f"{m} {int(np.sum(medians[m] >= medians[plan]))}/{len(medians[plan])}"
+                    for m in methods
+                    if m not in ("fixed", plan)
+                )
+            lines.append(f"| {report['contour']} | {study} | {overall} | {ahead} |")
+    return lines
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("report", type=Path, nargs="+")
     parser.add_argument("--policy", action="append", default=None)
     parser.add_argument("--summary", metavar="POLICY", help="one row per report for POLICY (see summary())")
+    parser.add_argument("--sweep-medians", action="store_true", help="medians over sweeps (sweep_medians())")
     args = parser.parse_args()
+    if args.sweep_medians:
+        print("\n".join(sweep_medians(args.report)))
+        return
     if args.summary:
         print("\n".join(summary(args.report, args.summary)))
         return

@@ -195,8 +195,8 @@ def _study(study: str, values: list[float], nominal: float, rows: list[list[floa
     }  # fmt: skip
 
 
-def _robustness_target():
-    """The robustness target check of the script that writes docs/robustness.md's tables (it lives beside
+def _tables():
+    """The script that writes docs/robustness.md's tables and checks the robustness target (it lives beside
     them, not in the library: no command reads it)."""
     import importlib.util
     from pathlib import Path
@@ -205,10 +205,27 @@ def _robustness_target():
     spec = importlib.util.spec_from_file_location("robustness_tables", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    return module.robustness_target
+    return module
 
 
-robustness_target = _robustness_target()
+tables = _tables()
+robustness_target = tables.robustness_target
+
+
+def test_sweep_medians_compare_each_policy_with_the_plan(tmp_path):
+    """A row per study: each method's median over the sweep of its per-value medians, and the values where a
+    policy's median is at least the plan's."""
+    report = {
+        "study": "noise", "contour": "c", "values": [0.0, 0.03, 0.06], "methods": ["none", "fixed"],
+        "runs": {"p": "RUN"}, "plans": {"plan": "FILE"},
+        "fixed": {"median": [10.0, 20.0, 30.0]}, "p": {"median": [50.0, 40.0, 45.0]},
+        "plan": {"median": [45.0, 42.0, 44.0]},
+    }  # fmt: skip
+    path = tmp_path / "robustness-noise.json"
+    path.write_text(json.dumps(report))
+    lines = tables.sweep_medians([path])
+    assert lines[0] == "| contour | study | fixed | p | plan | values where ≥ the plan |"
+    assert lines[2] == "| c | noise | +20.0 | +45.0 | +44.0 | p 2/3 |"
 
 
 def test_robustness_target_reads_medians_and_intervals():
