@@ -330,6 +330,7 @@ def test_the_correction_trains_on_randomised_sheets_and_is_selected_on_both(tmp_
     evaluated and exported on) stays the job's nominal one; a job that randomises its env keeps its own."""
     from agents.jobs import TrainJob
     from agents.training import learner_sheets, train_contour
+    from envs.vector import PatternCutVecEnv
 
     options = PatternCutOptions(contour="circle-small", sim_config=SMALL)
     gps = GpsConfig(teacher_iterations=2, refine=EsConfig(population=4), randomize=("gravity",))
@@ -342,13 +343,29 @@ def test_the_correction_trains_on_randomised_sheets_and_is_selected_on_both(tmp_
     assert learner_sheets(nominal, options) == (options, [options])
     assert GpsConfig().randomize == ("gravity", "noise_std")  # the default: sheets that differ
 
+    # at this resolution the randomised sheets' cut is a step longer than the nominal sheet's (49 and 48)
+    sim = dataclasses.replace(SMALL, resolution=15)
     job = TrainJob(
-        contour="circle-small", sim=SMALL, train=dataclasses.replace(cfg, iterations=1), eval_trials=2
+        contour="circle-small", sim=sim, train=dataclasses.replace(cfg, iterations=1), eval_trials=2
     )
     train_contour(job, tmp_path / "run", progress=False)
     state = read_checkpoint(tmp_path / "run" / "latest.pt")
     assert len(state["infos"]["validation_baseline"]) == 2 * cfg.validation_trials
     assert not json.loads((tmp_path / "run" / "options.json").read_text()).get("randomize")
+    # the plan table is the teacher's length, so the nominal cut plays the plan's moves step for step
+    teacher = json.loads((tmp_path / "run" / "teacher" / "circle-small.json").read_text())["plan"]
+    nominal = PatternCutVecEnv(1, dataclasses.replace(options, sim_config=sim))
+    assert len(teacher) == nominal.scene.episode_steps == 48
+    randomised = PatternCutVecEnv(8, dataclasses.replace(options, sim_config=sim, randomize=("gravity",)))
+    randomised.reset(seed=0)
+    assert randomised.scene.episode_steps == 49
+    actor = load_policy(tmp_path / "run" / "latest.pt")
+    assert actor.lookup.plan.shape[0] == 48
+    times = torch.arange(48) / 48
+    torch.testing.assert_close(actor.lookup(times), torch.as_tensor(teacher, dtype=torch.float32)[:, :3])
+    longer = dataclasses.replace(job, train=dataclasses.replace(cfg, iterations=2))
+    train_contour(longer, tmp_path / "run", resume=tmp_path / "run", progress=False)  # resumes the table
+    assert load_policy(tmp_path / "run" / "latest.pt").lookup.plan.shape[0] == 48
 
 
 def test_a_student_saved_before_its_correction_was_centred_plays_as_it_did(trained):

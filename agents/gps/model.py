@@ -127,6 +127,14 @@ class PlanFeedbackModel(FeedbackMLPModel):
         self.lookup = PlanLookup(plan_steps, output_dim)
         self.nominal = NominalLookup(plan_steps, self.obs_dim)
 
+    def resize(self, steps: int) -> None:
+        """Hold a plan of ``steps`` moves (and as many nominal observations), zero and uncentred: the table
+        is the teacher's length, the nominal sheet's cut, which an env of randomised sheets (whose cut may be
+        a step longer or shorter) does not know when it builds the actor."""
+        device = self.lookup.plan.device
+        self.lookup = PlanLookup(steps, self.lookup.plan.shape[1]).to(device)
+        self.nominal = NominalLookup(steps, self.obs_dim).to(device)
+
     def set_plan(self, moves: torch.Tensor) -> None:
         """Play ``moves`` ((steps, >= actions), in the env's action units) as the feed-forward; their first
         ``actions`` columns, zero-padded or cut to the plan's steps."""

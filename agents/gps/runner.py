@@ -63,6 +63,7 @@ class GpsRunner(Runner):
                 f"then resume from {self.logger.log_dir}"
             ) from exc.__cause__
         moves = np.asarray(self.teacher.plan, dtype=np.float32) / np.float32(config.max_step_mm)
+        self._resize(len(moves))
         self.alg.actor.set_plan(torch.as_tensor(moves))
         self.own_summary["teacher"] = {
             "seconds": self.teacher.seconds,
@@ -105,7 +106,21 @@ class GpsRunner(Runner):
         self._teach()
         return super().learn(num_learning_iterations, init_at_random_ep_len)
 
+    def _resize(self, steps: int) -> None:
+        """Make the actor's plan ``steps`` moves long, the teacher's (the nominal sheet's cut; the training
+        env's cut may differ by a step on randomised sheets), as the checkpoints' description says."""
+        if steps != self.alg.actor.lookup.plan.shape[0]:
+            self.alg.actor.resize(steps)
+            self.cfg["actor"]["plan_steps"] = steps
+            self.policy_description["actor"]["plan_steps"] = steps
+
     def load_checkpoint(self, path: str | Path, state: dict | None = None) -> None:
+        from agents.checkpoints import read_checkpoint
+
+        state = read_checkpoint(path, map_location=self.device) if state is None else state
+        plan = state.get("actor_state_dict", {}).get("lookup.plan")
+        if plan is not None:  # the checkpoint's plan length, the teacher's
+            self._resize(int(plan.shape[0]))
         super().load_checkpoint(path, state)
         # the plan is in the checkpoint's actor, unless the run stopped while its teacher was optimised
         self._taught = "teacher" in self.own_summary
