@@ -76,6 +76,10 @@ class Runner(OnPolicyRunner):
         self.best_iterations: int | None = None
         self.validation_baseline: list | None = None
         self.selection_margin = 0.0
+        self.guarded_episodes: int | None = None
+        """The first this many episodes of each validation are the ones a policy must not do worse on than
+        the initial policy by more than ``selection_margin`` standard errors to be kept (gps: the nominal
+        sheet's, beside the randomised ones); None: no such episodes."""
         self.earlier_wall_time: float | None = 0.0
         """Training seconds of the runs before this one, up to the checkpoint it resumed (0 for a new run)."""
         self.started = time.monotonic()
@@ -150,9 +154,12 @@ class Runner(OnPolicyRunner):
             actor.train(was_training)
         error, score = self._selection_score(errors)
         self.validation.append({"iterations": self.iterations_done, "error": error, "score": score})
+        eligible = self._guarded_ok(errors)
+        if not eligible:
+            self.validation[-1]["guarded_worse"] = True
         if self.logger.writer is not None:
             self.logger.writer.add_scalar("Validation/error", error, self.iterations_done)
-        if self.best_score is None or score < self.best_score:
+        if eligible and (self.best_score is None or score < self.best_score):
             previous = self.best_error, self.best_score, self.best_iterations
             self.best_error, self.best_score, self.best_iterations = error, score, self.iterations_done
             if self.logger.log_dir is not None:
@@ -166,6 +173,19 @@ class Runner(OnPolicyRunner):
                     self.best_error, self.best_score, self.best_iterations = previous
                     raise
         return error
+
+    def _guarded_ok(self, errors: float | np.ndarray) -> bool:
+        """Whether a validation's :attr:`guarded_episodes` are no worse than the initial policy's by more than
+        ``selection_margin`` standard errors of their paired differences (the mean difference); True for the
+        initial validation itself, or without guarded episodes."""
+        n = self.guarded_episodes
+        values = np.asarray(errors, dtype=np.float64)
+        if not n or values.ndim == 0 or self.validation_baseline is None or len(self.validation) <= 1:
+            return True
+        difference = values.reshape(len(values), -1)[:n] - np.asarray(self.validation_baseline)[:n]
+        difference = difference.reshape(n, -1)
+        se = difference.std(axis=0, ddof=1) / np.sqrt(n) if n > 1 else np.zeros(difference.shape[1])
+        return bool(np.any(difference.mean(axis=0) <= self.selection_margin * se))
 
     def _selection_score(self, errors: float | np.ndarray) -> tuple[float, float]:
         """``(error, score)`` of one validation: the mean error, and the score model selection minimises. The

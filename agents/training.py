@@ -108,6 +108,7 @@ def train(
     label: str | None = None,
     marks: dict | None = None,
     init: str | Path | None = None,
+    guarded_episodes: int | None = None,
 ) -> dict:
     """Train a policy on ``env`` with ``cfg``'s learner; write its checkpoints and summary into ``out_dir``.
 
@@ -129,6 +130,10 @@ def train(
         label: The progress bar's label (default: the learner's name).
         marks: Fields the summary records as they are (e.g. whether the pinch point is feasible).
         init: A run or checkpoint whose policy the training starts from (fine-tuning; es; not on resume).
+        guarded_episodes: The first this many episodes of each validation are ones a policy is kept only if
+            it does no worse there than the initial policy, by ``selection_margin`` standard errors
+            (:attr:`agents.runner.Runner.guarded_episodes`: the nominal sheet's, where others are
+            randomised).
 
     Returns:
         The summary also written to ``out_dir/summary.json``.
@@ -150,6 +155,7 @@ def train(
     runner_class = resolve_callable(algorithm(cfg.algo).runner)
     runner: Runner = runner_class(env, rsl_cfg, out_dir, cfg.torch_device)
     runner.selection_margin = cfg.selection_margin
+    runner.guarded_episodes = guarded_episodes
     runner.algo, runner.seed = cfg.algo, seed
     if hasattr(env, "seed"):  # once the learner has set the env up (es: its common sheets)
         env.seed(seed)
@@ -367,6 +373,9 @@ def _train_contour(
     write_json(out_dir / CONFIG_FILE, to_plain(resolved))
     write_json(out_dir / OPTIONS_FILE, dataclasses.replace(options, device=None).to_dict())
     validate = None
+    # beside randomised sheets, the nominal sheet's episodes (the first set) are guarded: a policy that does
+    # worse there than the initial one is not kept, whatever it gains on the randomised ones
+    guarded = cfg.validation_trials if len(validated_on) > 1 else None
     if cfg.validation_trials > 0:
         fix = "set train.validation_trials to at most {fits} (0: none)"
         with batch_named("train.validation_trials", fix):
@@ -393,7 +402,7 @@ def _train_contour(
         marks["init"] = job.init
     summary = train(
         env, cfg, out_dir, seed=job.seed, resume=resume, progress=progress, validate=validate, label=label,
-        marks=marks, init=init,
+        marks=marks, init=init, guarded_episodes=guarded,
     )  # fmt: skip
     evaluation = evaluate_run(
         out_dir, trials=job.eval_trials, seed=job.seed + 1, device=device, step_callbacks=step_callbacks
