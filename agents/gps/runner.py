@@ -9,7 +9,8 @@ the same held-out episodes (the nominal sheet's, and randomised ones where the c
 :meth:`agents.gps.config.GpsConfig.sheets`), the still grasp (the plan zeroed: fixed tension) and the plan
 played open loop (the student before any correction); later validations score the student. Model
 selection keeps the best of the three (``best.pt``), so the student never ships worse than its teacher or a
-still grasp on those episodes.
+still grasp on those episodes; beside randomised episodes, only a policy that does no worse than the plan on
+the nominal sheet's is kept (:attr:`agents.runner.Runner.guarded_episodes`).
 """
 
 from __future__ import annotations
