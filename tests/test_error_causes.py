@@ -176,6 +176,7 @@ def test_a_first_best_checkpoint_not_written_says_there_was_none(monkeypatch, tm
     runner = SimpleNamespace(
         alg=SimpleNamespace(get_policy=lambda: torch.nn.Linear(1, 1)),
         _selection_score=lambda errors: (1.0, 1.0),
+        _guarded_ok=lambda errors: True,
         validation=[],
         logger=SimpleNamespace(writer=None, log_dir=str(tmp_path)),
         iterations_done=0,
