@@ -124,16 +124,12 @@ def train(
         progress: Show a progress bar (on stderr).
         validate: Scores an actor (called with the live actor; use its deterministic output) on episodes
             that are not the evaluation's: the error of each episode, an array ``(episodes,)``, the same
-            episodes every call. Called before training and every ``cfg.validation_interval`` iterations; the
-            policy with the lowest selection score is saved as ``best.pt`` (model selection on held-out
-            episodes; :attr:`TrainConfig.selection_margin`).
+            episodes every call, before training and every ``cfg.validation_interval`` iterations; the policy
+            with the lowest selection score is ``best.pt`` (:attr:`TrainConfig.selection_margin`).
         label: The progress bar's label (default: the learner's name).
         marks: Fields the summary records as they are (e.g. whether the pinch point is feasible).
         init: A run or checkpoint whose policy the training starts from (fine-tuning; es; not on resume).
-        guarded_episodes: The first this many episodes of each validation are ones a policy is kept only if
-            it does no worse there than the initial policy, by ``selection_margin`` standard errors
-            (:attr:`agents.runner.Runner.guarded_episodes`: the nominal sheet's, where others are
-            randomised).
+        guarded_episodes: :attr:`agents.runner.Runner.guarded_episodes` (the nominal sheet's, first).
 
     Returns:
         The summary also written to ``out_dir/summary.json``.
@@ -154,8 +150,7 @@ def train(
     rsl_cfg = cfg.to_rsl_rl(getattr(env, "num_action_choices", None), feedback, episode_steps)
     runner_class = resolve_callable(algorithm(cfg.algo).runner)
     runner: Runner = runner_class(env, rsl_cfg, out_dir, cfg.torch_device)
-    runner.selection_margin = cfg.selection_margin
-    runner.guarded_episodes = guarded_episodes
+    runner.selection_margin, runner.guarded_episodes = cfg.selection_margin, guarded_episodes
     runner.algo, runner.seed = cfg.algo, seed
     if hasattr(env, "seed"):  # once the learner has set the env up (es: its common sheets)
         env.seed(seed)
