@@ -402,3 +402,15 @@ def test_a_policy_worse_on_the_guarded_nominal_episodes_is_not_kept():
     assert runner._guarded_ok(np.asarray(worse_nominal))
     runner.validation, runner.guarded_episodes = [{}, {}], None
     assert runner._guarded_ok(np.asarray(worse_nominal))
+
+
+def test_a_run_saved_before_the_correction_was_centred_is_refused_on_resume_in_one_line(tmp_path):
+    """Its checkpoint lacks the nominal observations: resuming it says so and what to do instead."""
+    cfg = gps_config(iterations=1)
+    train(gps_env(cfg), cfg, tmp_path / "a", seed=0, progress=False, validate=validation(cfg))
+    path = tmp_path / "a" / "latest.pt"
+    state = read_checkpoint(path)
+    state["actor_state_dict"] = {k: v for k, v in state["actor_state_dict"].items() if "nominal" not in k}
+    torch.save(state, path)
+    with pytest.raises(ValueError, match="earlier warpcut, whose correction is not centred.*start a new run"):
+        train(gps_env(cfg), gps_config(iterations=2), tmp_path / "a", seed=0, resume=path, progress=False)

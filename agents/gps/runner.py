@@ -119,7 +119,13 @@ class GpsRunner(Runner):
         from agents.checkpoints import read_checkpoint
 
         state = read_checkpoint(path, map_location=self.device) if state is None else state
-        plan = state.get("actor_state_dict", {}).get("lookup.plan")
+        saved = state.get("actor_state_dict", {})
+        if "lookup.plan" in saved and "nominal.obs" not in saved:
+            raise ValueError(
+                f"{path}: a gps run of an earlier warpcut, whose correction is not centred on its plan: it "
+                "cannot go on training here; start a new run (its policy still plays, evaluates and exports)"
+            )
+        plan = saved.get("lookup.plan")
         if plan is not None:  # the checkpoint's plan length, the teacher's
             self._resize(int(plan.shape[0]))
         super().load_checkpoint(path, state)
