@@ -77,9 +77,9 @@ class Runner(OnPolicyRunner):
         self.validation_baseline: list | None = None
         self.selection_margin = 0.0
         self.guarded_episodes: int | None = None
-        """The first this many episodes of each validation are the ones a policy must not do worse on than
-        the initial policy by more than ``selection_margin`` standard errors to be kept (gps: the nominal
-        sheet's, beside the randomised ones); None: no such episodes."""
+        """The first this many episodes of each validation are the ones a policy must not do worse on, on
+        average, than the initial policy to be kept (gps: the nominal sheet's, beside the randomised ones);
+        None: no such episodes."""
         self.earlier_wall_time: float | None = 0.0
         """Training seconds of the runs before this one, up to the checkpoint it resumed (0 for a new run)."""
         self.started = time.monotonic()
@@ -175,17 +175,17 @@ class Runner(OnPolicyRunner):
         return error
 
     def _guarded_ok(self, errors: float | np.ndarray) -> bool:
-        """Whether a validation's :attr:`guarded_episodes` are no worse than the initial policy's by more than
-        ``selection_margin`` standard errors of their paired differences (the mean difference); True for the
-        initial validation itself, or without guarded episodes."""
+        """Whether a validation's :attr:`guarded_episodes` are, on average, no worse than the initial policy's
+        on the same episodes (a mean paired difference ≤ 0: no margin for noise, since the initial policy is
+        the one optimised for those episodes' sheet); True for the initial validation itself, or without
+        guarded episodes."""
         n = self.guarded_episodes
         values = np.asarray(errors, dtype=np.float64)
         if not n or values.ndim == 0 or self.validation_baseline is None or len(self.validation) <= 1:
             return True
         difference = values.reshape(len(values), -1)[:n] - np.asarray(self.validation_baseline)[:n]
         difference = difference.reshape(n, -1)
-        se = difference.std(axis=0, ddof=1) / np.sqrt(n) if n > 1 else np.zeros(difference.shape[1])
-        return bool(np.any(difference.mean(axis=0) <= self.selection_margin * se))
+        return bool(np.any(difference.mean(axis=0) <= 0.0))
 
     def _selection_score(self, errors: float | np.ndarray) -> tuple[float, float]:
         """``(error, score)`` of one validation: the mean error, and the score model selection minimises. The
