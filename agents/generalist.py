@@ -182,6 +182,35 @@ def generalist_result(
     return MethodResult.from_rollouts(rollouts)
 
 
+def student_moves(
+    generalist: Generalist,
+    contour: Contour,
+    pinch: np.ndarray,
+    segments: Sequence[np.ndarray] | None,
+    config: SimConfig,
+    seed: int,
+    device: str | None = None,
+) -> np.ndarray:
+    """``(T, 3)`` the grasp moves (mm) ``generalist`` makes, deterministic, in one episode of cutting
+    ``contour`` (``segments``, at ``pinch``) on ``config``'s sheet with the noise of ``seed``: what a teacher
+    tethered to it starts from (``warpcut teachers --set near=DIR``)."""
+    from agents.policies import policy_errors
+    from envs.vector import PatternCutVecEnv
+
+    options = generalist_options(
+        generalist, [contour], [pinch], None if segments is None else [segments], config, 1, device,
+        allow_infeasible_pinch=True,
+    )  # fmt: skip
+    moves: list[np.ndarray] = []
+
+    def record(task, last_moves) -> None:
+        if last_moves is not None:
+            moves.append(np.array(last_moves[0], dtype=np.float32))
+
+    policy_errors(generalist.actor, PatternCutVecEnv(1, options), seed=seed, on_step=record)
+    return np.stack(moves) if moves else np.zeros((0, 3), dtype=np.float32)
+
+
 def fine_tuning_defaults(job, explicit: set[str]):
     """``job`` (a :class:`agents.jobs.TrainJob` with ``init``) observing and acting as its generalist does
     (its look-ahead, fiducials, actions) and, for es, with its network (widths, activation, normaliser,

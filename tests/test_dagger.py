@@ -225,3 +225,35 @@ def test_a_dagger_generalist_has_its_own_observation_and_network_unless_given(da
         yaml.safe_load(printed)["train"]["algo"] == "es"
         and yaml.safe_load(printed)["env"]["num_fiducials"] == 12
     )
+
+
+def test_teachers_near_a_student_start_from_its_moves_and_a_heavy_tether_keeps_them(student, tmp_path, capfd):
+    """Guided policy search's next round: each teacher starts from the student's own moves on its cut (and
+    records the student's and the still grasp's validation errors); a tether far heavier than any gain keeps
+    the student's moves as the teacher; a tether needs a student, and a student must be a generalist."""
+    from agents.generalist import load_generalist, student_moves
+    from agents.plan_optimizer.config import GRAD_SEED_OFFSET
+
+    out = tmp_path / "near"
+    near = ["--set", f"near={student[0]}", "--set", "tether=1e6"]
+    code, output, _ = invoke(["teachers", "--count", "2", "--out", str(out), *TEACHER, *near])
+    assert code == 0, output
+    index = json.loads((out / INDEX_FILE).read_text())
+    assert "mean_start_error_vertices" in index
+    config = SimConfig(resolution=13)
+    generalist = load_generalist(student[0])
+    for row, teacher in zip(index["contours"], load_teachers(out, config), strict=True):
+        assert row["error_vertices"] == row["start_error_vertices"]  # the student's moves, kept
+        moves = student_moves(
+            generalist, teacher.contour, teacher.pinch, teacher.segments, config, GRAD_SEED_OFFSET
+        )
+        np.testing.assert_array_equal(teacher.plan[: len(moves)], np.clip(moves, -1.0, 1.0))
+    message = refused(
+        ["teachers", "--count", "2", "--out", str(tmp_path / "a"), *TEACHER, "--set", "tether=0.1"], capfd
+    )
+    assert "TeachersJob.tether" in message and "near" in message
+    message = refused(
+        ["teachers", "--count", "2", "--out", str(tmp_path / "b"), *TEACHER, "--set", f"near={tmp_path}"],
+        capfd,
+    )
+    assert "generalist" in message and "warpcut generalist" in message

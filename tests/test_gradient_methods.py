@@ -9,7 +9,7 @@ import pytest
 
 from agents.config import TrainConfig
 from agents.plan_optimizer.config import GRAD_CONFIGS, GradConfig, grad_config
-from agents.plan_optimizer.estimators import SmoothedGradient
+from agents.plan_optimizer.estimators import SmoothedGradient, Tether, path_distance
 from agents.plan_optimizer.optimizer import cached_plan, grad_result, optimize_plan
 from agents.plan_optimizer.plan import PlanPolicy, PlanResult
 from warpcut import CuttingTask, load_contour
@@ -52,7 +52,9 @@ def test_optimize_plan_lowers_the_surrogate_within_the_move_limits():
     np.testing.assert_array_equal(again.plan, result.plan)  # bit for bit: a read-back plan plays the same
 
 
-def _interrupt_and_resume(monkeypatch, owner, name: str, call: int, settings, state) -> PlanResult:
+def _interrupt_and_resume(
+    monkeypatch, owner, name: str, call: int, settings, state, **anchored
+) -> PlanResult:
     """Optimise circle-small's plan with ``owner.name`` interrupted (Ctrl-C) at its ``call``-th call, check
     the state file holds the iterations done, and continue from it; returns the continued result."""
     method, calls = getattr(owner, name), []
@@ -66,10 +68,10 @@ def _interrupt_and_resume(monkeypatch, owner, name: str, call: int, settings, st
     contour = load_contour("circle-small")
     monkeypatch.setattr(owner, name, interrupted)
     with pytest.raises(KeyboardInterrupt):
-        optimize_plan(contour, PINCH, config=SMALL, settings=settings, state_file=state)
+        optimize_plan(contour, PINCH, config=SMALL, settings=settings, state_file=state, **anchored)
     assert json.loads(state.read_text())["iteration"] == call - 1
     monkeypatch.setattr(owner, name, method)
-    return optimize_plan(contour, PINCH, config=SMALL, settings=settings, state_file=state)
+    return optimize_plan(contour, PINCH, config=SMALL, settings=settings, state_file=state, **anchored)
 
 
 def test_an_interrupted_optimisation_continues_from_its_state(tmp_path, monkeypatch):
@@ -163,6 +165,67 @@ def test_the_es_estimator_points_uphill_from_antithetic_ranked_pairs():
     big = SmoothedGradient(_QuadraticTask(target), dataclasses.replace(settings, es_sigma_mm=5.0), 1.0, 4)
     big(plan)
     assert np.abs(big.task.played[0]).max() <= 1.0
+
+
+def test_the_tether_costs_the_mean_squared_distance_between_grasp_paths():
+    """A plan's path is its moves added up (each clipped as the simulator clips it): a first move 1 mm off
+    the anchor's leaves the whole path 1 mm off; a move undone by the next one costs only its own step."""
+    anchor = np.zeros((4, 3), np.float32)
+    assert path_distance(anchor, anchor, 1.0) == 0.0
+    shifted = anchor.copy()
+    shifted[0, 0] = 1.0
+    assert path_distance(shifted, anchor, 1.0) == pytest.approx(1.0)
+    jitter = anchor.copy()
+    jitter[1, 1], jitter[2, 1] = 1.0, -1.0
+    assert path_distance(jitter, anchor, 1.0) == pytest.approx(0.25)
+    clipped = shifted * 3.0  # 3 mm asked, 1 mm moved
+    assert path_distance(np.stack([clipped, anchor]), anchor, 1.0) == pytest.approx([1.0, 0.0])
+
+
+def test_a_tethered_es_estimator_is_pulled_back_towards_its_anchor():
+    """The tether's cost joins each perturbed plan's error before the ranking: far from the anchor, with a
+    heavy tether, the estimate points away from it (uphill: the optimiser steps against it); the mean error it
+    reports is the error alone."""
+    settings = GradConfig(estimator="es", es_population=64, es_trials=2, es_sigma_mm=0.1)
+    target = np.full((3, 3), 0.5, np.float32)
+    plan = np.full((3, 3), -0.5, np.float32)  # the error pulls up, towards the target
+    free = SmoothedGradient(_QuadraticTask(target), settings, 1.0, seed=4)(plan)
+    assert (free[1] < 0).mean() > 0.8
+    anchor = np.full((3, 3), -1.0, np.float32)
+    held = SmoothedGradient(_QuadraticTask(target), settings, 1.0, 4, Tether(anchor, 100.0))(plan)
+    assert (held[1] > 0).mean() > 0.8  # the tether outweighs the error: back down, towards the anchor
+    assert held[0] == pytest.approx(free[0])
+
+
+def test_an_anchored_optimisation_starts_from_the_anchor_and_a_heavy_tether_keeps_it():
+    """With an anchor the first iterate is the anchor's moves (padded to the cut), iteration 0 records the
+    still grasp's validation too, and a tether far heavier than any gain leaves the anchor the plan kept; a
+    tether needs an anchor."""
+    contour = load_contour("circle-small")
+    settings = GradConfig(iterations=3, es_population=8, es_trials=1, validation_trials=2)
+    free = optimize_plan(contour, PINCH, config=SMALL, settings=settings)
+    anchor = np.asarray(free.plan[:-5] + 0.2, np.float32)  # shorter than the cut: padded with still steps
+    held = optimize_plan(contour, PINCH, config=SMALL, settings=settings, anchor=anchor, tether=1e6)
+    first = held.history[0]
+    assert first["tether_vertices"] == 0.0 and "still_error_vertices" in first
+    assert first["validation_error_vertices"] != first["still_error_vertices"]
+    assert held.best_iteration == 0
+    np.testing.assert_array_equal(held.plan[: len(anchor)], np.clip(anchor, -1.0, 1.0))
+    assert not held.plan[len(anchor) :].any()
+    with pytest.raises(ValueError, match="tether: needs an anchor"):
+        optimize_plan(contour, PINCH, config=SMALL, settings=settings, tether=0.1)
+
+
+def test_an_anchored_tethered_optimisation_resumes_bit_for_bit(tmp_path, monkeypatch):
+    contour = load_contour("circle-small")
+    settings = GradConfig(iterations=3, es_population=8, es_trials=1, validation_trials=2)
+    anchored = {"anchor": np.full((10, 3), 0.1, np.float32), "tether": 0.05}
+    whole = optimize_plan(contour, PINCH, config=SMALL, settings=settings, **anchored)
+    resumed = _interrupt_and_resume(
+        monkeypatch, SmoothedGradient, "__call__", 2, settings, tmp_path / "s.json", **anchored
+    )
+    np.testing.assert_array_equal(resumed.plan, whole.plan)
+    assert [h["tether_vertices"] for h in resumed.history] == [h["tether_vertices"] for h in whole.history]
 
 
 def test_es_optimises_the_path_score_and_resumes_bit_for_bit(tmp_path, monkeypatch):

@@ -40,7 +40,8 @@ def command(
     --count.
 
     Everything but the flags is set with --config FILE and --set KEY=VALUE (the kinds of contour: kinds; the
-    teacher's optimiser: grad.*; the physics: sim.*); --print-config shows them all.
+    teacher's optimiser: grad.*; the physics: sim.*; a generalist every teacher starts from and is tethered
+    to, guided policy search's next round: near=DIR, tether=W); --print-config shows them all.
     """
     from agents.cluster import executor
     from agents.jobs import TeachersJob
@@ -52,6 +53,10 @@ def command(
         settings.print_config(job)
         return
     check_planner_memory(job.candidates, job.sim)
+    if job.near is not None:
+        from agents.generalist import generalist_dir
+
+        generalist_dir(job.near)
     out, claim = outputs.claim(out, "teachers", resume, overwrite, "teachers")
     from agents.pipelines.teachers import make_teachers  # torch: after every check
 

@@ -27,6 +27,8 @@ from warpcut.planning.generate import EXTRA_KINDS, KINDS, MAX_CONTOURS
 from warpcut.sim.config import SimConfig
 from warpcut.validation import (
     check_integer,
+    check_number,
+    check_text,
     fail,
 )
 
@@ -138,9 +140,21 @@ class TeachersJob:
     """The physics and the protocol the teachers are optimised under."""
     grad: GradConfig = field(default_factory=lambda: GRAD_CONFIGS["es"])
     """The teacher: the plan optimiser's settings (``warpcut optimize``'s, the es estimator)."""
+    near: str | None = None
+    """A generalist (a directory of ``warpcut generalist``, or ``generalist``) that every teacher starts
+    from: its deterministic moves on the contour's cut (the nominal sheet, the optimiser's noise) are the
+    optimiser's first plan, and ``tether`` keeps the teacher near them (guided policy search: teachers found
+    near the student agree with one another where the student's behaviour does). None: teachers start from a
+    still grasp."""
+    tether: float = 0.0
+    """With ``near``: the weight (vertices per mm²) of the cost of the teacher's grasp path leaving the
+    student's, the mean over the cut's steps of their squared distance; 0: the student's moves are only the
+    start (:func:`agents.plan_optimizer.optimizer.optimize_plan`)."""
 
     def __post_init__(self) -> None:
         _check_fields(self)
+        check_text("TeachersJob.near", self.near, optional=True, note="teachers start from a still grasp")
+        check_number("TeachersJob.tether", self.tether, 0, unit="vertices per mm^2")
         check_integer("TeachersJob.count", self.count, 1, MAX_CONTOURS)
         _counted("TeachersJob.candidates", self.candidates)
         if (
@@ -151,7 +165,9 @@ class TeachersJob:
             fail("TeachersJob.kinds", f"a non-empty list of {', '.join(KINDS + EXTRA_KINDS)}", self.kinds)
 
     def check(self) -> TeachersJob:
-        """Itself (every field is checked as it is set)."""
+        """Itself, or ``ConfigError`` for fields that do not fit together (each is checked as it is set)."""
+        if self.tether and self.near is None:
+            fail("TeachersJob.tether", "tethers teachers to a student: give near=DIR too, or 0", self.tether)
         return self
 
     def unused_keys(self) -> dict[str, str]:

@@ -70,6 +70,10 @@ def _make_teachers(
     if resume and (out / CONFIG_FILE).is_file():  # its settings, but a dataset may grow (count)
         check_resumed_job(out, dataclasses.replace(job, count=read_json(out / CONFIG_FILE).get("count")))
     config = job.sim.validated()
+    if job.near is not None:  # a student that cannot be played is refused before any work
+        from agents.generalist import load_generalist
+
+        load_generalist(job.near)
     write_json(out / CONFIG_FILE, to_plain(job))
     started = time.perf_counter()
     contours = generate_contours(job.count, "train", job.seed, config, job.kinds)
@@ -78,7 +82,7 @@ def _make_teachers(
         folder.mkdir(parents=True, exist_ok=True)
     unit = functools.partial(
         _teacher_unit, config=config, candidates=job.candidates, seed=job.seed, arm=job.arm, grad=job.grad,
-        device=device,
+        device=device, near=job.near, tether=job.tether,
     )  # fmt: skip
     count, finished = len(contours), iter(range(1, len(contours) + 1))
     if cluster.address is not None:
@@ -103,6 +107,11 @@ def _make_teachers(
         "teacher_seconds": round(sum(r["seconds"] for r in rows), 1),
         "mean_error_vertices": float(np.mean([r["error_vertices"] for r in rows])),
         "mean_still_error_vertices": float(np.mean([r["still_error_vertices"] for r in rows])),
+        **(
+            {"mean_start_error_vertices": float(np.mean([r["start_error_vertices"] for r in rows]))}
+            if job.near is not None
+            else {}
+        ),
         "contours": rows,
     }
     write_json(out / INDEX_FILE, index)
@@ -110,9 +119,22 @@ def _make_teachers(
 
 
 def _teacher_unit(
-    contour: Contour, folder: Path | None, *, config, candidates: int, seed: int, arm, grad, device
+    contour: Contour,
+    folder: Path | None,
+    *,
+    config,
+    candidates: int,
+    seed: int,
+    arm,
+    grad,
+    device,
+    near: str | None = None,
+    tether: float = 0.0,
 ) -> dict:
-    """One contour's cut and teacher, kept in ``folder`` (a unit of :func:`make_teachers`): its index row."""
+    """One contour's cut and teacher, kept in ``folder`` (a unit of :func:`make_teachers`): its index row.
+    With ``near``, the teacher starts from that generalist's moves on the cut, tethered to them by
+    ``tether`` (:class:`agents.jobs.TeachersJob`)."""
+    from agents.plan_optimizer.config import GRAD_SEED_OFFSET
     from agents.plan_optimizer.optimizer import cached_plan
     from warpcut.planning import plan_cut
 
@@ -131,10 +153,20 @@ def _teacher_unit(
         }  # fmt: skip
         write_json(cut_file, cut)
     segments = [np.asarray(s, dtype=np.float64) for s in cut["segments"]]
+    anchor = None
+    if near is not None:
+        from agents.generalist import load_generalist, student_moves
+
+        student = load_generalist(near)
+        anchor = student_moves(
+            student, contour, np.asarray(cut["pinch"]), segments, config, seed + GRAD_SEED_OFFSET, device
+        )
     result = cached_plan(
-        contour, np.asarray(cut["pinch"]), segments, config, grad, device, seed, folder, arm=arm
-    )
+        contour, np.asarray(cut["pinch"]), segments, config, grad, device, seed, folder, arm=arm,
+        anchor=anchor, tether=tether,
+    )  # fmt: skip
     history = result.history
+    start = {} if near is None else {"start_error_vertices": float(history[0]["validation_error_vertices"])}
     return {
         "contour": contour.name,
         "kind": contour.name.rsplit("-", 1)[-1],
@@ -142,7 +174,10 @@ def _teacher_unit(
         "segments": len(segments),
         "steps": len(result.plan),
         "error_vertices": float(history[result.best_iteration]["validation_error_vertices"]),
-        "still_error_vertices": float(history[0]["validation_error_vertices"]),
+        "still_error_vertices": float(
+            history[0].get("still_error_vertices", history[0]["validation_error_vertices"])
+        ),
+        **start,
         "best_iteration": result.best_iteration,
         "seconds": round(result.seconds, 2),
     }

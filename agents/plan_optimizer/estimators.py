@@ -5,12 +5,36 @@ iterate is scored on (:class:`HeldOut`, weighed by :class:`RelativeWeights` on r
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from agents.plan_optimizer.config import GradConfig
 from agents.plan_optimizer.plan import PlanPolicy
 from warpcut.sim.config import SimConfig, randomize_ranges, sample_parameters
 from warpcut.task import CuttingTask, NoTensionReference
+
+
+def path_distance(plans: np.ndarray, anchor: np.ndarray, max_step: float) -> np.ndarray:
+    """The mean over steps of the squared distance (mm²) between the grasp path of each of ``plans`` (``(P, T,
+    3)``, or one ``(T, 3)``) and that of ``anchor`` (``(T, 3)``): each path is its moves added up, each move
+    clipped to ``max_step`` per axis as the simulator clips it (the displacement cap left out)."""
+    paths = np.cumsum(np.clip(plans, -max_step, max_step), axis=-2, dtype=np.float64)
+    reference = np.cumsum(np.clip(anchor, -max_step, max_step), axis=0, dtype=np.float64)
+    return ((paths - reference) ** 2).sum(axis=-1).mean(axis=-1)
+
+
+class Tether(NamedTuple):
+    """A cost on a plan's leaving an anchor's moves (guided policy search's trust region around a student,
+    :func:`agents.plan_optimizer.optimizer.optimize_plan`'s ``anchor``): ``weight`` (vertices per mm²) times
+    :func:`path_distance` from ``anchor`` (``(T, 3)`` mm)."""
+
+    anchor: np.ndarray
+    weight: float
+
+    def cost(self, plans: np.ndarray, max_step: float) -> np.ndarray:
+        """The tether's cost (vertices) of each of ``plans``."""
+        return self.weight * path_distance(plans, self.anchor, max_step)
 
 
 class TapeGradient:
@@ -62,10 +86,18 @@ class SmoothedGradient:
 
     ``task``: the ``es_population x es_trials`` episodes (plan ``p``'s trials are envs ``p * es_trials ...``);
     ``seed``: the perturbations' random stream (NumPy's PCG64; :meth:`state` and :meth:`load` keep it across
-    a resume)."""
+    a resume); ``tether``: a cost added to each perturbed plan's error before the ranking (:class:`Tether`),
+    or None."""
 
-    def __init__(self, task: CuttingTask, settings: GradConfig, max_step: float, seed: int):
-        self.task, self.settings, self.max_step = task, settings, float(max_step)
+    def __init__(
+        self,
+        task: CuttingTask,
+        settings: GradConfig,
+        max_step: float,
+        seed: int,
+        tether: Tether | None = None,
+    ) -> None:
+        self.task, self.settings, self.max_step, self.tether = task, settings, float(max_step), tether
         self.rng = np.random.default_rng(seed)
         self.ranges = randomize_ranges(settings.es_randomize, settings.es_randomize_ranges)
         self.weights = RelativeWeights(task.config) if self.ranges else None
@@ -120,6 +152,9 @@ class SmoothedGradient:
         errors = errors.reshape(population, trials)
         finite = np.isfinite(errors).all(axis=1)
         fitness = np.where(finite, errors.mean(axis=1), np.inf)
+        mean = float(np.mean(fitness[finite])) if finite.any() else float("nan")
+        if self.tether is not None:
+            fitness = fitness + self.tether.cost(plans, self.max_step)
         ranks = np.empty(population)
         ranks[np.argsort(fitness, kind="stable")] = np.arange(population)
         centred = ranks / (population - 1) - 0.5  # the highest error +0.5
@@ -127,7 +162,6 @@ class SmoothedGradient:
         gains_grad = (
             None if eps_gains is None else np.tensordot(centred, eps_gains, axes=1) / (population * sigma)
         )
-        mean = float(np.mean(fitness[finite])) if finite.any() else float("nan")
         return mean, grad, gains_grad
 
 

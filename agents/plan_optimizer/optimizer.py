@@ -32,7 +32,7 @@ import numpy as np
 
 from agents.adam import Adam
 from agents.plan_optimizer.config import GRAD_CONFIG, GRAD_SEED_OFFSET, GradConfig
-from agents.plan_optimizer.estimators import HeldOut, SmoothedGradient, TapeGradient
+from agents.plan_optimizer.estimators import HeldOut, SmoothedGradient, TapeGradient, Tether
 from agents.plan_optimizer.plan import PlanResult
 from warpcut.contours import Contour
 from warpcut.planning import ArmModel
@@ -112,6 +112,8 @@ def optimize_plan(
     log: Callable[[str], None] = lambda _: None,
     state_file: Path | None = None,
     allow_infeasible_pinch: bool = False,
+    anchor: np.ndarray | None = None,
+    tether: float = 0.0,
 ) -> PlanResult:
     """Optimise a plan (open or closed loop: ``es_feedback_phases``) for ``contour`` at ``pinch`` (module).
 
@@ -127,19 +129,25 @@ def optimize_plan(
             optimisation interrupted (Ctrl-C, a crash) continues from it when it exists (it must be of
             the same contour, pinch point and settings).
         allow_infeasible_pinch: Optimise at a ``pinch`` the gripper could not hold instead of refusing it.
+        anchor: ``(T, 3)`` moves (mm), e.g. a student's on this cut, to start from instead of a still grasp
+            (cut or padded with still steps); iteration 0 then also records ``still_error_vertices``.
+        tether: With ``anchor`` (es): the weight (vertices per mm²) of a cost on leaving it, added to every
+            error the optimiser ranks and selects by (:class:`~agents.plan_optimizer.estimators.Tether`):
+            guided policy search's trust region, which keeps the plan near the student it teaches.
     """
-    from warpcut.io import write_json
-
     settings, config, arm = settings.validated(), (config or SimConfig()).validated(), arm or ArmModel()
     pinch = np.asarray(pinch, dtype=np.float64).reshape(2)
     check_pinch(pinch, contour, config, segments, arm, allow=allow_infeasible_pinch)  # InfeasiblePinch
     es = settings.estimator == "es"
+    if tether and (anchor is None or not es):
+        raise ValueError("tether: needs an anchor plan and the es estimator; give both, or tether 0")
     b, batch = _batch(settings)
+    cost = None
 
     def engine(point: np.ndarray) -> TapeGradient | SmoothedGradient:
         task = _episodes(contour, point, segments, config, b, device, seed + GRAD_SEED_OFFSET, batch)
         if es:
-            return SmoothedGradient(task, settings, config.max_step_mm, seed)
+            return SmoothedGradient(task, settings, config.max_step_mm, seed, cost)
         return TapeGradient(task, settings, seed + GRAD_SEED_OFFSET)
 
     def checker(point: np.ndarray) -> HeldOut | None:
@@ -150,29 +158,23 @@ def optimize_plan(
     rollout, validation = engine(pinch), checker(pinch)
     steps = rollout.num_steps
     plan = np.zeros((steps, 3), dtype=np.float32)
+    identity = {"contour": contour.name, "pinch": pinch.tolist(), "steps": steps}
+    identity.update(dataclasses.asdict(settings))
+    if anchor is not None:
+        plan = _fitted(anchor, steps, config.max_step_mm)
+        identity.update(anchor=plan.tolist(), tether=float(tether))
+        if tether:
+            cost = rollout.tether = Tether(plan.copy(), float(tether))
     phases = settings.es_feedback_phases
     shape = (phases, 3, 4 if settings.es_feedback_sag else 2)  # 3 x 4: scheduled on the sag
     gains, gain_moves = (np.zeros(shape, np.float32) if phases else None), Adam(shape, settings.learning_rate)
     moves, pinch_moves = Adam(plan.shape, settings.learning_rate), Adam((2,), settings.pinch_learning_rate)
     history, best, first, elapsed = [], None, 0, 0.0
-    identity = {
-        "contour": contour.name,
-        "pinch": pinch.tolist(),
-        "steps": steps,
-        **dataclasses.asdict(settings),
-    }
     state = _read_state(state_file, identity)
     if state is not None:
         first, history, elapsed = state["iteration"], state["history"], state["seconds"]
-        plan, pinch = np.asarray(state["plan"], np.float32), np.asarray(state["pinch"])
-        moves.load(state["moves"])
-        pinch_moves.load(state["pinch_moves"])
-        gain_moves.load(state["gain_moves"])
-        rollout.load(state["estimator"])
-        gains = None if state["gains"] is None else np.asarray(state["gains"], np.float32)
-        error, it, best_plan, best_pinch, best_gains = state["best"]
-        best_gains = None if best_gains is None else np.asarray(best_gains, np.float32)
-        best = (error, it, np.asarray(best_plan, np.float32), np.asarray(best_pinch), best_gains)
+        plan, pinch, gains, best = _resumed(state, {"moves": moves, "pinch_moves": pinch_moves,
+                                                    "gain_moves": gain_moves}, rollout)  # fmt: skip
         if not np.allclose(pinch, identity["pinch"]):
             rollout, validation = engine(pinch), checker(pinch)
         log(f"  continuing from iteration {first} ({state_file})")
@@ -184,6 +186,12 @@ def optimize_plan(
         error = record["error_vertices"]  # es: the perturbed plans'; the plan itself is validated
         if validation is not None:  # model selection on held-out episodes
             error = record["validation_error_vertices"] = validation(plan, gains)
+            if anchor is not None and iteration == 0:
+                still = None if gains is None else np.zeros_like(gains)
+                record["still_error_vertices"] = validation(np.zeros_like(plan), still)
+        if cost is not None:  # selection on the tethered objective, as the ranking
+            record["tether_vertices"] = float(cost.cost(plan, config.max_step_mm))
+            error = error + record["tether_vertices"]
         record["seconds"] = time.perf_counter() - start
         history.append(record)
         if best is None or error < best[0]:
@@ -203,23 +211,62 @@ def optimize_plan(
                 pinch = moved
                 rollout, validation = engine(pinch), checker(pinch)
         if state_file is not None:
-            error, it, best_plan, best_pinch, best_gains = best
-            listed = [None if g is None else g.tolist() for g in (gains, best_gains)]
-            state = {
-                "identity": identity, "iteration": iteration + 1, "history": history,
-                "seconds": time.perf_counter() - start, "plan": plan.tolist(), "pinch": pinch.tolist(),
-                "gains": listed[0], "moves": moves.state(), "pinch_moves": pinch_moves.state(),
-                "gain_moves": gain_moves.state(),
-                "best": [error, it, best_plan.tolist(), best_pinch.tolist(), listed[1]],
-                "estimator": rollout.state(),
-            }  # fmt: skip
-            write_json(state_file, state)
+            optimizers = {"moves": moves, "pinch_moves": pinch_moves, "gain_moves": gain_moves}
+            _save_state(state_file, identity, iteration + 1, history, start, plan, pinch, gains, optimizers,
+                        best, rollout)  # fmt: skip
     _, best_iteration, best_plan, best_pinch, best_gains = best
     env_steps = settings.iterations * b * steps if es else (settings.iterations + 1) * b * steps
     return PlanResult(
         contour.name, [float(v) for v in best_pinch], best_plan, best_iteration, history,
         time.perf_counter() - start, env_steps, best_gains,
     )  # fmt: skip
+
+
+def _fitted(anchor: np.ndarray, steps: int, max_step: float) -> np.ndarray:
+    """``anchor``'s moves as a plan of ``steps`` moves: cut, or padded with still steps, each axis clipped to
+    ``max_step``; ``ValueError`` for moves that are not ``(T, 3)`` finite numbers."""
+    moves = np.asarray(anchor, dtype=np.float32)
+    if moves.ndim != 2 or moves.shape[1] != 3 or not np.all(np.isfinite(moves)):
+        raise ValueError(f"anchor: must be (T, 3) finite moves in mm (got shape {moves.shape})")
+    plan = np.zeros((steps, 3), dtype=np.float32)
+    plan[: min(steps, len(moves))] = moves[:steps]
+    return np.clip(plan, -max_step, max_step).astype(np.float32)
+
+
+def _resumed(state: dict, optimizers: dict, rollout) -> tuple:
+    """From :func:`optimize_plan`'s saved ``state``: ``(plan, pinch, gains, best)``, with its Adam
+    ``optimizers`` (by name) and the estimator ``rollout`` loaded as they were."""
+    for name, adam in optimizers.items():
+        adam.load(state[name])
+    rollout.load(state["estimator"])
+    plan, pinch = np.asarray(state["plan"], np.float32), np.asarray(state["pinch"])
+    gains = None if state["gains"] is None else np.asarray(state["gains"], np.float32)
+    error, it, best_plan, best_pinch, best_gains = state["best"]
+    best_gains = None if best_gains is None else np.asarray(best_gains, np.float32)
+    return (
+        plan,
+        pinch,
+        gains,
+        (error, it, np.asarray(best_plan, np.float32), np.asarray(best_pinch), best_gains),
+    )
+
+
+def _save_state(
+    state_file, identity, iteration, history, start, plan, pinch, gains, optimizers, best, rollout
+) -> None:
+    """Write :func:`optimize_plan`'s state after an iteration (atomically), what a resume continues from."""
+    from warpcut.io import write_json
+
+    error, it, best_plan, best_pinch, best_gains = best
+    listed = [None if g is None else g.tolist() for g in (gains, best_gains)]
+    state = {
+        "identity": identity, "iteration": iteration, "history": history,
+        "seconds": time.perf_counter() - start, "plan": plan.tolist(), "pinch": pinch.tolist(),
+        "gains": listed[0], **{name: adam.state() for name, adam in optimizers.items()},
+        "best": [error, it, best_plan.tolist(), best_pinch.tolist(), listed[1]],
+        "estimator": rollout.state(),
+    }  # fmt: skip
+    write_json(state_file, state)
 
 
 def grad_result(
@@ -276,14 +323,20 @@ def cached_plan(
     arm: ArmModel | None = None,
     count: str = "",
     allow_infeasible_pinch: bool = False,
+    *,
+    anchor: np.ndarray | None = None,
+    tether: float = 0.0,
 ) -> PlanResult:
     """:func:`optimize_plan`, kept in ``folder/NAME.json`` (a plan found there is used as it is; the
     optimiser's state is kept in ``NAME.state.json`` while it runs, and an interrupted optimisation
-    continues from it). ``count``: the progress line's prefix, e.g. "[2/26] "."""
+    continues from it). ``count``: the progress line's prefix, e.g. "[2/26] "; ``anchor``, ``tether``:
+    :func:`optimize_plan`'s (the file's settings record the tether, where there is an anchor)."""
     from warpcut.io import read_json, safe_name, write_json
 
     done = state = None
     wanted = dataclasses.asdict(settings)
+    if anchor is not None:
+        wanted["tether"] = float(tether)
     if folder is not None:
         done = Path(folder) / f"{safe_name(contour.name)}.json"
         state = done.with_suffix(".state.json")
@@ -306,8 +359,9 @@ def cached_plan(
         f"{settings.estimator} estimator)"
     )
     result = optimize_plan(
-        contour, pinch, segments, config, settings, device, seed, arm, log, state, allow_infeasible_pinch
-    )
+        contour, pinch, segments, config, settings, device, seed, arm, log, state, allow_infeasible_pinch,
+        anchor, tether,
+    )  # fmt: skip
     if done is not None:
         problem = pinch_problems(np.asarray(result.pinch)[None], contour, config, None, arm or ArmModel())[0]
         marked = {"pinch_feasible": problem is None, "pinch_problem": problem}  # the file says it, too
