@@ -114,10 +114,10 @@ class CuttingTask:
             raise ValueError(
                 f"CuttingTask.contours: got {len(contours)} for {num_envs} envs; give one or one per env"
             )
-        check_integer("CuttingTask.seed", seed, 0, NOISE_SEEDS - 1)
+        seed = check_integer("CuttingTask.seed", seed, 0, NOISE_SEEDS - 1)
         check_text("CuttingTask.device", device, optional=True, note="the default device")
-        check_choice("CuttingTask.backend", backend, BACKENDS)
-        check_integer("CuttingTask.threads", threads, 1, optional=True, note="one per core")
+        backend = check_choice("CuttingTask.backend", backend, BACKENDS)
+        threads = check_integer("CuttingTask.threads", threads, 1, optional=True, note="one per core")
         check_flag("CuttingTask.trace_path", trace_path)
         check_flag("CuttingTask.allow_infeasible_pinch", allow_infeasible_pinch)
         if arm is not None:
@@ -132,7 +132,7 @@ class CuttingTask:
             raise ValueError(f"CuttingTask.{exc}") from None
         estimate = estimate_horizon(contours, segments, config)
         check_batch_memory(num_envs, config.nx * config.ny, estimate, device=device)
-        self.sim = Simulator(config, num_envs, device=device, seed=seed, backend=backend, threads=threads)
+        self.sim = Simulator.checked(config, num_envs, device, seed, backend, threads)
         self.config, self.grid, self.num_envs = self.sim.config, self.sim.grid, num_envs
         for contour in {id(c): c for c in contours}.values():
             check_resolution(contour, self.grid.spacing_mm)  # a contour the grid cannot resolve: refused

@@ -1,6 +1,7 @@
 """Reading a :class:`~warpcut.sim.simulator.Simulator`'s sheets back to NumPy: the whole batch, a few envs,
 or a few vertices of every env, each read the cheapest way its backend allows (docs/performance.md,
-sections 5 and 6); the grasps' displacements and which envs diverged."""
+sections 5 and 6); the grasps' displacements and which envs diverged; and the state as a checkpoint to
+continue from."""
 
 from __future__ import annotations
 
@@ -9,8 +10,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from warpcut.sim._warp import wp
+
 if TYPE_CHECKING:
-    from warpcut.sim._warp import wp
     from warpcut.sim.config import SheetGrid
     from warpcut.sim.simd import SimdState
 
@@ -19,18 +21,27 @@ class StateReads:
     """The read-back methods of :class:`~warpcut.sim.simulator.Simulator`, which it inherits (one module per
     concern; the simulator's own module holds the stepping). They read the simulator's ``x`` and ``alive``
     arrays, or the ``simd`` backend's packed blocks (``_simd``) while those hold the newer state
-    (``_flat_current`` False); and the grasp displacements and the divergence flags every update sets."""
+    (``_flat_current`` False); and the grasp displacements and the divergence flags every update sets. The
+    checkpoint (:meth:`state`, :meth:`load_state`) reads the state out and writes it back."""
 
     num_envs: int
     device: str
     grid: SheetGrid
     x: wp.array
     alive: wp.array
+    x_prev: wp.array
     displacement: wp.array
+    update_count: int
     _status: wp.array
     _simd: SimdState | None
     _is_cpu: bool
     _flat_current: bool
+    _packed_current: bool
+    _counter_synced: bool
+    _spare: wp.array
+    _buffers: list[wp.array]
+    _alive: list[wp.array]
+    _displacement_own: wp.array
 
     def _sync_flat(self) -> None:  # the simulator's: unpack the blocks into x and alive if they are newer
         raise NotImplementedError
@@ -220,3 +231,30 @@ class StateReads:
         coordinate (:data:`~warpcut.sim.checks.DIVERGENCE_REASONS`), 2 a vertex flung beyond the bounds."""
         status = self._status.numpy()
         return np.where(status[0] != 0, 1, np.where(status[1] != 0, 2, 0)).astype(np.int8)
+
+    # ------------------------------------------------------------------ checkpoint
+    def state(self) -> dict:
+        """A copy of what the next updates start from: ``x``, ``x_prev`` (B * N, 3), ``alive`` (B * N,),
+        ``displacement`` (B, 3) and ``update_count`` (the noise stream): a checkpoint for :meth:`load_state`
+        (pins, anchors, seed and tips are the caller's to keep; the traced path is not part of it)."""
+        self._sync_flat()
+        arrays = {k: getattr(self, k).numpy().copy() for k in ("x", "x_prev", "alive", "displacement")}
+        return {**arrays, "update_count": self.update_count}
+
+    def load_state(self, state: dict, requires_grad: bool = False) -> None:
+        """Continue from a :meth:`state`, of this simulator or another of the same shape; with
+        ``requires_grad`` into fresh arrays that record gradients, as the start of a taped replay."""
+        if requires_grad:
+            for k in ("x", "x_prev", "alive", "displacement"):
+                dtype = wp.int32 if k == "alive" else wp.vec3
+                setattr(
+                    self, k, wp.array(state[k], dtype=dtype, device=self.device, requires_grad=k != "alive")
+                )
+        else:
+            self.x, self.x_prev, self._spare = self._buffers
+            self.alive, self.displacement = self._alive[0], self._displacement_own
+            for k in ("x", "x_prev", "alive", "displacement"):
+                getattr(self, k).assign(state[k])
+        self.update_count = int(state["update_count"])
+        self._counter_synced = False
+        self._flat_current, self._packed_current = True, False

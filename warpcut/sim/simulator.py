@@ -87,12 +87,25 @@ class Simulator(StateReads, PathTracing):
         threads = check_integer("Simulator.threads", threads, 1, optional=True, note="one per core")
         if capture is not None:
             check_flag("Simulator.capture", capture)
-        self.config = config.validated()
-        self.num_envs = num_envs
-        self.device = resolve_device(device)
-        check_batch_memory(num_envs, self.config.nx * self.config.ny, device=self.device)
+        config = config.validated()
+        device = resolve_device(device)
+        check_batch_memory(num_envs, config.nx * config.ny, device=device)
+        self._build(config, num_envs, device, _checked_seed(seed), backend, threads, capture)
+
+    @classmethod
+    def checked(
+        cls, config: SimConfig, num_envs: int, device: str, seed: int, backend: str, threads: int | None
+    ) -> Simulator:
+        """A simulator of arguments checked already, as :class:`~warpcut.task.CuttingTask` checks its own
+        (a validated config, a resolved device, a batch whose memory was checked with its episode)."""
+        sim = cls.__new__(cls)
+        sim._build(config, num_envs, device, seed, backend, threads, None)
+        return sim
+
+    def _build(self, config, num_envs, device, seed, backend, threads, capture) -> None:
+        self.config, self.num_envs, self.device = config, num_envs, device
         self._seed_base = wp.zeros(1, dtype=wp.int32, device=self.device)
-        self.seed = seed
+        self._set_seed(seed)
         self.grid = SheetGrid.from_config(self.config)
         self.colours = spring_colours(self.config.springs)
         self.params = {name: self.config.per_env(name, num_envs) for name in PHYSICAL_PARAMETERS}
@@ -183,7 +196,10 @@ class Simulator(StateReads, PathTracing):
 
     @seed.setter
     def seed(self, value: int) -> None:
-        self._seed = check_integer("Simulator.seed", value, 0, NOISE_SEEDS - 1)
+        self._set_seed(_checked_seed(value))
+
+    def _set_seed(self, value: int) -> None:
+        self._seed = value
         # The colours path (and its captured graphs) reads the seed from device memory.
         self._seed_base.assign(np.array([self._noise_seed_base()], dtype=np.int32))
 
@@ -564,32 +580,9 @@ class Simulator(StateReads, PathTracing):
             device=self.device,
         )
 
-    # ------------------------------------------------------------------ state (reads: StateReads)
-    def state(self) -> dict:
-        """A copy of what the next updates start from: ``x``, ``x_prev`` (B * N, 3), ``alive`` (B * N,),
-        ``displacement`` (B, 3) and ``update_count`` (the noise stream): a checkpoint for :meth:`load_state`
-        (pins, anchors, seed and tips are the caller's to keep; the traced path is not part of it)."""
-        self._sync_flat()
-        arrays = {k: getattr(self, k).numpy().copy() for k in ("x", "x_prev", "alive", "displacement")}
-        return {**arrays, "update_count": self.update_count}
 
-    def load_state(self, state: dict, requires_grad: bool = False) -> None:
-        """Continue from a :meth:`state`, of this simulator or another of the same shape; with
-        ``requires_grad`` into fresh arrays that record gradients, as the start of a taped replay."""
-        if requires_grad:
-            for k in ("x", "x_prev", "alive", "displacement"):
-                dtype = wp.int32 if k == "alive" else wp.vec3
-                setattr(
-                    self, k, wp.array(state[k], dtype=dtype, device=self.device, requires_grad=k != "alive")
-                )
-        else:
-            self.x, self.x_prev, self._spare = self._buffers
-            self.alive, self.displacement = self._alive[0], self._displacement_own
-            for k in ("x", "x_prev", "alive", "displacement"):
-                getattr(self, k).assign(state[k])
-        self.update_count = int(state["update_count"])
-        self._counter_synced = False
-        self._flat_current, self._packed_current = True, False
+def _checked_seed(value: int) -> int:
+    return check_integer("Simulator.seed", value, 0, NOISE_SEEDS - 1)
 
 
 def _fresh(like: wp.array) -> wp.array:
