@@ -124,29 +124,31 @@ class CuttingTask:
             from warpcut.planning.feasibility import ArmModel
 
             check_instance("CuttingTask.arm", arm, ArmModel, "an ArmModel, or None for the default arm")
-        segments = checked_segments(segments)
         config = config.validated()
         try:
             device = resolve_device(device)
         except ValueError as exc:
             raise ValueError(f"CuttingTask.{exc}") from None
+        segments = checked_segments(segments)
+        self.segments = (
+            [list(s) for s in segments] if segments is not None else [default_segments(c) for c in contours]
+        )
+        if len(self.segments) != num_envs:
+            raise ValueError(f"CuttingTask.segments: got {len(self.segments)} lists for {num_envs} envs")
         estimate = estimate_horizon(contours, segments, config)
+        self._longest_updates = estimate_horizon(contours, segments, config, margin=MAX_TRAJECTORY_STRETCH)
+        """The updates beyond which a trajectory is stretched like no gauze (:data:`MAX_TRAJECTORY_STRETCH`):
+        refused, on every sheet the task lays its trajectories out on."""
         check_batch_memory(num_envs, config.nx * config.ny, estimate, device=device)
         self.sim = Simulator.checked(config, num_envs, device, seed, backend, threads)
         self.config, self.grid, self.num_envs = self.sim.config, self.sim.grid, num_envs
         for contour in {id(c): c for c in contours}.values():
             check_resolution(contour, self.grid.spacing_mm)  # a contour the grid cannot resolve: refused
         self.contours = contours
-        self.segments = (
-            [list(s) for s in segments] if segments is not None else [default_segments(c) for c in contours]
-        )
-        if len(self.segments) != num_envs:
-            raise ValueError(f"CuttingTask.segments: got {len(self.segments)} lists for {num_envs} envs")
         self.pinch_points = self._pinch_array(pinch_points)
         self.pinch_problems = self._judge_pinches(arm, allow_infeasible_pinch)
         """Per env, why its pinch point is not a feasible grasp (one line naming the rule), or None: feasible,
         or no grasp. Only ``allow_infeasible_pinch`` lets one through."""
-        self._given_segments = segments
         self._trajectory_cache: dict[tuple, Trajectory] = {}
         self._arc_cache: dict[tuple[int, int], np.ndarray] = {}
         if not trace_path and config.score == "path":
@@ -168,7 +170,14 @@ class CuttingTask:
         """(B,) updates of each env's own trajectory (the batch runs for the longest:
         :attr:`horizon_updates`)."""
         self.horizon_updates = int(self.trajectory_updates.max())
-        self._check_horizon(self._given_segments)
+        if self.horizon_updates > self._longest_updates:
+            p = self.sim.params
+            raise SimulationDiverged(
+                f"simulation diverged while settling the sheet: the scissors' path over it is "
+                f"{self.horizon_updates} updates, more than {MAX_TRAJECTORY_STRETCH:g} times the contour's "
+                f"length; the springs do not hold it (gravity {p['gravity'].max():g} mm/s^2, dt "
+                f"{p['dt'].max():g} s): lower gravity or dt, or raise sweeps"
+            )
         self._tips = np.zeros((num_envs, self.horizon_updates, 4), dtype=np.float32)
         self._targets = np.full((num_envs, self.horizon_updates, 2), np.nan)
         for env, trajectory in enumerate(self.trajectories):
@@ -262,19 +271,6 @@ class CuttingTask:
         if first is not None and not allow:
             raise InfeasiblePinch(self.pinch_points[first], self.contours[first], problems[first])
         return problems
-
-    def _check_horizon(self, segments: Sequence[Sequence[np.ndarray]] | None) -> None:
-        """Refuse trajectories stretched beyond :data:`MAX_TRAJECTORY_STRETCH` (a sheet that hangs like no
-        gauze), which would make an episode that long. ``segments``: as given to the constructor."""
-        longest = estimate_horizon(self.contours, segments, self.config, margin=MAX_TRAJECTORY_STRETCH)
-        if self.horizon_updates > longest:
-            p = self.sim.params
-            raise SimulationDiverged(
-                f"simulation diverged while settling the sheet: the scissors' path over it is "
-                f"{self.horizon_updates} updates, more than {MAX_TRAJECTORY_STRETCH:g} times the contour's "
-                f"length; the springs do not hold it (gravity {p['gravity'].max():g} mm/s^2, dt "
-                f"{p['dt'].max():g} s): lower gravity or dt, or raise sweeps"
-            )
 
     def _build_trajectories(self) -> list[Trajectory]:
         settled = self.sim.settled_positions()

@@ -157,8 +157,8 @@ class Simulator(StateReads, PathTracing):
         self._flat_current, self._packed_current = True, False
         blocks = 1
         if self.backend == "simd":
-            self._simd = SimdState(num_envs, self.grid.num_vertices, device=self.device, chebyshev=chebyshev)
             self._simd_model = SimdModel.from_config(self.config, self.grid, self.device)
+            self._simd = SimdState(num_envs, self.grid.num_vertices, device=self.device, chebyshev=chebyshev)
             blocks = self._simd.blocks
         if capture is None:
             capture = self.backend == "colours" and not is_cpu
