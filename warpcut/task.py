@@ -16,7 +16,7 @@ import shapely
 
 from warpcut.contours import Contour, check_resolution, ring
 from warpcut.scoring import Score, score_cut
-from warpcut.sim.checks import DIVERGENCE_REASONS, check_pinch_points
+from warpcut.sim.checks import DIVERGENCE_REASONS, checked_pinch_points
 from warpcut.sim.config import SimConfig, SimulationDiverged
 from warpcut.sim.devices import resolve_device
 from warpcut.sim.material import interpolate, interpolate_corners, material_cells, material_to_world
@@ -97,6 +97,8 @@ class CuttingTask:
         arm: ArmModel | None = None,
         allow_infeasible_pinch: bool = False,
     ):
+        from warpcut.planning.feasibility import ArmModel, InfeasiblePinch, pinch_problems_per_env
+
         check_instance("CuttingTask.config", config, SimConfig, "a SimConfig")
         num_envs = check_integer("CuttingTask.num_envs", num_envs, 1, optional=True, note="one per contour")
         if isinstance(contours, Contour):
@@ -121,10 +123,12 @@ class CuttingTask:
         check_flag("CuttingTask.trace_path", trace_path)
         check_flag("CuttingTask.allow_infeasible_pinch", allow_infeasible_pinch)
         if arm is not None:
-            from warpcut.planning.feasibility import ArmModel
-
             check_instance("CuttingTask.arm", arm, ArmModel, "an ArmModel, or None for the default arm")
         config = config.validated()
+        if not trace_path and config.score == "path":
+            raise ValueError(
+                "trace_path: the path score needs the traced path; keep trace_path=True or score='separated'"
+            )
         try:
             device = resolve_device(device)
         except ValueError as exc:
@@ -140,21 +144,21 @@ class CuttingTask:
         """The updates beyond which a trajectory is stretched like no gauze (:data:`MAX_TRAJECTORY_STRETCH`):
         refused, on every sheet the task lays its trajectories out on."""
         check_batch_memory(num_envs, config.nx * config.ny, estimate, device=device)
-        self.sim = Simulator.checked(config, num_envs, device, seed, backend, threads)
-        self.config, self.grid, self.num_envs = self.sim.config, self.sim.grid, num_envs
         for contour in {id(c): c for c in contours}.values():
-            check_resolution(contour, self.grid.spacing_mm)  # a contour the grid cannot resolve: refused
-        self.contours = contours
-        self.pinch_points = self._pinch_array(pinch_points)
-        self.pinch_problems = self._judge_pinches(arm, allow_infeasible_pinch)
+            check_resolution(contour, config.spacing_mm)  # a contour the grid cannot resolve: refused
+        # The grasps, judged before any sheet is settled: a refusal costs nothing.
+        self.pinch_points = checked_pinch_points(pinch_points, num_envs, config.width_mm, config.height_mm)
+        self.pinch_problems = pinch_problems_per_env(self.pinch_points, contours, self.segments, config, arm)
         """Per env, why its pinch point is not a feasible grasp (one line naming the rule), or None: feasible,
         or no grasp. Only ``allow_infeasible_pinch`` lets one through."""
+        first = next((env for env, problem in enumerate(self.pinch_problems) if problem), None)
+        if first is not None and not allow_infeasible_pinch:
+            raise InfeasiblePinch(self.pinch_points[first], contours[first], self.pinch_problems[first])
+        self.sim = Simulator.checked(config, num_envs, device, seed, backend, threads)
+        self.config, self.grid, self.num_envs = self.sim.config, self.sim.grid, num_envs
+        self.contours = contours
         self._trajectory_cache: dict[tuple, Trajectory] = {}
         self._arc_cache: dict[tuple[int, int], np.ndarray] = {}
-        if not trace_path and config.score == "path":
-            raise ValueError(
-                "trace_path: the path score needs the traced path; keep trace_path=True or score='separated'"
-            )
         self._trace = trace_path
         self._lay_out_trajectories()
         self.update_index = 0
@@ -220,57 +224,6 @@ class CuttingTask:
     @property
     def done(self) -> bool:
         return self.update_index >= self.num_steps * self.config.updates_per_step
-
-    def _pinch_array(self, pinch_points: np.ndarray | None) -> np.ndarray:
-        if pinch_points is None:
-            return np.full((self.num_envs, 2), np.nan)
-        raw = np.asarray(pinch_points) if not isinstance(pinch_points, str) else None
-        if raw is None or raw.dtype.kind not in "iuf":  # a text, bools, objects: not coordinates
-            fail("CuttingTask.pinch_points", "numbers: (x, y) in mm, or one (x, y) per env", pinch_points)
-        points = raw.astype(np.float64)
-        if points.shape == (2,):
-            if not np.all(np.isfinite(points)):
-                raise ValueError(
-                    f"pinch_points: the pinch point {points.tolist()} is not finite; give material "
-                    "coordinates (mm), or None for no grasp"
-                )
-            points = np.broadcast_to(points, (self.num_envs, 2)).copy()
-        if points.shape != (self.num_envs, 2):
-            raise ValueError(
-                f"CuttingTask.pinch_points: expected (2,) or ({self.num_envs}, 2), got {points.shape}"
-            )
-        check_pinch_points(points)
-        w, h = self.config.width_mm, self.config.height_mm
-        given = np.all(np.isfinite(points), axis=1)
-        off = given & ((points[:, 0] < 0) | (points[:, 0] > w) | (points[:, 1] < 0) | (points[:, 1] > h))
-        if off.any():
-            raise ValueError(
-                f"pinch_points: {points[off][0].tolist()} lies off the {w:g} x {h:g} mm sheet; "
-                "give material coordinates on the sheet"
-            )
-        return points
-
-    def _judge_pinches(self, arm: ArmModel | None, allow: bool) -> list[str | None]:
-        """Each env's pinch problem (:func:`warpcut.planning.pinch_problems` with its own contour and
-        segments), judged once per distinct contour, cut (in any order: the arm sweeps the same footprint)
-        and point; an :class:`~warpcut.planning.InfeasiblePinch` for the first unless ``allow``."""
-        from warpcut.planning.feasibility import ArmModel, InfeasiblePinch, pinch_problems
-
-        arm = ArmModel() if arm is None else arm
-        groups: dict[tuple, list[int]] = {}
-        for env in np.flatnonzero(np.all(np.isfinite(self.pinch_points), axis=1)):
-            cut = frozenset(np.ascontiguousarray(p, dtype=np.float64).tobytes() for p in self.segments[env])
-            groups.setdefault((id(self.contours[env]), cut), []).append(int(env))
-        problems: list[str | None] = [None] * self.num_envs
-        for envs in groups.values():
-            points, which = np.unique(self.pinch_points[envs], axis=0, return_inverse=True)
-            found = pinch_problems(points, self.contours[envs[0]], self.config, self.segments[envs[0]], arm)
-            for env, k in zip(envs, which.reshape(-1), strict=True):
-                problems[env] = found[k]
-        first = next((env for env, problem in enumerate(problems) if problem), None)
-        if first is not None and not allow:
-            raise InfeasiblePinch(self.pinch_points[first], self.contours[first], problems[first])
-        return problems
 
     def _build_trajectories(self) -> list[Trajectory]:
         settled = self.sim.settled_positions()

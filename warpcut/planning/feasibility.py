@@ -268,6 +268,30 @@ def pinch_problems(
     return problems
 
 
+def pinch_problems_per_env(
+    points: np.ndarray,
+    contours: Sequence[Contour],
+    segments: Sequence[ScissorPath],
+    config: SimConfig,
+    arm: ArmModel | None = None,
+) -> list[str | None]:
+    """Each env's pinch problem (:func:`pinch_problems` with its own contour and segments) for a batch's
+    (B, 2) pinch ``points`` (a row of NaN: no grasp, no problem), judged once per distinct contour, cut (in
+    any order: the arm sweeps the same footprint) and point."""
+    arm = ArmModel() if arm is None else arm
+    groups: dict[tuple, list[int]] = {}
+    for env in np.flatnonzero(np.all(np.isfinite(points), axis=1)):
+        cut = frozenset(np.ascontiguousarray(p, dtype=np.float64).tobytes() for p in segments[env])
+        groups.setdefault((id(contours[env]), cut), []).append(int(env))
+    problems: list[str | None] = [None] * len(points)
+    for envs in groups.values():
+        distinct, which = np.unique(points[envs], axis=0, return_inverse=True)
+        found = pinch_problems(distinct, contours[envs[0]], config, segments[envs[0]], arm)
+        for env, k in zip(envs, which.reshape(-1), strict=True):
+            problems[env] = found[k]
+    return problems
+
+
 def check_pinch(
     point: np.ndarray,
     contour: Contour,

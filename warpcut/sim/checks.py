@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from warpcut.sim.config import SETTLED_REACH_SHEETS, SimConfig, SimulationDiverged
+from warpcut.validation import fail
 
 
 def check_pinch_points(points: np.ndarray) -> None:
@@ -18,6 +21,37 @@ def check_pinch_points(points: np.ndarray) -> None:
             f"pinch_points: env {env}'s pinch point {points[env].tolist()} is not finite; give material "
             "coordinates (mm), or a row of NaN (None for all envs) for no grasp"
         )
+
+
+def checked_pinch_points(pinch_points: Any, num_envs: int, width_mm: float, height_mm: float) -> np.ndarray:
+    """``CuttingTask``'s ``pinch_points`` as a (B, 2) float array: one (x, y) for every env or one per env,
+    finite (:func:`check_pinch_points`) and on the ``width_mm`` x ``height_mm`` sheet; None: no grasp (rows of
+    NaN). Anything else: a ``ValueError`` naming ``pinch_points`` and the fix."""
+    if pinch_points is None:
+        return np.full((num_envs, 2), np.nan)
+    raw = np.asarray(pinch_points) if not isinstance(pinch_points, str) else None
+    if raw is None or raw.dtype.kind not in "iuf":  # a text, bools, objects: not coordinates
+        fail("CuttingTask.pinch_points", "numbers: (x, y) in mm, or one (x, y) per env", pinch_points)
+    points = raw.astype(np.float64)
+    if points.shape == (2,):
+        if not np.all(np.isfinite(points)):
+            raise ValueError(
+                f"pinch_points: the pinch point {points.tolist()} is not finite; give material "
+                "coordinates (mm), or None for no grasp"
+            )
+        points = np.broadcast_to(points, (num_envs, 2)).copy()
+    if points.shape != (num_envs, 2):
+        raise ValueError(f"CuttingTask.pinch_points: expected (2,) or ({num_envs}, 2), got {points.shape}")
+    check_pinch_points(points)
+    w, h = width_mm, height_mm
+    given = np.all(np.isfinite(points), axis=1)
+    off = given & ((points[:, 0] < 0) | (points[:, 0] > w) | (points[:, 1] < 0) | (points[:, 1] > h))
+    if off.any():
+        raise ValueError(
+            f"pinch_points: {points[off][0].tolist()} lies off the {w:g} x {h:g} mm sheet; "
+            "give material coordinates on the sheet"
+        )
+    return points
 
 
 DIVERGENCE_REASONS = {
