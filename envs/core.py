@@ -113,8 +113,20 @@ class PatternCut:
     def __init__(self, options: PatternCutOptions, num_envs: int, part: tuple[int, int] | None = None):
         check_instance("PatternCut.options", options, PatternCutOptions, "a PatternCutOptions")
         num_envs = check_integer("PatternCut.num_envs", num_envs, 1)
-        self.part = check_part(part, num_envs)
+        part = check_part(part, num_envs)
         options.validated()  # its fields may have been changed since it was made
+        self._build(options, num_envs, part)
+
+    @classmethod
+    def checked(cls, options: PatternCutOptions, num_envs: int, part: tuple[int, int]) -> PatternCut:
+        """A scene of arguments checked already: a vector env's (its options built and checked just now,
+        its batch size and ``part`` checked)."""
+        scene: PatternCut = cls.__new__(cls)
+        scene._build(options, num_envs, part)
+        return scene
+
+    def _build(self, options: PatternCutOptions, num_envs: int, part: tuple[int, int]) -> None:
+        self.part = part
         self._randomized = options.randomized()
         self.options = options
         self.num_envs = num_envs

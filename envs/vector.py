@@ -63,7 +63,7 @@ from gymnasium.vector.utils import batch_space
 from warpcut.task import CuttingTask
 from warpcut.validation import check_integer
 
-from .core import PatternCut, check_reset_options
+from .core import PatternCut, check_part, check_reset_options
 from .options import PatternCutOptions
 from .pattern_cut import check_render_mode, step_fps
 
@@ -120,9 +120,10 @@ class PatternCutVecEnv(VectorEnv):
             from warpcut.viz.render import check_render_settings
 
             check_render_settings(render_size, render_view, prefix="render_")
-        self.options = PatternCutOptions.build(options, **kwargs)
+        self.options = PatternCutOptions.build(options, **kwargs)  # its fields checked as it is built
         self.num_envs = num_envs
-        self.scene = PatternCut(self.options, num_envs, part)
+        part = check_part(part, num_envs)
+        self.scene = PatternCut.checked(self.options, num_envs, part)
         self.single_observation_space = self.scene.observation_space
         self.single_action_space = self.scene.action_space
         self.observation_space = batch_space(self.single_observation_space, num_envs)

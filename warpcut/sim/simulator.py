@@ -98,7 +98,7 @@ class Simulator(StateReads, PathTracing):
     ) -> Simulator:
         """A simulator of arguments checked already, as :class:`~warpcut.task.CuttingTask` checks its own
         (a validated config, a resolved device, a batch whose memory was checked with its episode)."""
-        sim = cls.__new__(cls)
+        sim: Simulator = cls.__new__(cls)
         sim._build(config, num_envs, device, seed, backend, threads, None)
         return sim
 
