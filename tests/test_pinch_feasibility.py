@@ -18,6 +18,7 @@ from envs.options import PatternCutOptions
 from warpcut.contours import load_contour
 from warpcut.planning import ArmModel, InfeasiblePinch, default_pinch, pinch_candidates, pinch_problems
 from warpcut.sim.config import SimConfig
+from warpcut.sim.simulator import Simulator
 from warpcut.task import CuttingTask
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -93,6 +94,15 @@ def test_cutting_task_refuses_an_infeasible_pinch_unless_allowed():
     assert CuttingTask(SMALL, FLS, 2, pinch_points=FEASIBLE).pinch_problems == [None, None]
     short = ArmModel(length_mm=5.0)
     assert CuttingTask(SMALL, FLS, 1, pinch_points=CENTROID, arm=short).pinch_problems == [None]
+
+
+def test_cutting_task_refuses_an_infeasible_pinch_before_it_builds_a_simulator(monkeypatch):
+    def built(*args, **kwargs):
+        raise AssertionError("a simulator was built for a task refused")
+
+    monkeypatch.setattr(Simulator, "checked", built)
+    with pytest.raises(InfeasiblePinch, match="on the cut line"):
+        CuttingTask(SMALL, FLS, 2, pinch_points=ON_CUT)
 
 
 def test_envs_refuse_an_infeasible_pinch_unless_allowed():
