@@ -102,7 +102,17 @@ class Simulator(StateReads, PathTracing):
         sim._build(config, num_envs, device, seed, backend, threads, None)
         return sim
 
-    def _build(self, config, num_envs, device, seed, backend, threads, capture) -> None:
+    def _build(
+        self,
+        config: SimConfig,
+        num_envs: int,
+        device: str,
+        seed: int,
+        backend: str,
+        threads: int | None,
+        capture: bool | None,
+    ) -> None:
+        """Allocate the batch from checked arguments (:meth:`checked`)."""
         self.config, self.num_envs, self.device = config, num_envs, device
         self._seed_base = wp.zeros(1, dtype=wp.int32, device=self.device)
         self._set_seed(seed)
