@@ -28,6 +28,7 @@ if TYPE_CHECKING:
     import torch
 
     from agents.evaluation import MethodResult
+    from warpcut.planning import ArmModel
     from warpcut.task import StepCallback
 
 GENERALIST_FILE = "generalist.json"
@@ -180,6 +181,69 @@ def generalist_result(
         for c in range(len(contours))
     ]
     return MethodResult.from_rollouts(rollouts)
+
+
+VALIDATION_EPISODES = 8
+"""Validation episodes per contour (and per pinch candidate in ``run``), seeded apart from the evaluation's
+(:data:`agents.policies.VALIDATION_SEED_OFFSET`), on which the generalist must cut better than holding still
+to be played (:func:`guarded_result`, ``run --policy generalist``)."""
+
+
+def validation_errors(
+    generalist: Generalist | None,
+    contours: Sequence[Contour],
+    pinches: Sequence[np.ndarray],
+    segments: Sequence[Sequence[np.ndarray]] | None,
+    config: SimConfig,
+    device: str | None,
+    seed: int,
+    arm: ArmModel | None = None,
+) -> np.ndarray:
+    """Per contour, the mean error (vertices) of ``generalist`` (None: holding still) over
+    :data:`VALIDATION_EPISODES` noisy episodes seeded ``seed`` +
+    :data:`~agents.policies.VALIDATION_SEED_OFFSET`, the generalist's and the still grasp's paired by their
+    noise."""
+    from agents.evaluation import run_method
+    from agents.policies import VALIDATION_SEED_OFFSET
+
+    seed, n = seed + VALIDATION_SEED_OFFSET, VALIDATION_EPISODES
+    if generalist is None:
+        result = run_method(contours, pinches, None, n, config, device, seed, segments=segments, arm=arm)
+    else:
+        result = generalist_result(generalist, contours, pinches, segments, n, config, device, seed)
+    return result.error_vertices.mean(axis=1)
+
+
+def guarded_result(
+    generalist: Generalist,
+    contours: Sequence[Contour],
+    pinches: Sequence[np.ndarray],
+    segments: Sequence[Sequence[np.ndarray]] | None,
+    trials: int,
+    config: SimConfig,
+    device: str | None,
+    seed: int,
+    on_step: StepCallback | None = None,
+    arm: ArmModel | None = None,
+) -> tuple[MethodResult, MethodResult, np.ndarray]:
+    """``generalist`` zero-shot where it validates better than holding still, else holding still (fixed
+    tension), contour by contour: the validation (:func:`validation_errors`) compares their mean errors on
+    episodes of their own; the trials are :func:`generalist_result`'s (the generalist played) and, where it
+    holds still, fixed tension's at the same pinch with the same noise (the baselines' trials, paired).
+
+    Returns:
+        The guarded result, the generalist's own on every contour (unguarded), and per contour whether the
+        generalist plays (``(num_contours,)`` bool).
+    """
+    from agents.evaluation import run_method
+
+    args = (contours, pinches, segments, config, device, seed)
+    plays = validation_errors(generalist, *args) < validation_errors(None, *args, arm=arm)
+    played = generalist_result(generalist, contours, pinches, segments, trials, config, device, seed, on_step)
+    if plays.all():
+        return played, played, plays
+    still = run_method(contours, pinches, None, trials, config, device, seed, segments=segments, arm=arm)
+    return played.where(plays, still), played, plays
 
 
 def student_moves(

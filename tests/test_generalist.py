@@ -201,9 +201,18 @@ def test_every_command_plays_a_generalist_zero_shot(generalist_run, tmp_path):
          "--trials", "2", "--out", str(results), "--set", "candidates=2", "--set", "plots=false", *SMALL]
     )  # fmt: skip
     assert code == 0, output
-    rows = json.loads((results / "results.json").read_text())["rows"]
+    report = json.loads((results / "results.json").read_text())
+    rows = report["rows"]
     assert [r["contour"] for r in rows] == ["gen-test-0-0000-blob", "gen-test-0-0001-polygon"]
     assert all(np.isfinite(r["generalist_improvement_pct"]) for r in rows)
+    for row in rows:  # where it holds still, fixed tension's trials; its own trials recorded either way
+        shown = "fixed" if row["generalist_holds_still"] else "generalist_played"
+        assert row["generalist_trials_error_vertices"] == row[f"{shown}_trials_error_vertices"]
+    assert report["generalist_still_contours"] == sum(r["generalist_holds_still"] for r in rows)
+    assert (
+        f"held still (it validated no better than that) on {report['generalist_still_contours']} of 2"
+        in output
+    )
     code, output, _ = invoke(
         ["run", "--contour", "circle-small", "--policy", "generalist", "--generalist", out, "--out",
          str(tmp_path / "run"), "--set", "candidates=2", "--set", "trials=2", "--set", "plots=false", *SMALL]
@@ -220,6 +229,13 @@ def test_the_generalist_column_is_paired_with_the_baselines_trials(generalist_ru
     contours = generate_contours(2, "test", 0, COARSE)
     pinches = [np.asarray(p) for p in PatternCutOptions(contour=contours, sim_config=COARSE).per_env(2)[1]]
     held = run_method(contours, pinches, None, 2, COARSE, "cpu", 3)
+    still = _still_generalist(generalist_run)
+    played = generalist_result(load_generalist(still), contours, pinches, None, 2, COARSE, "cpu", 3)
+    assert np.array_equal(played.error_mm2, held.error_mm2)
+
+
+def _still_generalist(generalist_run):
+    """A copy of the fixture's generalist with its policy zeroed: it holds still."""
     state = torch.load(generalist_run[0] / "best.pt", weights_only=True)
     for key, value in state["actor_state_dict"].items():
         if key.startswith("mlp.") and "weight" in key or key.endswith("bias"):
@@ -228,8 +244,50 @@ def test_the_generalist_column_is_paired_with_the_baselines_trials(generalist_ru
     still.mkdir(exist_ok=True)
     torch.save(state, still / "best.pt")
     (still / GENERALIST_FILE).write_text((generalist_run[0] / GENERALIST_FILE).read_text())
-    played = generalist_result(load_generalist(still), contours, pinches, None, 2, COARSE, "cpu", 3)
-    assert np.array_equal(played.error_mm2, held.error_mm2)
+    return still
+
+
+def test_the_guarded_generalist_plays_where_it_validates_better_and_else_holds_still(
+    generalist_run, monkeypatch
+):
+    """Contour by contour: the generalist's own trials where its validation error is below holding
+    still's, fixed tension's (same pinch, same noise) where it is not, ties included."""
+    import agents.generalist as module
+    from agents.evaluation import run_method
+
+    contours = generate_contours(3, "test", 0, COARSE)
+    pinches = [np.asarray(p) for p in PatternCutOptions(contour=contours, sim_config=COARSE).per_env(3)[1]]
+    generalist = module.load_generalist(generalist_run[0])
+    validation = {True: np.array([1.0, 2.0, 3.0]), False: np.array([2.0, 2.0, 1.0])}  # still: tie, worse
+    monkeypatch.setattr(module, "validation_errors", lambda g, *a, **k: validation[g is not None])
+    guarded, played, plays = module.guarded_result(generalist, contours, pinches, None, 2, COARSE, "cpu", 3)
+    assert plays.tolist() == [True, False, False]
+    held = run_method(contours, pinches, None, 2, COARSE, "cpu", 3)
+    raw = module.generalist_result(generalist, contours, pinches, None, 2, COARSE, "cpu", 3)
+    assert np.array_equal(played.error_vertices, raw.error_vertices)
+    assert np.array_equal(guarded.error_vertices[0], raw.error_vertices[0])
+    assert np.array_equal(guarded.error_vertices[1:], held.error_vertices[1:])
+    assert np.array_equal(guarded.error_mm2[1:], held.error_mm2[1:])
+
+
+def test_a_generalist_that_validates_no_better_than_holding_still_holds_still(generalist_run):
+    """Its validation errors are holding still's exactly (paired noise), so the guard keeps the still
+    grasp; a generalist that pushes the grasp away validates worse."""
+    from agents.generalist import load_generalist, validation_errors
+
+    contours = generate_contours(2, "test", 0, COARSE)
+    pinches = [np.asarray(p) for p in PatternCutOptions(contour=contours, sim_config=COARSE).per_env(2)[1]]
+    args = (contours, pinches, None, COARSE, "cpu", 5)
+    still = validation_errors(None, *args)
+    assert np.array_equal(validation_errors(load_generalist(_still_generalist(generalist_run)), *args), still)
+    state = torch.load(generalist_run[0] / "best.pt", weights_only=True)
+    last = [k for k in state["actor_state_dict"] if k.startswith("mlp.") and k.endswith("bias")][-1]
+    state["actor_state_dict"][last].fill_(50.0)  # every step the largest move, up and away
+    pushing = generalist_run[0].parent / "pushing"
+    pushing.mkdir(exist_ok=True)
+    torch.save(state, pushing / "best.pt")
+    (pushing / GENERALIST_FILE).write_text((generalist_run[0] / GENERALIST_FILE).read_text())
+    assert (validation_errors(load_generalist(pushing), *args) > still).all()
 
 
 def test_training_for_one_contour_starts_from_a_generalist(generalist_run, tmp_path):

@@ -14,7 +14,7 @@ import numpy as np
 
 from agents.cluster import Done, Executor, Serial, ran_here
 from agents.evaluation import Method, MethodResult, evaluate_suite
-from agents.generalist import Generalist, generalist_result, load_generalist
+from agents.generalist import Generalist, guarded_result, load_generalist
 from agents.jobs import EvaluateJob
 from agents.methods import StepCallbacks
 from agents.pipelines.common import (
@@ -35,6 +35,7 @@ from warpcut.io import read_json, safe_name, write_json
 from warpcut.planning import InfeasiblePinch, Plan, check_pinch, plan_cut
 from warpcut.planning.generate import GENERATED_SPEC, resolve_specs
 from warpcut.sim.config import SimConfig
+from warpcut.stats import mean_ci95, paired_improvement
 
 
 @dataclass
@@ -173,7 +174,10 @@ def evaluate_table(
             clock["rl"] = time.perf_counter() - started
             notes.append(functools.partial(_note_rl_iterations, kept, runs))
         elif spec.name == "generalist":
-            spec.result = _generalist_result(generalist, job, loaded, plans, device, step_callbacks, log)
+            spec.result, note = _generalist_result(
+                generalist, job, loaded, plans, device, step_callbacks, log
+            )
+            notes.append(note)
         elif spec.name == "grad":
             _share_teachers(job, runs, loaded, plans, out)
             spec.result, note = grad_column(
@@ -441,10 +445,13 @@ def _generalist_result(
     device: str | None,
     step_callbacks: StepCallbacks | None,
     log: Callable[[str], None],
-) -> MethodResult:
+) -> tuple[MethodResult, Callable[[dict], None]]:
     """The generalist column: ``generalist`` (``job.generalist``'s) zero-shot on every contour in one batch,
     at the planned pinch points and segments (without plans: the feasible centroid, the whole contour),
-    paired with the baselines' trials."""
+    paired with the baselines' trials; on a contour where it validates no better than holding still, it
+    holds still (:func:`agents.generalist.guarded_result`). The note it returns adds to each row whether it
+    held still (``generalist_holds_still``) and the generalist's own trials (``generalist_played_*``), and
+    to the table on how many contours it held still (``generalist_still_contours``)."""
     from warpcut.planning import default_pinch
 
     started = time.perf_counter()
@@ -454,11 +461,23 @@ def _generalist_result(
     else:
         pinches, segments = [default_pinch(c, job.sim, job.arm) for c in contours], None
     callback = None if step_callbacks is None else step_callbacks("generalist", 0)
-    result = generalist_result(
-        generalist, contours, pinches, segments, job.trials, job.sim, device, job.seed, on_step=callback
+    result, played, plays = guarded_result(
+        generalist, contours, pinches, segments, job.trials, job.sim, device, job.seed, callback, job.arm
     )
-    log(f"  generalist: {len(contours)} contour(s) zero-shot in {time.perf_counter() - started:.0f} s")
-    return result
+    log(
+        f"  generalist: {len(contours)} contour(s) zero-shot in {time.perf_counter() - started:.0f} s, "
+        f"holding still on {int((~plays).sum())}"
+    )
+
+    def note(table: dict) -> None:
+        for k, row in enumerate(table["rows"]):
+            improvement = paired_improvement(row["none_trials_error_vertices"], played.error_vertices[k])
+            row["generalist_holds_still"] = not bool(plays[k])
+            row["generalist_played_trials_error_vertices"] = played.error_vertices[k].tolist()
+            row["generalist_played_improvement_pct"], row["generalist_played_ci95"] = mean_ci95(improvement)
+        table["generalist_still_contours"] = int((~plays).sum())
+
+    return result, note
 
 
 def _check_checkpoints(checkpoints: Path, contours: list[Contour], job: EvaluateJob) -> None:
