@@ -245,6 +245,10 @@ ANALYTIC_PINCHES = ("feasible", "centroid")
 EVALUATION_CANDIDATES = PINCH_CANDIDATES
 """Pinch candidates per plan in :func:`evaluate_table` (the paper's 30)."""
 
+GENERALIST_CANDIDATES = 8
+"""Pinch candidates ``evaluate``'s generalist chooses among, on validation episodes: the plan's best by
+fixed tension (``generalist_candidates``; 1: the planned pinch point, as fixed and rl pinch)."""
+
 GENERALIST_CONTOURS = 48
 """Generated training contours of a generalist (``warpcut generalist --generated``)."""
 

@@ -157,10 +157,12 @@ def generalist_result(
     seed: int,
     on_step: StepCallback | None = None,
     allow_infeasible_pinch: bool = False,
+    still: Sequence[bool] | None = None,
 ) -> MethodResult:
     """``generalist`` on every (contour, trial) in one batch, zero-shot, paired with the baselines' trials
     of :func:`agents.evaluation.evaluate_suite` (seeded ``seed``: trial t of contour k sees the noise of
-    their env ``k * trials + t``)."""
+    their env ``k * trials + t``). ``still``: per contour, hold still there instead (no move, or the stay
+    action, every step: fixed tension's trials, bit for bit)."""
     from agents.evaluation import MethodResult
     from agents.policies import policy_errors
     from envs.vector import PatternCutVecEnv
@@ -170,7 +172,8 @@ def generalist_result(
         allow_infeasible_pinch=allow_infeasible_pinch,
     )  # fmt: skip
     env = PatternCutVecEnv(len(contours) * trials, options)
-    out = policy_errors(generalist.actor, env, seed=seed + 1, on_step=on_step, paired_noise=(seed, 0))
+    actor = generalist.actor if still is None else _holding(generalist.actor, np.repeat(still, trials))
+    out = policy_errors(actor, env, seed=seed + 1, on_step=on_step, paired_noise=(seed, 0))
     problems = env.task.pinch_problems
     rollouts = [
         {
@@ -184,66 +187,102 @@ def generalist_result(
 
 
 VALIDATION_EPISODES = 8
-"""Validation episodes per contour (and per pinch candidate in ``run``), seeded apart from the evaluation's
-(:data:`agents.policies.VALIDATION_SEED_OFFSET`), on which the generalist must cut better than holding still
-to be played (:func:`guarded_result`, ``run --policy generalist``)."""
+"""Validation episodes per contour and pinch candidate, seeded apart from the evaluation's
+(:data:`agents.policies.VALIDATION_SEED_OFFSET`), on which the generalist chooses where to pinch and must cut
+better than holding still to be played (:func:`guarded_result`)."""
+
+Candidate = tuple[np.ndarray, Sequence[np.ndarray] | None]
+"""Where a contour is cut: a pinch point and the segments in cutting order (None: the whole contour)."""
 
 
-def validation_errors(
-    generalist: Generalist | None,
-    contours: Sequence[Contour],
-    pinches: Sequence[np.ndarray],
-    segments: Sequence[Sequence[np.ndarray]] | None,
-    config: SimConfig,
-    device: str | None,
-    seed: int,
-    arm: ArmModel | None = None,
-) -> np.ndarray:
-    """Per contour, the mean error (vertices) of ``generalist`` (None: holding still) over
-    :data:`VALIDATION_EPISODES` noisy episodes seeded ``seed`` +
-    :data:`~agents.policies.VALIDATION_SEED_OFFSET`, the generalist's and the still grasp's paired by their
-    noise."""
-    from agents.evaluation import run_method
-    from agents.policies import VALIDATION_SEED_OFFSET
+@dataclass(frozen=True)
+class Guarded:
+    """What :func:`guarded_result` played and why."""
 
-    seed, n = seed + VALIDATION_SEED_OFFSET, VALIDATION_EPISODES
-    if generalist is None:
-        result = run_method(contours, pinches, None, n, config, device, seed, segments=segments, arm=arm)
-    else:
-        result = generalist_result(generalist, contours, pinches, segments, n, config, device, seed)
-    return result.error_vertices.mean(axis=1)
+    result: MethodResult
+    """Per contour, the generalist at its chosen candidate, or holding still (fixed tension) at the first."""
+    played: MethodResult | None
+    """The generalist's own trials at its chosen candidate on every contour, where it holds still too (None
+    where it held still somewhere and they were not asked for)."""
+    plays: np.ndarray
+    """(num_contours,) bool: the generalist validated better than holding still, and plays."""
+    chosen: list[int]
+    """Per contour, the index of the candidate the generalist validated best at."""
+    validation: list[np.ndarray]
+    """Per contour, the generalist's mean validation error (vertices) at each candidate."""
+    still: np.ndarray
+    """(num_contours,) holding still's mean validation error at the first candidate."""
 
 
 def guarded_result(
     generalist: Generalist,
     contours: Sequence[Contour],
-    pinches: Sequence[np.ndarray],
-    segments: Sequence[Sequence[np.ndarray]] | None,
+    candidates: Sequence[Sequence[Candidate]],
     trials: int,
     config: SimConfig,
     device: str | None,
     seed: int,
     on_step: StepCallback | None = None,
     arm: ArmModel | None = None,
-) -> tuple[MethodResult, MethodResult, np.ndarray]:
-    """``generalist`` zero-shot where it validates better than holding still, else holding still (fixed
-    tension), contour by contour: the validation (:func:`validation_errors`) compares their mean errors on
-    episodes of their own; the trials are :func:`generalist_result`'s (the generalist played) and, where it
-    holds still, fixed tension's at the same pinch with the same noise (the baselines' trials, paired).
-
-    Returns:
-        The guarded result, the generalist's own on every contour (unguarded), and per contour whether the
-        generalist plays (``(num_contours,)`` bool).
-    """
+    played_everywhere: bool = False,
+) -> Guarded:
+    """``generalist`` zero-shot, contour by contour, where it validates best among ``candidates[c]``
+    (pinch points with their cuts; the first is the plan's), if that beats holding still at the first
+    candidate; else holding still there (fixed tension). Validation: :data:`VALIDATION_EPISODES` noisy
+    episodes per candidate, seeded ``seed`` + :data:`~agents.policies.VALIDATION_SEED_OFFSET` and paired by
+    their noise, the lowest mean error wins (a tie holds still). The trials are one batch of
+    :func:`generalist_result`'s (paired with the baselines'), in which it holds still on the contours where it
+    does not play: fixed tension's trials there, and ``on_step`` sees what is played. ``played_everywhere``:
+    also play the generalist's trials where it holds still (``played``)."""
     from agents.evaluation import run_method
+    from agents.policies import VALIDATION_SEED_OFFSET
 
-    args = (contours, pinches, segments, config, device, seed)
-    plays = validation_errors(generalist, *args) < validation_errors(None, *args, arm=arm)
-    played = generalist_result(generalist, contours, pinches, segments, trials, config, device, seed, on_step)
-    if plays.all():
-        return played, played, plays
-    still = run_method(contours, pinches, None, trials, config, device, seed, segments=segments, arm=arm)
-    return played.where(plays, still), played, plays
+    def cuts(listed: Sequence[Candidate]):
+        return None if listed[0][1] is None else [segments for _, segments in listed]
+
+    first = [listed[0] for listed in candidates]
+    flat = [(c, candidate) for c, listed in enumerate(candidates) for candidate in listed]
+    validation_seed, n = seed + VALIDATION_SEED_OFFSET, VALIDATION_EPISODES
+    scores = generalist_result(
+        generalist, [contours[c] for c, _ in flat], [p for _, (p, _) in flat], cuts([x for _, x in flat]),
+        n, config, device, validation_seed,
+    ).error_vertices.mean(axis=1)  # fmt: skip
+    still = run_method(
+        contours, [p for p, _ in first], None, n, config, device, validation_seed, segments=cuts(first),
+        arm=arm,
+    ).error_vertices.mean(axis=1)  # fmt: skip
+    bounds = np.cumsum([0] + [len(listed) for listed in candidates])
+    validation = [scores[bounds[c] : bounds[c + 1]] for c in range(len(contours))]
+    chosen = [int(np.argmin(v)) for v in validation]
+    plays = np.array([v[k] < s for v, k, s in zip(validation, chosen, still, strict=True)])
+    best = [listed[k] for listed, k in zip(candidates, chosen, strict=True)]
+    at = [b if play else f for b, f, play in zip(best, first, plays, strict=True)]
+    result = generalist_result(
+        generalist, contours, [p for p, _ in at], cuts(at), trials, config, device, seed, on_step,
+        still=~plays,
+    )  # fmt: skip
+    played = result if plays.all() else None
+    if played_everywhere and played is None:
+        pinches = [p for p, _ in best]
+        played = generalist_result(generalist, contours, pinches, cuts(best), trials, config, device, seed)
+    return Guarded(result, played, plays, chosen, validation, still)
+
+
+def _holding(actor: torch.nn.Module, held: np.ndarray) -> torch.nn.Module:
+    """``actor`` with its action zeroed in the envs ``held`` marks: no move (continuous), stay (discrete)."""
+    import torch
+
+    keep = torch.as_tensor(~np.asarray(held, dtype=bool), dtype=torch.float32).reshape(-1, 1)
+
+    class Holding(torch.nn.Module):
+        def __init__(self) -> None:
+            super().__init__()
+            self.actor = actor
+
+        def forward(self, obs):
+            return self.actor(obs) * keep
+
+    return Holding()
 
 
 def student_moves(

@@ -1,7 +1,8 @@
 """The generalist's zero-shot tables of docs/results.md from a ``warpcut evaluate`` run with the
 ``generalist`` column (``results.json``): per contour every method's improvement over no tension ± its 95%
 CI over the paired trials, the generalist's paired difference from per-contour training (``rl``) and from
-the better baseline, and the summary rows the targets read (the mean over contours ± its 95% CI over
+the better baseline, where it holds still (validating no better than that) and what it scores played
+there too (unguarded), and the summary rows the targets read (the mean over contours ± its 95% CI over
 contours, the lead over the better of fixed and analytic, on how many contours the generalist is the best
 method or the best lies within its CI).
 
@@ -22,6 +23,12 @@ def _trials(row: dict, method: str) -> np.ndarray:
     return paired_improvement(row["none_trials_error_vertices"], row[f"{method}_trials_error_vertices"])
 
 
+def _worse_than_still(row: dict, method: str) -> bool:
+    """``method``'s paired improvement over fixed tension (holding still) is below zero beyond its CI."""
+    mean, ci = mean_ci95(_trials(row, method) - _trials(row, "fixed"))
+    return mean + ci < 0
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("results")
@@ -30,9 +37,13 @@ def main() -> None:
     report = json.loads(open(args.results).read())
     rows = report["rows"]
     methods = [m for m in ("fixed", "analytic", "rl", "generalist") if f"{m}_improvement_pct" in rows[0]]
+    guarded = (
+        "generalist_played_improvement_pct" in rows[0]
+    )  # the column holds still where it validates worse
     baselines = [b for b in args.others.split(",") if b in methods]
     has_rl = "rl" in methods
     head = ["contour", "no tension (vertices)", *methods]
+    head += ["generalist played (unguarded)"] if guarded else []
     head += ["generalist - rl (paired)"] if has_rl else []
     print("| " + " | ".join(head) + " |")
     print("|" + "---|" * len(head))
@@ -47,6 +58,12 @@ def main() -> None:
         if imps["generalist"] >= best or best - imps["generalist"] <= row["generalist_ci95"]:
             best_or_within += 1
             cells[methods.index("generalist")] = f"**{cells[methods.index('generalist')]}**"
+        if row.get("generalist_holds_still"):
+            cells[methods.index("generalist")] += " (holds still)"
+        if guarded:
+            cells.append(
+                f"{row['generalist_played_improvement_pct']:+.1f} ± {row['generalist_played_ci95']:.1f}"
+            )
         if has_rl:
             diff = _trials(row, "generalist") - _trials(row, "rl")
             mean, ci = mean_ci95(diff)
@@ -56,6 +73,10 @@ def main() -> None:
         print(f"| {row['contour']} | {row['none_error_vertices']:.1f} | " + " | ".join(cells) + " |")
     means = {m: mean_ci95([r[f"{m}_improvement_pct"] for r in rows]) for m in methods}
     cells = [f"{means[m][0]:+.1f} ± {means[m][1]:.1f}" for m in methods]
+    if guarded:
+        cells.append(
+            "{:+.1f} ± {:.1f}".format(*mean_ci95([r["generalist_played_improvement_pct"] for r in rows]))
+        )
     if has_rl:
         cells.append("{:+.1f} ± {:.1f}".format(*mean_ci95(vs_rl)))
     print("| **mean** | | " + " | ".join(cells) + " |")
@@ -76,6 +97,13 @@ def main() -> None:
         f"- best of every method, or the best within its CI: {best_or_within} of {len(rows)} "
         f"({100 * best_or_within / len(rows):.0f}%)"
     )
+    for played in ("generalist", "generalist_played") if guarded else ("generalist",):
+        worse = sum(_worse_than_still(row, played) for row in rows)
+        what = played.replace("_", " ")
+        print(f"- {what} worse than holding still (fixed) beyond its CI: {worse} of {len(rows)}")
+    if guarded:
+        still = sum(bool(r["generalist_holds_still"]) for r in rows)
+        print(f"- holds still where it validates no better: {still} of {len(rows)} contours")
     if has_rl:
         print(
             "- generalist - per-contour rl, mean over contours: {:+.1f} ± {:.1f} points".format(

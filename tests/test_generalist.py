@@ -247,39 +247,80 @@ def _still_generalist(generalist_run):
     return still
 
 
-def test_the_guarded_generalist_plays_where_it_validates_better_and_else_holds_still(
+def _candidates(contours, count):
+    """Per contour the first ``count`` sampled pinch points (the whole contour cut), the first the planned."""
+    from warpcut.planning import plan_cut
+
+    plans = [plan_cut(c, COARSE, num_candidates=count, seed=0, device="cpu") for c in contours]
+    return [[(np.asarray(c["pinch"]), p.ordered_segments(c["order"])) for c in p.ranked()] for p in plans]
+
+
+def test_the_guarded_generalist_plays_where_it_validates_best_and_else_holds_still(
     generalist_run, monkeypatch
 ):
-    """Contour by contour: the generalist's own trials where its validation error is below holding
-    still's, fixed tension's (same pinch, same noise) where it is not, ties included."""
+    """Contour by contour: the generalist at the candidate with its lowest validation error where that is
+    below holding still's at the first candidate, else holding still there (fixed tension, trial for trial,
+    ties included); its own trials at its best candidate everywhere on request."""
     import agents.generalist as module
     from agents.evaluation import run_method
 
     contours = generate_contours(3, "test", 0, COARSE)
-    pinches = [np.asarray(p) for p in PatternCutOptions(contour=contours, sim_config=COARSE).per_env(3)[1]]
+    candidates = [listed[:2] for listed in _candidates(contours, 2)]
     generalist = module.load_generalist(generalist_run[0])
-    validation = {True: np.array([1.0, 2.0, 3.0]), False: np.array([2.0, 2.0, 1.0])}  # still: tie, worse
-    monkeypatch.setattr(module, "validation_errors", lambda g, *a, **k: validation[g is not None])
-    guarded, played, plays = module.guarded_result(generalist, contours, pinches, None, 2, COARSE, "cpu", 3)
-    assert plays.tolist() == [True, False, False]
-    held = run_method(contours, pinches, None, 2, COARSE, "cpu", 3)
-    raw = module.generalist_result(generalist, contours, pinches, None, 2, COARSE, "cpu", 3)
-    assert np.array_equal(played.error_vertices, raw.error_vertices)
-    assert np.array_equal(guarded.error_vertices[0], raw.error_vertices[0])
-    assert np.array_equal(guarded.error_vertices[1:], held.error_vertices[1:])
-    assert np.array_equal(guarded.error_mm2[1:], held.error_mm2[1:])
+    validation = np.array([[1.0, 0.5], [2.0, 3.0], [3.0, 4.0]])  # holding still: 2, 2, 1
+    played_validation = module.generalist_result
+
+    def fake(gen, contours_, pinches, segments, trials, config, device, seed, *a, **k):
+        result = played_validation(gen, contours_, pinches, segments, trials, config, device, seed, *a, **k)
+        if trials == module.VALIDATION_EPISODES:
+            result.error_vertices[:] = validation.reshape(-1, 1)
+        return result
+
+    monkeypatch.setattr(module, "generalist_result", fake)
+    still_validation = run_method
+
+    def fake_still(contours_, pinches, policy, trials, *a, **k):
+        result = still_validation(contours_, pinches, policy, trials, *a, **k)
+        if trials == module.VALIDATION_EPISODES:
+            result.error_vertices[:] = np.array([[2.0], [2.0], [1.0]])
+        return result
+
+    import agents.evaluation
+
+    monkeypatch.setattr(agents.evaluation, "run_method", fake_still)
+    guarded = module.guarded_result(
+        generalist, contours, candidates, 2, COARSE, "cpu", 3, played_everywhere=True
+    )
+    assert guarded.plays.tolist() == [True, False, False] and guarded.chosen == [1, 0, 0]
+    first = [listed[0] for listed in candidates]
+    held = still_validation(
+        contours, [p for p, _ in first], None, 2, COARSE, "cpu", 3, segments=[s for _, s in first]
+    )
+    best = [candidates[0][1], first[1], first[2]]
+    raw = played_validation(
+        generalist, contours, [p for p, _ in best], [s for _, s in best], 2, COARSE, "cpu", 3
+    )
+    assert np.array_equal(guarded.result.error_vertices[0], raw.error_vertices[0])
+    assert np.array_equal(guarded.result.error_vertices[1:], held.error_vertices[1:])
+    assert np.array_equal(guarded.result.error_mm2[1:], held.error_mm2[1:])
+    assert np.array_equal(guarded.played.error_vertices, raw.error_vertices)
+    assert np.allclose(guarded.result.pinches[0], candidates[0][1][0])
 
 
 def test_a_generalist_that_validates_no_better_than_holding_still_holds_still(generalist_run):
-    """Its validation errors are holding still's exactly (paired noise), so the guard keeps the still
-    grasp; a generalist that pushes the grasp away validates worse."""
-    from agents.generalist import load_generalist, validation_errors
+    """A generalist that holds still validates as holding still does at the planned pinch point, exactly
+    (paired noise), so the guard keeps the still grasp; one that pushes the grasp away validates worse at
+    every candidate."""
+    from agents.generalist import guarded_result, load_generalist
 
     contours = generate_contours(2, "test", 0, COARSE)
-    pinches = [np.asarray(p) for p in PatternCutOptions(contour=contours, sim_config=COARSE).per_env(2)[1]]
-    args = (contours, pinches, None, COARSE, "cpu", 5)
-    still = validation_errors(None, *args)
-    assert np.array_equal(validation_errors(load_generalist(_still_generalist(generalist_run)), *args), still)
+    candidates = _candidates(contours, 2)
+    planned = [listed[:1] for listed in candidates]
+    guarded = guarded_result(
+        load_generalist(_still_generalist(generalist_run)), contours, planned, 1, COARSE, "cpu", 5
+    )
+    assert not guarded.plays.any()
+    assert [v[0] for v in guarded.validation] == guarded.still.tolist()
     state = torch.load(generalist_run[0] / "best.pt", weights_only=True)
     last = [k for k in state["actor_state_dict"] if k.startswith("mlp.") and k.endswith("bias")][-1]
     state["actor_state_dict"][last].fill_(50.0)  # every step the largest move, up and away
@@ -287,7 +328,10 @@ def test_a_generalist_that_validates_no_better_than_holding_still_holds_still(ge
     pushing.mkdir(exist_ok=True)
     torch.save(state, pushing / "best.pt")
     (pushing / GENERALIST_FILE).write_text((generalist_run[0] / GENERALIST_FILE).read_text())
-    assert (validation_errors(load_generalist(pushing), *args) > still).all()
+    guarded = guarded_result(load_generalist(pushing), contours, candidates, 1, COARSE, "cpu", 5)
+    assert not guarded.plays.any() and all(
+        (v > s).all() for v, s in zip(guarded.validation, guarded.still, strict=True)
+    )
 
 
 def test_training_for_one_contour_starts_from_a_generalist(generalist_run, tmp_path):

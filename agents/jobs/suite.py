@@ -9,6 +9,7 @@ from agents.config import (
     ANALYTIC_PINCHES,
     EVALUATION_CANDIDATES,
     EVALUATION_TRIALS,
+    GENERALIST_CANDIDATES,
     TrainConfig,
 )
 from agents.jobs.fields import (
@@ -68,6 +69,9 @@ class EvaluateJob:
     generalist: str = "generalist"
     """The generalist column's policy: ``generalist`` (the one warpcut ships) or a run directory of
     ``warpcut generalist``."""
+    generalist_candidates: int = GENERALIST_CANDIDATES
+    """Pinch candidates the generalist column chooses among on validation episodes: the plan's best by
+    fixed tension, each in its best order; 1: the planned pinch point only (as fixed and rl pinch)."""
     record: int | None = None
     """Write ``recording.rrd`` of the first contour's first N envs of each method; None: none."""
     colour_by: str = "strain"
@@ -79,7 +83,7 @@ class EvaluateJob:
 
     def __post_init__(self) -> None:
         _check_fields(self)
-        for name in ("trials", "candidates"):
+        for name in ("trials", "candidates", "generalist_candidates"):
             _counted(f"EvaluateJob.{name}", getattr(self, name))
 
     def check(self) -> EvaluateJob:
@@ -108,5 +112,6 @@ class EvaluateJob:
         if "grad" not in self.methods:
             unused["grad"] = "read by the grad column only (--methods ...,grad)"
         if "generalist" not in self.methods:
-            unused["generalist"] = "read by the generalist column only (--methods ...,generalist)"
+            why = "read by the generalist column only (--methods ...,generalist)"
+            unused |= {key: why for key in ("generalist", "generalist_candidates")}
         return {**unused, **_recording_keys(self)}

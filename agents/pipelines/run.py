@@ -16,7 +16,7 @@ from agents.baselines import AnalyticTension
 from agents.cluster import Done, Executor, Serial, ran_here
 from agents.config import VALIDATION_TRIALS
 from agents.evaluation import Method, MethodResult, evaluate_suite, run_method
-from agents.generalist import Generalist, generalist_result, load_generalist
+from agents.generalist import Generalist, guarded_result, load_generalist
 from agents.jobs import RunJob
 from agents.methods import StepCallbacks, point_text
 from agents.pipelines.common import (
@@ -27,7 +27,7 @@ from agents.pipelines.common import (
     record_job,
     train_policy,
 )
-from agents.policies import VALIDATION_SEED_OFFSET, nominal_validation_error, rollout_errors
+from agents.policies import nominal_validation_error, rollout_errors
 from envs.options import ENV_FIELDS, PatternCutOptions
 from warpcut.contours import Contour
 from warpcut.io import write_json
@@ -125,7 +125,7 @@ def run_pipeline(
         f"      {len(plan.segments)} segment(s), order {list(plan.order)}, pinch "
         f"{point_text(pinch)} with fixed tension: {plan.chosen['error_vertices']:.1f} vertices"
     )
-    listed = _ranked_candidates(plan, settings["rl_candidates"] if job.policy == "rl" else None)
+    listed = plan.ranked(settings["rl_candidates"] if job.policy == "rl" else None)
     # analytic_pinch "centroid" asks for the paper's literal pinch point, feasible or not: its row says which
     centroid = job.analytic_pinch == "centroid"
     analytic = Method(
@@ -140,7 +140,10 @@ def run_pipeline(
         log("[2/3] --policy fixed: the plan's pinch and order")
     elif job.policy == "generalist":
         log(f"[2/3] scoring the generalist at {len(listed)} pinch candidate(s), zero-shot")
-        chosen, plays = _choose_by_generalist(generalist, job, loaded, plan, listed, config, device)
+        on_step = None if step_callbacks is None else step_callbacks("generalist", 0)
+        chosen, plays, played = _choose_by_generalist(
+            generalist, job, loaded, plan, listed, config, device, on_step
+        )
         if not plays:
             log("      the generalist validated no better than holding still: it holds still (fixed tension)")
     elif job.policy == "analytic":
@@ -167,10 +170,6 @@ def run_pipeline(
         )
         specs.append(Method("rl", result=MethodResult.from_rollouts([rl])))
     if job.policy == "generalist":
-        on_step = None if step_callbacks is None else step_callbacks("generalist", 0)
-        played = _generalist_method(
-            generalist, job, loaded, plan, listed[chosen], plays, settings, device, on_step
-        )
         specs.append(played)
     table = evaluate_suite(
         [loaded],
@@ -194,19 +193,6 @@ def run_pipeline(
     )  # fmt: skip
     write_json(out / "results.json", report.to_json())
     return report
-
-
-def _ranked_candidates(plan: Plan, keep: int | None) -> list[dict]:
-    """The plan's candidates, best by fixed tension first (the first ``keep``; None: all)."""
-    ranked = sorted(range(len(plan.candidates)), key=lambda c: plan.candidates[c]["error_vertices"])
-    return [
-        {
-            "pinch": [float(v) for v in c["point"]],
-            "order": [int(k) for k in c["best_order"]],
-            "fixed_error_vertices": float(c["error_vertices"]),
-        }
-        for c in (plan.candidates[k] for k in ranked[:keep])
-    ]
 
 
 def _candidate_text(candidate: dict) -> str:
@@ -256,57 +242,23 @@ def _choose_by_generalist(
     listed: list[dict],
     config: SimConfig,
     device: str | None,
-) -> tuple[int, bool]:
-    """Score the generalist at every candidate (each in its best order) on validation episodes, as rl's
-    candidates are chosen: :data:`CANDIDATE_TRIALS` noisy trials each, seeded apart from the evaluation's,
-    in one batch; and holding still at the plan's candidate on the same episodes. Returns the index of the
-    candidate with the lowest mean error and whether the generalist plays there: it holds still instead
-    (at the plan's candidate, index 0) where it validates no better, as rl's model selection keeps its
-    initial, still policy."""
-    seed = job.seed + VALIDATION_SEED_OFFSET
-    scores = generalist_result(
-        generalist, [contour] * len(listed), [np.asarray(c["pinch"]) for c in listed],
-        [plan.ordered_segments(c["order"]) for c in listed], CANDIDATE_TRIALS, config, device, seed,
-    ).error_vertices.mean(axis=1)  # fmt: skip
-    for c, e in zip(listed, scores, strict=True):
-        c["generalist_error_vertices"] = float(e)
-    still = run_method(
-        [contour], [np.asarray(listed[0]["pinch"])], None, CANDIDATE_TRIALS, config, device, seed,
-        segments=[plan.ordered_segments(listed[0]["order"])], arm=job.arm,
-    ).error_vertices.mean()  # fmt: skip
-    listed[0]["still_error_vertices"] = float(still)
-    best = int(np.argmin(scores))
-    return (best, True) if scores[best] < still else (0, False)
-
-
-def _generalist_method(
-    generalist: Generalist,
-    job: RunJob,
-    contour: Contour,
-    plan: Plan,
-    chosen: dict,
-    plays: bool,
-    settings: dict,
-    device,
     on_step,
-) -> Method:
-    """The generalist's row of the evaluation, paired with the baselines' trials: the generalist at the
-    chosen candidate, or (``plays`` False) holding still at the plan's, fixed tension trial for trial."""
-    pinch, cut = np.asarray(chosen["pinch"]), plan.ordered_segments(chosen["order"])
-    config, trials = job.sim.validated(), settings["trials"]
-    if plays:
-        result = generalist_result(
-            generalist, [contour], [pinch], [cut], trials, config, device, job.seed, on_step=on_step
-        )
-    else:
-        result = run_method(
-            [contour], [pinch], None, trials, config, device, job.seed, on_step, [cut], arm=job.arm
-        )
-    return Method("generalist", result=result)
-
-
-CANDIDATE_TRIALS = 8
-"""Validation episodes per pinch candidate when the generalist chooses one (``run --policy generalist``)."""
+) -> tuple[int, bool, Method]:
+    """The generalist at the candidate (each in its best order) where it validates best, or holding still at
+    the plan's (index 0) where it validates no better (:func:`agents.generalist.guarded_result`), as rl's
+    model selection keeps its initial, still policy; records each candidate's validation error (and holding
+    still's at the first) in ``listed``. Returns the candidate played, whether the generalist plays, and its
+    row of the evaluation, paired with the baselines' trials."""
+    candidates = [(np.asarray(c["pinch"]), plan.ordered_segments(c["order"])) for c in listed]
+    guarded = guarded_result(
+        generalist, [contour], [candidates], job.settings()["trials"], config, device, job.seed, on_step,
+        job.arm,
+    )  # fmt: skip
+    for c, e in zip(listed, guarded.validation[0], strict=True):
+        c["generalist_error_vertices"] = float(e)
+    listed[0]["still_error_vertices"] = float(guarded.still[0])
+    plays = bool(guarded.plays[0])
+    return (guarded.chosen[0] if plays else 0), plays, Method("generalist", result=guarded.result)
 
 
 def _train_candidates(

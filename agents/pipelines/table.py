@@ -447,23 +447,28 @@ def _generalist_result(
     log: Callable[[str], None],
 ) -> tuple[MethodResult, Callable[[dict], None]]:
     """The generalist column: ``generalist`` (``job.generalist``'s) zero-shot on every contour in one batch,
-    at the planned pinch points and segments (without plans: the feasible centroid, the whole contour),
-    paired with the baselines' trials; on a contour where it validates no better than holding still, it
-    holds still (:func:`agents.generalist.guarded_result`). The note it returns adds to each row whether it
-    held still (``generalist_holds_still``) and the generalist's own trials (``generalist_played_*``), and
-    to the table on how many contours it held still (``generalist_still_contours``)."""
+    paired with the baselines' trials, at the plan's pinch candidate (the first ``job.generalist_candidates``
+    by fixed tension, each in its best order) where it validates best; on a contour where it validates no
+    better than holding still at the planned pinch point, it holds still there
+    (:func:`agents.generalist.guarded_result`; without plans: the feasible centroid, the whole contour). The
+    note it returns adds to each row whether it held still (``generalist_holds_still``), the candidate it
+    chose (``generalist_candidate``) and its own trials there (``generalist_played_*``), and to the table on
+    how many contours it held still (``generalist_still_contours``)."""
     from warpcut.planning import default_pinch
 
     started = time.perf_counter()
     if plans is not None:
-        pinches = [p.chosen["pinch"] for p in plans]
-        segments = [p.ordered_segments() for p in plans]
+        keep = job.generalist_candidates
+        candidates = [
+            [(np.asarray(c["pinch"]), p.ordered_segments(c["order"])) for c in p.ranked(keep)] for p in plans
+        ]
     else:
-        pinches, segments = [default_pinch(c, job.sim, job.arm) for c in contours], None
+        candidates = [[(default_pinch(c, job.sim, job.arm), None)] for c in contours]
     callback = None if step_callbacks is None else step_callbacks("generalist", 0)
-    result, played, plays = guarded_result(
-        generalist, contours, pinches, segments, job.trials, job.sim, device, job.seed, callback, job.arm
+    guarded = guarded_result(
+        generalist, contours, candidates, job.trials, job.sim, device, job.seed, callback, job.arm, True
     )
+    plays, played = guarded.plays, guarded.played
     log(
         f"  generalist: {len(contours)} contour(s) zero-shot in {time.perf_counter() - started:.0f} s, "
         f"holding still on {int((~plays).sum())}"
@@ -473,11 +478,12 @@ def _generalist_result(
         for k, row in enumerate(table["rows"]):
             improvement = paired_improvement(row["none_trials_error_vertices"], played.error_vertices[k])
             row["generalist_holds_still"] = not bool(plays[k])
+            row["generalist_candidate"] = guarded.chosen[k]
             row["generalist_played_trials_error_vertices"] = played.error_vertices[k].tolist()
             row["generalist_played_improvement_pct"], row["generalist_played_ci95"] = mean_ci95(improvement)
         table["generalist_still_contours"] = int((~plays).sum())
 
-    return result, note
+    return guarded.result, note
 
 
 def _check_checkpoints(checkpoints: Path, contours: list[Contour], job: EvaluateJob) -> None:

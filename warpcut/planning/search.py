@@ -158,6 +158,19 @@ class Plan:
     config: SimConfig = field(default_factory=SimConfig)
     """The simulation parameters the plan was made with (sheet size, grasp radius: feasibility)."""
 
+    def ranked(self, keep: int | None = None) -> list[dict]:
+        """The candidates, best by fixed tension first (the first is :attr:`chosen`; the first ``keep``;
+        None: all), each as ``pinch`` (a list), ``order`` (its best) and ``fixed_error_vertices``."""
+        ranked = sorted(range(len(self.candidates)), key=lambda c: self.candidates[c]["error_vertices"])
+        return [
+            {
+                "pinch": [float(v) for v in c["point"]],
+                "order": [int(k) for k in c["best_order"]],
+                "fixed_error_vertices": float(c["error_vertices"]),
+            }
+            for c in (self.candidates[k] for k in ranked[:keep])
+        ]
+
     @property
     def heuristic_orders(self) -> bool:
         """Whether fewer than all K! orders were searched."""
