@@ -14,9 +14,8 @@ import numpy as np
 from warpcut.contours import Contour
 from warpcut.planning import ArmModel, default_pinch, pinch_candidates
 from warpcut.sim.config import AUTHORS_UNITS_PER_MM, PINCH_CANDIDATES, SimConfig
-from warpcut.sim.memory import check_batch_memory
+from warpcut.sim.memory import batch_named
 from warpcut.task import CuttingTask, SimulationDiverged
-from warpcut.trajectory import estimate_horizon
 
 
 @dataclass
@@ -129,18 +128,14 @@ def search_fixed_pinches(
     rng = np.random.default_rng(seed)
     points = [pinch_candidates(c, config, num=candidates, rng=rng, arm=arm) for c in contours]
     owners = [c for c, p in zip(contours, points, strict=True) for _ in range(len(p))]
-    check_batch_memory(  # named here: the task would name num_envs, a count nobody gave
-        len(owners),
-        config.nx * config.ny,
-        estimate_horizon(contours, None, config),
-        device=device,
-        name="fixed's pinch search (one env per candidate pinch point)",
-        fix="give fixed a pinch point (simulate --pinch X,Y) and it searches none, or lower sim.resolution",
-    )
-    task = CuttingTask(
-        config.replace(noise_std=0.0), owners, pinch_points=np.vstack(points), device=device, seed=seed,
-        arm=arm,
-    )  # fmt: skip
+    with batch_named(  # the task would name num_envs, a count nobody gave
+        "fixed's pinch search (one env per candidate pinch point)",
+        "give fixed a pinch point (simulate --pinch X,Y) and it searches none, or lower sim.resolution",
+    ):
+        task = CuttingTask(
+            config.replace(noise_std=0.0), owners, pinch_points=np.vstack(points), device=device, seed=seed,
+            arm=arm,
+        )  # fmt: skip
     score = task.run(None)
     if score.diverged is not None and score.diverged.any():
         bad = sorted({owners[e].name for e in np.flatnonzero(score.diverged)})

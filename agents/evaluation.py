@@ -14,10 +14,10 @@ from agents.methods import BASELINES, StepCallbacks, tensioner
 from warpcut.contours import Contour
 from warpcut.planning import ArmModel, check_pinch, default_pinch
 from warpcut.sim.config import SimConfig
-from warpcut.sim.memory import check_batch_memory
+from warpcut.sim.memory import batch_named
 from warpcut.stats import mean_ci95, paired_improvement
 from warpcut.task import CuttingTask, SimulationDiverged, StepCallback, divergence_error
-from warpcut.trajectory import default_segments, estimate_horizon
+from warpcut.trajectory import default_segments
 
 
 @dataclass
@@ -183,21 +183,14 @@ def run_method(
     cut = None
     if segments is not None:
         cut = [s if s is not None else default_segments(c) for c, s in zip(contours, segments, strict=True)]
-    check_batch_memory(
-        len(contours) * trials,
-        config.nx * config.ny,
-        estimate_horizon(contours, cut, config),
-        device=device,
-        name="trials",
-        envs_per_unit=len(contours),
-    )
     envs = [(c, p) for c, p in zip(contours, pinches, strict=True) for _ in range(trials)]
     points = np.array([np.full(2, np.nan) if p is None else p for _, p in envs], dtype=np.float64)
     per_env_segments = None if cut is None else [s for s in cut for _ in range(trials)]
-    task = CuttingTask(
-        config, [c for c, _ in envs], pinch_points=points, segments=per_env_segments, device=device,
-        seed=seed, arm=arm, allow_infeasible_pinch=allow_infeasible_pinch,
-    )  # fmt: skip
+    with batch_named("trials", envs_per_unit=len(contours)):  # the task checks its memory, in trials
+        task = CuttingTask(
+            config, [c for c, _ in envs], pinch_points=points, segments=per_env_segments, device=device,
+            seed=seed, arm=arm, allow_infeasible_pinch=allow_infeasible_pinch,
+        )  # fmt: skip
     score = task.run(policy, on_step=on_step)
     shape = (len(contours), trials)
     result = MethodResult(

@@ -111,22 +111,28 @@ def _cgroup_room() -> float | None:
         return None
 
 
-_NAMED: contextvars.ContextVar[tuple[str, str] | None] = contextvars.ContextVar("batch", default=None)
-"""What the batches made inside :func:`batch_named` are, to the user, and how to make them smaller."""
+_NAMED: contextvars.ContextVar[tuple[str, str | None, int] | None] = contextvars.ContextVar(
+    "batch", default=None
+)
+"""What the batches made inside :func:`batch_named` are, to the user, how to make them smaller, and how many
+envs make one unit of the name."""
 
 
 @contextlib.contextmanager
-def batch_named(name: str, fix: str | None = None, *, default: bool = False) -> Iterator[None]:
+def batch_named(
+    name: str, fix: str | None = None, *, default: bool = False, envs_per_unit: int = 1
+) -> Iterator[None]:
     """Inside the block, a batch too big for memory is named ``name`` (what it is to the user, e.g. "the
     planner's batch (pinch candidates x segment orders)", or the setting that sizes it, e.g.
     "train.num_envs") instead of ``num_envs``, a count the user never gave: for the batches a pipeline makes
     itself. ``fix`` is what the user can change (``{fits}`` in it: the envs that fit); None: "use at most
-    N". With ``default`` the name holds only where no caller named the batch already (a library's own name,
-    which a command that knows its own settings replaces)."""
+    N". ``envs_per_unit``: envs per unit of ``name`` (:func:`check_batch_memory`). With ``default`` the name
+    holds only where no caller named the batch already (a library's own name, which a command that knows its
+    own settings replaces)."""
     if default and _NAMED.get() is not None:
         yield
         return
-    token = _NAMED.set((name, fix))
+    token = _NAMED.set((name, fix, envs_per_unit))
     try:
         yield
     finally:
@@ -160,7 +166,7 @@ def check_batch_memory(
             the estimate, the limit and the largest value that fits.
     """
     if name == "num_envs" and fix is None and _NAMED.get() is not None:
-        name, fix = _NAMED.get()
+        name, fix, envs_per_unit = _NAMED.get()
     needed = batch_bytes(num_envs, num_vertices, horizon_updates)
     limit, source = memory_limit()
     shape = (num_envs, envs_per_unit, num_vertices, horizon_updates)
