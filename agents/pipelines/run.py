@@ -126,13 +126,6 @@ def run_pipeline(
         f"{point_text(pinch)} with fixed tension: {plan.chosen['error_vertices']:.1f} vertices"
     )
     listed = plan.ranked(settings["rl_candidates"] if job.policy == "rl" else None)
-    # analytic_pinch "centroid" asks for the paper's literal pinch point, feasible or not: its row says which
-    centroid = job.analytic_pinch == "centroid"
-    analytic = Method(
-        "analytic",
-        pinches=analytic_pinches(job.analytic_pinch, [loaded], [plan]),
-        allow_infeasible_pinch=centroid,
-    )
     runs: list[Path] = []
     rl_dir = None
     if job.policy == "fixed":
@@ -149,10 +142,6 @@ def run_pipeline(
     elif job.policy == "analytic":
         log(f"[2/3] scoring the analytic policy at {len(listed)} pinch candidate(s)")
         chosen = _choose_by_analytic(loaded, plan, listed, config, device, job.seed, job.arm)
-        best = listed[chosen]
-        analytic = Method(
-            "analytic", pinches=[np.asarray(best["pinch"])], segments=[plan.ordered_segments(best["order"])]
-        )
     else:
         rl_dir, chosen, runs = _train_candidates(
             job, loaded, plan, listed, settings["trials"], out, device, resume, log, progress, cluster
@@ -161,6 +150,15 @@ def run_pipeline(
 
     methods = ["none", "fixed", "analytic"] + ([job.policy] if job.policy in ("rl", "generalist") else [])
     log(f"[3/3] evaluating {', '.join(methods)}: {settings['trials']} trials each")
+    if job.policy == "analytic":  # at the candidate it chose, in that candidate's best order
+        best = listed[chosen]
+        analytic = Method(
+            "analytic", pinches=[np.asarray(best["pinch"])], segments=[plan.ordered_segments(best["order"])]
+        )
+    else:  # at job.analytic_pinch; "centroid", the paper's literal point, feasible or not: its row says which
+        centroid = job.analytic_pinch == "centroid"
+        pinches = analytic_pinches(job.analytic_pinch, [loaded], [plan])
+        analytic = Method("analytic", pinches=pinches, allow_infeasible_pinch=centroid)
     specs = [Method("none"), Method("fixed", pinches=[pinch]), analytic]
     if rl_dir is not None:
         on_step = None if step_callbacks is None else step_callbacks("rl", 0)
