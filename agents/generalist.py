@@ -172,8 +172,8 @@ def generalist_result(
         generalist, contours, pinches, segments, config, trials, device,
         allow_infeasible_pinch=allow_infeasible_pinch,
     )  # fmt: skip
-    env = PatternCutVecEnv(len(contours) * trials, options)
     actor = generalist.actor if still is None else _holding(generalist.actor, np.repeat(still, trials))
+    env = PatternCutVecEnv(len(contours) * trials, options)
     out = policy_errors(actor, env, seed=seed + 1, on_step=on_step, paired_noise=(seed, 0))
     problems = env.task.pinch_problems
     rollouts = [
@@ -230,8 +230,9 @@ def guarded_result(
     """``generalist`` zero-shot, contour by contour, where it validates best among ``candidates[c]``
     (pinch points with their cuts; the first is the plan's), if that beats holding still at the first
     candidate; else holding still there (fixed tension). Validation: :data:`VALIDATION_EPISODES` noisy
-    episodes per candidate, seeded ``seed`` + :data:`~agents.policies.VALIDATION_SEED_OFFSET` and paired by
-    their noise, the lowest mean error wins (a tie holds still). The trials are one batch of
+    episodes per candidate, seeded ``seed`` + :data:`~agents.policies.VALIDATION_SEED_OFFSET` (one batch for
+    the candidates, one for holding still: each env draws a noise stream of its own), the lowest mean error
+    wins (a tie holds still). The trials are one batch of
     :func:`generalist_result`'s (paired with the baselines'), in which it holds still on the contours where it
     does not play: fixed tension's trials there, and ``on_step`` sees what is played. ``played_everywhere``:
     also play the generalist's trials where it holds still (``played``)."""

@@ -69,9 +69,10 @@ class EvaluateJob:
     generalist: str = "generalist"
     """The generalist column's policy: ``generalist`` (the one warpcut ships) or a run directory of
     ``warpcut generalist``."""
-    generalist_candidates: int = GENERALIST_CANDIDATES
+    generalist_candidates: int | None = GENERALIST_CANDIDATES
     """Pinch candidates the generalist column chooses among on validation episodes: the plan's best by
-    fixed tension, each in its best order; 1: the planned pinch point only (as fixed and rl pinch)."""
+    fixed tension, each in its best order (None: all the plan's); 1: the planned pinch point only (as fixed
+    and rl pinch)."""
     record: int | None = None
     """Write ``recording.rrd`` of the first contour's first N envs of each method; None: none."""
     colour_by: str = "strain"
@@ -83,8 +84,9 @@ class EvaluateJob:
 
     def __post_init__(self) -> None:
         _check_fields(self)
-        for name in ("trials", "candidates", "generalist_candidates"):
+        for name in ("trials", "candidates"):
             _counted(f"EvaluateJob.{name}", getattr(self, name))
+        _counted("EvaluateJob.generalist_candidates", self.generalist_candidates, True, "all the plan's")
 
     def check(self) -> EvaluateJob:
         """Itself, or ``ValueError`` naming what its fields do not say alone (each is checked as it is
