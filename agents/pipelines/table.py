@@ -447,9 +447,9 @@ def _generalist_result(
     log: Callable[[str], None],
 ) -> tuple[MethodResult, Callable[[dict], None]]:
     """The generalist column: ``generalist`` (``job.generalist``'s) zero-shot on every contour in one batch,
-    paired with the baselines' trials, at the plan's pinch candidate (the first ``job.generalist_candidates``
-    by fixed tension, each in its best order) where it validates best; on a contour where it validates no
-    better than holding still at the planned pinch point, it holds still there
+    paired with the baselines' trials, at the plan's pinch candidate (each in its best order; the first
+    ``job.generalist_candidates`` by fixed tension, None: all) where it validates best; on a contour where
+    it validates no better than holding still at the planned pinch point, it holds still there
     (:func:`agents.generalist.guarded_result`; without plans: the feasible centroid, the whole contour). The
     note it returns adds to each row whether it held still (``generalist_holds_still``), the candidate it
     chose (``generalist_candidate``) and its own trials there (``generalist_played_*``), and to the table on
