@@ -79,10 +79,15 @@ def test_pipelines_reject_bad_settings_by_name(tmp_path):
 
 
 def test_the_budgets_leave_the_iterations_to_the_learner():
-    """A budget sets the candidates and trials; each policy trains for its learner's own iterations unless
+    """A budget sets the candidates and trials (the generalist's plan, which trains nothing, has the paper's
+    30 candidates with either); each policy trains for its learner's own iterations unless
     ``train.iterations`` is given."""
-    assert RunJob().settings() == BUDGETS["fast"] == {"candidates": 8, "rl_candidates": 1, "trials": 10}
-    assert RunJob(budget="paper", trials=3).settings() == {**BUDGETS["paper"], "trials": 3}
+    assert RunJob().settings() == {"candidates": 8, "rl_candidates": 1, "trials": 10}
+    paper = {"candidates": 30, "rl_candidates": None, "trials": 3}
+    assert RunJob(budget="paper", trials=3).settings() == paper
+    assert RunJob(policy="generalist").settings()["candidates"] == 30
+    assert RunJob(policy="generalist", candidates=5).settings()["candidates"] == 5
+    assert RunJob(policy="fixed").settings()["candidates"] == BUDGETS["fast"]["candidates"] == 8
     assert all("iterations" not in budget for budget in BUDGETS.values())
     assert RunJob().train.iterations is None
 

@@ -30,7 +30,8 @@ from agents.methods import SELECTORS, point_text
         + f", {b['trials']} trials"
         for name, b in BUDGETS.items()
     )
-    + ". fast: about a minute on 2 CPU cores; paper: hours.",
+    + ". fast: about a minute on 2 CPU cores; paper: hours. --policy generalist plans "
+    + f"{BUDGETS[DEFAULT_BUDGET]['generalist_candidates']} candidates with either.",
 )
 @click.option(
     "--policy",

@@ -140,7 +140,7 @@ class RunJob:
     """The contour: a built-in name, a ``.json``/``.svg`` file, or the contour itself."""
     budget: str = DEFAULT_BUDGET
     """``fast`` (8 candidates, a policy for the best one, 10 trials: about a minute on 2 CPU cores) or
-    ``paper`` (the paper's 30 candidates, a policy for each)."""
+    ``paper`` (the paper's 30 candidates, a policy for each); the generalist's plan has 30 with either."""
     policy: str = DEFAULT_SELECTOR
     """The tensioner that chooses the pinch candidate: ``rl``; ``generalist`` (one policy for every contour,
     no training: seconds); or ``fixed`` / ``analytic`` for a quick plan."""
@@ -148,7 +148,7 @@ class RunJob:
     """The generalist ``policy: generalist`` plays: ``generalist`` (the one warpcut ships) or a run
     directory of ``warpcut generalist``."""
     candidates: int | None = None
-    """Pinch candidates sampled for the plan (None: the budget's)."""
+    """Pinch candidates sampled for the plan (None: the budget's; with ``policy: generalist``, 30)."""
     rl_candidates: int | None = None
     """How many of the best candidates (by fixed tension) get a policy (None: the budget's)."""
     trials: int | None = None
@@ -183,9 +183,14 @@ class RunJob:
             _counted(f"RunJob.{name}", getattr(self, name), optional=True)
 
     def settings(self) -> dict:
-        """The budget's ``candidates``, ``rl_candidates`` and ``trials``, with this job's where given."""
+        """The budget's ``candidates`` (the generalist's with ``policy: generalist``), ``rl_candidates`` and
+        ``trials``, with this job's where given."""
+        budget = dict(BUDGETS[self.budget])
+        generalist_candidates = budget.pop("generalist_candidates")
+        if self.policy == "generalist":
+            budget["candidates"] = generalist_candidates
         given = {"candidates": self.candidates, "rl_candidates": self.rl_candidates, "trials": self.trials}
-        return {**BUDGETS[self.budget], **{k: v for k, v in given.items() if v is not None}}
+        return {**budget, **{k: v for k, v in given.items() if v is not None}}
 
     def unused_keys(self) -> dict[str, str]:
         """The keys this job would not use, ``{key: when it applies}``: the learner and its env without
