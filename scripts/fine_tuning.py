@@ -5,9 +5,13 @@ For each contour: the contour planned as ``warpcut evaluate`` plans it (its pinc
 order), then es trained for it twice with the same seed, iterations and validation episodes: from scratch
 (the default env and policy) and from the generalist (its look-ahead env and network). The scratch run's
 kept validation error is "the per-contour level"; the table gives the training iterations each run needed to
-first validate at or below it (the generalist's zero-shot error counts, at 0), and their ratio.
+first validate at or below it (the generalist's zero-shot error counts, at 0), and their ratio. ``--at
+generalist``: both train at the plan's candidate (pinch point and order) where the generalist validates
+best, as ``evaluate`` and ``run`` play it (:func:`agents.generalist.guarded_result`), instead of at the
+planned pinch point.
 
-Run: python scripts/fine_tuning.py --contours fls-circle,kidney,gen-test-0:2 [--generalist DIR] [--out DIR]
+Run: python scripts/fine_tuning.py --contours fls-circle,kidney,gen-test-0:2 [--at plan|generalist]
+[--generalist DIR] [--out DIR]
 """
 
 from __future__ import annotations
@@ -49,16 +53,20 @@ def main() -> None:
     parser.add_argument("--contours", default="fls-circle,kidney,gen-test-0:2")
     parser.add_argument("--generalist", default="generalist")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--at", choices=("plan", "generalist"), default="plan", help="where both runs pinch")
     parser.add_argument("--out", type=Path, default=Path("logs/fine-tuning"))
     args = parser.parse_args()
     config = SimConfig()
     rows = []
     for name, contour in resolve_specs(args.contours.split(","), config):
         plan = _plan(contour, config, args.seed)
+        at = {"pinch": [float(v) for v in plan.chosen["pinch"]], "order": None}  # the planned pinch and order
+        if args.at == "generalist":
+            at = _generalist_candidate(plan, config, args)
         base = TrainJob(
             contour=name,
-            pinch=[float(v) for v in plan.chosen["pinch"]],
-            segments=[s.tolist() for s in plan.ordered_segments()],
+            pinch=at["pinch"],
+            segments=[s.tolist() for s in plan.ordered_segments(at["order"])],
             seed=args.seed,
             train=TrainConfig(algo="es"),  # fine-tuning is es's: the scratch run is es's too
             plots=False,
@@ -105,6 +113,18 @@ def main() -> None:
         print(
             f"median ratio of iterations: {np.median(ratios):.2f} over {len(ratios)} of {len(rows)} contours"
         )
+
+
+def _generalist_candidate(plan, config, args) -> dict:
+    """The plan's candidate where the generalist validates best (:func:`agents.generalist.guarded_result`,
+    seeded as ``evaluate`` seeds it)."""
+    from agents.generalist import guarded_result, load_generalist
+
+    listed = plan.ranked()
+    candidates = [(np.asarray(c["pinch"]), plan.ordered_segments(c["order"])) for c in listed]
+    generalist = load_generalist(args.generalist)
+    chosen = guarded_result(generalist, [plan.contour], [candidates], 1, config, None, args.seed).chosen[0]
+    return listed[chosen]
 
 
 def _fine_tuning(base, generalist: str):
