@@ -80,32 +80,6 @@ class MethodResult:
             [r.get("pinch_problem") for r in rollouts],
         )
 
-    def where(self, mine: Sequence[bool], other: MethodResult) -> MethodResult:
-        """This result on the contours ``mine`` marks, ``other``'s (the same contours and trials) on the
-        rest."""
-        keep = np.asarray(mine, dtype=bool)
-
-        def rows(a, b):
-            if a is None or b is None:
-                return None
-            return np.where(keep.reshape((-1,) + (1,) * (np.ndim(a) - 1)), a, b)
-
-        def items(a, b):
-            if a is None or b is None:
-                return None
-            return [x if k else y for k, x, y in zip(keep, a, b, strict=True)]
-
-        diverged = [r.diverged_trials() for r in (self, other)]
-        return MethodResult(
-            rows(self.error_vertices, other.error_vertices),
-            rows(self.error_mm2, other.error_mm2),
-            items(self.pinches, other.pinches),
-            rows(self.separated, other.separated),
-            rows(self.dropped, other.dropped),
-            None if self.diverged is None and other.diverged is None else rows(*diverged),
-            items(self.pinch_problems, other.pinch_problems),
-        )
-
     def diverged_trials(self) -> np.ndarray:
         """(num_contours, trials) bool: trials whose simulation diverged (flagged, or a NaN error)."""
         flagged = np.zeros(self.error_vertices.shape, dtype=bool) if self.diverged is None else self.diverged

@@ -232,10 +232,10 @@ def guarded_result(
     candidate; else holding still there (fixed tension). Validation: :data:`VALIDATION_EPISODES` noisy
     episodes per candidate, seeded ``seed`` + :data:`~agents.policies.VALIDATION_SEED_OFFSET` (one batch for
     the candidates, one for holding still: each env draws a noise stream of its own), the lowest mean error
-    wins (a tie holds still). The trials are one batch of
-    :func:`generalist_result`'s (paired with the baselines'), in which it holds still on the contours where it
-    does not play: fixed tension's trials there, and ``on_step`` sees what is played. ``played_everywhere``:
-    also play the generalist's trials where it holds still (``played``)."""
+    wins (a tie holds still). The trials are one batch of :func:`generalist_result`'s (paired with the
+    baselines'), in which it holds still on the contours where it does not play: fixed tension's trials
+    there, and ``on_step`` sees what is played. ``played_everywhere``: also play the generalist's trials
+    where it holds still (``played``)."""
     from agents.evaluation import run_method
     from agents.policies import VALIDATION_SEED_OFFSET
 
@@ -261,7 +261,7 @@ def guarded_result(
     at = [b if play else f for b, f, play in zip(best, first, plays, strict=True)]
     result = generalist_result(
         generalist, contours, [p for p, _ in at], cuts(at), trials, config, device, seed, on_step,
-        still=~plays,
+        still=None if plays.all() else ~plays,
     )  # fmt: skip
     played = result if plays.all() else None
     if played_everywhere and played is None:

@@ -135,7 +135,7 @@ def run_pipeline(
         log(f"[2/3] scoring the generalist at {len(listed)} pinch candidate(s), zero-shot")
         on_step = None if step_callbacks is None else step_callbacks("generalist", 0)
         chosen, plays, played = _choose_by_generalist(
-            generalist, job, loaded, plan, listed, config, device, on_step
+            generalist, job, loaded, plan, listed, settings["trials"], config, device, on_step
         )
         if not plays:
             log("      the generalist validated no better than holding still: it holds still (fixed tension)")
@@ -238,6 +238,7 @@ def _choose_by_generalist(
     contour: Contour,
     plan: Plan,
     listed: list[dict],
+    trials: int,
     config: SimConfig,
     device: str | None,
     on_step,
@@ -249,8 +250,7 @@ def _choose_by_generalist(
     row of the evaluation, paired with the baselines' trials."""
     candidates = [(np.asarray(c["pinch"]), plan.ordered_segments(c["order"])) for c in listed]
     guarded = guarded_result(
-        generalist, [contour], [candidates], job.settings()["trials"], config, device, job.seed, on_step,
-        job.arm,
+        generalist, [contour], [candidates], trials, config, device, job.seed, on_step, job.arm,
     )  # fmt: skip
     for c, e in zip(listed, guarded.validation[0], strict=True):
         c["generalist_error_vertices"] = float(e)
