@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from envs.options import EnvConfig, PatternCutOptions, sim_config_from_dict
+from envs.options import EnvConfig, PatternCutOptions
 from warpcut.contours import Contour
 from warpcut.io import read_json
 from warpcut.sim.config import SimConfig
@@ -89,7 +89,7 @@ def _read_settings(directory: Path) -> dict:
     try:
         data = read_json(path)
         EnvConfig(**data["env"])
-        sim_config_from_dict(data["sim"], "sim")
+        SimConfig.from_dict(data["sim"], "sim")
     except (OSError, KeyError, TypeError, ValueError) as exc:
         raise ValueError(f"generalist: {path} cannot be read ({exc}); restore it, or train again") from None
     return data

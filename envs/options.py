@@ -236,7 +236,7 @@ class PatternCutOptions(EnvConfig):
                 f"(got {self.allow_infeasible_pinch!r:.80})"
             )
         if isinstance(self.sim_config, dict):
-            self.sim_config = sim_config_from_dict(self.sim_config, f"{owner}.sim_config")
+            self.sim_config = SimConfig.from_dict(self.sim_config, f"{owner}.sim_config")
         check_instance(
             f"{owner}.sim_config", self.sim_config, SimConfig, "a SimConfig, or a dict of its fields"
         )
@@ -427,19 +427,6 @@ class PatternCutOptions(EnvConfig):
             message = str(exc).removeprefix(f"{cls.__name__}.")
             raise ValueError(message if message.startswith("options: ") else f"options: {message}") from None
         return options
-
-
-def sim_config_from_dict(data: dict[str, Any], where: str) -> SimConfig:
-    """A :class:`SimConfig` from a dict of its fields (JSON lists back to the tuples it holds); ``ValueError``
-    naming ``where`` and an unknown field, or ``where.FIELD`` and a bad value."""
-    known = {f.name for f in dataclasses.fields(SimConfig)}
-    unknown = sorted(set(data) - known)
-    if unknown:
-        raise ValueError(f"{where}: unknown field(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
-    try:
-        return SimConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
-    except ConfigError as error:
-        raise error.renamed(f"{where}.{error.field}") from None
 
 
 def _check_pinch_point(where: str, value: Any) -> None:

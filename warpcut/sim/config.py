@@ -228,6 +228,21 @@ class SimConfig:
         return dataclasses.replace(self, **changes).validated()
 
     @classmethod
+    def from_dict(cls, data: dict[str, Any], where: str) -> SimConfig:
+        """A config from a dict of its fields (JSON lists back to the tuples it holds); ``ValueError``
+        naming ``where`` and an unknown field, or ``where.FIELD`` and a bad value."""
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ValueError(
+                f"{where}: unknown field(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}"
+            )
+        try:
+            return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
+        except ConfigError as error:
+            raise error.renamed(f"{where}.{error.field}") from None
+
+    @classmethod
     def authors(cls, **changes) -> SimConfig:
         """The authors' released setting, as their code runs it: rows pinned, structural springs, 5 sweeps,
         z moved without momentum, half the gravity step (their update applies ``g dt^2 / 2``, ours
