@@ -69,6 +69,11 @@ def test_pipelines_reject_bad_settings_by_name(tmp_path):
         run_pipeline(RunJob(policy="none"), tmp_path)
     with pytest.raises(ValueError, match="candidates: must be an integer >= 1"):
         run_pipeline(RunJob(candidates=0), tmp_path)
+    physics = SimConfig()
+    physics.chebyshev_rho = 0.99  # each field alone is fine; with 7 sweeps it is not
+    with pytest.raises(ValueError, match="^sim.chebyshev_rho: "):  # by the job's key, before any work
+        run_pipeline(RunJob(policy="fixed", sim=physics), tmp_path / "bad-sim")
+    assert not (tmp_path / "bad-sim").exists()
     with pytest.raises(ValueError, match="methods: unknown magic"):
         evaluate_table(EvaluateJob(contours=["fls-circle"], methods=["none", "magic"]), tmp_path)
     with pytest.raises(ValueError, match="checkpoints: no trained run for 'fls-circle'"):

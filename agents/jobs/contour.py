@@ -192,6 +192,14 @@ class RunJob:
         given = {"candidates": self.candidates, "rl_candidates": self.rl_candidates, "trials": self.trials}
         return {**budget, **{k: v for k, v in given.items() if v is not None}}
 
+    def check(self) -> RunJob:
+        """Itself, or ``ValueError`` naming what its fields do not say alone (each is checked as it is
+        given): the physics, and with ``policy: rl`` whether the learner can train in the env."""
+        _sim_validated(self.sim)
+        if self.policy == "rl":
+            self.train.check(self.env.action_type == "discrete")
+        return self
+
     def unused_keys(self) -> dict[str, str]:
         """The keys this job would not use, ``{key: when it applies}``: the learner and its env without
         ``policy: rl``, the other learners' sections, the recording's colours without a recording."""

@@ -104,10 +104,8 @@ def run_pipeline(
             after another. The results are the same either way.
     """
     cluster = cluster or Serial()
+    job.check()  # before any work
     settings = job.settings()
-    config = job.sim.validated()
-    if job.policy == "rl":  # before any work: the learner can train in the env
-        job.train.check(job.env.action_type == "discrete")
     generalist = load_generalist(job.generalist) if job.policy == "generalist" else None  # before any work
     out = Path(out)
     loaded = resolve_contour(job.contour, job.sim)
@@ -117,7 +115,7 @@ def run_pipeline(
     sampled = f"{settings['candidates']} sampled pinch candidates (+ the centroid if feasible)"
     log(f"[1/3] planning {loaded.name}: {sampled}")
     plan = plan_cut(
-        loaded, config, num_candidates=settings["candidates"], seed=job.seed, device=device, arm=job.arm
+        loaded, job.sim, num_candidates=settings["candidates"], seed=job.seed, device=device, arm=job.arm
     )
     write_json(out / "plan.json", plan.to_json())
     pinch = plan.chosen["pinch"]
@@ -135,13 +133,13 @@ def run_pipeline(
         log(f"[2/3] scoring the generalist at {len(listed)} pinch candidate(s), zero-shot")
         on_step = None if step_callbacks is None else step_callbacks("generalist", 0)
         chosen, plays, played = _choose_by_generalist(
-            generalist, job, loaded, plan, listed, settings["trials"], config, device, on_step
+            generalist, job, loaded, plan, listed, settings["trials"], device, on_step
         )
         if not plays:
             log("      the generalist validated no better than holding still: it holds still (fixed tension)")
     elif job.policy == "analytic":
         log(f"[2/3] scoring the analytic policy at {len(listed)} pinch candidate(s)")
-        chosen = _choose_by_analytic(loaded, plan, listed, config, device, job.seed, job.arm)
+        chosen = _choose_by_analytic(loaded, plan, listed, job.sim, device, job.seed, job.arm)
     else:
         rl_dir, chosen, runs = _train_candidates(
             job, loaded, plan, listed, settings["trials"], out, device, resume, log, progress, cluster
@@ -173,7 +171,7 @@ def run_pipeline(
         [loaded],
         specs,
         trials=settings["trials"],
-        config=config,
+        config=job.sim,
         device=device,
         seed=job.seed,
         segments=[plan.ordered_segments()],
@@ -186,7 +184,7 @@ def run_pipeline(
     rl = {} if rl_dir is None else {"rl": listed[chosen].get("ran_on", here)}
     table["rows"][0]["ran_on"] = {"planning": here, **rl, "evaluation": here}
     report = RunReport(
-        loaded, config, plan, job.policy, methods, table, listed, chosen, job.budget, job.analytic_pinch,
+        loaded, job.sim, plan, job.policy, methods, table, listed, chosen, job.budget, job.analytic_pinch,
         time.perf_counter() - start, runs,
     )  # fmt: skip
     write_json(out / "results.json", report.to_json())
@@ -239,7 +237,6 @@ def _choose_by_generalist(
     plan: Plan,
     listed: list[dict],
     trials: int,
-    config: SimConfig,
     device: str | None,
     on_step,
 ) -> tuple[int, bool, Method]:
@@ -250,7 +247,7 @@ def _choose_by_generalist(
     row of the evaluation, paired with the baselines' trials."""
     candidates = [(np.asarray(c["pinch"]), plan.ordered_segments(c["order"])) for c in listed]
     guarded = guarded_result(
-        generalist, [contour], [candidates], trials, config, device, job.seed, on_step, job.arm,
+        generalist, [contour], [candidates], trials, job.sim, device, job.seed, on_step, job.arm,
     )  # fmt: skip
     for c, e in zip(listed, guarded.validation[0], strict=True):
         c["generalist_error_vertices"] = float(e)
