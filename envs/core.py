@@ -127,7 +127,6 @@ class PatternCut:
 
     def _build(self, options: PatternCutOptions, num_envs: int, part: tuple[int, int]) -> None:
         self.part = part
-        self._randomized = options.randomized()
         self.options = options
         self.num_envs = num_envs
         low, high = observation_bounds(options.num_fiducials, options.contour_features, options.lookahead)
@@ -139,6 +138,7 @@ class PatternCut:
             self.action_space = gym.spaces.Box(-1.0, 1.0, (num_axes,), dtype=np.float32)
         config = options.config()
         contours, pinch_points, segments = options.per_env(num_envs)
+        self._randomized = options.randomized()  # the randomised parameters and their ranges, checked
         self.task = CuttingTask(
             config, contours, num_envs, pinch_points=pinch_points, segments=segments, device=options.device,
             arm=options.arm, allow_infeasible_pinch=options.allow_infeasible_pinch,
