@@ -11,6 +11,7 @@ directory's ``config.json`` all read them from there.
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 from dataclasses import dataclass, field
 
@@ -258,6 +259,34 @@ GENERALIST_CANDIDATES = None
 fixed tension (``generalist_candidates``; None: all of them, the plan's 30; 1: the planned pinch point, as
 fixed and rl pinch). All measured best on the generated validation contours: +50.3% against +48.7% with 16
 and +39.8% with 8 (docs/results.md)."""
+
+GENERALIST_GAINS = (0.5, 0.75, 1.0, 1.25, 1.5)
+"""Factors on the generalist's moves it chooses among with its pinch candidate, on validation episodes
+(``generalist_gains``; 1: its moves as they are; (1,): no choice). A policy trained over many contours pulls
+too little on some and too much on others: on the 48 contours of the generated ``validation`` stream the
+choice gave +53.4% against +50.0% without it (better on 29, worse on 5); 0.35 to 1.4 did as well, adding 2
+did not help (docs/results.md)."""
+
+GAIN_SHORTLIST = 5
+"""The generalist's best candidates (its moves as they are) also tried with each other gain
+(:data:`GENERALIST_GAINS`): on the same contours, +53.4% against +53.7% trying all 30 and +52.9% the best 3,
+at a third of the validation episodes of all 30."""
+
+
+def check_gains(gains, key: str = "generalist_gains") -> tuple[float, ...]:
+    """``gains`` (:data:`GENERALIST_GAINS`'s kind) as a tuple, or ``ValueError`` naming ``key``: positive
+    numbers, 1 among them (the candidates are ranked with the generalist's moves as they are)."""
+    try:
+        listed = tuple(float(g) for g in gains)
+    except (TypeError, ValueError):
+        listed = ()
+    if 1.0 not in listed or any(not math.isfinite(g) or g <= 0 for g in listed):
+        raise ValueError(
+            f"{key}: {gains!r}: give a list of positive factors on the generalist's moves, 1 among them "
+            "(e.g. [1]: its moves as they are)"
+        )
+    return listed
+
 
 GENERALIST_CONTOURS = 48
 """Generated training contours of a generalist (``warpcut generalist --generated``)."""

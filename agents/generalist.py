@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from agents.config import GAIN_SHORTLIST, GENERALIST_GAINS, check_gains
 from envs.options import EnvConfig, PatternCutOptions
 from warpcut.contours import Contour
 from warpcut.io import read_json
@@ -158,21 +159,24 @@ def generalist_result(
     seed: int,
     on_step: StepCallback | None = None,
     allow_infeasible_pinch: bool = False,
-    still: Sequence[bool] | None = None,
+    gains: Sequence[float] | None = None,
+    arm: ArmModel | None = None,
 ) -> MethodResult:
     """``generalist`` on every (contour, trial) in one batch, zero-shot, paired with the baselines' trials
     of :func:`agents.evaluation.evaluate_suite` (seeded ``seed``: trial t of contour k sees the noise of
-    their env ``k * trials + t``). ``still``: per contour, hold still there instead (no move, or the stay
-    action, every step: fixed tension's trials, bit for bit)."""
+    their env ``k * trials + t``). ``gains``: per contour, a factor on the generalist's moves there (None or
+    1: its moves as they are; 0: it holds still, no move or the stay action every step: fixed tension's
+    trials, bit for bit). ``arm``: the cutting arm the pinch points must avoid (default: the paper's), as
+    :func:`agents.evaluation.run_method` judges them for the other methods."""
     from agents.evaluation import MethodResult
     from agents.policies import policy_errors
     from envs.vector import PatternCutVecEnv
 
     options = generalist_options(
         generalist, contours, pinches, segments, config, trials, device,
-        allow_infeasible_pinch=allow_infeasible_pinch,
+        allow_infeasible_pinch=allow_infeasible_pinch, **({} if arm is None else {"arm": arm}),
     )  # fmt: skip
-    actor = generalist.actor if still is None else _holding(generalist.actor, np.repeat(still, trials))
+    actor = generalist.actor if gains is None else _scaled(generalist.actor, np.repeat(gains, trials))
     env = PatternCutVecEnv(len(contours) * trials, options)
     out = policy_errors(actor, env, seed=seed + 1, on_step=on_step, paired_noise=(seed, 0))
     problems = env.task.pinch_problems
@@ -201,16 +205,22 @@ class Guarded:
     """What :func:`guarded_result` played and why."""
 
     result: MethodResult
-    """Per contour, the generalist at its chosen candidate, or holding still (fixed tension) at the first."""
+    """Per contour, the generalist at its chosen candidate and gain, or holding still (fixed tension) at the
+    first candidate."""
     played: MethodResult | None
-    """The generalist's own trials at its chosen candidate on every contour, where it holds still too (None
-    where it held still somewhere and they were not asked for)."""
+    """The generalist's own trials at its chosen candidate and gain on every contour, where it holds still
+    too (None where it held still somewhere and they were not asked for)."""
     plays: np.ndarray
     """(num_contours,) bool: the generalist validated better than holding still, and plays."""
     chosen: list[int]
     """Per contour, the index of the candidate the generalist validated best at."""
+    gain: np.ndarray
+    """(num_contours,) the factor on its moves it validated best with there (1: its moves as they are)."""
     validation: list[np.ndarray]
-    """Per contour, the generalist's mean validation error (vertices) at each candidate."""
+    """Per contour, the generalist's mean validation error (vertices) at each candidate, its moves as they
+    are."""
+    best: np.ndarray
+    """(num_contours,) its mean validation error at the chosen candidate and gain."""
     still: np.ndarray
     """(num_contours,) holding still's mean validation error at the first candidate."""
 
@@ -226,65 +236,102 @@ def guarded_result(
     on_step: StepCallback | None = None,
     arm: ArmModel | None = None,
     played_everywhere: bool = False,
+    gains: Sequence[float] = GENERALIST_GAINS,
 ) -> Guarded:
     """``generalist`` zero-shot, contour by contour, where it validates best among ``candidates[c]``
-    (pinch points with their cuts; the first is the plan's), if that beats holding still at the first
-    candidate; else holding still there (fixed tension). Validation: :data:`VALIDATION_EPISODES` noisy
-    episodes per candidate, seeded ``seed`` + :data:`~agents.policies.VALIDATION_SEED_OFFSET` (one batch for
-    the candidates, one for holding still: each env draws a noise stream of its own), the lowest mean error
-    wins (a tie holds still). The trials are one batch of :func:`generalist_result`'s (paired with the
-    baselines'), in which it holds still on the contours where it does not play: fixed tension's trials
-    there, and ``on_step`` sees what is played. ``played_everywhere``: also play the generalist's trials
-    where it holds still (``played``)."""
+    (pinch points with their cuts; the first is the plan's) and ``gains`` (factors on its moves), if that
+    beats holding still at the first candidate; else holding still there (fixed tension).
+
+    Validation: :data:`VALIDATION_EPISODES` noisy episodes per option, seeded ``seed`` +
+    :data:`~agents.policies.VALIDATION_SEED_OFFSET`: every candidate with the generalist's moves as they are,
+    then the :data:`~agents.config.GAIN_SHORTLIST` best of them with each other gain, and holding still (a
+    batch each: each env draws a noise stream of its own); the lowest mean error wins (a tie keeps the
+    earlier: the gain of 1, the better-ranked candidate, and holding still over playing). The trials are one
+    batch of :func:`generalist_result`'s (paired with the baselines'), in which it holds still on the
+    contours where it does not play: fixed tension's trials there, and ``on_step`` sees what is played.
+    ``played_everywhere``: also play the generalist's trials where it holds still (``played``)."""
     from agents.evaluation import run_method
     from agents.policies import VALIDATION_SEED_OFFSET
 
-    def cuts(listed: Sequence[Candidate]):
-        return None if listed[0][1] is None else [segments for _, segments in listed]
-
-    first = [listed[0] for listed in candidates]
-    flat = [(c, candidate) for c, listed in enumerate(candidates) for candidate in listed]
+    others = [g for g in _gains(gains, generalist) if g != 1.0]
     validation_seed, n = seed + VALIDATION_SEED_OFFSET, VALIDATION_EPISODES
-    scores = generalist_result(
-        generalist, [contours[c] for c, _ in flat], [p for _, (p, _) in flat], cuts([x for _, x in flat]),
-        n, config, device, validation_seed,
-    ).error_vertices.mean(axis=1)  # fmt: skip
+
+    def validate(options: list[tuple[int, int, float]]) -> np.ndarray:  # (contour, candidate, gain)
+        at = [candidates[c][k] for c, k, _ in options]
+        gain = None if not others else [g for *_, g in options]
+        return generalist_result(
+            generalist, [contours[c] for c, *_ in options], [p for p, _ in at], _cuts(at), n, config, device,
+            validation_seed, gains=gain, arm=arm,
+        ).error_vertices.mean(axis=1)  # fmt: skip
+
+    options = [(c, k, 1.0) for c, listed in enumerate(candidates) for k in range(len(listed))]
+    scores = validate(options)
+    first = [listed[0] for listed in candidates]
     still = run_method(
-        contours, [p for p, _ in first], None, n, config, device, validation_seed, segments=cuts(first),
+        contours, [p for p, _ in first], None, n, config, device, validation_seed, segments=_cuts(first),
         arm=arm,
     ).error_vertices.mean(axis=1)  # fmt: skip
     bounds = np.cumsum([0] + [len(listed) for listed in candidates])
     validation = [scores[bounds[c] : bounds[c + 1]] for c in range(len(contours))]
-    chosen = [int(np.argmin(v)) for v in validation]
-    plays = np.array([v[k] < s for v, k, s in zip(validation, chosen, still, strict=True)])
-    best = [listed[k] for listed, k in zip(candidates, chosen, strict=True)]
-    at = [b if play else f for b, f, play in zip(best, first, plays, strict=True)]
+    shortlist = [np.argsort(v, kind="stable")[:GAIN_SHORTLIST] for v in validation]
+    more = [(c, int(k), g) for c, top in enumerate(shortlist) for k in top for g in others]
+    if more:
+        options, scores = options + more, np.concatenate([scores, validate(more)])
+    kept = [min((s, i) for i, ((c, *_), s) in enumerate(zip(options, scores, strict=True))
+                if c == contour) for contour in range(len(contours))]  # fmt: skip
+    chosen = [options[i][1] for _, i in kept]
+    gain = np.array([options[i][2] for _, i in kept])
+    best = np.array([s for s, _ in kept])
+    plays = best < still
+    at = [candidates[c][k if play else 0] for c, (k, play) in enumerate(zip(chosen, plays, strict=True))]
+    played_gains = np.where(plays, gain, 0.0)
     result = generalist_result(
-        generalist, contours, [p for p, _ in at], cuts(at), trials, config, device, seed, on_step,
-        still=None if plays.all() else ~plays,
+        generalist, contours, [p for p, _ in at], _cuts(at), trials, config, device, seed, on_step,
+        gains=None if (played_gains == 1.0).all() else played_gains, arm=arm,
     )  # fmt: skip
     played = result if plays.all() else None
     if played_everywhere and played is None:
-        pinches = [p for p, _ in best]
-        played = generalist_result(generalist, contours, pinches, cuts(best), trials, config, device, seed)
-    return Guarded(result, played, plays, chosen, validation, still)
+        at = [candidates[c][k] for c, k in enumerate(chosen)]
+        played = generalist_result(
+            generalist, contours, [p for p, _ in at], _cuts(at), trials, config, device, seed,
+            gains=None if (gain == 1.0).all() else gain, arm=arm,
+        )  # fmt: skip
+    return Guarded(result, played, plays, chosen, gain, validation, best, still)
 
 
-def _holding(actor: torch.nn.Module, held: np.ndarray) -> torch.nn.Module:
-    """``actor`` with its action zeroed in the envs ``held`` marks: no move (continuous), stay (discrete)."""
+def _cuts(listed: Sequence[Candidate]) -> list | None:
+    """The segments of each candidate listed, or None where they cut the whole contour."""
+    return None if listed[0][1] is None else [segments for _, segments in listed]
+
+
+def _gains(gains: Sequence[float], generalist: Generalist) -> tuple[float, ...]:
+    """``gains`` checked (:func:`agents.config.check_gains`), and only 1 for a generalist with discrete
+    actions (a factor on a choice of moves means nothing)."""
+    listed = check_gains(gains)
+    if generalist.settings["env"].get("action_type") != "continuous" and listed != (1.0,):
+        raise ValueError(
+            f"generalist_gains: {list(gains)}: this generalist chooses among discrete moves, which a factor "
+            "cannot scale; give [1]"
+        )
+    return listed
+
+
+def _scaled(actor: torch.nn.Module, gains: np.ndarray) -> torch.nn.Module:
+    """``actor`` with its action multiplied by ``gains``, one per env: 0 zeroes it, no move (continuous) or
+    stay (discrete); 1 leaves it as it is, bit for bit."""
     import torch
 
-    keep = torch.as_tensor(~np.asarray(held, dtype=bool), dtype=torch.float32).reshape(-1, 1)
+    factor = torch.as_tensor(np.asarray(gains, dtype=np.float32)).reshape(-1, 1)
 
-    class Holding(torch.nn.Module):
+    class Scaled(torch.nn.Module):
         def __init__(self) -> None:
             super().__init__()
             self.actor = actor
 
         def forward(self, obs):
-            return self.actor(obs) * keep
+            return self.actor(obs) * factor
 
-    return Holding()
+    return Scaled()
 
 
 def student_moves(

@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from agents.checkpoints import policy_layout
-from agents.config import GENERALIST_LOOKAHEAD
+from agents.config import GENERALIST_GAINS, GENERALIST_LOOKAHEAD
 from agents.generalist import GENERALIST_FILE, SHIPPED_DIR, generalist_settings
 from agents.jobs import GeneralistJob
 from envs.observations import LOOKAHEAD_POINT, observation_bounds, observation_names
@@ -209,6 +209,7 @@ def test_every_command_plays_a_generalist_zero_shot(generalist_run, tmp_path):
         shown = "fixed" if row["generalist_holds_still"] else "generalist_played"
         assert row["generalist_trials_error_vertices"] == row[f"{shown}_trials_error_vertices"]
     assert report["generalist_still_contours"] == sum(r["generalist_holds_still"] for r in rows)
+    assert all(r["generalist_gain"] in GENERALIST_GAINS for r in rows)
     assert (
         f"held still (it validated no better than that) on {report['generalist_still_contours']} of 2"
         in output
@@ -232,6 +233,18 @@ def test_the_generalist_column_is_paired_with_the_baselines_trials(generalist_ru
     still = _still_generalist(generalist_run)
     played = generalist_result(load_generalist(still), contours, pinches, None, 2, COARSE, "cpu", 3)
     assert np.array_equal(played.error_mm2, held.error_mm2)
+
+
+def _pushing_generalist(generalist_run):
+    """A copy of the fixture's generalist that pushes the grasp up and away every step, as far as it may."""
+    state = torch.load(generalist_run[0] / "best.pt", weights_only=True)
+    last = [k for k in state["actor_state_dict"] if k.startswith("mlp.") and k.endswith("bias")][-1]
+    state["actor_state_dict"][last].fill_(50.0)  # every step the largest move (at any gain), up and away
+    pushing = generalist_run[0].parent / "pushing"
+    pushing.mkdir(exist_ok=True)
+    torch.save(state, pushing / "best.pt")
+    (pushing / GENERALIST_FILE).write_text((generalist_run[0] / GENERALIST_FILE).read_text())
+    return pushing
 
 
 def _still_generalist(generalist_run):
@@ -289,9 +302,10 @@ def test_the_guarded_generalist_plays_where_it_validates_best_and_else_holds_sti
 
     monkeypatch.setattr(agents.evaluation, "run_method", fake_still)
     guarded = module.guarded_result(
-        generalist, contours, candidates, 2, COARSE, "cpu", 3, played_everywhere=True
+        generalist, contours, candidates, 2, COARSE, "cpu", 3, played_everywhere=True, gains=[1]
     )
     assert guarded.plays.tolist() == [True, False, False] and guarded.chosen == [1, 0, 0]
+    assert guarded.gain.tolist() == [1.0, 1.0, 1.0]
     first = [listed[0] for listed in candidates]
     held = still_validation(
         contours, [p for p, _ in first], None, 2, COARSE, "cpu", 3, segments=[s for _, s in first]
@@ -305,6 +319,88 @@ def test_the_guarded_generalist_plays_where_it_validates_best_and_else_holds_sti
     assert np.array_equal(guarded.result.error_mm2[1:], held.error_mm2[1:])
     assert np.array_equal(guarded.played.error_vertices, raw.error_vertices)
     assert np.allclose(guarded.result.pinches[0], candidates[0][1][0])
+
+
+def test_the_guarded_generalist_chooses_the_gain_on_its_moves_it_validates_best_with(
+    generalist_run, monkeypatch
+):
+    """The best candidates (its moves as they are) are tried with each other gain too, and the candidate and
+    gain with the lowest validation error is played: its trials are the generalist's with its moves scaled
+    by that gain, which leaves them bit for bit at a gain of 1 and holds still at 0."""
+    import agents.generalist as module
+    from agents.evaluation import run_method
+
+    contours = generate_contours(2, "test", 0, COARSE)
+    candidates = [listed[:2] for listed in _candidates(contours, 2)]
+    generalist = module.load_generalist(generalist_run[0])
+    real = module.generalist_result
+    batches = []
+
+    def fake(gen, contours_, pinches, segments, trials, config, device, seed, *a, gains=None, **k):
+        result = real(gen, contours_, pinches, segments, trials, config, device, seed, *a, gains=gains, **k)
+        if trials == module.VALIDATION_EPISODES:  # the first contour best at 1.5, the second at 1
+            batches.append(list(gains))
+            best = [1.5 if c is contours[0] else 1.0 for c in contours_]
+            errors = [1.0 + (g != b) for g, b in zip(gains, best, strict=True)]
+            result.error_vertices[:] = np.array(errors).reshape(-1, 1)
+        return result
+
+    monkeypatch.setattr(module, "generalist_result", fake)
+    guarded = module.guarded_result(
+        generalist, contours, candidates, 2, COARSE, "cpu", 3, gains=[1, 0.5, 1.5]
+    )
+    assert batches == [[1.0] * 4, [0.5, 1.5] * 4]  # every candidate, then the shortlist with each other gain
+    assert guarded.gain.tolist() == [1.5, 1.0] and guarded.chosen == [0, 0]
+    assert guarded.best.tolist() == [1.0, 1.0]
+    stills = run_method(contours, [c[0][0] for c in candidates], None, 2, COARSE, "cpu", 3,
+                        segments=[c[0][1] for c in candidates])  # fmt: skip
+    plays = guarded.plays
+    expected = real(generalist, contours, [c[0][0] for c in candidates], [c[0][1] for c in candidates], 2,
+                    COARSE, "cpu", 3, gains=np.where(plays, [1.5, 1.0], 0.0))  # fmt: skip
+    assert np.array_equal(guarded.result.error_vertices, expected.error_vertices)
+    as_is = real(generalist, contours, [c[0][0] for c in candidates], [c[0][1] for c in candidates], 2,
+                 COARSE, "cpu", 3)  # fmt: skip
+    ones = real(generalist, contours, [c[0][0] for c in candidates], [c[0][1] for c in candidates], 2,
+                COARSE, "cpu", 3, gains=[1.0, 1.0])  # fmt: skip
+    zeros = real(generalist, contours, [c[0][0] for c in candidates], [c[0][1] for c in candidates], 2,
+                 COARSE, "cpu", 3, gains=[0.0, 0.0])  # fmt: skip
+    assert np.array_equal(ones.error_vertices, as_is.error_vertices)
+    assert np.array_equal(zeros.error_vertices, stills.error_vertices)
+
+
+def test_the_generalist_judges_its_pinch_points_with_the_jobs_arm(generalist_run):
+    """A pinch point under the paper's arm but clear of a thin, short one: the generalist's batch judges it
+    with the arm it is given, as the other methods' batches do (its problem names the arm with the paper's
+    only)."""
+    from agents.evaluation import run_method
+    from agents.generalist import generalist_result, load_generalist
+    from warpcut.planning import ArmModel, pinch_problems
+
+    contour = generate_contours(1, "test", 0, COARSE)[0]
+    thin = ArmModel(radius_mm=0.5, length_mm=5.0)
+    grid = np.array([[x, y] for x in range(5, 96, 3) for y in range(5, 96, 3)], dtype=float)
+    default, narrow = pinch_problems(grid, contour, COARSE), pinch_problems(grid, contour, COARSE, arm=thin)
+    point = next(
+        p for p, a, b in zip(grid, default, narrow, strict=True) if a and "arm" in a and "arm" not in b
+    )
+    generalist = load_generalist(generalist_run[0])
+    for arm in (None, thin):
+        played = generalist_result(generalist, [contour], [point], None, 1, COARSE, "cpu", 0,
+                                   allow_infeasible_pinch=True, arm=arm)  # fmt: skip
+        still = run_method(
+            [contour], [point], None, 1, COARSE, "cpu", 0, arm=arm, allow_infeasible_pinch=True
+        )
+        assert played.pinch_problems == still.pinch_problems
+        assert ("under the cutting arm" in played.pinch_problems[0]) == (arm is None)
+
+
+@pytest.mark.parametrize("gains", [[], [0.5], [1, 0], [1, -1], [1, float("nan")], "x"])
+def test_gains_without_one_or_not_positive_are_refused_by_name(gains):
+    from agents.config import check_gains
+
+    with pytest.raises(ValueError, match=r"^generalist_gains: .*1 among them"):
+        check_gains(gains)
+    assert check_gains([1, 1.25]) == (1.0, 1.25)
 
 
 def test_a_generalist_that_validates_no_better_than_holding_still_holds_still(generalist_run):
@@ -321,14 +417,8 @@ def test_a_generalist_that_validates_no_better_than_holding_still_holds_still(ge
     )
     assert not guarded.plays.any()
     assert [v[0] for v in guarded.validation] == guarded.still.tolist()
-    state = torch.load(generalist_run[0] / "best.pt", weights_only=True)
-    last = [k for k in state["actor_state_dict"] if k.startswith("mlp.") and k.endswith("bias")][-1]
-    state["actor_state_dict"][last].fill_(50.0)  # every step the largest move, up and away
-    pushing = generalist_run[0].parent / "pushing"
-    pushing.mkdir(exist_ok=True)
-    torch.save(state, pushing / "best.pt")
-    (pushing / GENERALIST_FILE).write_text((generalist_run[0] / GENERALIST_FILE).read_text())
-    guarded = guarded_result(load_generalist(pushing), contours, candidates, 1, COARSE, "cpu", 5)
+    guarded = guarded_result(load_generalist(_pushing_generalist(generalist_run)), contours, candidates, 1,
+                             COARSE, "cpu", 5)  # fmt: skip
     assert not guarded.plays.any() and all(
         (v > s).all() for v, s in zip(guarded.validation, guarded.still, strict=True)
     )
@@ -408,11 +498,12 @@ def test_the_sensitivity_studies_take_the_generalist(generalist_run, tmp_path):
 
 
 def test_run_holds_still_where_the_generalist_validates_no_better(generalist_run, tmp_path):
-    """A generalist that holds still (the fixture's kept policy, iteration 0) validates no better than
-    holding still: run keeps the still grasp at the plan's pinch, fixed tension trial for trial."""
+    """A generalist that pushes the grasp away validates worse than holding still at every candidate and
+    gain: run keeps the still grasp at the plan's pinch, fixed tension trial for trial."""
     out = tmp_path / "run"
+    still = _pushing_generalist(generalist_run)
     code, output, _ = invoke(
-        ["run", "--contour", "circle-small", "--policy", "generalist", "--generalist", str(generalist_run[0]),
+        ["run", "--contour", "circle-small", "--policy", "generalist", "--generalist", str(still),
          "--out", str(out), "--set", "candidates=2", "--set", "trials=2", "--set", "plots=false", *SMALL]
     )  # fmt: skip
     assert code == 0, output

@@ -10,7 +10,9 @@ from agents.config import (
     EVALUATION_CANDIDATES,
     EVALUATION_TRIALS,
     GENERALIST_CANDIDATES,
+    GENERALIST_GAINS,
     TrainConfig,
+    check_gains,
 )
 from agents.jobs.fields import (
     _check_fields,
@@ -73,6 +75,9 @@ class EvaluateJob:
     """Pinch candidates the generalist column chooses among on validation episodes: the plan's best by
     fixed tension, each in its best order (None: all the plan's); 1: the planned pinch point only (as fixed
     and rl pinch)."""
+    generalist_gains: tuple[float, ...] = GENERALIST_GAINS
+    """Factors on the generalist's moves it chooses among with its candidate, on the same validation
+    episodes (1: its moves as they are; [1]: no choice)."""
     record: int | None = None
     """Write ``recording.rrd`` of the first contour's first N envs of each method; None: none."""
     colour_by: str = "strain"
@@ -87,6 +92,7 @@ class EvaluateJob:
         for name in ("trials", "candidates"):
             _counted(f"EvaluateJob.{name}", getattr(self, name))
         _counted("EvaluateJob.generalist_candidates", self.generalist_candidates, True, "all the plan's")
+        self.generalist_gains = check_gains(self.generalist_gains, "EvaluateJob.generalist_gains")
 
     def check(self) -> EvaluateJob:
         """Itself, or ``ValueError`` naming what its fields do not say alone (each is checked as it is
@@ -115,5 +121,5 @@ class EvaluateJob:
             unused["grad"] = "read by the grad column only (--methods ...,grad)"
         if "generalist" not in self.methods:
             why = "read by the generalist column only (--methods ...,generalist)"
-            unused |= {key: why for key in ("generalist", "generalist_candidates")}
+            unused |= {key: why for key in ("generalist", "generalist_candidates", "generalist_gains")}
         return {**unused, **_recording_keys(self)}

@@ -197,10 +197,14 @@ def _candidate_text(candidate: dict) -> str:
         "fixed_error_vertices", "analytic_error_vertices", "generalist_error_vertices",
         "rl_validation_error_vertices",
     )  # fmt: skip
+    gain = candidate.get("generalist_gain", 1.0)
+    scaled = ""
+    if gain != 1:
+        scaled = f" ({candidate['generalist_gain_error_vertices']:.1f} with its moves x{gain:g})"
     return (
         f"pinch {point_text(candidate['pinch'])}, order {candidate['order']}"
         + "".join(f", {k.split('_')[0]} {candidate[k]:.1f}" for k in scores if k in candidate)
-        + " vertices"
+        + f" vertices{scaled}"
     )
 
 
@@ -240,11 +244,12 @@ def _choose_by_generalist(
     device: str | None,
     on_step,
 ) -> tuple[int, bool, Method]:
-    """The generalist at the candidate (each in its best order) where it validates best, or holding still at
-    the plan's (index 0) where it validates no better (:func:`agents.generalist.guarded_result`), as rl's
-    model selection keeps its initial, still policy; records each candidate's validation error (and holding
-    still's at the first) in ``listed``. Returns the candidate played, whether the generalist plays, and its
-    row of the evaluation, paired with the baselines' trials."""
+    """The generalist at the candidate (each in its best order) and gain where it validates best, or holding
+    still at the plan's (index 0) where it validates no better (:func:`agents.generalist.guarded_result`), as
+    rl's model selection keeps its initial, still policy; records each candidate's validation error (and
+    holding still's at the first; the chosen one's gain and its error with it) in ``listed``. Returns the
+    candidate played, whether the generalist plays, and its row of the evaluation, paired with the baselines'
+    trials."""
     candidates = [(np.asarray(c["pinch"]), plan.ordered_segments(c["order"])) for c in listed]
     guarded = guarded_result(
         generalist, [contour], [candidates], trials, job.sim, device, job.seed, on_step, job.arm,
@@ -252,6 +257,9 @@ def _choose_by_generalist(
     for c, e in zip(listed, guarded.validation[0], strict=True):
         c["generalist_error_vertices"] = float(e)
     listed[0]["still_error_vertices"] = float(guarded.still[0])
+    best = listed[guarded.chosen[0]]
+    best["generalist_gain"] = float(guarded.gain[0])
+    best["generalist_gain_error_vertices"] = float(guarded.best[0])
     plays = bool(guarded.plays[0])
     return (guarded.chosen[0] if plays else 0), plays, Method("generalist", result=guarded.result)
 

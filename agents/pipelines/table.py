@@ -451,8 +451,9 @@ def _generalist_result(
     ``job.generalist_candidates`` by fixed tension, None: all) where it validates best; on a contour where
     it validates no better than holding still at the planned pinch point, it holds still there
     (:func:`agents.generalist.guarded_result`; without plans: the feasible centroid, the whole contour). The
-    note it returns adds to each row whether it held still (``generalist_holds_still``), the candidate it
-    chose (``generalist_candidate``) and its own trials there (``generalist_played_*``), and to the table on
+    note it returns adds to each row whether it held still (``generalist_holds_still``), the candidate and
+    the gain it chose (``generalist_candidate``, ``generalist_gain``: ``job.generalist_gains``'s) and its
+    own trials there (``generalist_played_*``), and to the table on
     how many contours it held still (``generalist_still_contours``)."""
     from warpcut.planning import default_pinch
 
@@ -466,8 +467,9 @@ def _generalist_result(
         candidates = [[(default_pinch(c, job.sim, job.arm), None)] for c in contours]
     callback = None if step_callbacks is None else step_callbacks("generalist", 0)
     guarded = guarded_result(
-        generalist, contours, candidates, job.trials, job.sim, device, job.seed, callback, job.arm, True
-    )
+        generalist, contours, candidates, job.trials, job.sim, device, job.seed, callback, job.arm, True,
+        job.generalist_gains,
+    )  # fmt: skip
     plays, played = guarded.plays, guarded.played
     log(
         f"  generalist: {len(contours)} contour(s) zero-shot in {time.perf_counter() - started:.0f} s, "
@@ -479,6 +481,7 @@ def _generalist_result(
             improvement = paired_improvement(row["none_trials_error_vertices"], played.error_vertices[k])
             row["generalist_holds_still"] = not bool(plays[k])
             row["generalist_candidate"] = guarded.chosen[k]
+            row["generalist_gain"] = float(guarded.gain[k])
             row["generalist_played_trials_error_vertices"] = played.error_vertices[k].tolist()
             row["generalist_played_improvement_pct"], row["generalist_played_ci95"] = mean_ci95(improvement)
         table["generalist_still_contours"] = int((~plays).sum())
