@@ -192,9 +192,10 @@ def generalist_result(
 
 
 VALIDATION_EPISODES = 8
-"""Validation episodes per contour and pinch candidate, seeded apart from the evaluation's
-(:data:`agents.policies.VALIDATION_SEED_OFFSET`), on which the generalist chooses where to pinch and must cut
-better than holding still to be played (:func:`guarded_result`)."""
+"""Validation episodes per contour and option (pinch candidate, gain), seeded apart from the evaluation's
+(:data:`agents.policies.VALIDATION_SEED_OFFSET`), on which the generalist chooses where to pinch and how
+strongly to act, and as many fresh ones on which its choice must cut better than holding still to be played
+(:func:`guarded_result`)."""
 
 Candidate = tuple[np.ndarray, Sequence[np.ndarray] | None]
 """Where a contour is cut: a pinch point and the segments in cutting order (None: the whole contour)."""
@@ -211,7 +212,8 @@ class Guarded:
     """The generalist's own trials at its chosen candidate and gain on every contour, where it holds still
     too (None where it held still somewhere and they were not asked for)."""
     plays: np.ndarray
-    """(num_contours,) bool: the generalist validated better than holding still, and plays."""
+    """(num_contours,) bool: the generalist's choice cut better than holding still on the confirmation
+    episodes, and plays."""
     chosen: list[int]
     """Per contour, the index of the candidate the generalist validated best at."""
     gain: np.ndarray
@@ -220,9 +222,9 @@ class Guarded:
     """Per contour, the generalist's mean validation error (vertices) at each candidate, its moves as they
     are."""
     best: np.ndarray
-    """(num_contours,) its mean validation error at the chosen candidate and gain."""
+    """(num_contours,) its mean error at the chosen candidate and gain on the confirmation episodes."""
     still: np.ndarray
-    """(num_contours,) holding still's mean validation error at the first candidate."""
+    """(num_contours,) holding still's mean error at the first candidate on the confirmation episodes."""
 
 
 def guarded_result(
@@ -244,10 +246,12 @@ def guarded_result(
 
     Validation: :data:`VALIDATION_EPISODES` noisy episodes per option, seeded ``seed`` +
     :data:`~agents.policies.VALIDATION_SEED_OFFSET`: every candidate with the generalist's moves as they are,
-    then the :data:`~agents.config.GAIN_SHORTLIST` best of them with each other gain, and holding still (a
-    batch each: each env draws a noise stream of its own); the lowest mean error wins (a tie keeps the
-    earlier: the gain of 1, the better-ranked candidate, and holding still over playing). The trials are one
-    batch of :func:`generalist_result`'s (paired with the baselines'), in which it holds still on the
+    then the :data:`~agents.config.GAIN_SHORTLIST` best of them with each other gain (a batch each: each env
+    draws a noise stream of its own); the lowest mean error wins (a tie keeps the earlier: the gain of 1, the
+    better-ranked candidate). The lowest of many noisy means is lower than what the option cuts, so the
+    winner then plays against holding still on as many fresh episodes (seeded ``VALIDATION_SEED_OFFSET``
+    further on, paired env by env): it plays where it cuts better there (a tie holds still). The trials are
+    one batch of :func:`generalist_result`'s (paired with the baselines'), in which it holds still on the
     contours where it does not play: fixed tension's trials there, and ``on_step`` sees what is played.
     ``played_everywhere``: also play the generalist's trials where it holds still (``played``)."""
     from agents.evaluation import run_method
@@ -266,11 +270,6 @@ def guarded_result(
 
     options = [(c, k, 1.0) for c, listed in enumerate(candidates) for k in range(len(listed))]
     scores = validate(options)
-    first = [listed[0] for listed in candidates]
-    still = run_method(
-        contours, [p for p, _ in first], None, n, config, device, validation_seed, segments=_cuts(first),
-        arm=arm,
-    ).error_vertices.mean(axis=1)  # fmt: skip
     bounds = np.cumsum([0] + [len(listed) for listed in candidates])
     validation = [scores[bounds[c] : bounds[c + 1]] for c in range(len(contours))]
     shortlist = [np.argsort(v, kind="stable")[:GAIN_SHORTLIST] for v in validation]
@@ -281,7 +280,16 @@ def guarded_result(
                 if c == contour) for contour in range(len(contours))]  # fmt: skip
     chosen = [options[i][1] for _, i in kept]
     gain = np.array([options[i][2] for _, i in kept])
-    best = np.array([s for s, _ in kept])
+    confirmation_seed = validation_seed + VALIDATION_SEED_OFFSET
+    first, best_at = [listed[0] for listed in candidates], [candidates[c][k] for c, k in enumerate(chosen)]
+    best = generalist_result(
+        generalist, contours, [p for p, _ in best_at], _cuts(best_at), n, config, device, confirmation_seed,
+        gains=None if not others else gain, arm=arm,
+    ).error_vertices.mean(axis=1)  # fmt: skip
+    still = run_method(
+        contours, [p for p, _ in first], None, n, config, device, confirmation_seed, segments=_cuts(first),
+        arm=arm,
+    ).error_vertices.mean(axis=1)  # fmt: skip
     plays = best < still
     at = [candidates[c][k if play else 0] for c, (k, play) in enumerate(zip(chosen, plays, strict=True))]
     played_gains = np.where(plays, gain, 0.0)
@@ -291,9 +299,8 @@ def guarded_result(
     )  # fmt: skip
     played = result if plays.all() else None
     if played_everywhere and played is None:
-        at = [candidates[c][k] for c, k in enumerate(chosen)]
         played = generalist_result(
-            generalist, contours, [p for p, _ in at], _cuts(at), trials, config, device, seed,
+            generalist, contours, [p for p, _ in best_at], _cuts(best_at), trials, config, device, seed,
             gains=None if (gain == 1.0).all() else gain, arm=arm,
         )  # fmt: skip
     return Guarded(result, played, plays, chosen, gain, validation, best, still)

@@ -2,9 +2,9 @@
 ``generalist`` column (``results.json``): per contour every method's improvement over no tension ± its 95%
 CI over the paired trials, the generalist's paired difference from per-contour training (``rl``) and from
 the better baseline, where it holds still (validating no better than that) and what it scores played
-there too (unguarded), and the summary rows the targets read (the mean over contours ± its 95% CI over
-contours, the lead over the better of fixed and analytic, on how many contours the generalist is the best
-method or the best lies within its CI).
+there too (unguarded), the gain on its moves it plays with (×g where not 1), and the summary rows the
+targets read (the mean over contours ± its 95% CI over contours, the lead over the better of fixed and
+analytic, on how many contours the generalist is the best method or the best lies within its CI).
 
 Run: python scripts/generalist_tables.py RESULTS.json [--others fixed,analytic]
 """
@@ -64,6 +64,8 @@ def main() -> None:
             cells[methods.index("generalist")] = f"**{cells[methods.index('generalist')]}**"
         if row.get("generalist_holds_still"):
             cells[methods.index("generalist")] += " (holds still)"
+        elif row.get("generalist_gain", 1.0) != 1.0:  # its moves scaled by the gain it validated best with
+            cells[methods.index("generalist")] += f" ×{row['generalist_gain']:g}"
         if guarded:
             cells.append(
                 f"{row['generalist_played_improvement_pct']:+.1f} ± {row['generalist_played_ci95']:.1f}"
@@ -115,6 +117,11 @@ def main() -> None:
     if guarded:
         still = sum(bool(r["generalist_holds_still"]) for r in rows)
         print(f"- holds still where it validates no better: {still} of {len(rows)} contours")
+    if "generalist_gain" in rows[0]:
+        plays = [r["generalist_gain"] for r in rows if not r["generalist_holds_still"]]
+        gains, counts = np.unique(plays, return_counts=True)
+        listed = ", ".join(f"×{g:g} on {n}" for g, n in zip(gains, counts, strict=True))
+        print(f"- the gain on its moves where it plays: {listed}")
     if has_rl:
         print(
             "- generalist - per-contour rl, mean over contours: {:+.1f} ± {:.1f} points".format(

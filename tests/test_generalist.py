@@ -271,31 +271,38 @@ def _candidates(contours, count):
 def test_the_guarded_generalist_plays_where_it_validates_best_and_else_holds_still(
     generalist_run, monkeypatch
 ):
-    """Contour by contour: the generalist at the candidate with its lowest validation error where that is
-    below holding still's at the first candidate, else holding still there (fixed tension, trial for trial,
-    ties included); its own trials at its best candidate everywhere on request."""
+    """Contour by contour: the generalist at the candidate with its lowest validation error, where that
+    choice cuts better than holding still at the first candidate on fresh episodes, else holding still there
+    (fixed tension, trial for trial, ties included); its own trials at its best candidate everywhere on
+    request."""
     import agents.generalist as module
     from agents.evaluation import run_method
+    from agents.policies import VALIDATION_SEED_OFFSET
 
     contours = generate_contours(3, "test", 0, COARSE)
     candidates = [listed[:2] for listed in _candidates(contours, 2)]
     generalist = module.load_generalist(generalist_run[0])
-    validation = np.array([[1.0, 0.5], [2.0, 3.0], [3.0, 4.0]])  # holding still: 2, 2, 1
+    validation = np.array([[1.0, 0.5], [2.0, 3.0], [3.0, 4.0]])  # the choice: 1, 0, 0
+    fresh, fresh_still = (
+        np.array([[1.0], [2.0], [3.0]]),
+        np.array([[2.0], [2.0], [1.0]]),
+    )  # plays on the first
+    validation_seed, fresh_seed = 3 + VALIDATION_SEED_OFFSET, 3 + 2 * VALIDATION_SEED_OFFSET
     played_validation = module.generalist_result
 
     def fake(gen, contours_, pinches, segments, trials, config, device, seed, *a, **k):
         result = played_validation(gen, contours_, pinches, segments, trials, config, device, seed, *a, **k)
-        if trials == module.VALIDATION_EPISODES:
-            result.error_vertices[:] = validation.reshape(-1, 1)
+        if seed in (validation_seed, fresh_seed):
+            result.error_vertices[:] = validation.reshape(-1, 1) if seed == validation_seed else fresh
         return result
 
     monkeypatch.setattr(module, "generalist_result", fake)
     still_validation = run_method
 
-    def fake_still(contours_, pinches, policy, trials, *a, **k):
-        result = still_validation(contours_, pinches, policy, trials, *a, **k)
-        if trials == module.VALIDATION_EPISODES:
-            result.error_vertices[:] = np.array([[2.0], [2.0], [1.0]])
+    def fake_still(contours_, pinches, policy, trials, config, device, seed, *a, **k):
+        result = still_validation(contours_, pinches, policy, trials, config, device, seed, *a, **k)
+        assert seed == fresh_seed  # holding still is scored on the fresh episodes only
+        result.error_vertices[:] = fresh_still
         return result
 
     import agents.evaluation
@@ -329,6 +336,7 @@ def test_the_guarded_generalist_chooses_the_gain_on_its_moves_it_validates_best_
     by that gain, which leaves them bit for bit at a gain of 1 and holds still at 0."""
     import agents.generalist as module
     from agents.evaluation import run_method
+    from agents.policies import VALIDATION_SEED_OFFSET
 
     contours = generate_contours(2, "test", 0, COARSE)
     candidates = [listed[:2] for listed in _candidates(contours, 2)]
@@ -338,7 +346,7 @@ def test_the_guarded_generalist_chooses_the_gain_on_its_moves_it_validates_best_
 
     def fake(gen, contours_, pinches, segments, trials, config, device, seed, *a, gains=None, **k):
         result = real(gen, contours_, pinches, segments, trials, config, device, seed, *a, gains=gains, **k)
-        if trials == module.VALIDATION_EPISODES:  # the first contour best at 1.5, the second at 1
+        if seed == 3 + VALIDATION_SEED_OFFSET:  # the first contour best at 1.5, the second at 1
             batches.append(list(gains))
             best = [1.5 if c is contours[0] else 1.0 for c in contours_]
             errors = [1.0 + (g != b) for g, b in zip(gains, best, strict=True)]
@@ -351,7 +359,6 @@ def test_the_guarded_generalist_chooses_the_gain_on_its_moves_it_validates_best_
     )
     assert batches == [[1.0] * 4, [0.5, 1.5] * 4]  # every candidate, then the shortlist with each other gain
     assert guarded.gain.tolist() == [1.5, 1.0] and guarded.chosen == [0, 0]
-    assert guarded.best.tolist() == [1.0, 1.0]
     stills = run_method(contours, [c[0][0] for c in candidates], None, 2, COARSE, "cpu", 3,
                         segments=[c[0][1] for c in candidates])  # fmt: skip
     plays = guarded.plays
@@ -416,12 +423,11 @@ def test_a_generalist_that_validates_no_better_than_holding_still_holds_still(ge
         load_generalist(_still_generalist(generalist_run)), contours, planned, 1, COARSE, "cpu", 5
     )
     assert not guarded.plays.any()
-    assert [v[0] for v in guarded.validation] == guarded.still.tolist()
+    assert guarded.best.tolist() == guarded.still.tolist()  # at any gain, on the same fresh episodes
     guarded = guarded_result(load_generalist(_pushing_generalist(generalist_run)), contours, candidates, 1,
                              COARSE, "cpu", 5)  # fmt: skip
-    assert not guarded.plays.any() and all(
-        (v > s).all() for v, s in zip(guarded.validation, guarded.still, strict=True)
-    )
+    assert not guarded.plays.any() and (guarded.best > guarded.still).all()
+    assert all((v > s).all() for v, s in zip(guarded.validation, guarded.still, strict=True))
 
 
 def test_training_for_one_contour_starts_from_a_generalist(generalist_run, tmp_path):

@@ -135,8 +135,11 @@ def run_pipeline(
         chosen, plays, played = _choose_by_generalist(
             generalist, job, loaded, plan, listed, settings["trials"], device, on_step
         )
-        if not plays:
-            log("      the generalist validated no better than holding still: it holds still (fixed tension)")
+        best = next(c["generalist_confirmed_error_vertices"] for c in listed if "generalist_gain" in c)
+        confirmed = (
+            f"      on fresh episodes its choice cut {best:.1f} vertices, holding still "
+            f"{listed[0]['still_error_vertices']:.1f}" + ("" if plays else ": it holds still (fixed tension)")
+        )
     elif job.policy == "analytic":
         log(f"[2/3] scoring the analytic policy at {len(listed)} pinch candidate(s)")
         chosen = _choose_by_analytic(loaded, plan, listed, job.sim, device, job.seed, job.arm)
@@ -145,6 +148,8 @@ def run_pipeline(
             job, loaded, plan, listed, settings["trials"], out, device, resume, log, progress, cluster
         )
     log(f"      chosen by {job.policy}: {_candidate_text(listed[chosen])}")
+    if job.policy == "generalist":
+        log(confirmed)
 
     methods = ["none", "fixed", "analytic"] + ([job.policy] if job.policy in ("rl", "generalist") else [])
     log(f"[3/3] evaluating {', '.join(methods)}: {settings['trials']} trials each")
@@ -198,13 +203,11 @@ def _candidate_text(candidate: dict) -> str:
         "rl_validation_error_vertices",
     )  # fmt: skip
     gain = candidate.get("generalist_gain", 1.0)
-    scaled = ""
-    if gain != 1:
-        scaled = f" ({candidate['generalist_gain_error_vertices']:.1f} with its moves x{gain:g})"
     return (
         f"pinch {point_text(candidate['pinch'])}, order {candidate['order']}"
         + "".join(f", {k.split('_')[0]} {candidate[k]:.1f}" for k in scores if k in candidate)
-        + f" vertices{scaled}"
+        + " vertices"
+        + (f", its moves x{gain:g}" if gain != 1 else "")
     )
 
 
@@ -245,9 +248,10 @@ def _choose_by_generalist(
     on_step,
 ) -> tuple[int, bool, Method]:
     """The generalist at the candidate (each in its best order) and gain where it validates best, or holding
-    still at the plan's (index 0) where it validates no better (:func:`agents.generalist.guarded_result`), as
-    rl's model selection keeps its initial, still policy; records each candidate's validation error (and
-    holding still's at the first; the chosen one's gain and its error with it) in ``listed``. Returns the
+    still at the plan's (index 0) where that cuts no better on fresh episodes
+    (:func:`agents.generalist.guarded_result`), as rl's model selection keeps its initial, still policy;
+    records in ``listed`` each candidate's validation error, and the chosen one's gain and its error on the
+    fresh episodes (holding still's: at the first). Returns the
     candidate played, whether the generalist plays, and its row of the evaluation, paired with the baselines'
     trials."""
     candidates = [(np.asarray(c["pinch"]), plan.ordered_segments(c["order"])) for c in listed]
@@ -259,7 +263,7 @@ def _choose_by_generalist(
     listed[0]["still_error_vertices"] = float(guarded.still[0])
     best = listed[guarded.chosen[0]]
     best["generalist_gain"] = float(guarded.gain[0])
-    best["generalist_gain_error_vertices"] = float(guarded.best[0])
+    best["generalist_confirmed_error_vertices"] = float(guarded.best[0])
     plays = bool(guarded.plays[0])
     return (guarded.chosen[0] if plays else 0), plays, Method("generalist", result=guarded.result)
 
