@@ -263,14 +263,15 @@ and +39.8% with 8 (docs/results.md)."""
 GENERALIST_GAINS = (0.5, 0.75, 1.0, 1.25, 1.5)
 """Factors on the generalist's moves it chooses among with its pinch candidate, on validation episodes
 (``generalist_gains``; 1: its moves as they are; (1,): no choice). A policy trained over many contours pulls
-too little on some and too much on others: on the 48 contours of the generated ``validation`` stream the
-choice gave +53.4% against +50.0% without it (better on 29, worse on 5); 0.35 to 1.4 did as well, adding 2
-did not help (docs/results.md)."""
+too hard on some and too little on others: on the 48 contours of the generated ``validation`` stream,
+``evaluate``'s generalist column scored +51.6% against +49.3% with (1,) (docs/results.md);
+``experiments/generalist_gains.py`` compares sets of gains (on 28 of them, 0.35 to 1.4 did as well and
+adding 2 did not help: ``--gains 0.25,0.35,0.5,0.7,1,1.4,2``)."""
 
 GAIN_SHORTLIST = 5
 """The generalist's best candidates (its moves as they are) also tried with each other gain
-(:data:`GENERALIST_GAINS`): on the same contours, +53.4% against +53.7% trying all 30 and +52.9% the best 3,
-at a third of the validation episodes of all 30."""
+(:data:`GENERALIST_GAINS`): on the same contours as good as all 30 within 0.3 points, 0.5 above the best 3,
+at a third of the validation episodes of all 30 (``experiments/generalist_gains.py``)."""
 
 
 def check_gains(gains, key: str = "generalist_gains") -> tuple[float, ...]:

@@ -117,13 +117,15 @@ def main() -> None:
 
 def _generalist_candidate(plan, config, args) -> dict:
     """The plan's candidate where the generalist validates best (:func:`agents.generalist.guarded_result`,
-    seeded as ``evaluate`` seeds it)."""
+    seeded as ``evaluate`` seeds it), its moves as they are: fine-tuning starts from its weights unscaled."""
     from agents.generalist import guarded_result, load_generalist
 
     listed = plan.ranked()
     candidates = [(np.asarray(c["pinch"]), plan.ordered_segments(c["order"])) for c in listed]
     generalist = load_generalist(args.generalist)
-    chosen = guarded_result(generalist, [plan.contour], [candidates], 1, config, None, args.seed).chosen[0]
+    chosen = guarded_result(
+        generalist, [plan.contour], [candidates], 1, config, None, args.seed, gains=(1.0,)
+    ).chosen[0]
     return listed[chosen]
 
 

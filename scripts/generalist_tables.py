@@ -116,7 +116,7 @@ def main() -> None:
         print(f"- {what} worse than holding still (fixed) beyond its CI: {worse} of {len(rows)}")
     if guarded:
         still = sum(bool(r["generalist_holds_still"]) for r in rows)
-        print(f"- holds still where it validates no better: {still} of {len(rows)} contours")
+        print(f"- holds still where its choice cuts no better: {still} of {len(rows)} contours")
     if "generalist_gain" in rows[0]:
         plays = [r["generalist_gain"] for r in rows if not r["generalist_holds_still"]]
         gains, counts = np.unique(plays, return_counts=True)

@@ -143,7 +143,10 @@ def command(
         ("grad_initial_plan_contours", "grad kept its initial plan (hold still)"),
         ("rl_initial_policy_contours", "rl kept its initial policy (hold still)"),
         ("rl_plan_contours", "rl kept its teacher's plan (open loop)"),
-        ("generalist_still_contours", "the generalist held still (it validated no better than that)"),
+        (
+            "generalist_still_contours",
+            "the generalist held still (its choice cut no better on fresh episodes)",
+        ),
     )
     for key, what in kept:
         if key in report.table:
