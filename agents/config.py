@@ -262,7 +262,8 @@ and +39.8% with 8 (docs/results.md)."""
 
 GENERALIST_GAINS = (0.5, 0.75, 1.0, 1.25, 1.5)
 """Factors on the generalist's moves it chooses among with its pinch candidate, on validation episodes
-(``generalist_gains``; 1: its moves as they are; (1,): no choice). A policy trained over many contours pulls
+(``generalist_gains``; 1: its moves as they are; (1,): no choice, as for a generalist with discrete
+moves). A policy trained over many contours pulls
 too hard on some and too little on others: on the 48 contours of the generated ``validation`` stream,
 ``evaluate``'s generalist column scored +51.6% against +49.3% with (1,) (docs/results.md);
 ``experiments/generalist_gains.py`` compares sets of gains (on 28 of them, 0.35 to 1.4 did as well and

@@ -242,8 +242,9 @@ def guarded_result(
     gains: Sequence[float] = GENERALIST_GAINS,
 ) -> Guarded:
     """``generalist`` zero-shot, contour by contour, where it validates best among ``candidates[c]``
-    (pinch points with their cuts; the first is the plan's) and ``gains`` (factors on its moves), if that
-    beats holding still at the first candidate; else holding still there (fixed tension).
+    (pinch points with their cuts; the first is the plan's) and ``gains`` (factors on its moves; a generalist
+    with discrete actions plays its own), if that beats holding still at the first candidate; else holding
+    still there (fixed tension).
 
     Validation: :data:`VALIDATION_EPISODES` noisy episodes per option, seeded ``seed`` +
     :data:`~agents.policies.VALIDATION_SEED_OFFSET`: every candidate with the generalist's moves as they are,
@@ -313,15 +314,10 @@ def _cuts(listed: Sequence[Candidate]) -> list | None:
 
 
 def _gains(gains: Sequence[float], generalist: Generalist) -> tuple[float, ...]:
-    """``gains`` checked (:func:`agents.config.check_gains`), and only 1 for a generalist with discrete
-    actions (a factor on a choice of moves means nothing)."""
+    """``gains`` checked (:func:`agents.config.check_gains`); (1,) for a generalist with discrete actions,
+    whose choice among moves a factor cannot scale."""
     listed = check_gains(gains)
-    if generalist.settings["env"].get("action_type") != "continuous" and listed != (1.0,):
-        raise ValueError(
-            f"generalist_gains: {list(gains)}: this generalist chooses among discrete moves, which a factor "
-            "cannot scale; give [1]"
-        )
-    return listed
+    return listed if generalist.settings["env"].get("action_type") == "continuous" else (1.0,)
 
 
 def _scaled(actor: torch.nn.Module, gains: np.ndarray) -> torch.nn.Module:

@@ -399,6 +399,18 @@ def test_the_generalist_judges_its_pinch_points_with_the_jobs_arm(generalist_run
         assert ("under the cutting arm" in played.pinch_problems[0]) == (arm is None)
 
 
+def test_a_generalist_with_discrete_moves_chooses_no_gain():
+    from agents.generalist import Generalist, _gains
+
+    def generalist(action_type):
+        return Generalist({"env": {"action_type": action_type}}, None)
+
+    assert _gains(GENERALIST_GAINS, generalist("discrete")) == (1.0,)
+    assert _gains(GENERALIST_GAINS, generalist("continuous")) == GENERALIST_GAINS
+    with pytest.raises(ValueError, match="generalist_gains"):
+        _gains([0.5], generalist("discrete"))
+
+
 @pytest.mark.parametrize("gains", [[], [0.5], [1, 0], [1, -1], [1, float("nan")], "x"])
 def test_gains_without_one_or_not_positive_are_refused_by_name(gains):
     from agents.config import check_gains
