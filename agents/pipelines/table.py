@@ -448,13 +448,13 @@ def _generalist_result(
 ) -> tuple[MethodResult, Callable[[dict], None]]:
     """The generalist column: ``generalist`` (``job.generalist``'s) zero-shot on every contour in one batch,
     paired with the baselines' trials, at the plan's pinch candidate (each in its best order; the first
-    ``job.generalist_candidates`` by fixed tension, None: all) where it validates best; on a contour where
-    it validates no better than holding still at the planned pinch point, it holds still there
-    (:func:`agents.generalist.guarded_result`; without plans: the feasible centroid, the whole contour). The
-    note it returns adds to each row whether it held still (``generalist_holds_still``), the candidate and
-    the gain it chose (``generalist_candidate``, ``generalist_gain``: ``job.generalist_gains``'s) and its
-    own trials there (``generalist_played_*``), and to the table on
-    how many contours it held still (``generalist_still_contours``)."""
+    ``job.generalist_candidates`` by fixed tension, None: all) and gain (``job.generalist_gains``) where it
+    validates best; on a contour where that choice cuts no better than holding still at the planned pinch
+    point on fresh episodes, it holds still there (:func:`agents.generalist.guarded_result`; without plans:
+    the feasible centroid, the whole contour). The note it returns adds to each row whether it held still
+    (``generalist_holds_still``), the candidate and the gain it chose (``generalist_candidate``,
+    ``generalist_gain``) and its own trials there (``generalist_played_*``), and to the table on how many
+    contours it held still (``generalist_still_contours``)."""
     from warpcut.planning import default_pinch
 
     started = time.perf_counter()
