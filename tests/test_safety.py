@@ -1000,3 +1000,26 @@ def test_export_of_a_run_stopped_before_it_chose_a_candidate(tmp_path):
     code, output = invoke(["export", str(out)])
     assert code == 0 and "unfinished, no candidate chosen" in output, output
     assert (out / "rl" / "candidate-0" / "exported" / "policy.onnx").is_file()
+
+
+def test_a_signal_raised_inside_a_finalizer_is_sent_again():
+    """Python drops an exception raised inside a ``__del__`` (it runs wherever memory is freed, as a Warp
+    array's does): while a command runs, its hook sends the signal again, so that SIGTERM still stops the
+    command at its next step instead of being lost."""
+    from agents.cli.errors import Terminated, _redeliver, _stop_on_signals
+
+    class Finalized:
+        def __del__(self):
+            raise Terminated(signal.SIGTERM)
+
+    handlers, hook = _stop_on_signals(), sys.unraisablehook
+    sys.unraisablehook = _redeliver
+    try:
+        with pytest.raises(Terminated):
+            Finalized()  # freed at once: its exception is dropped, the signal sent again
+            for _ in range(200):  # the handler runs at the next check
+                time.sleep(0.01)
+    finally:
+        sys.unraisablehook = hook
+        for signum, handler in handlers.items():
+            signal.signal(signum, handler)

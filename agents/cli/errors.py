@@ -28,7 +28,8 @@ class CleanErrors(click.Group):
         kwargs["standalone_mode"] = False
         given = args[0] if args else kwargs.get("args")
         COMMAND_LINE[:] = ["warpcut", *(sys.argv[1:] if given is None else given)]
-        handlers = _stop_on_signals()
+        handlers, unraisable = _stop_on_signals(), sys.unraisablehook
+        sys.unraisablehook = _redeliver
         try:
             result = super().main(*args, **kwargs)
         except click.exceptions.Abort as exc:  # Ctrl-C, SIGTERM, SIGHUP: what was saved, how to continue
@@ -64,6 +65,7 @@ class CleanErrors(click.Group):
                 click.echo(note, err=True)
             sys.exit(1)
         finally:
+            sys.unraisablehook = unraisable
             for signum, handler in handlers.items():
                 signal.signal(signum, handler)
         sys.exit(result if isinstance(result, int) else 0)
@@ -94,6 +96,22 @@ exception and raises a KeyboardInterrupt of its own, as Ray's waits do, loses it
 def _raise_terminated(signum: int, frame) -> None:
     _RECEIVED.append(signum)
     raise Terminated(signum)
+
+
+def _redeliver(unraisable) -> None:
+    """``sys.unraisablehook`` while a command runs: a Ctrl-C, SIGTERM or SIGHUP whose exception was raised
+    inside a finalizer (a ``__del__``, which Python runs wherever memory is freed and whose exceptions it
+    prints and drops) is sent again, from a thread of its own once this hook has returned (a handler run
+    inside the hook would be dropped too), so that it stops the command at its next step instead of being
+    lost; anything else goes to Python's hook."""
+    exc = unraisable.exc_value
+    if isinstance(exc, KeyboardInterrupt) and threading.current_thread() is threading.main_thread():
+        signum = exc.signum if isinstance(exc, Terminated) else signal.SIGINT
+        again = threading.Timer(0.01, os.kill, (os.getpid(), signum))
+        again.daemon = True
+        again.start()
+        return
+    sys.__unraisablehook__(unraisable)
 
 
 def _stop(exc: BaseException) -> Terminated | None:
