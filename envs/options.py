@@ -33,6 +33,7 @@ from warpcut.validation import (
     check_flag,
     check_instance,
     check_integer,
+    check_known_fields,
     check_number,
     check_text,
     fail,
@@ -413,12 +414,7 @@ class PatternCutOptions(EnvConfig):
             raise ValueError(
                 f"options: expected a JSON object of PatternCutOptions fields (got {type(data).__name__})"
             )
-        names = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(data) - names)
-        if unknown:
-            raise ValueError(
-                f"options: unknown field(s) {', '.join(unknown)}; known: {', '.join(sorted(names))}"
-            )
+        check_known_fields("options", data, cls)
         try:
             options = cls(**data)
             options.config()  # the simulation settings, checked now

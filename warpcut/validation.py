@@ -24,8 +24,9 @@ Everything they raise is a :class:`ConfigError`, a ``ValueError``: the command l
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Collection
+from collections.abc import Collection, Mapping
 from typing import Any, NoReturn
 
 import numpy as np
@@ -238,3 +239,12 @@ def check_instance(where: str, value: Any, kind: type | tuple[type, ...], what: 
     if not isinstance(value, kind):
         fail(where, what, value)
     return value
+
+
+def check_known_fields(where: str, data: Mapping[str, Any], kind: type) -> None:
+    """``ValueError`` naming ``where`` and the keys of ``data`` that are not fields of the dataclass ``kind``
+    (with the known ones), as a settings file or a run directory's JSON is read back."""
+    known = {f.name for f in dataclasses.fields(kind)}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise ValueError(f"{where}: unknown field(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")

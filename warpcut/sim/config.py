@@ -21,6 +21,7 @@ from warpcut.validation import (
     check_choice,
     check_flag,
     check_integer,
+    check_known_fields,
     check_number,
     check_numbers,
     fail,
@@ -231,12 +232,7 @@ class SimConfig:
     def from_dict(cls, data: dict[str, Any], where: str) -> SimConfig:
         """A config from a dict of its fields (JSON lists back to the tuples it holds); ``ValueError``
         naming ``where`` and an unknown field, or ``where.FIELD`` and a bad value."""
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(data) - known)
-        if unknown:
-            raise ValueError(
-                f"{where}: unknown field(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}"
-            )
+        check_known_fields(where, data, cls)
         try:
             return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
         except ConfigError as error:
