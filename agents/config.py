@@ -235,8 +235,8 @@ BUDGETS = {
 """``run_pipeline``'s budgets (``warpcut run --budget``). fast: a policy for the best pinch candidate by
 fixed tension, about a minute on 2 CPU cores; paper: a policy for each of the paper's 30 candidates. The
 generalist, which trains nothing, chooses among the paper's 30 candidates with either budget
-(``generalist_candidates``): on the 20 generated test contours +47.9% against +37.5% with 8, 10 s a run
-against 9 (the medians, a busy 2-core machine; docs/results.md)."""
+(``generalist_candidates``): on the 20 generated test contours +53.4% against +43.9% with 8
+(docs/results.md, "The main job with the generalist")."""
 
 DEFAULT_CONTOUR = "fls-circle"
 """The contour ``warpcut run`` cuts unless told otherwise: the FLS pattern-cutting circle."""
@@ -263,9 +263,9 @@ and +39.8% with 8 (docs/results.md)."""
 GENERALIST_GAINS = (0.5, 0.75, 1.0, 1.25, 1.5)
 """Factors on the generalist's moves it chooses among with its pinch candidate, on validation episodes
 (``generalist_gains``; 1: its moves as they are; (1,): no choice, as for a generalist with discrete
-moves). A policy trained over many contours pulls
-too hard on some and too little on others: on the 48 contours of the generated ``validation`` stream,
-``evaluate``'s generalist column scored +51.6% against +49.3% with (1,) (docs/results.md);
+moves). A policy trained over many contours pulls too hard on some and too little on others: on the 48
+contours of the generated ``validation`` stream, ``evaluate``'s generalist column scored +51.6% against
++49.3% with (1,) (docs/results.md);
 ``experiments/generalist_gains.py`` compares sets of gains (on 28 of them, 0.35 to 1.4 did as well and
 adding 2 did not help: ``--gains 0.25,0.35,0.5,0.7,1,1.4,2``)."""
 

@@ -132,13 +132,8 @@ def run_pipeline(
     elif job.policy == "generalist":
         log(f"[2/3] scoring the generalist at {len(listed)} pinch candidate(s), zero-shot")
         on_step = None if step_callbacks is None else step_callbacks("generalist", 0)
-        chosen, plays, played = _choose_by_generalist(
+        chosen, plays, played, confirmed = _choose_by_generalist(
             generalist, job, loaded, plan, listed, settings["trials"], device, on_step
-        )
-        best = next(c["generalist_confirmed_error_vertices"] for c in listed if "generalist_gain" in c)
-        confirmed = (
-            f"      on fresh episodes its choice cut {best:.1f} vertices, holding still "
-            f"{listed[0]['still_error_vertices']:.1f}" + ("" if plays else ": it holds still (fixed tension)")
         )
     elif job.policy == "analytic":
         log(f"[2/3] scoring the analytic policy at {len(listed)} pinch candidate(s)")
@@ -149,7 +144,7 @@ def run_pipeline(
         )
     log(f"      chosen by {job.policy}: {_candidate_text(listed[chosen])}")
     if job.policy == "generalist":
-        log(confirmed)
+        log(f"      {confirmed}")
 
     methods = ["none", "fixed", "analytic"] + ([job.policy] if job.policy in ("rl", "generalist") else [])
     log(f"[3/3] evaluating {', '.join(methods)}: {settings['trials']} trials each")
@@ -246,14 +241,13 @@ def _choose_by_generalist(
     trials: int,
     device: str | None,
     on_step,
-) -> tuple[int, bool, Method]:
+) -> tuple[int, bool, Method, str]:
     """The generalist at the candidate (each in its best order) and gain where it validates best, or holding
     still at the plan's (index 0) where that cuts no better on fresh episodes
     (:func:`agents.generalist.guarded_result`), as rl's model selection keeps its initial, still policy;
     records in ``listed`` each candidate's validation error, and the chosen one's gain and its error on the
-    fresh episodes (holding still's: at the first). Returns the
-    candidate played, whether the generalist plays, and its row of the evaluation, paired with the baselines'
-    trials."""
+    fresh episodes (holding still's: at the first). Returns the candidate played, whether the generalist
+    plays, its row of the evaluation (paired with the baselines' trials) and what the fresh episodes said."""
     candidates = [(np.asarray(c["pinch"]), plan.ordered_segments(c["order"])) for c in listed]
     guarded = guarded_result(
         generalist, [contour], [candidates], trials, job.sim, device, job.seed, on_step, job.arm,
@@ -265,7 +259,11 @@ def _choose_by_generalist(
     best["generalist_gain"] = float(guarded.gain[0])
     best["generalist_confirmed_error_vertices"] = float(guarded.best[0])
     plays = bool(guarded.plays[0])
-    return (guarded.chosen[0] if plays else 0), plays, Method("generalist", result=guarded.result)
+    confirmed = (
+        f"on fresh episodes its choice cut {guarded.best[0]:.1f} vertices, holding still "
+        f"{guarded.still[0]:.1f}" + ("" if plays else ": it holds still (fixed tension)")
+    )
+    return (guarded.chosen[0] if plays else 0), plays, Method("generalist", result=guarded.result), confirmed
 
 
 def _train_candidates(
