@@ -96,6 +96,7 @@ SLOW_TESTS = frozenset(
         "tests/test_export.py::test_the_default_trainings_policy_runs_on_the_default_env",
         "tests/test_export.py::test_the_exported_policy_runs_in_onnxruntime_on_the_env_its_metadata_makes",
         "tests/test_fuzz_physics.py::test_env_observations_and_rewards_are_never_nan",
+        "tests/test_generalist.py::test_a_generalist_refines_the_shipped_one_by_its_name",
         "tests/test_generalist.py::test_a_generalist_run_resumes_to_train_longer",
         "tests/test_generalist.py::test_a_generalist_that_validates_no_better_than_holding_still_holds_still",
         "tests/test_generalist.py::test_a_generalist_trains_over_generated_contours_into_its_run_directory",

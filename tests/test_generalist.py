@@ -178,6 +178,22 @@ def test_a_generalist_run_resumes_to_train_longer(generalist_run, tmp_path):
     assert json.loads((out / "summary.json").read_text())["iterations"] == 2
 
 
+def test_a_generalist_refines_the_shipped_one_by_its_name(tmp_path):
+    """``init=generalist`` names the shipped generalist, as train's ``init`` does."""
+    out = tmp_path / "refined"
+    code, output, _ = invoke(
+        ["generalist", "--generated", "1", "--validation-contours", "1", "--iterations", "1",
+         "--out", str(out), "--no-progress", "--set", "candidates=1", "--set", "train.es.population=2",
+         "--set", "init=generalist", *SMALL]
+    )  # fmt: skip
+    assert code == 0, output
+    shipped = torch.load(SHIPPED_DIR / "best.pt", weights_only=False)["actor_state_dict"]
+    started = torch.load(out / "model_0.pt", weights_only=False)["actor_state_dict"]  # after one es step
+    assert shipped.keys() == started.keys()
+    body = [k for k in shipped if k.startswith("mlp.body")]
+    assert all(torch.allclose(shipped[k], started[k], atol=0.005) for k in body)  # one Adam step
+
+
 def test_a_resumed_generalist_keeps_its_settings(generalist_run, tmp_path, capfd):
     import shutil
 

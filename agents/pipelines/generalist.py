@@ -27,7 +27,7 @@ import numpy as np
 
 from agents.cluster import Executor
 from agents.config_io import to_plain
-from agents.generalist import ES_FIELDS, FORMAT, GENERALIST_FILE, POLICY_FIELDS
+from agents.generalist import ES_FIELDS, FORMAT, GENERALIST_FILE, POLICY_FIELDS, generalist_dir
 from agents.jobs import CONFIG_FILE
 from agents.teachers import load_teachers
 from envs.options import ENV_FIELDS, PatternCutOptions
@@ -145,10 +145,11 @@ def _train_generalist(
         return errors * validation_env.scene.reward_scale / area
 
     latest = out if resume and any(out.glob("*.pt")) else None
+    init = None if latest is not None or job.init is None else generalist_dir(job.init)
     try:
         return train(
             env, cfg, out, seed=job.seed, resume=latest, progress=progress, validate=validate,
-            label=f"{cfg.algo.upper()} generalist", init=None if latest is not None else job.init,
+            label=f"{cfg.algo.upper()} generalist", init=init,
             marks={"contours": count, "validation_contours": len(validation)},
         )  # fmt: skip
     finally:
