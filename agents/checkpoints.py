@@ -223,9 +223,10 @@ def layout_mismatch(saved: dict, expected: dict, source: str) -> str | None:
     return None
 
 
-def start_from(runner, source: str | Path) -> None:
+def start_from(runner, source: str | Path, gain: float = 1.0) -> None:
     """Load the policy of ``source`` (a run directory or checkpoint) into ``runner``'s fresh actor: its
-    weights and observation normaliser (es then skips its warm-up: the normaliser has learnt already).
+    weights and observation normaliser (es then skips its warm-up: the normaliser has learnt already), its
+    moves multiplied by ``gain`` (:func:`agents.models.scale_moves_`; 1: as they are, bit for bit).
 
     Raises:
         ValueError: not es, or the policy does not observe and act as the env does (the message names the
@@ -245,4 +246,8 @@ def start_from(runner, source: str | Path) -> None:
             f"init: {checkpoint}: {mismatch}; train with the generalist's env settings (leave env.* unset)"
         )
     actor.load_state_dict(state)
+    if gain != 1.0:
+        from agents.models import scale_moves_
+
+        scale_moves_(actor.mlp, gain)
     runner.alg._warm_up = False

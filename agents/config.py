@@ -275,6 +275,12 @@ GAIN_SHORTLIST = 5
 at a third of the validation episodes of all 30 (``experiments/generalist_gains.py``)."""
 
 
+FINE_TUNING_GAIN = 0.5
+"""The factor on a generalist's moves that fine-tuning (``train --set init=generalist``) starts from
+(``init_gain``): es reaches the per-contour level sooner from the generalist's moves halved than from its
+moves as they are (docs/results.md, "Fine-tuning"; ``scripts/fine_tuning.py --init-gain``)."""
+
+
 def check_gains(gains, key: str = "generalist_gains") -> tuple[float, ...]:
     """``gains`` (:data:`GENERALIST_GAINS`'s kind) as a tuple, or ``ValueError`` naming ``key``: positive
     numbers, 1 among them (the candidates are ranked with the generalist's moves as they are)."""

@@ -18,7 +18,7 @@ from tensordict import TensorDict
 
 from envs.observations import TRACKING_ERROR, observation_names
 
-__all__ = ["FeedbackMLP", "FeedbackMLPModel", "feedback_inputs"]
+__all__ = ["FeedbackMLP", "FeedbackMLPModel", "feedback_inputs", "scale_moves_"]
 
 
 class FeedbackMLP(torch.nn.Module):
@@ -103,3 +103,17 @@ def feedback_inputs(env) -> tuple[int, int]:
         )
     names = observation_names(options.num_fiducials, options.contour_features)
     return names.index(TRACKING_ERROR[0]), len(TRACKING_ERROR)
+
+
+def scale_moves_(mlp: torch.nn.Module, gain: float) -> None:
+    """Multiply what ``mlp`` (an actor's MLP: rsl-rl's, or a :class:`FeedbackMLP`) outputs by ``gain``, in
+    place: its last linear layer's weights and bias, and the feedback path's gains, scaled. Its output is
+    linear in them, so a continuous policy's move becomes ``gain`` times its move, exactly."""
+    layers = [m for m in mlp.modules() if isinstance(m, torch.nn.Linear)]
+    feedback = getattr(mlp, "feedback", None)
+    last = [m for m in layers if m is not feedback][-1]
+    with torch.no_grad():
+        for layer in (last, feedback):
+            if layer is not None:
+                for parameter in layer.parameters():
+                    parameter.mul_(gain)

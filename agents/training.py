@@ -108,6 +108,7 @@ def train(
     label: str | None = None,
     marks: dict | None = None,
     init: str | Path | None = None,
+    init_gain: float = 1.0,
     guarded_episodes: int | None = None,
 ) -> dict:
     """Train a policy on ``env`` with ``cfg``'s learner; write its checkpoints and summary into ``out_dir``.
@@ -129,6 +130,7 @@ def train(
         label: The progress bar's label (default: the learner's name).
         marks: Fields the summary records as they are (e.g. whether the pinch point is feasible).
         init: A run or checkpoint whose policy the training starts from (fine-tuning; es; not on resume).
+        init_gain: The factor on ``init``'s moves the training starts from (continuous moves).
         guarded_episodes: :attr:`agents.runner.Runner.guarded_episodes` (the nominal sheet's, first).
 
     Returns:
@@ -162,7 +164,7 @@ def train(
         runner.load_checkpoint(checkpoint, state)
         runner.checkpoint = checkpoint if checkpoint.parent.resolve() == out_dir.resolve() else None
     elif init is not None:  # fine-tuning: es from another policy
-        start_from(runner, init)
+        start_from(runner, init, init_gain)
     start_iterations, status, steps = runner.iterations_done, "failed", runner.steps_per_iteration
     runner.started = time.monotonic()
     try:
@@ -394,10 +396,10 @@ def _train_contour(
         from agents.generalist import generalist_dir
 
         init = generalist_dir(job.init)
-        marks["init"] = job.init
+        marks["init"], marks["init_gain"] = job.init, job.init_gain
     summary = train(
         env, cfg, out_dir, seed=job.seed, resume=resume, progress=progress, validate=validate, label=label,
-        marks=marks, init=init, guarded_episodes=guarded,
+        marks=marks, init=init, init_gain=job.init_gain, guarded_episodes=guarded,
     )  # fmt: skip
     evaluation = evaluate_run(
         out_dir, trials=job.eval_trials, seed=job.seed + 1, device=device, step_callbacks=step_callbacks

@@ -10,8 +10,11 @@ generalist``: both train at the plan's candidate (pinch point and order) where t
 best, as ``evaluate`` and ``run`` play it (:func:`agents.generalist.guarded_result`), instead of at the
 planned pinch point.
 
+``--init-gain G``: the factor on the generalist's moves fine-tuning starts from (default: ``train``'s,
+:data:`agents.config.FINE_TUNING_GAIN`).
+
 Run: python scripts/fine_tuning.py --contours fls-circle,kidney,gen-test-0:2 [--at plan|generalist]
-[--generalist DIR] [--out DIR]
+[--generalist DIR] [--init-gain G] [--out DIR]
 """
 
 from __future__ import annotations
@@ -54,6 +57,9 @@ def main() -> None:
     parser.add_argument("--generalist", default="generalist")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--at", choices=("plan", "generalist"), default="plan", help="where both runs pinch")
+    parser.add_argument(
+        "--init-gain", type=float, default=None, help="the factor on the generalist's moves it starts from"
+    )
     parser.add_argument("--out", type=Path, default=Path("logs/fine-tuning"))
     args = parser.parse_args()
     config = SimConfig()
@@ -73,7 +79,8 @@ def main() -> None:
         )
         resolve_contour(base.contour, base.sim)  # a bad name: now
         runs = {}
-        for label, job in (("scratch", base), ("generalist", _fine_tuning(base, args.generalist))):
+        tuned = _fine_tuning(base, args.generalist, args.init_gain)
+        for label, job in (("scratch", base), ("generalist", tuned)):
             out = args.out / name / label
             if not (out / "summary.json").is_file():
                 train_contour(job, out, progress=False)
@@ -129,11 +136,15 @@ def _generalist_candidate(plan, config, args) -> dict:
     return listed[chosen]
 
 
-def _fine_tuning(base, generalist: str):
-    """``base`` started from the generalist, observing and acting as it does."""
+def _fine_tuning(base, generalist: str, gain: float | None):
+    """``base`` started from the generalist, observing and acting as it does, its moves scaled by ``gain``
+    (None: the job's default, :data:`agents.config.FINE_TUNING_GAIN`)."""
     from agents.jobs import with_dependent_defaults
 
-    return with_dependent_defaults(dataclasses.replace(base, init=generalist), set())
+    job = dataclasses.replace(base, init=generalist)
+    if gain is not None:
+        job = dataclasses.replace(job, init_gain=gain)
+    return with_dependent_defaults(job, set())
 
 
 if __name__ == "__main__":

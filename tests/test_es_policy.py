@@ -472,6 +472,33 @@ def test_the_feedback_path_adds_a_gain_matrix_on_the_tracking_error():
         feedback_inputs(object())
 
 
+def test_scaling_an_actors_moves_scales_its_output_exactly():
+    """:func:`agents.models.scale_moves_` (fine-tuning's ``init_gain``): the last layer and the feedback
+    gains, static and scheduled, scaled; the output scales with them, and 1 changes nothing."""
+    from agents.models import FeedbackMLP, scale_moves_
+
+    torch.manual_seed(0)
+    for body, scheduled in (
+        (torch.nn.Sequential(torch.nn.Linear(10, 16), torch.nn.Tanh(), torch.nn.Linear(16, 3)), True),
+        (torch.nn.Sequential(torch.nn.Linear(10, 16), torch.nn.Tanh(), torch.nn.Linear(16, 3)), False),
+    ):
+        mlp = FeedbackMLP(body, 4, 3, scheduled)
+        with torch.no_grad():
+            mlp.feedback.weight.normal_()
+        x = torch.randn(5, 10)
+        before = mlp(x).detach()
+        scale_moves_(mlp, 1.0)
+        assert torch.equal(mlp(x).detach(), before)
+        scale_moves_(mlp, 0.5)
+        torch.testing.assert_close(mlp(x).detach(), 0.5 * before)
+    plain = torch.nn.Sequential(torch.nn.Linear(10, 16), torch.nn.Tanh(), torch.nn.Linear(16, 3))
+    x, hidden = torch.randn(5, 10), plain[0].weight.detach().clone()
+    before = plain(x).detach()
+    scale_moves_(plain, 1.5)
+    torch.testing.assert_close(plain(x).detach(), 1.5 * before)
+    assert torch.equal(plain[0].weight, hidden)  # the hidden layer as it was
+
+
 @pytest.mark.filterwarnings("ignore:.*torch.jit.load.* is deprecated:DeprecationWarning")
 def test_es_trains_the_feedback_path_and_its_exports_play_it(tmp_path):
     """Training moves the feedback gains off zero; the checkpoint describes the actor with its feedback

@@ -16,6 +16,7 @@ from agents.config import (
     DEFAULT_SELECTOR,
     EVALUATION_CANDIDATES,
     EVALUATION_TRIALS,
+    FINE_TUNING_GAIN,
     TrainConfig,
 )
 from agents.jobs.fields import (
@@ -74,6 +75,10 @@ class TrainJob:
     """Start from a generalist's policy instead of "hold still" (fine-tuning; es only): ``generalist`` (the
     one warpcut ships) or a run directory of ``warpcut generalist``. The env then observes as the generalist
     does (its look-ahead), unless ``env.*`` says otherwise. None: a fresh policy."""
+    init_gain: float = FINE_TUNING_GAIN
+    """The factor on the generalist's moves that fine-tuning (``init``) starts from: its last layer and
+    feedback gains scaled (es's moves are continuous; 1: its moves as they are). Default
+    :data:`~agents.config.FINE_TUNING_GAIN`."""
     record: int | None = None
     """Write ``recording.rrd`` of the final evaluation's first N envs (rerun); None: no recording."""
     colour_by: str = "strain"
