@@ -334,6 +334,16 @@ def test_the_memory_limit_names_what_simulate_controls(monkeypatch):
     assert "give fixed a pinch point (simulate --pinch X,Y)" in message and "num_envs" not in message
 
 
+def test_a_batch_whose_every_env_is_too_big_says_so_and_not_at_most_0(monkeypatch):
+    from agents.baselines import search_fixed_pinch
+
+    monkeypatch.setenv("WARPCUT_MEMORY_LIMIT_GB", "0.000001")
+    with pytest.raises(ValueError) as error:
+        search_fixed_pinch(CONTOUR, SimConfig(resolution=25), device="cpu")
+    message = str(error.value)
+    assert "even one is too big: its sheet has 625 vertices" in message and "at most 0" not in message
+
+
 def test_agent_configs_and_jobs_check_each_field_as_they_are_made():
     """The learners' configs, the optimiser's and every job refuse a field of the wrong kind at
     construction, in one line naming ``Class.field``; GradConfig's own checks name its own keys."""

@@ -199,7 +199,7 @@ def _refuse(
     if envs_per_unit != 1:
         what = f"{num_envs // envs_per_unit} x {envs_per_unit} = {what}"
     tail = f" ({hint})" if hint else ""
-    if fix is not None and "{fits}" in fix and fits < 1:
+    if fits < 1:
         fix = None  # not a matter of batch size: said below
     if fix is not None and "{fits}" in fix:
         advice = fix.replace("{fits}", str(fits)) + tail
