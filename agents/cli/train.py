@@ -75,7 +75,8 @@ def command(
 
     Everything but the flags is set with --config FILE and --set KEY=VALUE (the env's observations, actions
     and reward: env.*; the physics and noise: sim.*; the learner: train.*; fine-tuning from a generalist:
-    init=generalist, or init=DIR of 'warpcut generalist'); --print-config shows them all.
+    init=generalist, or init=DIR of 'warpcut generalist'; init_gain: the factor on its moves it starts
+    from); --print-config shows them all.
     """
     from agents.jobs import CONFIG_FILE, TrainJob
     from warpcut.io import RUN_MARKER, check_run_dir, enclosing_run, read_run_marker, safe_name
