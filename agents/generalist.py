@@ -308,6 +308,33 @@ def guarded_result(
     return Guarded(result, played, plays, chosen, gain, validation, best, still)
 
 
+def generalist_cut(
+    generalist: Generalist,
+    contour: Contour,
+    config: SimConfig,
+    seed: int = 0,
+    device: str | None = None,
+    arm: ArmModel | None = None,
+) -> Candidate:
+    """Where ``generalist`` plays ``contour`` zero-shot with its moves as they are, and where fine-tuning it
+    starts: the contour planned as ``evaluate`` plans it (:data:`~agents.config.EVALUATION_CANDIDATES` pinch
+    candidates, noise-free), then the candidate (its pinch point and segments in order) where it validates
+    best (:func:`guarded_result`'s validation, seeded from ``seed``)."""
+    from agents.config import EVALUATION_CANDIDATES
+    from warpcut.planning import ArmModel, plan_cut
+
+    arm = arm or ArmModel()
+    noise_free = config.replace(noise_std=0.0)
+    plan = plan_cut(
+        contour, noise_free, num_candidates=EVALUATION_CANDIDATES, seed=seed, device=device, arm=arm
+    )
+    candidates = [(np.asarray(c["pinch"]), plan.ordered_segments(c["order"])) for c in plan.ranked()]
+    guarded = guarded_result(
+        generalist, [contour], [candidates], 1, config, device, seed, arm=arm, gains=(1.0,)
+    )
+    return candidates[guarded.chosen[0]]
+
+
 def _cuts(listed: Sequence[Candidate]) -> list | None:
     """The segments of each candidate listed, or None where they cut the whole contour."""
     return None if listed[0][1] is None else [segments for _, segments in listed]

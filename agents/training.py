@@ -69,6 +69,7 @@ from agents.checkpoints import (
 from agents.config import TrainConfig
 from agents.config_io import flatten, to_plain
 from agents.jobs import CONFIG_FILE
+from agents.models import feedback_inputs
 from agents.policies import (
     OPTIONS_FILE,
     RESUME_FIX,
@@ -129,15 +130,14 @@ def train(
             with the lowest selection score is ``best.pt`` (:attr:`TrainConfig.selection_margin`).
         label: The progress bar's label (default: the learner's name).
         marks: Fields the summary records as they are (e.g. whether the pinch point is feasible).
-        init: A run or checkpoint whose policy the training starts from (fine-tuning; es; not on resume).
-        init_gain: The factor on ``init``'s moves the training starts from (continuous moves).
+        init, init_gain: A run or checkpoint whose policy, its moves times ``init_gain``, the training starts
+            from (fine-tuning; es; not on resume).
         guarded_episodes: :attr:`agents.runner.Runner.guarded_episodes` (the nominal sheet's, first).
 
     Returns:
         The summary also written to ``out_dir/summary.json``.
     """
-    discrete = getattr(env, "num_action_choices", None) is not None
-    cfg.check(discrete)
+    cfg.check(getattr(env, "num_action_choices", None) is not None)  # discrete moves
     if env.num_envs != cfg.batch_size:
         raise ValueError(
             f"num_envs: the env has {env.num_envs} envs but the config asks for {cfg.batch_size}"
@@ -146,8 +146,6 @@ def train(
     iterations = cfg.total_iterations(episode_steps)
     out_dir = make_run_dir(out_dir)
     seed_everything(seed)
-    from agents.models import feedback_inputs
-
     feedback = feedback_inputs(env) if cfg.feedback else None
     rsl_cfg = cfg.to_rsl_rl(getattr(env, "num_action_choices", None), feedback, episode_steps)
     runner_class = resolve_callable(algorithm(cfg.algo).runner)
@@ -357,6 +355,8 @@ def _train_contour(
         check_resumed_job(resume, job)
     if resume is not None and saved_nothing(resume):
         resume = None  # stopped before its first checkpoint: it starts again, with its own settings
+    if job.init is not None and job.pinch is None and job.segments is None and resume is None:
+        job, options = _where_the_generalist_plays(job, options, device)
     if resume is not None:
         checkpoint, state, _ = resume_checkpoint(resume)
         check_layout(state["actor_state_dict"], checkpoint, options, "the env", RESUME_FIX)
@@ -406,6 +406,22 @@ def _train_contour(
     )
     write_json(out_dir / "evaluation.json", evaluation)
     return {"summary": summary, "evaluation": evaluation}
+
+
+def _where_the_generalist_plays(
+    job: TrainJob, options: PatternCutOptions, device: str | None
+) -> tuple[TrainJob, PatternCutOptions]:
+    """``job`` (fine-tuning, with no pinch point or segments given) at the cut where its generalist plays
+    the contour (:func:`agents.generalist.generalist_cut`), and its options."""
+    from agents.generalist import generalist_cut, load_generalist
+
+    contour = options.contours(1)[0]
+    pinch, segments = generalist_cut(
+        load_generalist(job.init), contour, job.sim.validated(), job.seed, device, job.arm
+    )
+    cut = [np.asarray(s).tolist() for s in segments]
+    job = dataclasses.replace(job, pinch=[float(v) for v in pinch], segments=cut)
+    return job, job.options(device)
 
 
 RESUMABLE_CHANGES = ("train.iterations", "record", "colour_by", "video", "plots")

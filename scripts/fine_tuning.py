@@ -7,8 +7,8 @@ order), then es trained for it twice with the same seed, iterations and validati
 kept validation error is "the per-contour level"; the table gives the training iterations each run needed to
 first validate at or below it (the generalist's zero-shot error counts, at 0), and their ratio. ``--at
 generalist``: both train at the plan's candidate (pinch point and order) where the generalist validates
-best, as ``evaluate`` and ``run`` play it (:func:`agents.generalist.guarded_result`), instead of at the
-planned pinch point.
+best, as ``evaluate`` and ``run`` play it and ``train`` fine-tunes it by default
+(:func:`agents.generalist.generalist_cut`), instead of at the planned pinch point.
 
 ``--init-gain G``: the factor on the generalist's moves fine-tuning starts from (default: ``train``'s,
 :data:`agents.config.FINE_TUNING_GAIN`).
@@ -47,6 +47,7 @@ def _reached(curve: list[tuple[float, float]], level: float) -> float | None:
 
 def main() -> None:
     from agents.config import TrainConfig
+    from agents.generalist import generalist_cut, load_generalist
     from agents.jobs import TrainJob
     from agents.training import train_contour
     from warpcut.planning import resolve_contour, resolve_specs
@@ -66,13 +67,15 @@ def main() -> None:
     rows = []
     for name, contour in resolve_specs(args.contours.split(","), config):
         plan = _plan(contour, config, args.seed)
-        at = {"pinch": [float(v) for v in plan.chosen["pinch"]], "order": None}  # the planned pinch and order
-        if args.at == "generalist":
-            at = _generalist_candidate(plan, config, args)
+        pinch, segments = plan.chosen["pinch"], plan.ordered_segments()  # the planned pinch and order
+        if args.at == "generalist":  # where the generalist plays, as train's fine-tuning starts by default
+            pinch, segments = generalist_cut(
+                load_generalist(args.generalist), contour, config, seed=args.seed
+            )
         base = TrainJob(
             contour=name,
-            pinch=at["pinch"],
-            segments=[s.tolist() for s in plan.ordered_segments(at["order"])],
+            pinch=[float(v) for v in pinch],
+            segments=[np.asarray(s).tolist() for s in segments],
             seed=args.seed,
             train=TrainConfig(algo="es"),  # fine-tuning is es's: the scratch run is es's too
             plots=False,
@@ -120,20 +123,6 @@ def main() -> None:
         print(
             f"median ratio of iterations: {np.median(ratios):.2f} over {len(ratios)} of {len(rows)} contours"
         )
-
-
-def _generalist_candidate(plan, config, args) -> dict:
-    """The plan's candidate where the generalist validates best (:func:`agents.generalist.guarded_result`,
-    seeded as ``evaluate`` seeds it), its moves as they are: fine-tuning starts from its weights unscaled."""
-    from agents.generalist import guarded_result, load_generalist
-
-    listed = plan.ranked()
-    candidates = [(np.asarray(c["pinch"]), plan.ordered_segments(c["order"])) for c in listed]
-    generalist = load_generalist(args.generalist)
-    chosen = guarded_result(
-        generalist, [plan.contour], [candidates], 1, config, None, args.seed, gains=(1.0,)
-    ).chosen[0]
-    return listed[chosen]
 
 
 def _fine_tuning(base, generalist: str, gain: float | None):

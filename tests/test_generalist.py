@@ -9,7 +9,13 @@ import torch
 
 from agents.checkpoints import policy_layout
 from agents.config import FINE_TUNING_GAIN, GENERALIST_GAINS, GENERALIST_LOOKAHEAD
-from agents.generalist import GENERALIST_FILE, SHIPPED_DIR, generalist_settings
+from agents.generalist import (
+    GENERALIST_FILE,
+    SHIPPED_DIR,
+    generalist_cut,
+    generalist_settings,
+    load_generalist,
+)
 from agents.jobs import GeneralistJob
 from envs.observations import LOOKAHEAD_POINT, observation_bounds, observation_names
 from envs.options import PatternCutOptions
@@ -480,6 +486,10 @@ def test_training_for_one_contour_starts_from_a_generalist(generalist_run, tmp_p
     assert config["train"]["es"]["scheduled"]  # the generalist's network, and its MLP's σ and step
     assert (config["train"]["es"]["sigma"], config["train"]["es"]["learning_rate"]) == (0.01, 0.003)
     assert config["init_gain"] == FINE_TUNING_GAIN != 1
+    contour = resolve_specs(["circle-small"], COARSE)[0][1]
+    pinch, segments = generalist_cut(load_generalist(source), contour, COARSE)  # where it plays
+    assert config["pinch"] == pinch.tolist() and config["segments"] == [s.tolist() for s in segments]
+    assert "where it plays" in output
     first = torch.load(out / "model_0.pt", weights_only=True)["actor_state_dict"]  # after one es step
     general = state["actor_state_dict"]
     scaled = ("mlp.body.4.weight", "mlp.body.4.bias", "mlp.feedback.weight")  # its moves, halved

@@ -128,6 +128,10 @@ def command(
                 )
             else:
                 click.echo(f"training {contour_name} with {job.train.algo} into {out} ({device})")
+                if job.init is not None and job.pinch is None and job.segments is None:
+                    click.echo(
+                        "  from the generalist, where it plays: the plan's candidate it validates best at"
+                    )
             result = train_contour(
                 job,
                 out,

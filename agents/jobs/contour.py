@@ -52,7 +52,9 @@ class TrainJob:
     pinch: list[float] | None = None
     """Pinch point ``[x, y]`` (mm, material coordinates); one the gripper could not hold (on or near the cut
     line, under the cutting arm) is refused unless ``allow_infeasible_pinch``. None: the centroid, or the
-    feasible point nearest it."""
+    feasible point nearest it; fine-tuning (``init``) with neither ``pinch`` nor ``segments`` given: where
+    the generalist plays the contour (:func:`agents.generalist.generalist_cut`: the plan's candidate it
+    validates best at, and its segments)."""
     allow_infeasible_pinch: bool = False
     """Train at a ``pinch`` the gripper could not hold (:func:`warpcut.planning.pinch_problems`) all the
     same; ``summary.json`` and ``evaluation.json`` mark it (``pinch_feasible``: false, ``pinch_problem``)."""
