@@ -355,7 +355,7 @@ def _train_contour(
         check_resumed_job(resume, job)
     if resume is not None and saved_nothing(resume):
         resume = None  # stopped before its first checkpoint: it starts again, with its own settings
-    if job.init is not None and job.pinch is None and job.segments is None and resume is None:
+    if job.at_generalists_cut and resume is None:
         job, options = _where_the_generalist_plays(job, options, device)
     if resume is not None:
         checkpoint, state, _ = resume_checkpoint(resume)

@@ -66,12 +66,13 @@ def main() -> None:
     config = SimConfig()
     rows = []
     for name, contour in resolve_specs(args.contours.split(","), config):
-        plan = _plan(contour, config, args.seed)
-        pinch, segments = plan.chosen["pinch"], plan.ordered_segments()  # the planned pinch and order
         if args.at == "generalist":  # where the generalist plays, as train's fine-tuning starts by default
             pinch, segments = generalist_cut(
                 load_generalist(args.generalist), contour, config, seed=args.seed
             )
+        else:  # the planned pinch point and order
+            plan = _plan(contour, config, args.seed)
+            pinch, segments = plan.chosen["pinch"], plan.ordered_segments()
         base = TrainJob(
             contour=name,
             pinch=[float(v) for v in pinch],

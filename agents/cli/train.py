@@ -128,7 +128,7 @@ def command(
                 )
             else:
                 click.echo(f"training {contour_name} with {job.train.algo} into {out} ({device})")
-                if job.init is not None and job.pinch is None and job.segments is None:
+                if job.at_generalists_cut:
                     click.echo(
                         "  from the generalist, where it plays: the plan's candidate it validates best at"
                     )

@@ -93,6 +93,12 @@ class TrainJob:
     def __post_init__(self) -> None:
         _check_fields(self)
 
+    @property
+    def at_generalists_cut(self) -> bool:
+        """Whether it fine-tunes where its generalist plays the contour (``init``, and neither ``pinch`` nor
+        ``segments`` given: :attr:`pinch`)."""
+        return self.init is not None and self.pinch is None and self.segments is None
+
     def options(self, device: str | None = None) -> PatternCutOptions:
         """The env's options for this job (the contour loaded where it is given inline)."""
         if self.contour is None:
