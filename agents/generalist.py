@@ -15,7 +15,7 @@ episodes (:func:`guarded_result`: ``run`` and ``evaluate``); what it observes le
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -45,6 +45,11 @@ SHIPPED_DIR = Path(__file__).resolve().parent / "data" / "generalist"
 
 FORMAT = 1
 """The layout of ``generalist.json``."""
+
+MEMBERS = "members"
+"""The key in ``generalist.json`` that lists its other members: folders in its directory, each a
+generalist's directory of its own (``generalist.json`` and ``best.pt``) with the same ``env``
+(:attr:`Generalist.members`; ``scripts/ship_generalist.py RUN --member RUN2``)."""
 
 POLICY_FIELDS = ("actor_hidden_dims", "activation", "obs_normalization")
 """The :class:`~agents.config.TrainConfig` fields that shape a generalist's network (``policy`` in
@@ -104,7 +109,17 @@ class Generalist:
     settings: dict
     """Its ``generalist.json``."""
     actor: torch.nn.Module
-    """Its policy (:func:`agents.policies.load_policy`), on the CPU, in eval mode."""
+    """Its policy (:func:`agents.policies.load_policy`), on the CPU, in eval mode: what fine-tuning starts
+    from and what plays at a given pinch point."""
+    members: tuple[torch.nn.Module, ...] = ()
+    """The policies of its other members (:data:`MEMBERS`), loaded as :attr:`actor` is: policies trained the
+    same way from other seeds, which observe and act as it does; :func:`guarded_result` plays, contour by
+    contour, the one that validates best."""
+
+    @property
+    def actors(self) -> tuple[torch.nn.Module, ...]:
+        """Its policy, then its members' (the index a :class:`Guarded` reports)."""
+        return (self.actor, *self.members)
 
 
 def load_generalist(source: str | Path | None) -> Generalist:
@@ -120,7 +135,36 @@ def load_generalist(source: str | Path | None) -> Generalist:
     directory = generalist_dir(source)
     settings = _read_settings(directory)
     env = EnvConfig(**settings["env"])
-    return Generalist(settings, load_policy(directory, env, GENERALIST_FILE, "restore it, or train again"))
+    actor = load_policy(directory, env, GENERALIST_FILE, "restore it, or train again")
+    names = settings.get(MEMBERS, [])
+    if not isinstance(names, list):
+        raise ValueError(
+            f"generalist: {directory / GENERALIST_FILE}: {MEMBERS} must be a list of member folders in "
+            f"{directory} (got {names!r}); restore it, or ship it again (scripts/ship_generalist.py)"
+        )
+    return Generalist(settings, actor, tuple(_member(directory, name, settings["env"]) for name in names))
+
+
+def _member(directory: Path, name, env: dict) -> torch.nn.Module:
+    """The policy of the member ``name`` of the generalist in ``directory`` (a folder in it, with its own
+    ``generalist.json`` and policy), checked to observe and act as the generalist's ``env`` says."""
+    from agents.policies import load_policy
+
+    where = f"generalist: {directory / GENERALIST_FILE}: member {name!r}"
+    if not isinstance(name, str) or not name or Path(name).is_absolute() or ".." in Path(name).parts:
+        raise ValueError(f"{where}: name a folder inside {directory}; restore it, or ship it again")
+    path = directory / name
+    try:
+        own = _read_settings(generalist_dir(path))
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
+    if own["env"] != env:
+        differ = sorted(k for k in {*env, *own["env"]} if env.get(k) != own["env"].get(k))
+        raise ValueError(
+            f"{where}: observes or acts otherwise than the generalist ({', '.join(differ)} differ); its "
+            "members must be trained with the same env settings"
+        )
+    return load_policy(path, EnvConfig(**env), GENERALIST_FILE, "restore it, or ship it again")
 
 
 def generalist_options(
@@ -162,13 +206,15 @@ def generalist_result(
     allow_infeasible_pinch: bool = False,
     gains: Sequence[float] | None = None,
     arm: ArmModel | None = None,
+    members: Sequence[int] | None = None,
 ) -> MethodResult:
     """``generalist`` on every (contour, trial) in one batch, zero-shot, paired with the baselines' trials
     of :func:`agents.evaluation.evaluate_suite` (seeded ``seed``: trial t of contour k sees the noise of
     their env ``k * trials + t``). ``gains``: per contour, a factor on the generalist's moves there (None or
     1: its moves as they are; 0: it holds still, no move or the stay action every step: fixed tension's
     trials, bit for bit). ``arm``: the cutting arm the pinch points must avoid (default: the paper's), as
-    :func:`agents.evaluation.run_method` judges them for the other methods."""
+    :func:`agents.evaluation.run_method` judges them for the other methods. ``members``: per contour, which
+    of :attr:`Generalist.actors` plays there (None: its own policy everywhere)."""
     from agents.evaluation import MethodResult
     from agents.policies import policy_errors
     from envs.vector import PatternCutVecEnv
@@ -177,7 +223,11 @@ def generalist_result(
         generalist, contours, pinches, segments, config, trials, device,
         allow_infeasible_pinch=allow_infeasible_pinch, **({} if arm is None else {"arm": arm}),
     )  # fmt: skip
-    actor = generalist.actor if gains is None else _scaled(generalist.actor, np.repeat(gains, trials))
+    actor = generalist.actor
+    if members is not None and any(members):
+        actor = _chosen(generalist.actors, np.repeat(np.asarray(members, dtype=np.int64), trials))
+    if gains is not None:
+        actor = _scaled(actor, np.repeat(gains, trials))
     env = PatternCutVecEnv(len(contours) * trials, options)
     out = policy_errors(actor, env, seed=seed + 1, on_step=on_step, paired_noise=(seed, 0))
     problems = env.task.pinch_problems
@@ -219,9 +269,11 @@ class Guarded:
     """Per contour, the index of the candidate the generalist validated best at."""
     gain: np.ndarray
     """(num_contours,) the factor on its moves it validated best with there (1: its moves as they are)."""
+    member: np.ndarray
+    """(num_contours,) which of :attr:`Generalist.actors` validated best there (0: its own policy)."""
     validation: list[np.ndarray]
     """Per contour, the generalist's mean validation error (vertices) at each candidate, its moves as they
-    are."""
+    are (its best member's there)."""
     best: np.ndarray
     """(num_contours,) its mean error at the chosen candidate and gain on the confirmation episodes."""
     still: np.ndarray
@@ -247,9 +299,10 @@ def guarded_result(
     still there (fixed tension).
 
     Validation: :data:`VALIDATION_EPISODES` noisy episodes per option, seeded ``seed`` +
-    :data:`~agents.policies.VALIDATION_SEED_OFFSET`: every candidate with the generalist's moves as they are,
-    then the :data:`~agents.config.GAIN_SHORTLIST` best of them with each other gain (a batch each: each env
-    draws a noise stream of its own); the lowest mean error wins (a tie keeps the earlier: the gain of 1, the
+    :data:`~agents.policies.VALIDATION_SEED_OFFSET`: every candidate with the moves of each of its
+    :attr:`~Generalist.actors` as they are, then each one's :data:`~agents.config.GAIN_SHORTLIST` best
+    candidates with each other gain (a batch each: each env draws a noise stream of its own); the lowest
+    mean error wins (a tie keeps the earlier: the gain of 1, the generalist's own policy, the
     better-ranked candidate). The lowest of many noisy means is lower than what the option cuts, so the
     winner then plays against holding still on as many fresh episodes (seeded ``VALIDATION_SEED_OFFSET``
     further on, paired env by env): it plays where it cuts better there (a tie holds still). The trials are
@@ -261,32 +314,37 @@ def guarded_result(
 
     others = [g for g in _gains(gains, generalist) if g != 1.0]
     validation_seed, n = seed + VALIDATION_SEED_OFFSET, VALIDATION_EPISODES
+    count = len(generalist.actors)
 
-    def validate(options: list[tuple[int, int, float]]) -> np.ndarray:  # (contour, candidate, gain)
-        at = [candidates[c][k] for c, k, _ in options]
-        gain = None if not others else [g for *_, g in options]
+    def validate(options: list[tuple[int, int, float, int]]) -> np.ndarray:  # contour, candidate, gain, actor
+        at = [candidates[c][k] for c, k, *_ in options]
         return generalist_result(
             generalist, [contours[c] for c, *_ in options], [p for p, _ in at], _cuts(at), n, config, device,
-            validation_seed, gains=gain, arm=arm,
+            validation_seed, gains=[g for _, _, g, _ in options] if others else None, arm=arm,
+            members=[m for *_, m in options],
         ).error_vertices.mean(axis=1)  # fmt: skip
 
-    options = [(c, k, 1.0) for c, listed in enumerate(candidates) for k in range(len(listed))]
+    options = [(c, k, 1.0, m) for c, listed in enumerate(candidates) for m in range(count)
+               for k in range(len(listed))]  # fmt: skip
     scores = validate(options)
-    bounds = np.cumsum([0] + [len(listed) for listed in candidates])
-    validation = [scores[bounds[c] : bounds[c + 1]] for c in range(len(contours))]
-    shortlist = [np.argsort(v, kind="stable")[:GAIN_SHORTLIST] for v in validation]
-    more = [(c, int(k), g) for c, top in enumerate(shortlist) for k in top for g in others]
+    bounds = np.cumsum([0] + [count * len(listed) for listed in candidates])
+    per_member = [scores[bounds[c] : bounds[c + 1]].reshape(count, -1) for c in range(len(contours))]
+    validation = [v.min(axis=0) for v in per_member]
+    shortlist = [np.argsort(v, axis=1, kind="stable")[:, :GAIN_SHORTLIST] for v in per_member]
+    more = [(c, int(k), g, m) for c, top in enumerate(shortlist) for m in range(count) for k in top[m]
+            for g in others]  # fmt: skip
     if more:
         options, scores = options + more, np.concatenate([scores, validate(more)])
     kept = [min((s, i) for i, ((c, *_), s) in enumerate(zip(options, scores, strict=True))
                 if c == contour) for contour in range(len(contours))]  # fmt: skip
     chosen = [options[i][1] for _, i in kept]
     gain = np.array([options[i][2] for _, i in kept])
+    member = np.array([options[i][3] for _, i in kept], dtype=np.int64)
     confirmation_seed = validation_seed + VALIDATION_SEED_OFFSET
     first, best_at = [listed[0] for listed in candidates], [candidates[c][k] for c, k in enumerate(chosen)]
     best = generalist_result(
         generalist, contours, [p for p, _ in best_at], _cuts(best_at), n, config, device, confirmation_seed,
-        gains=None if not others else gain, arm=arm,
+        gains=None if not others else gain, arm=arm, members=member,
     ).error_vertices.mean(axis=1)  # fmt: skip
     still = run_method(
         contours, [p for p, _ in first], None, n, config, device, confirmation_seed, segments=_cuts(first),
@@ -297,15 +355,15 @@ def guarded_result(
     played_gains = np.where(plays, gain, 0.0)
     result = generalist_result(
         generalist, contours, [p for p, _ in at], _cuts(at), trials, config, device, seed, on_step,
-        gains=None if (played_gains == 1.0).all() else played_gains, arm=arm,
+        gains=None if (played_gains == 1.0).all() else played_gains, arm=arm, members=member,
     )  # fmt: skip
     played = result if plays.all() else None
     if played_everywhere and played is None:
         played = generalist_result(
             generalist, contours, [p for p, _ in best_at], _cuts(best_at), trials, config, device, seed,
-            gains=None if (gain == 1.0).all() else gain, arm=arm,
+            gains=None if (gain == 1.0).all() else gain, arm=arm, members=member,
         )  # fmt: skip
-    return Guarded(result, played, plays, chosen, gain, validation, best, still)
+    return Guarded(result, played, plays, chosen, gain, member, validation, best, still)
 
 
 def generalist_cut(
@@ -316,10 +374,11 @@ def generalist_cut(
     device: str | None = None,
     arm: ArmModel | None = None,
 ) -> Candidate:
-    """Where ``generalist`` plays ``contour`` zero-shot with its moves as they are, and where fine-tuning it
-    starts: the contour planned as ``evaluate`` plans it (:data:`~agents.config.EVALUATION_CANDIDATES` pinch
-    candidates, noise-free), then the candidate (its pinch point and segments in order) where it validates
-    best (:func:`guarded_result`'s validation, seeded from ``seed``)."""
+    """Where ``generalist``'s own policy (not its members) plays ``contour`` zero-shot with its moves as they
+    are, and where fine-tuning it starts: the contour planned as ``evaluate`` plans it
+    (:data:`~agents.config.EVALUATION_CANDIDATES` pinch candidates, noise-free), then the candidate (its
+    pinch point and segments in order) where it validates best (:func:`guarded_result`'s validation, seeded
+    from ``seed``)."""
     from agents.config import EVALUATION_CANDIDATES
     from warpcut.planning import ArmModel, plan_cut
 
@@ -329,9 +388,8 @@ def generalist_cut(
         contour, noise_free, num_candidates=EVALUATION_CANDIDATES, seed=seed, device=device, arm=arm
     )
     candidates = [(np.asarray(c["pinch"]), plan.ordered_segments(c["order"])) for c in plan.ranked()]
-    guarded = guarded_result(
-        generalist, [contour], [candidates], 1, config, device, seed, arm=arm, gains=(1.0,)
-    )
+    own = replace(generalist, members=())  # fine-tuning starts from its own policy
+    guarded = guarded_result(own, [contour], [candidates], 1, config, device, seed, arm=arm, gains=(1.0,))
     return candidates[guarded.chosen[0]]
 
 
@@ -363,6 +421,30 @@ def _scaled(actor: torch.nn.Module, gains: np.ndarray) -> torch.nn.Module:
             return self.actor(obs) * factor
 
     return Scaled()
+
+
+def _chosen(actors: Sequence[torch.nn.Module], index: np.ndarray) -> torch.nn.Module:
+    """One policy of the batch: env ``e`` acts as ``actors[index[e]]`` (each member on its own envs'
+    observations)."""
+    import torch
+
+    groups = [(actors[m], torch.as_tensor(np.flatnonzero(index == m))) for m in np.unique(index)]
+
+    class Chosen(torch.nn.Module):
+        def __init__(self) -> None:
+            super().__init__()
+            self.actors = torch.nn.ModuleList(actors)
+
+        def forward(self, obs):
+            out = None
+            for actor, rows in groups:
+                part = actor(obs[rows])
+                if out is None:
+                    out = part.new_empty((len(index), *part.shape[1:]))
+                out[rows] = part
+            return out
+
+    return Chosen()
 
 
 def student_moves(

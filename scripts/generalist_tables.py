@@ -66,6 +66,8 @@ def main() -> None:
             cells[methods.index("generalist")] += " (holds still)"
         elif row.get("generalist_gain", 1.0) != 1.0:  # its moves scaled by the gain it validated best with
             cells[methods.index("generalist")] += f" ×{row['generalist_gain']:g}"
+        if not row.get("generalist_holds_still") and row.get("generalist_member"):  # another member plays
+            cells[methods.index("generalist")] += f" (m{row['generalist_member']})"
         if guarded:
             cells.append(
                 f"{row['generalist_played_improvement_pct']:+.1f} ± {row['generalist_played_ci95']:.1f}"
@@ -122,6 +124,11 @@ def main() -> None:
         gains, counts = np.unique(plays, return_counts=True)
         listed = ", ".join(f"×{g:g} on {n}" for g, n in zip(gains, counts, strict=True))
         print(f"- the gain on its moves where it plays: {listed}")
+    if any(r.get("generalist_member") for r in rows):
+        members = [r["generalist_member"] for r in rows if not r["generalist_holds_still"]]
+        index, counts = np.unique(members, return_counts=True)
+        listed = ", ".join(f"member {m} on {n}" for m, n in zip(index, counts, strict=True))
+        print(f"- the member that plays where it plays (0: its own policy): {listed}")
     if has_rl:
         print(
             "- generalist - per-contour rl, mean over contours: {:+.1f} ± {:.1f} points".format(

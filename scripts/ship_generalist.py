@@ -2,7 +2,8 @@
 ``generalist.json`` with the command that trained it and the figures it reached, into
 ``agents/data/generalist/`` (what ``generalist`` plays: docs/results.md, "One policy for every contour").
 
-Run: python scripts/ship_generalist.py RUN [--zero-shot RESULTS.json ...]
+Run: python scripts/ship_generalist.py RUN [--member RUN2 ...] [--zero-shot RESULTS.json ...] [--into DIR];
+without RUN, the generalist in DIR (the shipped one) stays and each --member joins it.
 """
 
 from __future__ import annotations
@@ -17,7 +18,18 @@ def main() -> None:
     from agents.pipelines.generalist import ship_generalist
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("run", type=Path)
+    parser.add_argument("run", type=Path, nargs="?", help="default: keep the policy of the one in --into")
+    parser.add_argument(
+        "--into", type=Path, default=SHIPPED_DIR, help="its folder (default: the one warpcut ships)"
+    )
+    parser.add_argument(
+        "--member",
+        action="append",
+        default=[],
+        type=Path,
+        help="another finished run, trained with the same env settings (e.g. --seed 1): shipped as a member "
+        "the generalist chooses per contour on validation episodes (repeat for more)",
+    )
     parser.add_argument(
         "--zero-shot",
         nargs="*",
@@ -36,7 +48,7 @@ def main() -> None:
             "trials": report["trials"],
             **{k: round(v, 1) for k, v in report["mean"].items()},
         }
-    print(f"wrote {ship_generalist(args.run, SHIPPED_DIR, zero_shot)}")
+    print(f"wrote {ship_generalist(args.run, args.into, zero_shot, args.member)}")
 
 
 if __name__ == "__main__":

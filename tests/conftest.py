@@ -101,6 +101,7 @@ SLOW_TESTS = frozenset(
         "tests/test_generalist.py::test_a_generalist_that_validates_no_better_than_holding_still_holds_still",
         "tests/test_generalist.py::test_a_generalist_trains_over_generated_contours_into_its_run_directory",
         "tests/test_generalist.py::test_a_reward_relative_to_no_tension_makes_the_episode_cost_the_error_over_no_tensions",
+        "tests/test_generalist.py::test_evaluate_and_run_play_a_generalist_with_members",
         "tests/test_generalist.py::test_every_command_plays_a_generalist_zero_shot",
         "tests/test_generalist.py::test_generated_contours_are_named_and_resolved_by_their_specs",
         "tests/test_generalist.py::test_the_guarded_generalist_chooses_the_gain_on_its_moves_it_validates_best_with",

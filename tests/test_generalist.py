@@ -557,3 +557,123 @@ def test_run_holds_still_where_the_generalist_validates_no_better(generalist_run
     assert report["generalist_holds_still"] is True
     assert row["generalist_trials_error_vertices"] == row["fixed_trials_error_vertices"]
     assert "still_error_vertices" in report["candidates"][0]
+
+
+def _with_members(generalist_run, main, *members):
+    """A generalist directory with ``main``'s policy and ``members`` (generalist directories) as its members,
+    laid out as warpcut ships one."""
+    import shutil
+
+    from agents.generalist import MEMBERS
+
+    out = generalist_run[0].parent / ("with-" + "-".join(p.name for p in (main, *members)))
+    shutil.rmtree(out, ignore_errors=True)
+    shutil.copytree(main, out)
+    names = [f"member-{k}" for k in range(1, len(members) + 1)]
+    for name, member in zip(names, members, strict=True):
+        shutil.copytree(member, out / name)
+    settings = json.loads((out / GENERALIST_FILE).read_text())
+    (out / GENERALIST_FILE).write_text(json.dumps({**settings, MEMBERS: names}))
+    return out
+
+
+def test_each_member_of_a_generalist_plays_its_own_contours(generalist_run):
+    """``members`` says which policy plays each contour: a member that holds still cuts fixed tension's
+    trials there, bit for bit, and the generalist's own policy its own trials on the others."""
+    from agents.evaluation import run_method
+    from agents.generalist import generalist_result
+
+    pushing, still = _pushing_generalist(generalist_run), _still_generalist(generalist_run)
+    both = load_generalist(_with_members(generalist_run, pushing, still))
+    assert len(both.members) == 1 and len(both.actors) == 2
+    contours = generate_contours(2, "test", 0, COARSE)
+    pinches = [listed[0][0] for listed in _candidates(contours, 1)]
+    mixed = generalist_result(both, contours, pinches, None, 2, COARSE, "cpu", 3, members=[1, 0])
+    held = run_method(contours, pinches, None, 2, COARSE, "cpu", 3)
+    own = generalist_result(load_generalist(pushing), contours, pinches, None, 2, COARSE, "cpu", 3)
+    assert np.array_equal(mixed.error_vertices[0], held.error_vertices[0])
+    assert np.array_equal(mixed.error_vertices[1], own.error_vertices[1])
+    assert not np.array_equal(own.error_vertices[0], held.error_vertices[0])  # the members differ there
+
+
+def test_the_guarded_generalist_plays_the_member_it_validates_best(generalist_run, monkeypatch):
+    """Every candidate is validated with each member's moves; the (member, candidate) with the lowest
+    validation error plays, and the fine-tuning cut is its own policy's alone."""
+    import agents.generalist as module
+    from agents.policies import VALIDATION_SEED_OFFSET
+
+    contours = generate_contours(2, "test", 0, COARSE)
+    candidates = [listed[:2] for listed in _candidates(contours, 2)]
+    generalist = load_generalist(_with_members(generalist_run, generalist_run[0], generalist_run[0]))
+    real, batches = module.generalist_result, []
+
+    def fake(gen, contours_, pinches, segments, trials, config, device, seed, *a, members=None, **k):
+        result = real(
+            gen, contours_, pinches, segments, trials, config, device, seed, *a, members=members, **k
+        )
+        if seed == 3 + VALIDATION_SEED_OFFSET:  # the first contour best with member 1, the second with 0
+            batches.append(list(members))
+            best = [1 if c is contours[0] else 0 for c in contours_]
+            errors = [1.0 + (m != b) for m, b in zip(members, best, strict=True)]
+            result.error_vertices[:] = np.array(errors).reshape(-1, 1)
+        return result
+
+    monkeypatch.setattr(module, "generalist_result", fake)
+    guarded = module.guarded_result(generalist, contours, candidates, 2, COARSE, "cpu", 3, gains=[1])
+    assert batches == [[0, 0, 1, 1, 0, 0, 1, 1]]  # per contour each member at every candidate
+    assert guarded.member.tolist() == [1, 0] and guarded.chosen == [0, 0]
+    assert [v.tolist() for v in guarded.validation] == [[1.0, 1.0], [1.0, 1.0]]  # the best member's
+    batches.clear()
+    generalist_cut(generalist, contours[0], COARSE, seed=3, device="cpu")
+    assert batches and all(set(b) == {0} for b in batches)
+
+
+def test_a_generalist_ships_with_its_members_and_refuses_a_member_that_differs(generalist_run, tmp_path):
+    from agents.generalist import MEMBERS
+    from agents.pipelines.generalist import ship_generalist
+
+    dest = ship_generalist(generalist_run[0], tmp_path / "shipped", members=[generalist_run[0]])
+    settings = json.loads((dest / GENERALIST_FILE).read_text())
+    assert settings[MEMBERS] == ["member-1"] and (dest / "member-1" / "best.pt").is_file()
+    assert len(load_generalist(dest).members) == 1
+    ship_generalist(None, dest, members=[generalist_run[0]])  # joins the generalist already there
+    assert json.loads((dest / GENERALIST_FILE).read_text())[MEMBERS] == ["member-1", "member-2"]
+    assert len(load_generalist(dest).members) == 2
+    member = dest / "member-1" / GENERALIST_FILE
+    own = json.loads(member.read_text())
+    member.write_text(json.dumps({**own, "env": {**own["env"], "lookahead": own["env"]["lookahead"] + 1}}))
+    with pytest.raises(ValueError, match=r"member 'member-1': observes or acts otherwise .*lookahead differ"):
+        load_generalist(dest)
+    (dest / GENERALIST_FILE).write_text(json.dumps({**settings, MEMBERS: ["../shipped"]}))
+    with pytest.raises(ValueError, match=r"member '\.\./shipped': name a folder inside"):
+        load_generalist(dest)
+    (dest / GENERALIST_FILE).write_text(json.dumps({**settings, MEMBERS: "member-1"}))
+    with pytest.raises(ValueError, match=r"members must be a list"):
+        load_generalist(dest)
+
+
+def test_evaluate_and_run_play_a_generalist_with_members(generalist_run, tmp_path, capfd):
+    """A member that pushes the grasp away never validates best beside one that holds still: evaluate's
+    column and run play the still member's choices or hold still, and ``generalist_members=1`` keeps the
+    generalist's own policy alone."""
+    both = str(
+        _with_members(generalist_run, _pushing_generalist(generalist_run), _still_generalist(generalist_run))
+    )
+    base = ["--contours", "gen-test-0:2", "--methods", "none,fixed,generalist", "--generalist", both,
+            "--trials", "2", "--set", "candidates=2", "--set", "plots=false", *SMALL]  # fmt: skip
+    for members, expected in ((None, 1), (1, 0)):
+        results = tmp_path / f"evaluate-{members}"
+        extra = [] if members is None else ["--set", f"generalist_members={members}"]
+        code, output, _ = invoke(["evaluate", *base, "--out", str(results), *extra])
+        assert code == 0, output
+        rows = json.loads((results / "results.json").read_text())["rows"]
+        assert [r["generalist_member"] for r in rows] == [expected, expected]
+    code, output, _ = invoke(
+        ["run", "--contour", "circle-small", "--policy", "generalist", "--generalist", both, "--out",
+         str(tmp_path / "run"), "--set", "candidates=2", "--set", "trials=2", "--set", "plots=false", *SMALL]
+    )  # fmt: skip
+    assert code == 0, output
+    chosen = json.loads((tmp_path / "run" / "results.json").read_text())
+    assert "generalist_member" in json.dumps(chosen)
+    line = refused(["evaluate", *base, "--set", "generalist_members=0"], capfd)
+    assert "generalist_members" in line and ">= 1" in line

@@ -135,8 +135,10 @@ def command(
     name, row = report.contour.name, report.row
     chosen = report.candidates[report.chosen_candidate] if report.candidates else report.plan.chosen
     by = "planned" if job.policy in ("fixed", "analytic") else f"chosen by {job.policy}"
-    if chosen.get("generalist_gain", 1.0) != 1.0 and not report.table.get("generalist_holds_still"):
-        by += f" (its moves x{chosen['generalist_gain']:g})"
+    if not report.table.get("generalist_holds_still"):
+        gain, member = chosen.get("generalist_gain", 1.0), chosen.get("generalist_member")
+        how = ([f"its moves x{gain:g}"] if gain != 1.0 else []) + ([f"member {member}"] if member else [])
+        by += f" ({', '.join(how)})" if how else ""
     click.echo(
         f"{name}: {by}: order {list(chosen['order'])}, pinch {point_text(chosen['pinch'])}; "
         f"{report.table['trials']} trials, {report.seconds:.0f} s"

@@ -78,6 +78,9 @@ class EvaluateJob:
     generalist_gains: tuple[float, ...] = GENERALIST_GAINS
     """Factors on the generalist's moves it chooses among with its candidate, on the same validation
     episodes (1: its moves as they are; [1]: no choice)."""
+    generalist_members: int | None = None
+    """Of the generalist's policies (its own, then its members: :attr:`agents.generalist.Generalist.actors`),
+    the first N it chooses among with its candidate and gain (None: all; 1: its own policy alone)."""
     record: int | None = None
     """Write ``recording.rrd`` of the first contour's first N envs of each method; None: none."""
     colour_by: str = "strain"
@@ -92,6 +95,7 @@ class EvaluateJob:
         for name in ("trials", "candidates"):
             _counted(f"EvaluateJob.{name}", getattr(self, name))
         _counted("EvaluateJob.generalist_candidates", self.generalist_candidates, True, "all the plan's")
+        _counted("EvaluateJob.generalist_members", self.generalist_members, True, "all its members")
         self.generalist_gains = check_gains(self.generalist_gains, "EvaluateJob.generalist_gains")
 
     def check(self) -> EvaluateJob:
@@ -121,5 +125,6 @@ class EvaluateJob:
             unused["grad"] = "read by the grad column only (--methods ...,grad)"
         if "generalist" not in self.methods:
             why = "read by the generalist column only (--methods ...,generalist)"
-            unused |= {key: why for key in ("generalist", "generalist_candidates", "generalist_gains")}
+            keys = ("generalist", "generalist_candidates", "generalist_gains", "generalist_members")
+            unused |= {key: why for key in keys}
         return {**unused, **_recording_keys(self)}

@@ -19,7 +19,7 @@ physics and the training contours' names), the checkpoints (``best.pt``) and ``s
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -199,28 +199,67 @@ def _settings(job: GeneralistJob, train_set: list[Contour], validation: list[Con
 __all__ = ["ship_generalist", "train_generalist", "training_contours"]
 
 
-def ship_generalist(run: str | Path, dest: str | Path, zero_shot: dict | None = None) -> Path:
+def ship_generalist(
+    run: str | Path | None,
+    dest: str | Path,
+    zero_shot: dict | None = None,
+    members: Sequence[str | Path] = (),
+) -> Path:
     """Copy the generalist that ``run`` (a finished run of ``warpcut generalist``) kept into ``dest``, as
     warpcut ships one: its policy alone (``best.pt``, without the optimiser's state) and its
     ``generalist.json``, with the command that trained it and the figures it reached (``figures``: the
-    run's validation, and ``zero_shot``, e.g. an evaluation's mean improvements, as given).
+    run's validation, and ``zero_shot``, e.g. an evaluation's mean improvements, as given). ``members``:
+    other finished runs, trained with the same env settings, shipped the same way into ``dest/member-N``
+    and listed in its ``generalist.json`` (:data:`agents.generalist.MEMBERS`). ``run`` None: the generalist
+    in ``dest`` stays, and ``members`` join its own (``zero_shot`` replaces its figures' where given).
 
     Raises:
-        ValueError: ``run`` did not finish, or holds no generalist.
+        ValueError: ``run`` or a member did not finish, holds no generalist, or observes otherwise.
     """
-    import torch
+    from agents.generalist import MEMBERS, generalist_settings
 
+    dest = Path(dest)
+    if run is None:
+        settings, state = generalist_settings(dest), None
+        if zero_shot:
+            settings.setdefault("figures", {})["zero_shot"] = zero_shot
+    else:
+        settings, state = _shipped(Path(run), zero_shot)
+    have = list(settings.get(MEMBERS, []))
+    names = [f"member-{k}" for k in range(len(have) + 1, len(have) + len(members) + 1)]
+    for member in members:
+        if generalist_settings(member)["env"] != settings["env"]:
+            raise ValueError(f"{member}: observes or acts otherwise than {run or dest}; train members alike")
+    dest.mkdir(parents=True, exist_ok=True)
+    for name, member in zip(names, members, strict=True):
+        ship_generalist(member, dest / name)
+    if have or names:
+        settings[MEMBERS] = have + names
+    if state is not None:
+        import io
+
+        import torch
+
+        from warpcut.io import write_atomic
+
+        buffer = io.BytesIO()
+        torch.save(state, buffer)
+        write_atomic(dest / "best.pt", buffer.getvalue())
+    write_json(dest / GENERALIST_FILE, settings)
+    return dest
+
+
+def _shipped(run: Path, zero_shot: dict | None) -> tuple[dict, dict]:
+    """The ``generalist.json`` and the policy (a checkpoint without the optimiser's state) that ship the
+    generalist ``run`` kept (:func:`ship_generalist`)."""
     from agents.checkpoints import policy_checkpoint, read_checkpoint
+    from agents.config_io import apply
     from agents.generalist import generalist_settings
-    from warpcut.io import write_atomic
+    from agents.jobs import GeneralistJob
 
-    run, dest = Path(run), Path(dest)
     summary = read_json(run / "summary.json")
     if summary.get("status") != "completed" or not summary.get("best"):
         raise ValueError(f"{run}: not a finished generalist run (status {summary.get('status')!r})")
-    from agents.config_io import apply
-    from agents.jobs import GeneralistJob
-
     settings = generalist_settings(run)
     settings["policy"] = _policy(apply(GeneralistJob(), read_json(run / CONFIG_FILE), str(run / CONFIG_FILE)))
     state = read_checkpoint(policy_checkpoint(run))
@@ -243,11 +282,4 @@ def ship_generalist(run: str | Path, dest: str | Path, zero_shot: dict | None = 
         "validation_improvement_pct": round(100 * (1 - best["validation_error"]), 1),
         **({"zero_shot": zero_shot} if zero_shot else {}),
     }
-    dest.mkdir(parents=True, exist_ok=True)
-    import io
-
-    buffer = io.BytesIO()
-    torch.save(state, buffer)
-    write_atomic(dest / "best.pt", buffer.getvalue())
-    write_json(dest / GENERALIST_FILE, settings)
-    return dest
+    return settings, state

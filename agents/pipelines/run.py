@@ -197,12 +197,13 @@ def _candidate_text(candidate: dict) -> str:
         "fixed_error_vertices", "analytic_error_vertices", "generalist_error_vertices",
         "rl_validation_error_vertices",
     )  # fmt: skip
-    gain = candidate.get("generalist_gain", 1.0)
+    gain, member = candidate.get("generalist_gain", 1.0), candidate.get("generalist_member")
     return (
         f"pinch {point_text(candidate['pinch'])}, order {candidate['order']}"
         + "".join(f", {k.split('_')[0]} {candidate[k]:.1f}" for k in scores if k in candidate)
         + " vertices"
         + (f", its moves x{gain:g}" if gain != 1 else "")
+        + (f", member {member}" if member else "")
     )
 
 
@@ -257,6 +258,8 @@ def _choose_by_generalist(
     listed[0]["still_error_vertices"] = float(guarded.still[0])
     best = listed[guarded.chosen[0]]
     best["generalist_gain"] = float(guarded.gain[0])
+    if generalist.members:
+        best["generalist_member"] = int(guarded.member[0])
     best["generalist_confirmed_error_vertices"] = float(guarded.best[0])
     plays = bool(guarded.plays[0])
     confirmed = (

@@ -448,13 +448,15 @@ def _generalist_result(
 ) -> tuple[MethodResult, Callable[[dict], None]]:
     """The generalist column: ``generalist`` (``job.generalist``'s) zero-shot on every contour in one batch,
     paired with the baselines' trials, at the plan's pinch candidate (each in its best order; the first
-    ``job.generalist_candidates`` by fixed tension, None: all) and gain (``job.generalist_gains``) where it
-    validates best; on a contour where that choice cuts no better than holding still at the planned pinch
-    point on fresh episodes, it holds still there (:func:`agents.generalist.guarded_result`; without plans:
-    the feasible centroid, the whole contour). The note it returns adds to each row whether it held still
+    ``job.generalist_candidates`` by fixed tension, None: all), member (``job.generalist_members``) and gain
+    (``job.generalist_gains``) where it validates best; on a contour where that choice cuts no better than
+    holding still at the planned pinch point on fresh episodes, it holds still there
+    (:func:`agents.generalist.guarded_result`; without plans: the feasible centroid, the whole contour). The
+    note it returns adds to each row whether it held still
     (``generalist_holds_still``), the candidate and the gain it chose (``generalist_candidate``,
-    ``generalist_gain``) and its own trials there (``generalist_played_*``), and to the table on how many
-    contours it held still (``generalist_still_contours``)."""
+    ``generalist_gain``), the member that played (``generalist_member``; 0: its own policy,
+    :attr:`agents.generalist.Generalist.members`) and its own trials there (``generalist_played_*``), and
+    to the table on how many contours it held still (``generalist_still_contours``)."""
     from warpcut.planning import default_pinch
 
     started = time.perf_counter()
@@ -466,6 +468,8 @@ def _generalist_result(
     else:
         candidates = [[(default_pinch(c, job.sim, job.arm), None)] for c in contours]
     callback = None if step_callbacks is None else step_callbacks("generalist", 0)
+    if job.generalist_members is not None:  # its own policy, then the first of its members
+        generalist = dataclasses.replace(generalist, members=generalist.members[: job.generalist_members - 1])
     guarded = guarded_result(
         generalist, contours, candidates, job.trials, job.sim, device, job.seed, callback, job.arm, True,
         job.generalist_gains,
@@ -482,6 +486,7 @@ def _generalist_result(
             row["generalist_holds_still"] = not bool(plays[k])
             row["generalist_candidate"] = guarded.chosen[k]
             row["generalist_gain"] = float(guarded.gain[k])
+            row["generalist_member"] = int(guarded.member[k])
             row["generalist_played_trials_error_vertices"] = played.error_vertices[k].tolist()
             row["generalist_played_improvement_pct"], row["generalist_played_ci95"] = mean_ci95(improvement)
         table["generalist_still_contours"] = int((~plays).sum())
