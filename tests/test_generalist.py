@@ -520,7 +520,9 @@ def test_a_generalist_that_is_not_one_is_named(tmp_path, capfd):
 
 def test_warpcut_ships_a_small_generalist_with_its_command_and_figures():
     assert (SHIPPED_DIR / "best.pt").stat().st_size < 300_000
+    assert sum(f.stat().st_size for f in SHIPPED_DIR.rglob("*") if f.is_file()) < 1_000_000
     settings = generalist_settings("generalist")
+    assert [p.name for p in sorted(SHIPPED_DIR.glob("member-*"))] == settings["members"]
     assert settings["command"].startswith("warpcut generalist")
     assert settings["env"]["lookahead"] == GENERALIST_LOOKAHEAD
     assert settings["figures"]["validation_improvement_pct"] is not None
