@@ -5,11 +5,12 @@ one warpcut ships is :data:`SHIPPED` (``"generalist"``).
 
 A generalist's directory holds its policy (``best.pt``, or the run's checkpoints) and ``generalist.json``:
 what it observes and how it acts (``env``: :class:`~envs.options.EnvConfig`, with its look-ahead), the
-physics it was trained on (``sim``), its training and validation contours, and the command that trained it.
-It plays each contour in the planned segments, at the plan's pinch candidate and with the gain on its moves
-where it validates best, and holds still where that choice cuts no better than holding still on fresh
-episodes (:func:`guarded_result`: ``run`` and ``evaluate``); what it observes lets it tension any of them
-(:mod:`envs.observations`).
+physics it was trained on (``sim``), its training and validation contours, and the command that trained it;
+and, where it lists them (:data:`MEMBERS`), its members: policies trained alike from other seeds, each in a
+folder of its own. It plays each contour in the planned segments, with the policy, at the plan's pinch
+candidate and with the gain on its moves where it validates best, and holds still where that choice cuts no
+better than holding still on fresh episodes (:func:`guarded_result`: ``run`` and ``evaluate``); what it
+observes lets it tension any of them (:mod:`envs.observations`).
 """
 
 from __future__ import annotations
