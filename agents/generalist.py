@@ -124,8 +124,8 @@ class Generalist:
 
 
 def load_generalist(source: str | Path | None) -> Generalist:
-    """The generalist ``source`` names (:func:`generalist_dir`): its settings and its policy, which is
-    checked to observe and act as its settings say.
+    """The generalist ``source`` names (:func:`generalist_dir`): its settings, its policy and its members'
+    (:data:`MEMBERS`), each checked to observe and act as its settings say.
 
     Raises:
         ValueError: No such generalist, or its settings or policy cannot be read or do not fit each other;
@@ -136,36 +136,39 @@ def load_generalist(source: str | Path | None) -> Generalist:
     directory = generalist_dir(source)
     settings = _read_settings(directory)
     env = EnvConfig(**settings["env"])
-    actor = load_policy(directory, env, GENERALIST_FILE, "restore it, or train again")
+    folders = [directory, *_members(directory, settings)]
+    actor, *members = [load_policy(d, env, GENERALIST_FILE, "restore it, or train again") for d in folders]
+    return Generalist(settings, actor, tuple(members))
+
+
+def _members(directory: Path, settings: dict) -> list[Path]:
+    """The folders of the members ``settings`` (the ``generalist.json`` in ``directory``) lists, each
+    checked to be a generalist's directory in ``directory`` that observes and acts as it does."""
     names = settings.get(MEMBERS, [])
     if not isinstance(names, list):
         raise ValueError(
             f"generalist: {directory / GENERALIST_FILE}: {MEMBERS} must be a list of member folders in "
             f"{directory} (got {names!r}); restore it, or ship it again (scripts/ship_generalist.py)"
         )
-    return Generalist(settings, actor, tuple(_member(directory, name, settings["env"]) for name in names))
-
-
-def _member(directory: Path, name, env: dict) -> torch.nn.Module:
-    """The policy of the member ``name`` of the generalist in ``directory`` (a folder in it, with its own
-    ``generalist.json`` and policy), checked to observe and act as the generalist's ``env`` says."""
-    from agents.policies import load_policy
-
-    where = f"generalist: {directory / GENERALIST_FILE}: member {name!r}"
-    if not isinstance(name, str) or not name or Path(name).is_absolute() or ".." in Path(name).parts:
-        raise ValueError(f"{where}: name a folder inside {directory}; restore it, or ship it again")
-    path = directory / name
-    try:
-        own = _read_settings(generalist_dir(path))
-    except ValueError as exc:
-        raise ValueError(f"{where}: {exc}") from None
-    if own["env"] != env:
-        differ = sorted(k for k in {*env, *own["env"]} if env.get(k) != own["env"].get(k))
-        raise ValueError(
-            f"{where}: observes or acts otherwise than the generalist ({', '.join(differ)} differ); its "
-            "members must be trained with the same env settings"
-        )
-    return load_policy(path, EnvConfig(**env), GENERALIST_FILE, "restore it, or ship it again")
+    folders = []
+    for name in names:
+        where = f"generalist: {directory / GENERALIST_FILE}: member {name!r}"
+        if not isinstance(name, str) or not name or Path(name).is_absolute() or ".." in Path(name).parts:
+            raise ValueError(f"{where}: name a folder inside {directory}; restore it, or ship it again")
+        try:
+            own = _read_settings(generalist_dir(directory / name))
+        except ValueError as exc:
+            raise ValueError(f"{where}: {exc}") from None
+        if own["env"] != settings["env"]:
+            differ = sorted(
+                k for k in {*settings["env"], *own["env"]} if settings["env"].get(k) != own["env"].get(k)
+            )
+            raise ValueError(
+                f"{where}: observes or acts otherwise than the generalist ({', '.join(differ)} differ); its "
+                "members must be trained with the same env settings"
+            )
+        folders.append(directory / name)
+    return folders
 
 
 def generalist_options(
