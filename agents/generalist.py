@@ -159,16 +159,19 @@ def _members(directory: Path, settings: dict) -> list[Path]:
             own = _read_settings(generalist_dir(directory / name))
         except ValueError as exc:
             raise ValueError(f"{where}: {exc}") from None
-        if own["env"] != settings["env"]:
-            differ = sorted(
-                k for k in {*settings["env"], *own["env"]} if settings["env"].get(k) != own["env"].get(k)
-            )
+        differ = env_differences(settings["env"], own["env"])
+        if differ:
             raise ValueError(
                 f"{where}: observes or acts otherwise than the generalist ({', '.join(differ)} differ); its "
                 "members must be trained with the same env settings"
             )
         folders.append(directory / name)
     return folders
+
+
+def env_differences(env: dict, other: dict) -> list[str]:
+    """The fields in which two generalists' ``env`` settings differ (none: a member may join the other)."""
+    return sorted(k for k in {*env, *other} if env.get(k) != other.get(k))
 
 
 def generalist_options(

@@ -216,7 +216,7 @@ def ship_generalist(
     Raises:
         ValueError: ``run`` or a member did not finish, holds no generalist, or observes otherwise.
     """
-    from agents.generalist import MEMBERS, generalist_settings
+    from agents.generalist import MEMBERS, env_differences, generalist_settings
 
     dest = Path(dest)
     if run is None:
@@ -228,8 +228,12 @@ def ship_generalist(
     have = list(settings.get(MEMBERS, []))
     names = [f"member-{k}" for k in range(len(have) + 1, len(have) + len(members) + 1)]
     for member in members:
-        if generalist_settings(member)["env"] != settings["env"]:
-            raise ValueError(f"{member}: observes or acts otherwise than {run or dest}; train members alike")
+        differ = env_differences(settings["env"], generalist_settings(member)["env"])
+        if differ:
+            raise ValueError(
+                f"{member}: observes or acts otherwise than {run or dest} ({', '.join(differ)} differ); "
+                "train members with the same env settings"
+            )
     dest.mkdir(parents=True, exist_ok=True)
     for name, member in zip(names, members, strict=True):
         ship_generalist(member, dest / name)
