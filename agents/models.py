@@ -12,13 +12,16 @@ that calls ``model.mlp`` use it unchanged.
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
+
 import torch
 from rsl_rl.models import MLPModel
 from tensordict import TensorDict
 
 from envs.observations import TRACKING_ERROR, observation_names
 
-__all__ = ["FeedbackMLP", "FeedbackMLPModel", "feedback_inputs", "scale_moves_"]
+__all__ = ["FeedbackMLP", "FeedbackMLPModel", "feedback_inputs", "scale_moves_", "torch_threads"]
 
 
 class FeedbackMLP(torch.nn.Module):
@@ -117,3 +120,17 @@ def scale_moves_(mlp: torch.nn.Module, gain: float) -> None:
             if layer is not None:
                 for parameter in layer.parameters():
                     parameter.mul_(gain)
+
+
+@contextlib.contextmanager
+def torch_threads(count: int) -> Iterator[None]:
+    """torch's CPU ops on ``count`` threads inside the block, as many as before after it. The policy is a
+    small MLP that gains nothing from threads, while the simulator steps the batch on threads of its own:
+    torch's idle OpenMP threads spinning beside them slow both (a 2 x 32 MLP's batch of 720 took 0.3 ms on
+    one thread, 2-5 ms on two beside a busy simulator; docs/performance.md)."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(count)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)

@@ -29,6 +29,7 @@ from agents.checkpoints import (
 from agents.config import EVALUATION_TRIALS
 from agents.evaluation import Method, MethodResult, evaluate_suite
 from agents.methods import StepCallbacks
+from agents.models import torch_threads
 from envs.observations import observation_bounds
 from envs.options import ContourSpec, EnvConfig, PatternCutOptions, plain
 from envs.vector import PatternCutVecEnv
@@ -366,7 +367,7 @@ def policy_errors(
         on_step(env.task, None)
     final = None
     discrete = env.options.action_type == "discrete"
-    with torch.inference_mode():
+    with torch.inference_mode(), torch_threads(1):  # the actor runs on the CPU, beside the simulator
         for _ in range(env.task.num_steps):
             obs_td = {"policy": torch.as_tensor(obs)}
             action = actor(_tensordict(obs_td, trials)).cpu().numpy().reshape(trials, -1)

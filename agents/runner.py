@@ -21,6 +21,7 @@ from rsl_rl.runners import OnPolicyRunner
 from rsl_rl.utils.logger import Logger
 
 from agents.checkpoints import BEST_CHECKPOINT, LATEST_CHECKPOINT, layout_mismatch, read_checkpoint
+from agents.models import torch_threads
 from envs.rsl import FINAL_ERROR_KEY
 from warpcut.io import WriteFailed, enclosing_run, note_written, read_run_marker, write_atomic, write_json
 
@@ -221,19 +222,15 @@ class Runner(OnPolicyRunner):
         update = self.alg.update
 
         def update_on_all_threads(*args, **kwargs):
-            torch.set_num_threads(threads)
-            try:
+            with torch_threads(threads):
                 return update(*args, **kwargs)
-            finally:
-                torch.set_num_threads(1)
 
-        torch.set_num_threads(1)
         self.alg.update = update_on_all_threads
         try:
-            return super().learn(num_learning_iterations, init_at_random_ep_len)
+            with torch_threads(1):
+                return super().learn(num_learning_iterations, init_at_random_ep_len)
         finally:
             self.alg.update = update
-            torch.set_num_threads(threads)
 
     def save_interrupted(self) -> None:
         """Save the current state after a Ctrl-C, as the checkpoint of the last completed iteration."""

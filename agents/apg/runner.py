@@ -30,6 +30,7 @@ from rsl_rl.env import VecEnv
 
 from agents.algorithms import algorithm
 from agents.checkpoints import read_checkpoint
+from agents.models import torch_threads
 from agents.runner import Runner
 
 
@@ -108,9 +109,7 @@ class EpisodeRunner(Runner):
         self.logger.init_logging_writer()
         self.alg.train_mode()
         start = self.current_learning_iteration
-        threads = torch.get_num_threads()
-        torch.set_num_threads(1)  # a 2 x 32 MLP gains nothing from threads; the simulator uses them
-        try:
+        with torch_threads(1):
             for it in range(start, start + num_learning_iterations):
                 metrics = self._iteration()
                 self.current_learning_iteration = it
@@ -120,8 +119,6 @@ class EpisodeRunner(Runner):
                 self._end_iteration(it, metrics)
                 if self.logger.writer is not None and it % self.cfg["save_interval"] == 0:
                     self.save(os.path.join(self.logger.log_dir, f"model_{it}.pt"))
-        finally:
-            torch.set_num_threads(threads)
         if self.logger.writer is not None:
             self.save(os.path.join(self.logger.log_dir, f"model_{self.current_learning_iteration}.pt"))
             self.logger.stop_logging_writer()
