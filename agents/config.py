@@ -274,6 +274,14 @@ GAIN_SHORTLIST = 5
 (:data:`GENERALIST_GAINS`): on the same contours as good as all 30 within 0.3 points, 0.5 above the best 3,
 at a third of the validation episodes of all 30 (``experiments/generalist_gains.py``)."""
 
+GENERALIST_FINALISTS = 5
+"""The generalist's best options (member, candidate, gain) per contour by their validation episodes that play
+again on as many fresh ones, the lowest mean over both winning (``generalist_finalists``; 1: the best by
+the validation episodes alone). The lowest of some 250 noisy means flatters its option; the finalists' fresh
+episodes tell the options apart without that bias, for 40 more episodes a contour. On the first 16
+contours of the generated ``validation`` stream: +62.3% against +60.9% with 1, +61.7% with 3 and +61.5%
+with 10 (docs/results.md)."""
+
 
 FINE_TUNING_GAIN = 0.5
 """The factor on a generalist's moves that fine-tuning (``train --set init=generalist``) starts from

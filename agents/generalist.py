@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from agents.config import GAIN_SHORTLIST, GENERALIST_GAINS, check_gains
+from agents.config import GAIN_SHORTLIST, GENERALIST_FINALISTS, GENERALIST_GAINS, check_gains
 from envs.options import EnvConfig, PatternCutOptions
 from warpcut.contours import Contour
 from warpcut.io import read_json
@@ -299,6 +299,7 @@ def guarded_result(
     arm: ArmModel | None = None,
     played_everywhere: bool = False,
     gains: Sequence[float] = GENERALIST_GAINS,
+    finalists: int = GENERALIST_FINALISTS,
 ) -> Guarded:
     """``generalist`` zero-shot, contour by contour, where it validates best among ``candidates[c]``
     (pinch points with their cuts; the first is the plan's) and ``gains`` (factors on its moves; a generalist
@@ -310,7 +311,9 @@ def guarded_result(
     :attr:`~Generalist.actors` as they are, then each one's :data:`~agents.config.GAIN_SHORTLIST` best
     candidates with each other gain (a batch each: each env draws a noise stream of its own); the lowest
     mean error wins (a tie keeps the earlier: the gain of 1, the generalist's own policy, the
-    better-ranked candidate). The lowest of many noisy means is lower than what the option cuts, so the
+    better-ranked candidate); with ``finalists`` > 1, each contour's best ``finalists`` options play again on
+    as many fresh episodes (seeded ``VALIDATION_SEED_OFFSET`` beyond the confirmation's) and the lowest mean
+    over both wins. The lowest of many noisy means is lower than what the option cuts, so the
     winner then plays against holding still on as many fresh episodes (seeded ``VALIDATION_SEED_OFFSET``
     further on, paired env by env): it plays where it cuts better there (a tie holds still). The trials are
     one batch of :func:`generalist_result`'s (paired with the baselines'), in which it holds still on the
@@ -323,11 +326,11 @@ def guarded_result(
     validation_seed, n = seed + VALIDATION_SEED_OFFSET, VALIDATION_EPISODES
     count = len(generalist.actors)
 
-    def validate(options: list[tuple[int, int, float, int]]) -> np.ndarray:  # contour, candidate, gain, actor
-        at = [candidates[c][k] for c, k, *_ in options]
+    def validate(options: list[tuple[int, int, float, int]], seed: int = validation_seed) -> np.ndarray:
+        at = [candidates[c][k] for c, k, *_ in options]  # options: (contour, candidate, gain, actor)
         return generalist_result(
             generalist, [contours[c] for c, *_ in options], [p for p, _ in at], _cuts(at), n, config, device,
-            validation_seed, gains=[g for _, _, g, _ in options] if others else None, arm=arm,
+            seed, gains=[g for _, _, g, _ in options] if others else None, arm=arm,
             members=[m for *_, m in options],
         ).error_vertices.mean(axis=1)  # fmt: skip
 
@@ -342,12 +345,18 @@ def guarded_result(
             for g in others]  # fmt: skip
     if more:
         options, scores = options + more, np.concatenate([scores, validate(more)])
-    kept = [min((s, i) for i, ((c, *_), s) in enumerate(zip(options, scores, strict=True))
-                if c == contour) for contour in range(len(contours))]  # fmt: skip
+    ranked = [sorted((s, i) for i, ((c, *_), s) in enumerate(zip(options, scores, strict=True))
+                     if c == contour)[:finalists] for contour in range(len(contours))]  # fmt: skip
+    confirmation_seed = validation_seed + VALIDATION_SEED_OFFSET
+    if finalists > 1:
+        pool = [i for top in ranked for _, i in top]
+        fresh = validate([options[i] for i in pool], confirmation_seed + VALIDATION_SEED_OFFSET)
+        again = dict(zip(pool, fresh, strict=True))
+        ranked = [[((s + again[i]) / 2, i) for s, i in top] for top in ranked]
+    kept = [min(top) for top in ranked]
     chosen = [options[i][1] for _, i in kept]
     gain = np.array([options[i][2] for _, i in kept])
     member = np.array([options[i][3] for _, i in kept], dtype=np.int64)
-    confirmation_seed = validation_seed + VALIDATION_SEED_OFFSET
     first, best_at = [listed[0] for listed in candidates], [candidates[c][k] for c, k in enumerate(chosen)]
     best = generalist_result(
         generalist, contours, [p for p, _ in best_at], _cuts(best_at), n, config, device, confirmation_seed,

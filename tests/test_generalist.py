@@ -329,7 +329,7 @@ def test_the_guarded_generalist_plays_where_it_validates_best_and_else_holds_sti
 
     monkeypatch.setattr(agents.evaluation, "run_method", fake_still)
     guarded = module.guarded_result(
-        generalist, contours, candidates, 2, COARSE, "cpu", 3, played_everywhere=True, gains=[1]
+        generalist, contours, candidates, 2, COARSE, "cpu", 3, played_everywhere=True, gains=[1], finalists=1
     )
     assert guarded.plays.tolist() == [True, False, False] and guarded.chosen == [1, 0, 0]
     assert guarded.gain.tolist() == [1.0, 1.0, 1.0]
@@ -375,7 +375,7 @@ def test_the_guarded_generalist_chooses_the_gain_on_its_moves_it_validates_best_
 
     monkeypatch.setattr(module, "generalist_result", fake)
     guarded = module.guarded_result(
-        generalist, contours, candidates, 2, COARSE, "cpu", 3, gains=[1, 0.5, 1.5]
+        generalist, contours, candidates, 2, COARSE, "cpu", 3, gains=[1, 0.5, 1.5], finalists=1
     )
     assert batches == [[1.0] * 4, [0.5, 1.5] * 4]  # every candidate, then the shortlist with each other gain
     assert guarded.gain.tolist() == [1.5, 1.0] and guarded.chosen == [0, 0]
@@ -621,13 +621,52 @@ def test_the_guarded_generalist_plays_the_member_it_validates_best(generalist_ru
         return result
 
     monkeypatch.setattr(module, "generalist_result", fake)
-    guarded = module.guarded_result(generalist, contours, candidates, 2, COARSE, "cpu", 3, gains=[1])
+    guarded = module.guarded_result(
+        generalist, contours, candidates, 2, COARSE, "cpu", 3, gains=[1], finalists=1
+    )
     assert batches == [[0, 0, 1, 1, 0, 0, 1, 1]]  # per contour each member at every candidate
     assert guarded.member.tolist() == [1, 0] and guarded.chosen == [0, 0]
     assert [v.tolist() for v in guarded.validation] == [[1.0, 1.0], [1.0, 1.0]]  # the best member's
     batches.clear()
     generalist_cut(generalist, contours[0], COARSE, seed=3, device="cpu")
     assert batches and all(set(b) == {0} for b in batches)
+
+
+def test_the_generalist_s_finalists_play_again_on_fresh_episodes(generalist_run, monkeypatch):
+    """With finalists, each contour's best options by the validation episodes play again on fresh ones and
+    the lowest mean over both wins; with one, the best on the validation episodes alone, and no more
+    episodes."""
+    import agents.generalist as module
+    from agents.policies import VALIDATION_SEED_OFFSET as OFFSET
+
+    contours = generate_contours(2, "test", 0, COARSE)
+    candidates = [listed[:3] for listed in _candidates(contours, 3)]
+    generalist = load_generalist(generalist_run[0])
+    real, seen = module.generalist_result, []
+    validation = {3 + OFFSET: [1.0, 2.0, 3.0], 3 + 3 * OFFSET: [5.0, 1.0, 0.0]}  # per candidate
+
+    def fake(gen, contours_, pinches, segments, trials, config, device, seed, *a, **k):
+        result = real(gen, contours_, pinches, segments, trials, config, device, seed, *a, **k)
+        if seed in validation:
+            at = [
+                next(i for i, (p, _) in enumerate(candidates[contours.index(c)]) if np.allclose(p, q))
+                for c, q in zip(contours_, pinches, strict=True)
+            ]
+            seen.append((seed, at))
+            result.error_vertices[:] = np.array([validation[seed][i] for i in at]).reshape(-1, 1)
+        return result
+
+    monkeypatch.setattr(module, "generalist_result", fake)
+    guarded = module.guarded_result(
+        generalist, contours, candidates, 2, COARSE, "cpu", 3, gains=[1], finalists=1
+    )
+    assert guarded.chosen == [0, 0] and [seed for seed, _ in seen] == [3 + OFFSET]
+    seen.clear()
+    guarded = module.guarded_result(
+        generalist, contours, candidates, 2, COARSE, "cpu", 3, gains=[1], finalists=2
+    )
+    assert seen[1] == (3 + 3 * OFFSET, [0, 1, 0, 1])  # the best two of each contour, on fresh episodes
+    assert guarded.chosen == [1, 1]  # (2 + 1) / 2 beats (1 + 5) / 2; the third never plays again
 
 
 def test_a_generalist_ships_with_its_members_and_refuses_a_member_that_differs(generalist_run, tmp_path):
@@ -677,5 +716,6 @@ def test_evaluate_and_run_play_a_generalist_with_members(generalist_run, tmp_pat
     assert code == 0, output
     chosen = json.loads((tmp_path / "run" / "results.json").read_text())
     assert "generalist_member" in json.dumps(chosen)
-    line = refused(["evaluate", *base, "--set", "generalist_members=0"], capfd)
-    assert "generalist_members" in line and ">= 1" in line
+    for key in ("generalist_members", "generalist_finalists"):
+        line = refused(["evaluate", *base, "--set", f"{key}=0"], capfd)
+        assert key in line and ">= 1" in line

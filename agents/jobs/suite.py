@@ -10,6 +10,7 @@ from agents.config import (
     EVALUATION_CANDIDATES,
     EVALUATION_TRIALS,
     GENERALIST_CANDIDATES,
+    GENERALIST_FINALISTS,
     GENERALIST_GAINS,
     TrainConfig,
     check_gains,
@@ -81,6 +82,9 @@ class EvaluateJob:
     generalist_members: int | None = None
     """Of the generalist's policies (its own, then its members: :attr:`agents.generalist.Generalist.actors`),
     the first N it chooses among with its candidate and gain (None: all; 1: its own policy alone)."""
+    generalist_finalists: int = GENERALIST_FINALISTS
+    """The generalist's best options per contour (member, candidate, gain) that play again on fresh
+    validation episodes, the lowest mean over both winning (1: the best on the first episodes alone)."""
     record: int | None = None
     """Write ``recording.rrd`` of the first contour's first N envs of each method; None: none."""
     colour_by: str = "strain"
@@ -96,6 +100,7 @@ class EvaluateJob:
             _counted(f"EvaluateJob.{name}", getattr(self, name))
         _counted("EvaluateJob.generalist_candidates", self.generalist_candidates, True, "all the plan's")
         _counted("EvaluateJob.generalist_members", self.generalist_members, True, "all its members")
+        _counted("EvaluateJob.generalist_finalists", self.generalist_finalists)
         self.generalist_gains = check_gains(self.generalist_gains, "EvaluateJob.generalist_gains")
 
     def check(self) -> EvaluateJob:
@@ -125,6 +130,7 @@ class EvaluateJob:
             unused["grad"] = "read by the grad column only (--methods ...,grad)"
         if "generalist" not in self.methods:
             why = "read by the generalist column only (--methods ...,generalist)"
-            keys = ("generalist", "generalist_candidates", "generalist_gains", "generalist_members")
+            keys = ("generalist", "generalist_candidates", "generalist_gains", "generalist_members",
+                    "generalist_finalists")  # fmt: skip
             unused |= {key: why for key in keys}
         return {**unused, **_recording_keys(self)}

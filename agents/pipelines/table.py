@@ -472,7 +472,7 @@ def _generalist_result(
         generalist = dataclasses.replace(generalist, members=generalist.members[: job.generalist_members - 1])
     guarded = guarded_result(
         generalist, contours, candidates, job.trials, job.sim, device, job.seed, callback, job.arm, True,
-        job.generalist_gains,
+        job.generalist_gains, job.generalist_finalists,
     )  # fmt: skip
     plays, played = guarded.plays, guarded.played
     log(
