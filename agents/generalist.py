@@ -189,7 +189,8 @@ def generalist_options(
     ``config``'s physics."""
     env = {**generalist.settings["env"], "randomize": [], "randomize_ranges": None}  # on the physics given
     per_env = [k for k in range(len(contours)) for _ in range(trials)]
-    cut = None if segments is None else [[np.asarray(p).tolist() for p in segments[k]] for k in per_env]
+    listed = None if segments is None else [[np.asarray(p).tolist() for p in cut] for cut in segments]
+    cut = None if listed is None else [listed[k] for k in per_env]  # a contour's envs share its cut
     return PatternCutOptions(
         contour=[contours[k] for k in per_env],
         pinch_point=np.array([np.asarray(pinches[k], dtype=np.float64) for k in per_env]),

@@ -82,7 +82,7 @@ def sample_fiducials(
 ) -> np.ndarray:
     """``num`` random material points per env, preferably where they stay informative.
 
-    Points are drawn uniformly over the sheet; those at least one cut radius from the env's contour (away
+    Points are drawn uniformly over the sheet; those farther than one cut radius from the env's contour (away
     from the kerf) and outside its grasp disc (which moves rigidly with the gripper) are taken first, and
     only if too few are found are the others used.
 
@@ -106,8 +106,9 @@ def sample_fiducials(
     for contour in {id(c): c for c in contours}.values():
         envs = np.array([c is contour for c in contours])
         line = shapely.LinearRing(contour.points) if contour.closed else shapely.LineString(contour.points)
-        distance = shapely.distance(shapely.points(draws[envs].reshape(-1, 2)), line).reshape(-1, 16 * num)
-        preferred[envs] = distance >= config.cut_radius
+        shapely.prepare(line)  # within the cut radius: 4x faster than the distances themselves
+        near = shapely.dwithin(shapely.points(draws[envs].reshape(-1, 2)), line, config.cut_radius)
+        preferred[envs] = ~near.reshape(-1, 16 * num)
     with np.errstate(invalid="ignore"):  # NaN pinch points (no grasp) exclude nothing
         preferred &= ~(np.linalg.norm(draws - pinch_points[:, None], axis=2) <= config.grasp_radius)
     order = np.argsort(~preferred, axis=1, kind="stable")[:, :num]
