@@ -277,7 +277,7 @@ at a third of the validation episodes of all 30 (``experiments/generalist_gains.
 GENERALIST_FINALISTS = 5
 """The generalist's best options (member, candidate, gain) per contour by their validation episodes that play
 again on as many fresh ones, the lowest mean over both winning (``generalist_finalists``; 1: the best by
-the validation episodes alone). The lowest of some 250 noisy means flatters its option; the finalists' fresh
+the validation episodes alone). The lowest of some 200 noisy means flatters its option; the finalists' fresh
 episodes tell the options apart without that bias, for 40 more episodes a contour. On the first 16
 contours of the generated ``validation`` stream: +62.3% against +60.9% with 1, +61.7% with 3 and +61.5%
 with 10 (docs/results.md)."""
