@@ -235,7 +235,7 @@ BUDGETS = {
 """``run_pipeline``'s budgets (``warpcut run --budget``). fast: a policy for the best pinch candidate by
 fixed tension, about a minute on 2 CPU cores; paper: a policy for each of the paper's 30 candidates. The
 generalist, which trains nothing, chooses among the paper's 30 candidates with either budget
-(``generalist_candidates``): on the 20 generated test contours +53.4% against +43.9% with 8
+(``generalist_candidates``): on the 20 generated test contours +58.0% against +48.7% with 8
 (docs/results.md, "The main job with the generalist")."""
 
 DEFAULT_CONTOUR = "fls-circle"
